@@ -1,0 +1,67 @@
+"""Shared fixtures: a small valid scene to mutate, and the stored Cornell box."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+CORNELL = ROOT / "references" / "cornell-box" / "scene.toml"
+
+#: One white quad lit by a small emitter, seen by a camera: every field the format has.
+MINIMAL_SCENE = """\
+format = 1
+name = "minimal"
+features = ["triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"]
+
+[camera]
+type = "pinhole"
+position = [0, 0, 3]
+look_at = [0, 0, 0]
+up = [0, 1, 0]
+fov_deg = 40
+fov_axis = "smaller"
+resolution = [8, 6]
+
+[render]
+max_depth = -1
+pixel_filter = "box"
+
+[materials.white]
+type = "diffuse"
+reflectance = [0.8, 0.8, 0.8]
+
+[[meshes]]
+name = "floor"
+material = "white"
+vertices = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]
+faces = [[0, 1, 2, 3]]
+
+[[meshes]]
+name = "light"
+material = "white"
+vertices = [[-0.1, -0.1, 1], [-0.1, 0.1, 1], [0.1, 0.1, 1], [0.1, -0.1, 1]]
+faces = [[0, 1, 2, 3]]
+emitter = { radiance = [10, 10, 10] }
+"""
+
+
+@pytest.fixture
+def write_scene(tmp_path):
+    """Write a scene text to tmp_path/scene.toml and return its path."""
+
+    def write(text: str = MINIMAL_SCENE, name: str = "scene.toml") -> Path:
+        path = tmp_path / name
+        path.write_text(text)
+        return path
+
+    return write
+
+
+def run_cbox(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    """Run the CLI in a fresh interpreter, as a user would."""
+    return subprocess.run([sys.executable, "-m", "harness", *args], capture_output=True, text=True,
+                          timeout=timeout, cwd=ROOT)

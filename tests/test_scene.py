@@ -1,0 +1,114 @@
+"""Scene parsing and validation: the good file, and each kind of bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import CORNELL, MINIMAL_SCENE, run_cbox
+from harness.scene import SceneError, load_scene, triangle_arrays
+
+
+def test_minimal_scene_parses(write_scene):
+    s = load_scene(write_scene())
+    assert s.name == "minimal"
+    assert (s.camera.width, s.camera.height) == (8, 6)
+    assert [m.name for m in s.meshes] == ["floor", "light"]
+    assert s.meshes[0].triangles.tolist() == [[0, 1, 2], [0, 2, 3]]  # quad split (a,b,c),(a,c,d)
+    assert s.meshes[1].radiance == (10.0, 10.0, 10.0)
+    assert s.emitters == (s.meshes[1],)
+    assert s.max_depth == -1 and s.pixel_filter == "box"
+
+
+def test_cornell_box_scene():
+    s = load_scene(CORNELL)
+    assert s.features == {"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"}
+    assert len(s.emitters) == 1 and s.emitters[0].name == "light"
+    tri = triangle_arrays(s)
+    assert tri["triangles"].shape == (5 * 2 + 2 * 12 + 2, 3)  # walls, boxes, light
+    # Every wall faces into the box: its normal points toward the centre.
+    for m in s.meshes:
+        a, b, c = (m.vertices[m.triangles[:, k]] for k in range(3))
+        n = np.cross(b - a, c - a)
+        centroid = (a + b + c) / 3
+        inward = np.einsum("ij,ij->i", n, -centroid)
+        if m.name in ("floor", "ceiling", "back", "green-wall", "red-wall", "light"):
+            assert np.all(inward > 0), m.name
+        else:  # boxes: normals point away from the box's own centre
+            outward = np.einsum("ij,ij->i", n, centroid - m.vertices.mean(0))
+            assert np.all(outward > 0), m.name
+
+
+def test_content_hash_ignores_formatting_but_not_content(write_scene):
+    h = load_scene(write_scene()).content_hash()
+    assert load_scene(write_scene("# comment\n" + MINIMAL_SCENE.replace(" = ", "="), "b.toml")).content_hash() == h
+    assert load_scene(write_scene(MINIMAL_SCENE.replace("0.8, 0.8, 0.8", "0.8, 0.8, 0.7"), "c.toml")).content_hash() != h
+
+
+def test_obj_mesh(write_scene, tmp_path):
+    (tmp_path / "quad.obj").write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3 4\n")
+    text = MINIMAL_SCENE.replace(
+        'vertices = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]\nfaces = [[0, 1, 2, 3]]', 'obj = "quad.obj"')
+    obj = load_scene(write_scene(text))
+    inline = load_scene(write_scene(MINIMAL_SCENE, "inline.toml"))
+    assert obj.content_hash() == inline.content_hash()
+
+
+def _replace(old: str, new: str) -> str:
+    assert old in MINIMAL_SCENE, old
+    return MINIMAL_SCENE.replace(old, new, 1)
+
+
+BAD_INPUTS = {
+    "missing field": (_replace("fov_deg = 40\n", ""), "camera.fov_deg", "missing"),
+    "wrong type": (_replace("fov_deg = 40", 'fov_deg = "wide"'), "camera.fov_deg", "expected a number"),
+    "wrong type in list": (_replace("position = [0, 0, 3]", 'position = [0, "a", 3]'), "camera.position[1]", "expected a number"),
+    "unknown material": (_replace('name = "light"\nmaterial = "white"', 'name = "light"\nmaterial = "chalk"'),
+                         "meshes[1] (light).material", "unknown material 'chalk'"),
+    "degenerate triangle": (_replace("[-1, 1, 0]]", "[3, 3, 0]]"), "meshes[0] (floor)", "degenerate"),
+    "non-finite number": (_replace("position = [0, 0, 3]", "position = [0, nan, 3]"), "camera.position[1]", "finite"),
+    "infinite radiance": (_replace("radiance = [10, 10, 10]", "radiance = [10, inf, 10]"),
+                          "meshes[1] (light).emitter.radiance[1]", "finite"),
+    "reflectance above 1": (_replace("reflectance = [0.8, 0.8, 0.8]", "reflectance = [0.8, 1.2, 0.8]"),
+                            "materials.white.reflectance[1]", "[0, 1]"),
+    "reflectance below 0": (_replace("reflectance = [0.8, 0.8, 0.8]", "reflectance = [-0.1, 0.8, 0.8]"),
+                            "materials.white.reflectance[0]", "[0, 1]"),
+    "zero-size resolution": (_replace("resolution = [8, 6]", "resolution = [0, 6]"), "camera.resolution", "positive"),
+    "missing OBJ": (_replace('vertices = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]\nfaces = [[0, 1, 2, 3]]',
+                             'obj = "nowhere.obj"'), "meshes[0] (floor).obj", "does not exist"),
+    "face index out of range": (_replace("faces = [[0, 1, 2, 3]]", "faces = [[0, 1, 2, 9]]"),
+                                "meshes[0] (floor).faces[0]", "out of range"),
+    "undeclared feature": (_replace('"area_light", ', ""), "features", "uses area_light but does not declare"),
+    "unknown feature": (_replace('"box_filter"]', '"box_filter", "caustics"]'), "features[5]", "unknown feature"),
+    "bad max_depth": (_replace("max_depth = -1", "max_depth = 0"), "render.max_depth", "-1"),
+    "unknown filter": (_replace('pixel_filter = "box"', 'pixel_filter = "gaussian"'), "render.pixel_filter", "unknown"),
+    "boolean as number": (_replace("fov_deg = 40", "fov_deg = true"), "camera.fov_deg", "boolean"),
+    "TOML syntax": (_replace("[camera]", "[camera"), "(syntax)", "invalid TOML"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_INPUTS))
+def test_bad_input_names_file_and_field(case, write_scene):
+    text, field, words = BAD_INPUTS[case]
+    path = write_scene(text)
+    with pytest.raises(SceneError) as exc:
+        load_scene(path)
+    assert exc.value.file == str(path)
+    assert exc.value.field == field
+    assert words in exc.value.message
+    assert "\n" not in str(exc.value)
+
+
+def test_missing_scene_file(tmp_path):
+    with pytest.raises(SceneError, match="no such file"):
+        load_scene(tmp_path / "absent.toml")
+
+
+@pytest.mark.parametrize("case", ["unknown material", "degenerate triangle", "zero-size resolution"])
+def test_cli_bad_scene_one_line_exit_2(case, write_scene, tmp_path):
+    path = write_scene(BAD_INPUTS[case][0])
+    proc = run_cbox("render", "--scene", str(path), "--renderer", "mitsuba", "--out", str(tmp_path / "x.exr"))
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"cbox: error: {path}: {BAD_INPUTS[case][1]}: "), proc.stderr
+    assert "Traceback" not in proc.stderr
