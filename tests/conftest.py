@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -61,7 +62,10 @@ def write_scene(tmp_path):
     return write
 
 
-def run_cbox(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
-    """Run the CLI in a fresh interpreter, as a user would."""
+def run_cbox(*args: str, timeout: float = 600, env_path: Path | None = None) -> subprocess.CompletedProcess:
+    """Run the CLI in a fresh interpreter, as a user would; ``env_path`` joins PYTHONPATH."""
+    env = dict(os.environ)
+    if env_path is not None:
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(env_path), env.get("PYTHONPATH")]))
     return subprocess.run([sys.executable, "-m", "harness", *args], capture_output=True, text=True,
-                          timeout=timeout, cwd=ROOT)
+                          timeout=timeout, cwd=ROOT, env=env)

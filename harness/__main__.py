@@ -1,0 +1,5 @@
+"""``python -m harness`` is ``cbox``."""
+
+from harness.cli import main
+
+main()

@@ -1,0 +1,166 @@
+"""The renderer adapter interface and the registry that finds adapters.
+
+An adapter is a small class (state: the renderer's own handles) with
+
+- ``name``: short id used on the command line (``mitsuba``, ``pyrender``);
+- ``features``: the scene features (:data:`harness.scene.FEATURES`) it models;
+- ``approximations``: one line per thing it only approximates (shown in reports);
+- ``unavailable_reason()``: ``None`` if it can run here, else why not;
+- ``version()``: the renderer's version string (only called when available);
+- ``render(scene, spp, seed, checkpoints=())``: a :class:`RenderResult`.
+
+Adapters are found through the entry-point group ``cbox.renderers`` (ours are
+registered in ``pyproject.toml`` the same way a third party's would be), or
+given directly as ``package.module:ClassName``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.metadata
+from dataclasses import dataclass, field
+from typing import Protocol, Sequence, runtime_checkable
+
+import numpy as np
+
+from harness.scene import Scene
+
+ENTRY_POINT_GROUP = "cbox.renderers"
+
+
+@dataclass
+class Checkpoint:
+    """The image after the first ``spp`` samples per pixel, and the time to get there."""
+
+    spp: int
+    image: np.ndarray
+    time_s: float
+
+
+@dataclass
+class RenderResult:
+    """What a render returns.
+
+    ``image`` is linear-sRGB radiance, float32, shape (height, width, 3).
+    ``time_s`` is wall time of the render proper (scene set-up excluded,
+    JIT compilation included unless the adapter warmed up beforehand).
+    ``info`` carries adapter details worth recording (e.g. Mitsuba's variant).
+    """
+
+    image: np.ndarray
+    time_s: float
+    spp: int
+    seed: int
+    checkpoints: list[Checkpoint] = field(default_factory=list)
+    info: dict = field(default_factory=dict)
+
+
+@runtime_checkable
+class Renderer(Protocol):
+    name: str
+    features: frozenset[str]
+    approximations: tuple[str, ...]
+
+    def unavailable_reason(self) -> str | None: ...
+
+    def version(self) -> str: ...
+
+    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = ()) -> RenderResult: ...
+
+
+class RendererError(RuntimeError):
+    """A renderer could not be found or loaded (bad spec, import failure)."""
+
+
+@dataclass
+class RendererEntry:
+    """A renderer as the registry knows it: loaded, or the reason it is not."""
+
+    name: str
+    spec: str
+    renderer: Renderer | None
+    reason: str | None  # why it is unavailable; None when available
+
+    @property
+    def available(self) -> bool:
+        return self.renderer is not None and self.reason is None
+
+
+def missing_features(renderer: Renderer, scene: Scene) -> list[str]:
+    """Scene features the renderer does not model (empty: it can run)."""
+    return sorted(scene.features - set(renderer.features))
+
+
+def load_spec(spec: str) -> Renderer:
+    """Instantiate ``package.module:ClassName``; raise RendererError if impossible."""
+    module_name, _, attr = spec.partition(":")
+    if not module_name or not attr:
+        raise RendererError(f"renderer {spec!r}: expected a registered name or package.module:ClassName")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as e:
+        raise RendererError(f"renderer {spec!r}: cannot import {module_name}: {e}") from None
+    try:
+        cls = getattr(module, attr)
+    except AttributeError:
+        raise RendererError(f"renderer {spec!r}: {module_name} has no attribute {attr!r}") from None
+    return _instantiate(cls, spec)
+
+
+def _instantiate(cls, spec: str) -> Renderer:
+    try:
+        obj = cls()
+    except Exception as e:  # a third-party constructor may raise anything
+        raise RendererError(f"renderer {spec!r}: constructing it failed: {type(e).__name__}: {e}") from None
+    for attr in ("name", "features", "render", "unavailable_reason", "version"):
+        if not hasattr(obj, attr):
+            raise RendererError(f"renderer {spec!r}: does not implement the adapter interface (no {attr!r})")
+    return obj
+
+
+def _entry(name: str, spec: str, load) -> RendererEntry:
+    try:
+        r = load()
+    except RendererError as e:
+        return RendererEntry(name, spec, None, str(e))
+    try:
+        reason = r.unavailable_reason()
+    except Exception as e:  # availability probes must never crash a run
+        reason = f"availability check failed: {type(e).__name__}: {e}"
+    return RendererEntry(getattr(r, "name", name), spec, r, reason)
+
+
+def discover() -> dict[str, RendererEntry]:
+    """All renderers registered under ``cbox.renderers``, by name."""
+    out: dict[str, RendererEntry] = {}
+    for ep in sorted(importlib.metadata.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        def load(ep=ep):
+            try:
+                cls = ep.load()
+            except Exception as e:
+                raise RendererError(f"renderer {ep.name!r}: cannot import {ep.value}: {type(e).__name__}: {e}") from None
+            return _instantiate(cls, ep.value)
+
+        out[ep.name] = _entry(ep.name, ep.value, load)
+    return out
+
+
+def resolve(specs: Sequence[str] | None) -> list[RendererEntry]:
+    """Renderers named by ``specs`` (registered names or module:Class), or all registered.
+
+    An unknown name raises RendererError (a usage error); a renderer that
+    exists but cannot run here comes back unavailable, with its reason.
+    """
+    registered = discover()
+    if not specs:
+        return list(registered.values())
+    out = []
+    for spec in specs:
+        if spec in registered:
+            out.append(registered[spec])
+        elif ":" in spec:
+            out.append(_entry(spec, spec, lambda spec=spec: load_spec(spec)))
+        else:
+            known = ", ".join(registered) or "(none)"
+            raise RendererError(f"unknown renderer {spec!r}; registered: {known}; or give package.module:ClassName")
+    return out

@@ -1,0 +1,119 @@
+"""The runner: renders a scene with each renderer and scores it against the reference.
+
+A renderer that is unavailable here, or does not model a feature the scene
+uses, is never run; its record says why (``status`` "unavailable" or
+"skipped"). A renderer that raises is recorded as "failed" with the error, and
+the other renderers still run.
+"""
+
+from __future__ import annotations
+
+import math
+import traceback
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from harness import metrics, stats
+from harness.adapter import RendererEntry, missing_features
+from harness.reference import Reference
+from harness.scene import Scene
+
+STATUSES = ("ok", "skipped", "unavailable", "failed")
+
+
+@dataclass
+class RunRecord:
+    """One renderer on one scene at one (spp, seed): outcome, image and metrics."""
+
+    scene: str
+    renderer: str
+    status: str
+    spp: int
+    seed: int
+    reason: str | None = None
+    version: str | None = None
+    time_s: float | None = None
+    approximations: tuple[str, ...] = ()
+    info: dict = field(default_factory=dict)
+    metrics: dict = field(default_factory=dict)
+    image: np.ndarray | None = field(default=None, repr=False)
+
+    def row(self) -> dict:
+        """Flat, JSON-serialisable record (no image)."""
+        out = {
+            "scene": self.scene,
+            "renderer": self.renderer,
+            "status": self.status,
+            "reason": self.reason,
+            "version": self.version,
+            "spp": self.spp,
+            "seed": self.seed,
+            "time_s": None if self.time_s is None else round(self.time_s, 4),
+        }
+        out.update(self.metrics)
+        for k, v in self.info.items():
+            out[f"info_{k}"] = v
+        return out
+
+
+def json_safe(row: dict) -> dict:
+    """The row with non-finite floats (e.g. PSNR of identical images) as None: strict JSON."""
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
+
+
+def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: Reference | None) -> RunRecord:
+    """Render and score one renderer; never raises for the renderer's own failures."""
+    rec = RunRecord(scene.name, entry.name, "ok", spp, seed)
+    if not entry.available:
+        rec.status, rec.reason = "unavailable", entry.reason
+        return rec
+    r = entry.renderer
+    rec.approximations = tuple(getattr(r, "approximations", ()))
+    if missing := missing_features(r, scene):
+        rec.status, rec.reason = "skipped", f"does not model {', '.join(missing)}"
+        return rec
+    try:
+        rec.version = str(r.version())
+        result = r.render(scene, spp, seed)
+        image = np.asarray(result.image, dtype=np.float32)
+        expected = (scene.camera.height, scene.camera.width, 3)
+        if image.shape != expected:
+            raise ValueError(f"returned an image of shape {image.shape}, expected {expected}")
+    except Exception as e:  # any renderer bug must be reported, not crash the run
+        rec.status = "failed"
+        rec.reason = f"{type(e).__name__}: {e}"
+        rec.info = {"traceback": traceback.format_exc(limit=8)}
+        return rec
+    rec.time_s, rec.info, rec.image = float(result.time_s), dict(result.info), image
+    if reference is not None:
+        rec.metrics = score(image, reference, spp)
+    else:
+        rec.metrics = metrics.invalid_pixel_counts(image)
+    return rec
+
+
+def score(image: np.ndarray, reference: Reference, spp: int) -> dict:
+    """Every metric of ``image`` against the reference, plus its noise yardsticks."""
+    out = metrics.image_metrics(image, reference.image)
+    out.update(stats.noise_yardsticks(image, reference.image, reference.variance, reference.spp, spp))
+    return out
+
+
+def compare(
+    scene: Scene,
+    entries: Sequence[RendererEntry],
+    spp: int,
+    seed: int,
+    reference: Reference | None,
+    on_done: Callable[[RunRecord], None] | None = None,
+) -> list[RunRecord]:
+    """:func:`run_one` for each renderer, in order."""
+    records = []
+    for entry in entries:
+        rec = run_one(entry, scene, spp, seed, reference)
+        records.append(rec)
+        if on_done:
+            on_done(rec)
+    return records

@@ -1,0 +1,62 @@
+"""Statistics that tell error from noise, using the reference's variance.
+
+The reference stores the per-pixel variance of its mean, ``var_ref``, from
+``ref_spp`` samples. A renderer whose per-sample variance equals the
+reference renderer's would, at ``spp`` samples, have per-pixel variance
+``var_ref * ref_spp / spp``; the difference image (render - reference) then
+has variance ``var_ref * (ref_spp / spp + 1)``. These yardsticks assume that
+noise model, which holds exactly for the reference renderer itself and is a
+scale for any other unbiased renderer.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from harness import metrics
+
+#: Seed of the simulated noise image; fixed so yardsticks are reproducible.
+NOISE_SEED = 20260101
+
+
+def difference_variance(ref_var: np.ndarray, ref_spp: int, spp: int) -> np.ndarray:
+    """Per-pixel variance of (render at ``spp`` - reference), under the noise model above."""
+    return np.asarray(ref_var, dtype=np.float64) * (ref_spp / spp + 1.0)
+
+
+def mean_radiance_z(image: np.ndarray, ref: np.ndarray, ref_var: np.ndarray, ref_spp: int, spp: int) -> float:
+    """z-score of the image's mean radiance (mean over pixels and channels) against the reference.
+
+    Pixels are independent; a pixel's three channels come from the same paths,
+    so their covariance is bounded by the perfectly correlated case
+    (Cauchy-Schwarz), which makes this z conservative (|z| never overstated).
+    """
+    var = difference_variance(ref_var, ref_spp, spp)
+    n = image.shape[0] * image.shape[1]
+    pixel_sd = np.sqrt(var).sum(axis=-1) / 3.0  # sd of the channel mean, correlated bound
+    sd = np.sqrt(np.sum(pixel_sd**2)) / n
+    diff = float(np.nanmean(np.asarray(image, np.float64)) - np.mean(ref, dtype=np.float64))
+    return diff / sd if sd > 0 else (0.0 if diff == 0 else float(np.sign(diff)) * np.inf)
+
+
+def simulated_noisy_image(ref: np.ndarray, ref_var: np.ndarray, ref_spp: int, spp: int, seed: int = NOISE_SEED) -> np.ndarray:
+    """The reference plus Gaussian noise of the difference variance (channels independent)."""
+    rng = np.random.default_rng(seed)
+    sd = np.sqrt(difference_variance(ref_var, ref_spp, spp))
+    return np.asarray(ref, np.float64) + sd * rng.standard_normal(ref.shape)
+
+
+def noise_yardsticks(image: np.ndarray, ref: np.ndarray, ref_var: np.ndarray, ref_spp: int, spp: int) -> dict:
+    """What noise alone would give at this spp, to read the real metrics against.
+
+    - ``noise_rmse``: expected RMSE from noise alone;
+    - ``noise_delta_e2000_mean``: ΔE mean of a simulated noise-only image;
+    - ``noise_mean_radiance_z``: z-score of the mean-radiance difference.
+    """
+    var = difference_variance(ref_var, ref_spp, spp)
+    noisy = simulated_noisy_image(ref, ref_var, ref_spp, spp)
+    return {
+        "noise_rmse": float(np.sqrt(np.mean(var))),
+        "noise_delta_e2000_mean": float(metrics.delta_e2000(noisy, ref)),
+        "noise_mean_radiance_z": float(mean_radiance_z(image, ref, ref_var, ref_spp, spp)),
+    }

@@ -1,0 +1,192 @@
+"""Mitsuba 3 adapter: the harness's reference renderer.
+
+Scenes are converted to ``mi.load_dict`` with in-memory meshes, rendered with
+Mitsuba's unidirectional ``path`` integrator (next-event estimation + BSDF
+sampling with MIS, Russian roulette from depth 5), an ``independent`` sampler
+and a ``box`` reconstruction filter.
+
+Variant: ``llvm_ad_rgb`` when an LLVM shared library of version 17 or newer is
+found (``DRJIT_LIBLLVM_PATH`` first, then the usual system locations),
+otherwise ``scalar_rgb`` (same images in expectation, about 4x slower). The
+variant used is reported in ``RenderResult.info`` and in ``version()``.
+
+Renders are split into passes of at most :data:`MAX_SAMPLES_PER_PASS` samples
+so memory stays bounded at any spp (the LLVM variant keeps a whole wavefront
+in memory); each pass has its own seed, derived from the user's seed.
+"""
+
+from __future__ import annotations
+
+import ctypes.util
+import glob
+import os
+import re
+import time
+from functools import cache
+from typing import Sequence
+
+import numpy as np
+
+from harness.adapter import Checkpoint, RenderResult
+from harness.sampling import pass_seed, spp_passes
+from harness.scene import Scene
+
+MIN_LLVM_MAJOR = 17
+#: Upper bound on width × height × spp of one ``mi.render`` call (~1.5 GB of wavefront state).
+MAX_SAMPLES_PER_PASS = 1 << 23
+
+_LLVM_GLOBS = (
+    "/usr/lib/x86_64-linux-gnu/libLLVM*.so*",
+    "/usr/lib/aarch64-linux-gnu/libLLVM*.so*",
+    "/usr/lib/llvm-*/lib/libLLVM*.so*",
+    "/usr/lib64/libLLVM*.so*",
+    "/usr/lib/libLLVM*.so*",
+    "/usr/local/lib/libLLVM*.so*",
+    "/opt/homebrew/opt/llvm/lib/libLLVM*.dylib",
+)
+
+
+def _llvm_major(path: str) -> int | None:
+    """LLVM major version from a library file name (libLLVM.so.19.1, libLLVM-19.so)."""
+    m = re.search(r"libLLVM[-.]?(?:so\.)?(\d+)", os.path.basename(path))
+    return int(m.group(1)) if m else None
+
+
+@cache
+def find_llvm() -> tuple[str | None, str]:
+    """(path to a usable libLLVM, or None; a sentence saying what was found)."""
+    env = os.environ.get("DRJIT_LIBLLVM_PATH")
+    if env:
+        major = _llvm_major(env)
+        if not os.path.exists(env):
+            return None, f"DRJIT_LIBLLVM_PATH={env} does not exist"
+        if major is not None and major < MIN_LLVM_MAJOR:
+            return None, f"DRJIT_LIBLLVM_PATH={env} is LLVM {major}; Mitsuba 3.9 needs {MIN_LLVM_MAJOR} or newer"
+        return env, f"LLVM from DRJIT_LIBLLVM_PATH={env}"
+    candidates = [p for g in _LLVM_GLOBS for p in glob.glob(g)]
+    found = ctypes.util.find_library("LLVM")
+    if found:
+        candidates.append(found)
+    versioned = [(v, p) for p in candidates if (v := _llvm_major(p)) is not None and os.path.exists(p)]
+    good = sorted((v, p) for v, p in versioned if v >= MIN_LLVM_MAJOR)
+    if good:
+        major, path = good[-1]
+        return path, f"LLVM {major} at {path}"
+    seen = ", ".join(sorted({str(v) for v, _ in versioned})) or "none"
+    return None, (
+        f"no LLVM >= {MIN_LLVM_MAJOR} found (versions seen: {seen}); install Debian's libllvm19 "
+        "or set DRJIT_LIBLLVM_PATH"
+    )
+
+
+@cache
+def _select_variant() -> tuple[str, str]:
+    """Set and return Mitsuba's variant, with a note on why it was chosen."""
+    llvm, note = find_llvm()
+    if llvm and not os.environ.get("DRJIT_LIBLLVM_PATH"):
+        os.environ["DRJIT_LIBLLVM_PATH"] = llvm  # drjit reads it at first use
+    import mitsuba as mi
+
+    if llvm:
+        try:
+            mi.set_variant("llvm_ad_rgb")
+            import drjit as dr
+
+            dr.eval(dr.arange(mi.Float, 4) + 1)  # forces LLVM to load now, not mid-render
+            return "llvm_ad_rgb", note
+        except Exception as e:  # a broken LLVM must degrade, not crash
+            note = f"llvm_ad_rgb failed ({type(e).__name__}: {e}); falling back"
+    mi.set_variant("scalar_rgb")
+    return "scalar_rgb", f"{note}; using scalar_rgb (about 4x slower)"
+
+
+def scene_dict(scene: Scene, spp: int) -> dict:
+    """The scene as a ``mi.load_dict`` dictionary (Mitsuba must be imported)."""
+    import mitsuba as mi
+
+    cam = scene.camera
+    d: dict = {
+        "type": "scene",
+        # Our max_depth convention is Mitsuba's own: no translation needed.
+        "integrator": {"type": "path", "max_depth": scene.max_depth},
+        "sensor": {
+            "type": "perspective",
+            "fov": cam.fov_deg,
+            "fov_axis": cam.fov_axis,
+            "near_clip": 1e-4 * scene.extent(),
+            "far_clip": 1e4 * scene.extent(),
+            "to_world": mi.ScalarTransform4f().look_at(origin=cam.position, target=cam.look_at, up=cam.up),
+            "sampler": {"type": "independent", "sample_count": spp},
+            "film": {
+                "type": "hdrfilm",
+                "width": cam.width,
+                "height": cam.height,
+                "rfilter": {"type": scene.pixel_filter},
+                "pixel_format": "rgb",
+                "component_format": "float32",
+            },
+        },
+    }
+    bsdfs = {
+        name: mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": list(m.reflectance)}})
+        for name, m in scene.materials.items()
+    }
+    for i, m in enumerate(scene.meshes):
+        props = mi.Properties()
+        props["bsdf"] = bsdfs[m.material]
+        if m.is_emitter:
+            props["emitter"] = mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": list(m.radiance)}})
+        mesh = mi.Mesh(m.name, len(m.vertices), len(m.triangles), has_vertex_normals=False,
+                       has_vertex_texcoords=False, props=props)
+        params = mi.traverse(mesh)
+        params["vertex_positions"] = mi.Float(m.vertices.astype(np.float32).ravel())
+        params["faces"] = mi.UInt32(m.triangles.astype(np.uint32).ravel())
+        params.update()
+        d[f"mesh_{i}"] = mesh
+    return d
+
+
+class Mitsuba3:
+    """Mitsuba 3 path tracer (``path`` integrator)."""
+
+    name = "mitsuba"
+    features = frozenset({"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"})
+    approximations: tuple[str, ...] = ()
+
+    def unavailable_reason(self) -> str | None:
+        try:
+            import mitsuba  # noqa: F401
+        except ImportError as e:
+            return f"mitsuba is not installed ({e}); pip install mitsuba"
+        return None
+
+    def variant(self) -> tuple[str, str]:
+        """(variant in use, why it was chosen)."""
+        return _select_variant()
+
+    def version(self) -> str:
+        import mitsuba as mi
+
+        return f"{mi.__version__} ({self.variant()[0]})"
+
+    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = ()) -> RenderResult:
+        variant, note = self.variant()
+        import mitsuba as mi
+
+        cam = scene.camera
+        per_pass = max(1, MAX_SAMPLES_PER_PASS // (cam.width * cam.height))
+        mi_scene = mi.load_dict(scene_dict(scene, per_pass))
+        acc = np.zeros((cam.height, cam.width, 3), dtype=np.float64)
+        done, elapsed, shots = 0, 0.0, []
+        for k, n in enumerate(spp_passes(spp, per_pass, checkpoints)):
+            t0 = time.perf_counter()
+            img = np.asarray(mi.render(mi_scene, spp=n, seed=pass_seed(seed, k)), dtype=np.float64)
+            elapsed += time.perf_counter() - t0
+            acc += img * n
+            done += n
+            if done in checkpoints and done < spp:
+                shots.append(Checkpoint(done, (acc / done).astype(np.float32), elapsed))
+        image = (acc / spp).astype(np.float32)
+        if spp in checkpoints:
+            shots.append(Checkpoint(spp, image, elapsed))
+        return RenderResult(image, elapsed, spp, seed, shots, {"variant": variant, "variant_note": note})

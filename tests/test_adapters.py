@@ -1,0 +1,84 @@
+"""Adapter registry, capability matching and skipping, and user renderers given as module:Class."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from conftest import CORNELL, run_cbox
+from harness import runner
+from harness.adapter import RendererError, discover, load_spec, resolve
+from harness.scene import load_scene
+
+TESTS = Path(__file__).resolve().parent  # pytest puts it on sys.path; subprocesses need PYTHONPATH
+
+
+def test_builtin_renderers_are_registered_as_entry_points():
+    names = set(discover())
+    assert {"mitsuba", "pyrender"} <= names
+
+
+def test_load_spec_module_class():
+    r = load_spec("user_renderers:FlatGrey")
+    assert r.name == "flat-grey" and r.unavailable_reason() is None
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("user_renderers:Nope", "has no attribute 'Nope'"),
+    ("no_such_module_xyz:Thing", "cannot import no_such_module_xyz"),
+    ("user_renderers", "expected a registered name or package.module:ClassName"),
+])
+def test_load_spec_errors(spec, words):
+    with pytest.raises(RendererError, match=words):
+        load_spec(spec)
+
+
+def test_unknown_name_is_a_usage_error():
+    with pytest.raises(RendererError, match="unknown renderer 'povray'"):
+        resolve(["povray"])
+
+
+def test_import_failure_makes_renderer_unavailable_not_a_crash():
+    (entry,) = resolve(["no_such_module_xyz:Thing"])
+    assert not entry.available and "cannot import" in entry.reason
+
+
+def test_runner_statuses_and_reasons():
+    scene = load_scene(CORNELL).with_resolution(8, 8)
+    entries = resolve(["user_renderers:FlatGrey", "user_renderers:MeshOnly", "user_renderers:NeedsGPU",
+                       "user_renderers:Crashes", "user_renderers:WrongShape"])
+    recs = {r.renderer: r for r in runner.compare(scene, entries, spp=1, seed=0, reference=None)}
+    assert recs["flat-grey"].status == "ok" and recs["flat-grey"].image.shape == (8, 8, 3)
+    assert recs["mesh-only"].status == "skipped"
+    assert recs["mesh-only"].reason == "does not model area_light, box_filter, diffuse"
+    assert recs["needs-gpu"].status == "unavailable" and recs["needs-gpu"].reason == "no CUDA device found"
+    assert recs["crashes"].status == "failed" and "segfault simulator" in recs["crashes"].reason
+    assert recs["wrong-shape"].status == "failed" and "shape (2, 2, 3)" in recs["wrong-shape"].reason
+    assert recs["mesh-only"].image is None and recs["mesh-only"].metrics == {}
+
+
+def test_cli_render_with_user_renderer(tmp_path):
+    out = tmp_path / "grey.exr"
+    proc = run_cbox("render", "--scene", "cornell-box", "--renderer", "user_renderers:FlatGrey",
+                    "--spp", "1", "--out", str(out), env_path=TESTS)
+    assert proc.returncode == 0, proc.stderr
+    from harness.exr import read_exr
+
+    img = read_exr(out)
+    assert img.shape == (256, 256, 3) and float(img.mean()) == pytest.approx(0.25)
+
+
+def test_cli_render_refuses_renderer_lacking_a_feature(tmp_path):
+    proc = run_cbox("render", "--scene", "cornell-box", "--renderer", "user_renderers:MeshOnly",
+                    "--out", str(tmp_path / "x.exr"), env_path=TESTS)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == ("cbox: error: renderer 'mesh-only' does not model area_light, box_filter, "
+                                   "diffuse, which cornell-box uses")
+
+
+def test_cli_renderers_lists_availability():
+    proc = run_cbox("renderers")
+    assert proc.returncode == 0, proc.stderr
+    assert "mitsuba" in proc.stdout and "pyrender" in proc.stdout
+    assert "available" in proc.stdout

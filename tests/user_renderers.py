@@ -1,0 +1,76 @@
+"""Renderers a user might write, loaded by the tests as ``user_renderers:ClassName``.
+
+They implement the adapter interface without importing anything from the
+harness but its result type, exactly as a third-party package would.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from harness.adapter import RenderResult
+
+ALL = frozenset({"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"})
+
+
+class FlatGrey:
+    """Every pixel the same grey: a valid, deterministic, very wrong renderer."""
+
+    name = "flat-grey"
+    features = ALL
+    approximations = ("everything is grey",)
+    calls = 0
+
+    def unavailable_reason(self):
+        return None
+
+    def version(self):
+        return "1.0"
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        type(self).calls += 1
+        img = np.full((scene.camera.height, scene.camera.width, 3), 0.25, dtype=np.float32)
+        return RenderResult(img, 0.001, spp, seed)
+
+
+class MeshOnly(FlatGrey):
+    """Models geometry only: must be skipped on any lit scene, never run."""
+
+    name = "mesh-only"
+    features = frozenset({"triangle_mesh", "pinhole_camera"})
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        raise AssertionError("a renderer that lacks a feature must not be run")
+
+
+class NeedsGPU(FlatGrey):
+    name = "needs-gpu"
+
+    def unavailable_reason(self):
+        return "no CUDA device found"
+
+
+class Crashes(FlatGrey):
+    name = "crashes"
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        raise RuntimeError("segfault simulator")
+
+
+class WrongShape(FlatGrey):
+    name = "wrong-shape"
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        return RenderResult(np.zeros((2, 2, 3), np.float32), 0.0, spp, seed)
+
+
+class SeededNoise(FlatGrey):
+    """Grey plus unit Gaussian noise drawn from the seed: independent across seeds."""
+
+    name = "seeded-noise"
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        rng = np.random.default_rng(seed)
+        shape = (scene.camera.height, scene.camera.width, 3)
+        img = 0.25 + rng.standard_normal(shape) / np.sqrt(spp)
+        return RenderResult(img.astype(np.float32), 0.001, spp, seed)
