@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# Set up cornell-harness on a fresh Debian/Ubuntu machine: system libraries
+# (when missing), then a virtual environment in .venv with the project and its
+# test tools. Safe to run again: it only installs what is missing or changed.
+#
+#   scripts/setup.sh            # runtime + tests
+#   CBOX_NO_APT=1 scripts/setup.sh   # never call apt-get (renderers needing
+#                                    # missing libraries then report themselves unavailable)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+say() { printf 'setup: %s\n' "$*" >&2; }
+
+# --- system libraries -------------------------------------------------------
+# libllvm19: Mitsuba's fast llvm_ad_rgb variant (needs LLVM >= 17; without it
+#            Mitsuba falls back to scalar_rgb).
+# libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libosmesa6: headless OpenGL for pyrender.
+need_pkgs=()
+have_lib() { ldconfig -p 2>/dev/null | grep -q "$1"; }
+have_llvm17() { ls /usr/lib/*/libLLVM*.so* /usr/lib/llvm-*/lib/libLLVM*.so* 2>/dev/null \
+  | grep -Eq 'libLLVM(-|\.so\.)(1[7-9]|[2-9][0-9])'; }
+have_llvm17 || need_pkgs+=(libllvm19)
+have_lib 'libEGL\.so\.1' || need_pkgs+=(libegl1)
+have_lib 'libGL\.so\.1' || need_pkgs+=(libgl1)
+have_lib 'libEGL_mesa\.so\.0' || need_pkgs+=(libegl-mesa0)
+ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || need_pkgs+=(libgl1-mesa-dri)
+have_lib 'libOSMesa\.so' || need_pkgs+=(libosmesa6)
+
+if ((${#need_pkgs[@]})); then
+  if [[ -n "${CBOX_NO_APT:-}" ]]; then
+    say "missing system packages (not installed, CBOX_NO_APT set): ${need_pkgs[*]}"
+  else
+    SUDO=""; [[ $(id -u) -ne 0 ]] && SUDO="sudo"
+    say "installing system packages: ${need_pkgs[*]}"
+    export DEBIAN_FRONTEND=noninteractive
+    if ! $SUDO apt-get install -y --no-install-recommends "${need_pkgs[@]}" >/dev/null 2>&1; then
+      $SUDO apt-get update -qq && $SUDO apt-get install -y --no-install-recommends "${need_pkgs[@]}" >/dev/null
+    fi
+  fi
+fi
+
+# --- Python environment -----------------------------------------------------
+PY=${PYTHON:-python3}
+"$PY" -c 'import sys; sys.exit(sys.version_info < (3, 11))' \
+  || { say "Python 3.11 or newer is needed (found $("$PY" --version 2>&1))"; exit 1; }
+[[ -x .venv/bin/python ]] || { say "creating .venv"; "$PY" -m venv .venv; }
+
+# Reinstall only when the dependency list changed.
+stamp=.venv/.cbox-installed
+want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+if [[ ! -f $stamp || $(cat "$stamp") != "$want" ]]; then
+  say "installing Python packages into .venv (first run takes a minute)"
+  .venv/bin/python -m pip install -q --upgrade pip 2>&1 | grep -v "is ignored" >&2 || true
+  .venv/bin/python -m pip install -q -e '.[test]' 2>&1 | grep -v "is ignored" >&2 || true
+  .venv/bin/python -c 'import harness.cli, renderers.mitsuba3' \
+    || { say "installation failed"; exit 1; }
+  echo "$want" > "$stamp"
+fi
+say "ready: .venv/bin/cbox --help"
