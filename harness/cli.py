@@ -16,6 +16,7 @@ import typer
 from tqdm import tqdm
 
 from harness.adapter import RendererError, missing_features, resolve
+from harness.atomic import atomic_path, write_json_atomic
 from harness.exr import ImageFileError, write_exr
 from harness.reference import ReferenceError, build_reference, load_reference, resolve_scene, scene_names
 from harness.scene import FEATURES, SceneError
@@ -113,7 +114,6 @@ def render(
 def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool) -> int:
     from harness import runner
     from reports.html import write_report
-    from harness.reference import write_json_atomic
     import pandas as pd
 
     sc = resolve_scene(scene)
@@ -123,18 +123,15 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
 
     def done(rec: runner.RunRecord) -> None:
         bar.update(1)
-        bar.set_postfix_str(f"{rec.renderer}: {rec.status}")
         if as_json:
             typer.echo(json.dumps(runner.json_safe(rec.row()), allow_nan=False))
 
-    bar.set_postfix_str("starting")
-    records = runner.compare(sc, entries, spp, seed, ref, on_done=done)
+    records = runner.compare(sc, entries, spp, seed, ref, on_start=lambda e: bar.set_postfix_str(e.name), on_done=done)
     bar.close()
     out.mkdir(parents=True, exist_ok=True)
     frame = pd.DataFrame([r.row() for r in records])
-    tmp = out / ".metrics.csv.tmp"
-    frame.to_csv(tmp, index=False)
-    tmp.replace(out / "metrics.csv")
+    with atomic_path(out / "metrics.csv") as tmp:
+        frame.to_csv(tmp, index=False)
     write_json_atomic(out / "metrics.json", [runner.json_safe(r.row()) for r in records])
     report = write_report(out / "report.html", scene=sc, reference_image=ref.image,
                           reference_provenance=ref.provenance, records=records, command=_command_line())
@@ -187,7 +184,7 @@ def reference_build(
     sc = resolve_scene(scene)
     if spp % batches:
         raise typer.BadParameter(f"--spp ({spp}) must be a multiple of --batches ({batches})")
-    bar = tqdm(total=batches, desc=f"reference {sc.name}", unit="batch", file=sys.stderr, dynamic_ncols=True)
+    bar = tqdm(total=batches + 1, desc=f"reference {sc.name}", unit="batch", file=sys.stderr, dynamic_ncols=True)
     ref = build_reference(sc, spp, batches, progress=lambda b, n: bar.update(1))
     bar.close()
     typer.echo(f"wrote {ref.folder} ({spp} spp in {ref.provenance['wall_time_s']:.0f} s, {ref.provenance['renderer_version']})")

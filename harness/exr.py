@@ -1,17 +1,16 @@
 """Reading and writing float32 RGB OpenEXR images through OpenImageIO.
 
-Writes are atomic: the image goes to a temporary file in the same folder,
-which then replaces the target, so an interrupted write never leaves a
-truncated EXR behind.
+Writes are atomic (:mod:`harness.atomic`): an interrupted write never leaves
+a truncated EXR behind.
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from harness.atomic import atomic_path
 
 
 class ImageFileError(OSError):
@@ -26,25 +25,18 @@ def write_exr(path: str | Path, image: np.ndarray, metadata: dict[str, str] | No
     img = np.ascontiguousarray(image, dtype=np.float32)
     if img.ndim != 3 or img.shape[2] != 3:
         raise ValueError(f"expected an (H, W, 3) image, got shape {img.shape}")
-    path.parent.mkdir(parents=True, exist_ok=True)
     spec = oiio.ImageSpec(img.shape[1], img.shape[0], 3, oiio.FLOAT)
     spec.attribute("compression", "zip")
     for k, v in (metadata or {}).items():
         spec.attribute(k, str(v))
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".exr", dir=path.parent)
-    os.close(fd)
-    try:
-        out = oiio.ImageOutput.create(tmp)
-        if out is None or not out.open(tmp, spec):
+    with atomic_path(path) as tmp:
+        out = oiio.ImageOutput.create("exr")
+        if out is None or not out.open(str(tmp), spec):
             raise ImageFileError(f"{path}: cannot write EXR: {oiio.geterror()}")
         ok = out.write_image(img)
         out.close()
         if not ok:
             raise ImageFileError(f"{path}: cannot write EXR: {oiio.geterror()}")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def read_exr(path: str | Path) -> np.ndarray:

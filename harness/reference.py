@@ -7,6 +7,10 @@
   Mitsuba renders of ``batch_spp`` samples each (float32 linear sRGB);
 - ``variance.exr``: per-pixel, per-channel variance *of that mean*, i.e. the
   unbiased sample variance of the batch images divided by ``batches``;
+- ``noise.exr``: one more batch, independent of the reference (seed
+  ``noise_seed``), kept as a sample of the renderer's real noise: its channel
+  correlations and tails make the noise yardsticks of :mod:`harness.stats`
+  match real renders where a Gaussian model would not;
 - ``provenance.json``: renderer, version, variant, spp, seeds, wall time, the
   scene's content hash, date, command line.
 
@@ -21,7 +25,6 @@ import json
 import os
 import platform
 import sys
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,11 +32,13 @@ from typing import Callable
 
 import numpy as np
 
+from harness.atomic import write_json_atomic
 from harness.exr import ImageFileError, read_exr, write_exr
 from harness.scene import Scene, SceneError, load_scene
 
 REFERENCE_SEED_BASE = 1_000_000_000
-REFERENCE_FILE, VARIANCE_FILE, PROVENANCE_FILE = "reference.exr", "variance.exr", "provenance.json"
+REFERENCE_FILE, VARIANCE_FILE, NOISE_FILE = "reference.exr", "variance.exr", "noise.exr"
+PROVENANCE_FILE = "provenance.json"
 
 
 class ReferenceError(RuntimeError):
@@ -67,12 +72,17 @@ def resolve_scene(name_or_path: str) -> Scene:
 class Reference:
     image: np.ndarray  # (H, W, 3) float32
     variance: np.ndarray  # variance of the mean, (H, W, 3) float32
+    noise: np.ndarray  # one independent batch of noise_spp samples, (H, W, 3) float32
     provenance: dict
     folder: Path
 
     @property
     def spp(self) -> int:
         return int(self.provenance["spp"])
+
+    @property
+    def noise_spp(self) -> int:
+        return int(self.provenance["noise_spp"])
 
 
 def rebuild_command(scene: Scene, spp: int = 16384) -> str:
@@ -96,16 +106,16 @@ def load_reference(scene: Scene, folder: Path | None = None) -> Reference:
             f"now hashes to {scene.content_hash()}; rebuild it with: {rebuild_command(scene, spp)}"
         )
     try:
-        image, variance = read_exr(folder / REFERENCE_FILE), read_exr(folder / VARIANCE_FILE)
+        image, variance, noise = (read_exr(folder / f) for f in (REFERENCE_FILE, VARIANCE_FILE, NOISE_FILE))
     except ImageFileError as e:
         raise ReferenceError(f"{e}; rebuild with: {rebuild_command(scene, spp)}") from None
     shape = (scene.camera.height, scene.camera.width, 3)
-    if image.shape != shape or variance.shape != shape:
+    if not image.shape == variance.shape == noise.shape == shape:
         raise ReferenceError(
             f"{folder}: reference images are {image.shape[1]}x{image.shape[0]}, scene is {shape[1]}x{shape[0]}; "
             f"rebuild with: {rebuild_command(scene, spp)}"
         )
-    return Reference(image, variance, prov, folder)
+    return Reference(image, variance, noise, prov, folder)
 
 
 def build_reference(
@@ -116,7 +126,7 @@ def build_reference(
     folder: Path | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> Reference:
-    """Render ``batches`` independent batches and store mean, variance and provenance.
+    """Render ``batches`` independent batches (and the noise batch); store mean, variance, noise, provenance.
 
     ``spp`` must be a multiple of ``batches``. The files are written only when
     every batch is done, each atomically, provenance last.
@@ -146,7 +156,11 @@ def build_reference(
         mean += delta / (b + 1)
         m2 += delta * (x - mean)
         if progress:
-            progress(b + 1, batches)
+            progress(b + 1, batches + 1)
+    noise_seed = REFERENCE_SEED_BASE + batches
+    noise = renderer.render(scene, batch_spp, noise_seed).image
+    if progress:
+        progress(batches + 1, batches + 1)
     variance_of_mean = m2 / (batches - 1) / batches
     prov = {
         "scene": scene.name,
@@ -158,6 +172,8 @@ def build_reference(
         "batches": batches,
         "batch_spp": batch_spp,
         "seeds": seeds,
+        "noise_seed": noise_seed,
+        "noise_spp": batch_spp,
         "wall_time_s": round(wall, 3),
         "resolution": [scene.camera.width, scene.camera.height],
         "max_depth": scene.max_depth,
@@ -170,20 +186,6 @@ def build_reference(
     meta = {"cbox:scene_hash": prov["scene_hash"], "cbox:spp": str(spp), "cbox:renderer": prov["renderer_version"]}
     write_exr(folder / REFERENCE_FILE, mean, meta)
     write_exr(folder / VARIANCE_FILE, variance_of_mean, meta)
+    write_exr(folder / NOISE_FILE, noise, meta)
     write_json_atomic(folder / PROVENANCE_FILE, prov)
-    return Reference(mean.astype(np.float32), variance_of_mean.astype(np.float32), prov, folder)
-
-
-def write_json_atomic(path: Path, data) -> None:
-    """Write JSON through a temporary file and rename, so readers never see half a file."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=1, allow_nan=False)
-            f.write("\n")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    return Reference(mean.astype(np.float32), variance_of_mean.astype(np.float32), noise, prov, folder)

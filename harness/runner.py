@@ -97,7 +97,7 @@ def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: 
 def score(image: np.ndarray, reference: Reference, spp: int) -> dict:
     """Every metric of ``image`` against the reference, plus its noise yardsticks."""
     out = metrics.image_metrics(image, reference.image)
-    out.update(stats.noise_yardsticks(image, reference.image, reference.variance, reference.spp, spp))
+    out.update(stats.noise_yardsticks(image, reference, spp))
     return out
 
 
@@ -107,11 +107,14 @@ def compare(
     spp: int,
     seed: int,
     reference: Reference | None,
+    on_start: Callable[[RendererEntry], None] | None = None,
     on_done: Callable[[RunRecord], None] | None = None,
 ) -> list[RunRecord]:
-    """:func:`run_one` for each renderer, in order."""
+    """:func:`run_one` for each renderer, in order, with optional progress callbacks."""
     records = []
     for entry in entries:
+        if on_start:
+            on_start(entry)
         rec = run_one(entry, scene, spp, seed, reference)
         records.append(rec)
         if on_done:

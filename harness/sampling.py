@@ -22,17 +22,21 @@ def pass_seed(seed: int, index: int) -> int:
 def spp_passes(spp: int, max_per_pass: int, checkpoints: Sequence[int] = ()) -> Iterator[int]:
     """Sizes of consecutive passes summing to ``spp``.
 
-    No pass exceeds ``max_per_pass``, and every checkpoint in (0, spp] is the
-    running total after some pass, so progressive images cost no extra samples.
+    Passes double (1, 1, 2, 4, ...) up to ``max_per_pass``, then stay at that
+    size, so every power-of-two spp up to ``max_per_pass`` is a pass boundary and
+    a render's image does not depend on which of those checkpoints were
+    asked for. Any other checkpoint in (0, spp) adds a boundary of its own.
     """
     if spp < 1:
         raise ValueError(f"spp must be >= 1, got {spp}")
     if max_per_pass < 1:
         raise ValueError(f"max_per_pass must be >= 1, got {max_per_pass}")
-    stops = sorted({int(c) for c in checkpoints if 0 < c < spp} | {spp})
+    stops = {int(c) for c in checkpoints if 0 < c < spp} | {spp}
+    b = 1
+    while b < spp:
+        stops.add(b)
+        b += min(b, max_per_pass)
     done = 0
-    for stop in stops:
-        while done < stop:
-            n = min(max_per_pass, stop - done)
-            yield n
-            done += n
+    for stop in sorted(stops):
+        yield stop - done
+        done = stop

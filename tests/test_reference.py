@@ -18,6 +18,7 @@ def test_build_stores_mean_variance_and_provenance(write_scene, tmp_path):
     scene = load_scene(write_scene())
     r = SeededNoise()
     ref = build_reference(scene, spp=8, batches=4, renderer=r)
+    np.testing.assert_array_equal(ref.noise, r.render(scene, 2, REFERENCE_SEED_BASE + 4).image)
     batches = np.stack([r.render(scene, 2, REFERENCE_SEED_BASE + b).image.astype(np.float64) for b in range(4)])
     np.testing.assert_allclose(ref.image, batches.mean(0), rtol=1e-6)
     np.testing.assert_allclose(ref.variance, batches.var(0, ddof=1) / 4, rtol=1e-5)
@@ -29,7 +30,8 @@ def test_build_stores_mean_variance_and_provenance(write_scene, tmp_path):
         assert key in prov, key
     assert prov["spp"] == 8 and prov["seeds"] == [REFERENCE_SEED_BASE + b for b in range(4)]
     assert prov["scene_hash"] == scene.content_hash()
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["provenance.json", "reference.exr", "scene.toml", "variance.exr"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["noise.exr", "provenance.json", "reference.exr", "scene.toml",
+                                                   "variance.exr"]
 
 
 def test_changed_scene_is_refused_with_rebuild_command(write_scene, tmp_path):

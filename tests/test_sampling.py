@@ -1,0 +1,25 @@
+"""Pass schedules and pass seeds."""
+
+import pytest
+
+from harness.sampling import pass_seed, spp_passes
+
+
+@pytest.mark.parametrize("spp, cap, checkpoints", [(1, 8, ()), (10, 4, ()), (300, 128, (1, 2, 4, 100)), (64, 1, ())])
+def test_passes_sum_to_spp_and_respect_cap(spp, cap, checkpoints):
+    passes = list(spp_passes(spp, cap, checkpoints))
+    assert sum(passes) == spp and max(passes) <= cap and min(passes) >= 1
+    totals = {sum(passes[: i + 1]) for i in range(len(passes))}
+    assert set(checkpoints) <= totals
+
+
+def test_power_of_two_checkpoints_do_not_change_the_schedule():
+    assert list(spp_passes(256, 64, (1, 2, 4, 8, 16, 32, 64, 128))) == list(spp_passes(256, 64))
+
+
+def test_pass_seeds_distinct_and_stable():
+    seeds = {pass_seed(s, k) for s in range(20) for k in range(20)}
+    assert len(seeds) == 400
+    assert pass_seed(3, 7) == pass_seed(3, 7)
+    with pytest.raises(ValueError):
+        pass_seed(-1, 0)
