@@ -45,6 +45,8 @@ class RenderResult:
     ``time_s`` is wall time of the render proper (scene set-up excluded,
     JIT compilation included unless the adapter warmed up beforehand).
     ``info`` carries adapter details worth recording (e.g. Mitsuba's variant).
+    ``variance``, when the renderer can give it, is the per-pixel variance of
+    ``image`` (of the mean, not of one sample), float32 (height, width, 3).
     """
 
     image: np.ndarray
@@ -53,6 +55,7 @@ class RenderResult:
     seed: int
     checkpoints: list[Checkpoint] = field(default_factory=list)
     info: dict = field(default_factory=dict)
+    variance: np.ndarray | None = None
 
 
 @runtime_checkable
@@ -130,37 +133,49 @@ def _entry(name: str, spec: str, load) -> RendererEntry:
     return RendererEntry(getattr(r, "name", name), spec, r, reason)
 
 
-def discover() -> dict[str, RendererEntry]:
-    """All renderers registered under ``cbox.renderers``, by name."""
-    out: dict[str, RendererEntry] = {}
-    for ep in sorted(importlib.metadata.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
-        def load(ep=ep):
-            try:
-                cls = ep.load()
-            except Exception as e:
-                raise RendererError(f"renderer {ep.name!r}: cannot import {ep.value}: {type(e).__name__}: {e}") from None
-            return _instantiate(cls, ep.value)
+def _entry_points() -> dict:
+    eps = importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)
+    return {ep.name: ep for ep in sorted(eps, key=lambda e: e.name)}
 
-        out[ep.name] = _entry(ep.name, ep.value, load)
-    return out
+
+def _load_entry_point(ep) -> RendererEntry:
+    def load():
+        try:
+            cls = ep.load()
+        except Exception as e:
+            raise RendererError(f"renderer {ep.name!r}: cannot import {ep.value}: {type(e).__name__}: {e}") from None
+        return _instantiate(cls, ep.value)
+
+    return _entry(ep.name, ep.value, load)
+
+
+def registered_names() -> list[str]:
+    """Names registered under ``cbox.renderers``, without loading anything."""
+    return list(_entry_points())
+
+
+def discover() -> dict[str, RendererEntry]:
+    """All renderers registered under ``cbox.renderers``, loaded and probed, by name."""
+    return {name: _load_entry_point(ep) for name, ep in _entry_points().items()}
 
 
 def resolve(specs: Sequence[str] | None) -> list[RendererEntry]:
     """Renderers named by ``specs`` (registered names or module:Class), or all registered.
 
-    An unknown name raises RendererError (a usage error); a renderer that
-    exists but cannot run here comes back unavailable, with its reason.
+    Only the renderers named are loaded and probed. An unknown name raises
+    RendererError (a usage error); a renderer that exists but cannot run here
+    comes back unavailable, with its reason.
     """
-    registered = discover()
+    eps = _entry_points()
     if not specs:
-        return list(registered.values())
+        return [_load_entry_point(ep) for ep in eps.values()]
     out = []
     for spec in specs:
-        if spec in registered:
-            out.append(registered[spec])
+        if spec in eps:
+            out.append(_load_entry_point(eps[spec]))
         elif ":" in spec:
             out.append(_entry(spec, spec, lambda spec=spec: load_spec(spec)))
         else:
-            known = ", ".join(registered) or "(none)"
+            known = ", ".join(eps) or "(none)"
             raise RendererError(f"unknown renderer {spec!r}; registered: {known}; or give package.module:ClassName")
     return out
