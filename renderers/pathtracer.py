@@ -32,6 +32,7 @@ side reflects nothing and ends the path (one-sided BSDF, as Mitsuba's
 from __future__ import annotations
 
 import math
+import time
 from typing import Sequence
 
 import numpy as np
@@ -39,46 +40,84 @@ import numpy as np
 from harness.adapter import RenderResult
 from harness.scene import Scene
 from renderers.core.geometry import SceneGeometry
-from renderers.core.sampling import (INV_PI, camera_rays, cosine_hemisphere, jit, power_heuristic,
+from renderers.core.rng import uniform
+from renderers.core.sampling import (INV_PI, camera_basis, camera_ray, cosine_hemisphere, jit, power_heuristic,
                                      triangle_barycentrics)
 from renderers.core.wavefront import render_wavefront
 
 RR_DEPTH = 5
 Q_MAX = 0.99
-#: Random numbers per vertex: emitter choice, 2 for the point on it, 2 for the BSDF direction, RR.
+#: Random dimensions per vertex: emitter choice, 2 for the point on it, 2 for the BSDF direction, RR.
 _DIMS = 6
 
 
+class _Rays:
+    """A wavefront's ray buffers: float64 for shading, float32 copies for embreex."""
+
+    def __init__(self, m: int):
+        self.o, self.d = np.empty((m, 3)), np.empty((m, 3))
+        self.o32, self.d32 = np.empty((m, 3), np.float32), np.empty((m, 3), np.float32)
+        self.path = np.empty(m, np.int64)
+        self.beta = np.empty((m, 3))
+        self.pdf = np.empty(m)  # solid-angle pdf of the BSDF sample that made the ray (0: camera ray)
+
+    def fields(self):
+        return self.o, self.d, self.o32, self.d32, self.path, self.beta, self.pdf
+
+
 @jit
-def _shade(prim, t, o, d, path, beta, pdf_bsdf, rnd, camera_ray, extend, roulette,
+def _camera_rays(basis, width, height, first, pixels, key, o, d, o32, d32, path, beta, pdf):
+    """Camera rays for paths first .. first + len(path) - 1 (path j sees pixel j mod pixels)."""
+    for i in range(path.size):
+        j = first + i
+        d0, d1, d2 = camera_ray(basis, width, height, j % pixels, uniform(key, j, 0), uniform(key, j, 1))
+        for c in range(3):
+            o[i, c] = basis[0, c]
+            o32[i, c] = basis[0, c]
+            beta[i, c] = 1.0
+        d[i, 0], d[i, 1], d[i, 2] = d0, d1, d2
+        d32[i, 0], d32[i, 1], d32[i, 2] = d0, d1, d2
+        path[i] = i
+        pdf[i] = 0.0
+
+
+@jit
+def _shade(prim, o, d, path, beta, pdf_bsdf, key, first, depth, extend, roulette,
            v0, e1, e2, nrm, rho, le, light_pdf_area, emitter_ids, emitter_cdf, eps,
-           L, sh_o, sh_d, sh_t, sh_path, sh_c, nx_o, nx_d, nx_path, nx_beta, nx_pdf):
+           L, sh_o, sh_d, sh_t, sh_path, sh_c, nx_o, nx_d, nx_o32, nx_d32, nx_path, nx_beta, nx_pdf):
     """Shade one bounce of a wavefront.
 
     For each ray that hit a surface (``prim >= 0``): add the emission it found
-    (MIS-weighted unless ``camera_ray``); then, if ``extend`` (max_depth allows
-    another segment), make one NEE shadow ray (``sh_*``: origin, direction,
-    tfar, path, unoccluded contribution) and one continuation ray (``nx_*``),
-    with Russian roulette if ``roulette``. Returns (shadow rays, next rays).
+    (MIS-weighted except for camera rays, depth 1); then, if ``extend``
+    (max_depth allows another segment), make one NEE shadow ray (``sh_*``:
+    float32 origin, direction, tfar; path; unoccluded contribution) and one
+    continuation ray (``nx_*``), with Russian roulette if ``roulette``.
+    ``path`` holds indices local to the unit; random numbers are drawn for
+    path ``first + path``, its index in the pass. Returns (shadow rays, next rays).
     """
     ns = 0
     nn = 0
     n_emit = emitter_ids.size
+    dim0 = 2 + (depth - 1) * 6  # this vertex's random dimensions (2 went to the camera ray)
     for i in range(prim.size):
         p = prim[i]
         if p < 0:
             continue
-        ti = t[i]
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
-        x0, x1, x2 = o[i, 0] + ti * dx, o[i, 1] + ti * dy, o[i, 2] + ti * dz
         n0, n1, n2 = nrm[p, 0], nrm[p, 1], nrm[p, 2]
         cos_o = -(dx * n0 + dy * n1 + dz * n2)
         if cos_o <= 0.0:
-            continue  # back side: one-sided emitters and BSDFs give nothing, the path ends
+            continue  # back side (or grazing): one-sided emitters and BSDFs give nothing, the path ends
+        # Distance to the triangle's plane in float64 (Embree gave the triangle).
+        ti = ((v0[p, 0] - o[i, 0]) * n0 + (v0[p, 1] - o[i, 1]) * n1 + (v0[p, 2] - o[i, 2]) * n2) / -cos_o
+        if ti < 0.0:
+            ti = 0.0
+        x0, x1, x2 = o[i, 0] + ti * dx, o[i, 1] + ti * dy, o[i, 2] + ti * dz
         q = path[i]
+        j = first + q
         pa = light_pdf_area[p]
         if pa > 0.0:
-            w = 1.0 if camera_ray else power_heuristic(pdf_bsdf[i], pa * ti * ti / cos_o)
+            w = 1.0 if depth == 1 else power_heuristic(pdf_bsdf[i], pa * ti * ti / cos_o)
             for c in range(3):
                 L[q, c] += beta[i, c] * le[p, c] * w
         if not extend:
@@ -86,9 +125,9 @@ def _shade(prim, t, o, d, path, beta, pdf_bsdf, rnd, camera_ray, extend, roulett
 
         # Next-event estimation: a point on an emitter triangle chosen by power.
         if n_emit > 0:
-            k = min(np.searchsorted(emitter_cdf, rnd[i, 0], side="right"), n_emit - 1)
+            k = min(np.searchsorted(emitter_cdf, uniform(key, j, dim0), side="right"), n_emit - 1)
             e = emitter_ids[k]
-            b1, b2 = triangle_barycentrics(rnd[i, 1], rnd[i, 2])
+            b1, b2 = triangle_barycentrics(uniform(key, j, dim0 + 1), uniform(key, j, dim0 + 2))
             y0 = v0[e, 0] + b1 * e1[e, 0] + b2 * e2[e, 0]
             y1 = v0[e, 1] + b1 * e1[e, 1] + b2 * e2[e, 1]
             y2 = v0[e, 2] + b1 * e1[e, 2] + b2 * e2[e, 2]
@@ -119,7 +158,7 @@ def _shade(prim, t, o, d, path, beta, pdf_bsdf, rnd, camera_ray, extend, roulett
                         ns += 1
 
         # BSDF sampling: for cosine-weighted Lambertian, f·cos/pdf = ρ.
-        wx, wy, wz, cos_w = cosine_hemisphere(n0, n1, n2, rnd[i, 3], rnd[i, 4])
+        wx, wy, wz, cos_w = cosine_hemisphere(n0, n1, n2, uniform(key, j, dim0 + 3), uniform(key, j, dim0 + 4))
         if cos_w <= 0.0:
             continue  # zero-pdf direction
         b0, b1_, b2_ = beta[i, 0] * rho[p, 0], beta[i, 1] * rho[p, 1], beta[i, 2] * rho[p, 2]
@@ -128,11 +167,14 @@ def _shade(prim, t, o, d, path, beta, pdf_bsdf, rnd, camera_ray, extend, roulett
             continue
         if roulette:
             survive = min(bmax, Q_MAX)
-            if rnd[i, 5] >= survive:
+            if uniform(key, j, dim0 + 5) >= survive:
                 continue
             b0, b1_, b2_ = b0 / survive, b1_ / survive, b2_ / survive
-        nx_o[nn, 0], nx_o[nn, 1], nx_o[nn, 2] = x0 + eps * n0, x1 + eps * n1, x2 + eps * n2
+        ox, oy, oz = x0 + eps * n0, x1 + eps * n1, x2 + eps * n2
+        nx_o[nn, 0], nx_o[nn, 1], nx_o[nn, 2] = ox, oy, oz
+        nx_o32[nn, 0], nx_o32[nn, 1], nx_o32[nn, 2] = ox, oy, oz
         nx_d[nn, 0], nx_d[nn, 1], nx_d[nn, 2] = wx, wy, wz
+        nx_d32[nn, 0], nx_d32[nn, 1], nx_d32[nn, 2] = wx, wy, wz
         nx_path[nn] = q
         nx_beta[nn, 0], nx_beta[nn, 1], nx_beta[nn, 2] = b0, b1_, b2_
         nx_pdf[nn] = cos_w * INV_PI
@@ -148,35 +190,29 @@ def _add_visible(L, sh_path, sh_c, visible):
                 L[sh_path[j], c] += sh_c[j, c]
 
 
-def trace_paths(geom: SceneGeometry, scene: Scene, pixel: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Radiance estimates (m, 3) for one path per entry of ``pixel``."""
-    m = pixel.size
+def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: int, key: np.uint64) -> np.ndarray:
+    """Radiance estimates (m, 3) for paths ``first .. stop-1`` (path j sees pixel j mod ``pixels``)."""
+    m = stop - first
+    cam = scene.camera
     unbounded = scene.max_depth < 0
-    u = rng.random((m, 2))
-    o, d = camera_rays(scene.camera, pixel, u[:, 0], u[:, 1])
-    L = np.zeros((m, 3))
-    path = np.arange(m)
-    beta = np.ones((m, 3))
-    pdf_bsdf = np.zeros(m)
     g = geom
     tables = (g.v0, g.e1, g.e2, g.normal, g.reflectance, g.radiance, g.light_pdf_area, g.emitter_ids,
               g.emitter_cdf, g.offset)
-    # Buffers reused across bounces; a bounce never has more rays than the one before.
-    sh_o, sh_d, sh_c = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
-    sh_t, sh_path = np.empty(m), np.empty(m, np.int64)
-    nx = [np.empty((m, 3)), np.empty((m, 3)), np.empty(m, np.int64), np.empty((m, 3)), np.empty(m)]
-    depth = 1  # segments so far, the current ray included
-    while path.size:
-        prim, t = geom.intersect(o, d)
+    L = np.zeros((m, 3))
+    cur, nxt = _Rays(m), _Rays(m)  # double buffer: shade reads one wavefront, writes the next
+    sh_o, sh_d = np.empty((m, 3), np.float32), np.empty((m, 3), np.float32)
+    sh_t, sh_path, sh_c = np.empty(m, np.float32), np.empty(m, np.int64), np.empty((m, 3))
+    _camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, key, *cur.fields())
+    n, depth = m, 1  # live rays; segments so far, the current ray included
+    while n:
+        prim = geom.intersect(cur.o32[:n], cur.d32[:n])
         extend = unbounded or depth + 1 <= scene.max_depth
-        rnd = rng.random((path.size, _DIMS))
-        ns, nn = _shade(prim, t, o, d, path, beta, pdf_bsdf, rnd, depth == 1, extend, depth >= RR_DEPTH,
-                        *tables, L, sh_o, sh_d, sh_t, sh_path, sh_c, *nx)
+        o, d, _, _, path, beta, pdf = (a[:n] for a in cur.fields())
+        ns, n = _shade(prim, o, d, path, beta, pdf, key, first, depth, extend, depth >= RR_DEPTH,
+                       *tables, L, sh_o, sh_d, sh_t, sh_path, sh_c, *nxt.fields())
         if ns:
-            visible = geom.unoccluded(sh_o[:ns], sh_d[:ns], sh_t[:ns])
-            _add_visible(L, sh_path[:ns], sh_c[:ns], visible)
-        # Copies: the next _shade call writes into the nx buffers.
-        o, d, path, beta, pdf_bsdf = (a[:nn].copy() for a in nx)
+            _add_visible(L, sh_path[:ns], sh_c[:ns], geom.unoccluded(sh_o[:ns], sh_d[:ns], sh_t[:ns]))
+        cur, nxt = nxt, cur
         depth += 1
     return L
 
@@ -204,6 +240,13 @@ class PathTracer:
         return f"cornell-harness {version('cornell-harness')} (embreex {version('embreex')})"
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = ()) -> RenderResult:
+        t0 = time.perf_counter()
         geom = SceneGeometry(scene)
-        return render_wavefront(scene, spp, seed, lambda px, rng: trace_paths(geom, scene, px, rng),
-                                checkpoints, self.threads, {"rr_depth": RR_DEPTH, "rr_q_max": Q_MAX})
+        # Compile (or load from numba's cache) before the clock starts.
+        trace_paths(geom, scene, 0, 1, 1, np.uint64(0))
+        geom.rays = 0
+        setup_s = time.perf_counter() - t0
+        result = render_wavefront(scene, spp, seed, lambda *unit: trace_paths(geom, scene, *unit),
+                                  checkpoints, self.threads, {"rr_depth": RR_DEPTH, "rr_q_max": Q_MAX})
+        result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
+        return result

@@ -7,8 +7,8 @@ scene that answers ray queries.
 
 Numerical conventions (every renderer of ours relies on them):
 
-- All maths is float64; arrays are cast to float32 only when handed to
-  embreex, which rejects float64.
+- All maths is float64; kernels also write float32 copies of the rays they
+  make, because embreex takes float32 only.
 - embreex has no ``tnear``: rays leaving a surface start at
   ``x + offset * n`` on the side they travel to, with ``offset`` scaled to the
   scene (:data:`OFFSET_REL` of its size), so a scene scaled by 1e-3 or 1e3
@@ -18,6 +18,8 @@ Numerical conventions (every renderer of ours relies on them):
 """
 
 from __future__ import annotations
+
+import threading
 
 import numpy as np
 
@@ -55,6 +57,8 @@ class SceneGeometry:
         self.offset = OFFSET_REL * max(self.extent, float(np.abs(verts).max()))
 
         self._init_emitters()
+        self.rays = 0  # rays traced so far (closest-hit and shadow), for benchmarks
+        self._rays_lock = threading.Lock()
         self._embree = rtcs.EmbreeScene()
         self._mesh = TriangleMesh(self._embree, verts.astype(np.float32), faces.astype(np.int32))
 
@@ -85,19 +89,25 @@ class SceneGeometry:
         return self.emitter_ids.size > 0
 
     # -- ray queries -------------------------------------------------------
-    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Closest hit: (triangle id or -1, distance t in units of |direction|), float64 t."""
+    def _count(self, n: int) -> None:
+        with self._rays_lock:
+            self.rays += n
+
+    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Closest-hit triangle id per ray, -1 for a miss; float32 (n, 3) inputs.
+
+        Only the id comes back: kernels recompute the distance in float64 from
+        the triangle's plane, which is cheaper than Embree's full hit record and
+        more precise.
+        """
         if len(origins) == 0:
-            return np.zeros(0, np.int64), np.zeros(0)
-        res = self._embree.run(origins.astype(np.float32), directions.astype(np.float32),
-                               query="INTERSECT", output=1)
-        prim = res["primID"].astype(np.int64)
-        return prim, res["tfar"].astype(np.float64)
+            return np.zeros(0, np.int32)
+        self._count(len(origins))
+        return self._embree.run(origins, directions, query="INTERSECT")
 
     def unoccluded(self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray) -> np.ndarray:
-        """True where nothing lies along origin + t·direction for t in (0, tfar)."""
+        """True where nothing lies along origin + t·direction for t in (0, tfar); float32 inputs."""
         if len(origins) == 0:
             return np.zeros(0, bool)
-        res = self._embree.run(origins.astype(np.float32), directions.astype(np.float32),
-                               dists=tfar.astype(np.float32), query="OCCLUDED")
-        return res == -1  # embreex: -1 means the ray reached tfar unblocked
+        self._count(len(origins))
+        return self._embree.run(origins, directions, dists=tfar, query="OCCLUDED") == -1  # -1: unblocked

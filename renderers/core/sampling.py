@@ -1,8 +1,7 @@
 """Sampling routines shared by our renderers.
 
-The per-vertex routines are scalar numba functions (``nogil``), called from
-each renderer's shading kernel; camera rays are made once per work unit, in
-numpy. Everything is float64.
+They are scalar numba functions (``nogil``), called from each renderer's
+kernels. Everything is float64.
 """
 
 from __future__ import annotations
@@ -15,7 +14,7 @@ import numpy as np
 from harness.scene import Camera
 
 INV_PI = 1.0 / math.pi
-jit = numba.njit(cache=True, nogil=True, fastmath=False)
+jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
 
 @jit
@@ -58,18 +57,25 @@ def power_heuristic(pdf_a: float, pdf_b: float) -> float:
     return a2 / (a2 + b2) if a2 + b2 > 0.0 else 0.0
 
 
-def camera_rays(camera: Camera, pixel: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Primary rays through uniformly jittered points of the given pixels (box filter).
+def camera_basis(camera: Camera) -> np.ndarray:
+    """(4, 3) float64: position, and right, up, forward scaled to the image plane at distance 1.
 
-    ``pixel`` is the flat index row * width + col. Returns origins and unit
-    directions, float64 (m, 3).
+    Pixel (row, col) spans directions forward + sx·right + sy·up with
+    sx in [-tan_x, tan_x] left to right and sy in [tan_y, -tan_y] top to bottom.
     """
     right, up, forward = camera.frame()
     tx, ty = camera.tan_half_fov()
-    row, col = np.divmod(pixel, camera.width)
-    sx = (2.0 * (col + u1) / camera.width - 1.0) * tx
-    sy = (1.0 - 2.0 * (row + u2) / camera.height) * ty
-    d = forward + sx[:, None] * right + sy[:, None] * up
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    o = np.tile(np.asarray(camera.position, dtype=np.float64), (d.shape[0], 1))
-    return o, d
+    return np.stack([np.asarray(camera.position, dtype=np.float64), right * tx, up * ty, forward])
+
+
+@jit
+def camera_ray(basis, width: int, height: int, pixel: int, u1: float, u2: float):
+    """Unit direction through a uniformly jittered point of ``pixel`` (box filter), from basis[0]."""
+    row, col = pixel // width, pixel % width
+    sx = 2.0 * (col + u1) / width - 1.0
+    sy = 1.0 - 2.0 * (row + u2) / height
+    d0 = basis[3, 0] + sx * basis[1, 0] + sy * basis[2, 0]
+    d1 = basis[3, 1] + sx * basis[1, 1] + sy * basis[2, 1]
+    d2 = basis[3, 2] + sx * basis[1, 2] + sy * basis[2, 2]
+    inv = 1.0 / math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    return d0 * inv, d1 * inv, d2 * inv

@@ -3,18 +3,22 @@
 A render of ``spp`` samples per pixel is split into passes
 (:func:`harness.sampling.spp_passes`; pass sizes double, so power-of-two
 checkpoints come free). A pass of ``n`` samples over ``P`` pixels is a range
-of ``n·P`` path indices (pixel = index mod P), cut into work units of
-:data:`UNIT_PATHS` paths. Each unit
+of ``n·P`` paths (path j looks through pixel j mod P), cut into work units.
 
-- draws its random numbers from its own stream,
-  ``SeedSequence([seed, pass, unit])``, and
-- returns one radiance estimate per path, which is added (with its square,
-  for the per-pixel variance) into the image in unit order.
+- Random numbers are a pure function of (pass key, path index, dimension)
+  (:mod:`renderers.core.rng`; the pass key comes from
+  ``SeedSequence([seed, pass])``), so they do not depend on how the paths
+  are cut into units.
+- Each unit returns one radiance estimate per path; estimates are added into
+  the image path by path, in path order (:func:`accumulate`), units in order.
 
-So the image depends on the seed only, never on the number of threads or on
-which thread ran which unit: it is bit-identical for 1 or 16 threads. Memory
-is bounded by a few units in flight, whatever the spp. Units are large
-(≥ 64k rays) because embreex releases the GIL only for batches that big.
+So the image depends on the seed only: it is bit-identical for any number
+of threads, though the unit size follows the thread count to keep every
+thread busy. Units of all passes flow through one pipeline (no barrier
+between passes), at most ``2·threads`` in flight, so memory is bounded at
+any spp. Unit sizes (2^13 to 2^15 paths) were measured on the Cornell box
+(BENCHMARKS.md): smaller units keep a unit's arrays in cache, and embreex
+still releases the GIL for batches of that size (2 threads: 1.7-2x).
 """
 
 from __future__ import annotations
@@ -23,20 +27,24 @@ import os
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
 from harness.adapter import Checkpoint, RenderResult
 from harness.sampling import spp_passes
 from harness.scene import Scene
+from renderers.core.rng import stream_key
+from renderers.core.sampling import jit
 
-UNIT_PATHS = 1 << 17
+MAX_UNIT_PATHS = 1 << 15
+MIN_UNIT_PATHS = 1 << 13
 #: Pass sizes double without a cap: the unit size already bounds memory.
 _NO_CAP = 1 << 40
 
-#: trace(pixel indices (m,), rng) -> radiance estimates (m, 3) float64
-TraceFn = Callable[[np.ndarray, np.random.Generator], np.ndarray]
+#: trace(first, stop, pixels, key) -> radiance estimates (stop - first, 3) float64
+#: for the paths first..stop-1 of a pass; path j looks through pixel j mod pixels.
+TraceFn = Callable[[int, int, int, np.uint64], np.ndarray]
 
 
 def default_threads() -> int:
@@ -47,19 +55,25 @@ def default_threads() -> int:
     return os.cpu_count() or 1
 
 
-def _add_paths(acc: np.ndarray, start: int, values: np.ndarray) -> None:
-    """acc[(start + i) mod P] += values[i], in a fixed order (deterministic)."""
-    p, m = acc.shape[0], values.shape[0]
-    first = start % p
-    if m > p:  # small images: fold whole rounds with one reshape-sum
-        padded = np.zeros((-(-(first + m) // p) * p, values.shape[1]))
-        padded[first:first + m] = values
-        acc += padded.reshape(-1, p, values.shape[1]).sum(axis=0)
-        return
-    head = min(m, p - first)
-    acc[first:first + head] += values[:head]
-    if head < m:
-        acc[: m - head] += values[head:]
+@jit
+def accumulate(acc, acc2, first, values):
+    """acc[(first + i) mod P] += values[i] and acc2 likewise with squares, i in order.
+
+    Each pixel receives its paths' values one at a time in path order, so the
+    floating-point sums are the same however the paths were cut into units.
+    """
+    p = acc.shape[0]
+    for i in range(values.shape[0]):
+        k = (first + i) % p
+        for c in range(values.shape[1]):
+            v = values[i, c]
+            acc[k, c] += v
+            acc2[k, c] += v * v
+
+
+def unit_size(total: int, threads: int) -> int:
+    """Paths per unit: enough units to keep ``threads`` busy, within [MIN, MAX]_UNIT_PATHS."""
+    return int(min(MAX_UNIT_PATHS, max(MIN_UNIT_PATHS, -(-total // (2 * threads)))))
 
 
 def render_wavefront(
@@ -75,43 +89,43 @@ def render_wavefront(
     if spp < 1:
         raise ValueError(f"spp must be >= 1, got {spp}")
     cam = scene.camera
+    shape = (cam.height, cam.width, 3)
     p = cam.width * cam.height
     threads = threads or default_threads()
     acc = np.zeros((p, 3))
     acc2 = np.zeros((p, 3))  # sums of squares, for the per-pixel variance
-    done, elapsed, shots = 0, 0.0, []
+    passes = list(spp_passes(spp, _NO_CAP, checkpoints))
 
-    def run_unit(job: tuple[int, int, int, int]) -> np.ndarray:
-        k, u, start, stop = job
-        rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, k, u])))
-        pixel = np.arange(start, stop, dtype=np.int64) % p
-        values = trace(pixel, rng)
-        return values, values * values
+    def jobs() -> Iterator[tuple[int, int, int, bool]]:
+        """(pass, first path, stop, last unit of its pass?) for every unit, in order."""
+        for k, n in enumerate(passes):
+            total, size = n * p, unit_size(n * p, threads)
+            for first in range(0, total, size):
+                yield k, first, min(first + size, total), first + size >= total
 
-    def _reduce(start: int, fut) -> None:
-        values, squares = fut.result()
-        _add_paths(acc, start, values)
-        _add_paths(acc2, start, squares)
-
+    keys = [stream_key(seed, k) for k in range(len(passes))]
+    done, shots = 0, []
+    t0 = time.perf_counter()
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        for k, n in enumerate(spp_passes(spp, _NO_CAP, checkpoints)):
-            t0 = time.perf_counter()
-            total = n * p
-            jobs = [(k, u, s, min(s + UNIT_PATHS, total)) for u, s in enumerate(range(0, total, UNIT_PATHS))]
-            # A sliding window of 2·threads units in flight bounds memory at any
-            # spp; results are added oldest first, so the sum order is fixed.
-            pending: deque = deque()
-            for job in jobs:
-                pending.append((job[2], pool.submit(run_unit, job)))
-                if len(pending) >= 2 * threads:
-                    _reduce(*pending.popleft())
-            while pending:
-                _reduce(*pending.popleft())
-            elapsed += time.perf_counter() - t0
-            done += n
-            if done in checkpoints and done < spp:
-                shots.append(Checkpoint(done, (acc / done).reshape(cam.height, cam.width, 3).astype(np.float32), elapsed))
-    shape = (cam.height, cam.width, 3)
+        pending: deque = deque()
+
+        def reduce_oldest() -> None:
+            nonlocal done
+            k, first, last, fut = pending.popleft()
+            accumulate(acc, acc2, first, fut.result())
+            if last:
+                done += passes[k]
+                if done in checkpoints and done < spp:
+                    shots.append(Checkpoint(done, (acc / done).reshape(shape).astype(np.float32),
+                                            time.perf_counter() - t0))
+
+        for k, first, stop, last in jobs():
+            pending.append((k, first, last, pool.submit(trace, first, stop, p, keys[k])))
+            if len(pending) >= 2 * threads:
+                reduce_oldest()
+        while pending:
+            reduce_oldest()
+    elapsed = time.perf_counter() - t0
     mean = acc / spp
     image = mean.reshape(shape).astype(np.float32)
     if spp in checkpoints:
