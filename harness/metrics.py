@@ -77,6 +77,10 @@ _RGB_TO_XYZ = colour.normalised_primary_matrix(
 REINHARD_KEY = 0.18
 REINHARD_DELTA = 1e-4
 REL_MSE_EPS = 1e-2
+#: Fraction of pixels with the largest relMSE terms that ``rel_mse_trimmed`` drops:
+#: a handful of fireflies should not decide a comparison (0.1%, as is common in
+#: denoising papers' trimmed relMSE).
+REL_MSE_TRIM = 1e-3
 JND_DELTA_E2000 = 2.3
 
 
@@ -249,7 +253,9 @@ def image_metrics(img, ref, exposure: float | None = None) -> dict:
     mean_img, mean_ref = mean_radiance(img), mean_radiance(ref)
     return {
         "rmse": rmse(clean, ref),
+        "mse": float(np.mean((clean - ref) ** 2)),
         "rel_mse": rel_mse(clean, ref),
+        "rel_mse_trimmed": rel_mse(clean, ref, trim=REL_MSE_TRIM),
         "psnr": psnr(clean, ref, exposure=exposure),
         "ssim": ssim(clean, ref, exposure=exposure),
         **delta_e2000_stats(de_map),

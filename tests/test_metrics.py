@@ -330,7 +330,9 @@ def test_image_metrics_keys_types_and_json():
     result = m.image_metrics(img, ref)
     assert list(result) == [
         "rmse",
+        "mse",
         "rel_mse",
+        "rel_mse_trimmed",
         "psnr",
         "ssim",
         "delta_e2000_mean",
@@ -349,6 +351,9 @@ def test_image_metrics_keys_types_and_json():
         assert type(value) is (int if key.endswith("_count") else float), key
     assert json.loads(json.dumps(result)) == result
     assert result["rmse"] == pytest.approx(m.rmse(img, ref))
+    assert result["mse"] == pytest.approx(m.rmse(img, ref) ** 2)
+    assert result["rel_mse_trimmed"] == pytest.approx(m.rel_mse(img, ref, trim=m.REL_MSE_TRIM))
+    assert result["rel_mse_trimmed"] <= result["rel_mse"]
     assert result["delta_e2000_mean"] == pytest.approx(m.delta_e2000(img, ref))
     expected_rel = img.reshape(-1, 3).mean() / ref.reshape(-1, 3).mean() - 1.0
     assert result["mean_radiance_rel_error"] == pytest.approx(expected_rel, rel=1e-12)
