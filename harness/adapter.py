@@ -7,7 +7,9 @@ An adapter is a small class (state: the renderer's own handles) with
 - ``approximations``: one line per thing it only approximates (shown in reports);
 - ``unavailable_reason()``: ``None`` if it can run here, else why not;
 - ``version()``: the renderer's version string (only called when available);
-- ``render(scene, spp, seed, checkpoints=())``: a :class:`RenderResult`.
+- ``render(scene, spp, seed, checkpoints=())``: a :class:`RenderResult`;
+- optionally ``deterministic = True`` for a renderer whose image does not
+  depend on the seed (a rasteriser): experiments then run it for one seed only.
 
 Adapters are found through the entry-point group ``cbox.renderers`` (ours are
 registered in ``pyproject.toml`` the same way a third party's would be), or

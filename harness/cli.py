@@ -6,6 +6,7 @@ a one-line ``cbox: error: ...`` on stderr and exit code 2, never a traceback.
 
 from __future__ import annotations
 
+import datetime as _dt
 import json
 import shlex
 import sys
@@ -18,6 +19,7 @@ from tqdm import tqdm
 from harness.adapter import RendererError, missing_features, resolve
 from harness.atomic import atomic_path, write_json_atomic
 from harness.exr import ImageFileError, write_exr
+from harness.experiments import ExperimentError
 from harness.reference import ReferenceError, build_reference, load_reference, resolve_scene, scene_names
 from harness.scene import FEATURES, SceneError
 
@@ -30,7 +32,7 @@ app = typer.Typer(
 reference_app = typer.Typer(help="Build and inspect stored reference images.", no_args_is_help=True)
 app.add_typer(reference_app, name="reference")
 
-USER_ERRORS = (SceneError, ReferenceError, RendererError, ImageFileError)
+USER_ERRORS = (SceneError, ReferenceError, RendererError, ImageFileError, ExperimentError)
 
 SceneOpt = typer.Option(..., "--scene", "-s", help="Stored scene name (see `cbox scenes`) or path to a scene .toml file or folder.")
 SppOpt = typer.Option(64, "--spp", min=1, help="Samples per pixel.")
@@ -111,33 +113,69 @@ def render(
     typer.echo(f"wrote {out} ({sc.camera.width}x{sc.camera.height}, {spp} spp, {result.time_s:.2f} s)", err=True)
 
 
-def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool) -> int:
-    from harness import runner
-    from reports.html import write_report
+def _write_compare_outputs(out: Path, sc, ref, records, command: str) -> Path:
+    """Store a comparison as an experiment folder (results, images, CSV/JSON) and build its report."""
     import pandas as pd
 
+    from harness import experiments, runner
+
+    out.mkdir(parents=True, exist_ok=True)
+    for r in records:
+        if r.image is not None:
+            write_exr(out / "images" / f"{experiments.cell_name(r.renderer, r.seed)}.exr", r.image)
+    rows = [r.row() for r in records]
+    frame = pd.DataFrame(rows)
+    write_json_atomic(out / experiments.CONFIG_FILE, {
+        "kind": "compare", "scene": str(sc.path), "scene_name": sc.name, "scene_hash": sc.content_hash(),
+        "renderers": [r.renderer for r in records], "spp": sorted({r.spp for r in records}),
+        "seeds": sorted({r.seed for r in records}), "command": command,
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")})
+    experiments.write_parquet_atomic(frame, out / experiments.RESULTS_FILE)
+    with atomic_path(out / "metrics.csv") as tmp:
+        frame.to_csv(tmp, index=False)
+    write_json_atomic(out / "metrics.json", [runner.json_safe(r) for r in rows])
+    return experiments.write_experiment_report(out, sc, ref)
+
+
+def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool,
+                 time_budget: Optional[str] = None, target_error: Optional[str] = None, max_spp: int = 4096) -> int:
+    from harness import experiments, runner
+    from harness.convergence import parse_target
+
+    try:
+        budget = experiments.parse_duration(time_budget) if time_budget else None
+        target = parse_target(target_error) if target_error else None
+    except ValueError as e:
+        raise typer.BadParameter(str(e)) from None
     sc = resolve_scene(scene)
     ref = load_reference(sc)
     entries = resolve(renderer)
-    bar = _progress(len(entries), f"{sc.name} @ {spp} spp")
-
-    def done(rec: runner.RunRecord) -> None:
+    mode = f"{budget:g} s each" if budget else f"to {target[0]}<={target[1]:g}" if target else f"{spp} spp"
+    bar = _progress(len(entries), f"{sc.name} @ {mode}")
+    records = []
+    for entry in entries:
+        bar.set_postfix_str(entry.name)
+        runnable = entry.available and not missing_features(entry.renderer, sc)
+        if budget and runnable:
+            rec = runner.run_one(entry, sc, experiments.spp_for_time_budget(entry, sc, budget, seed), seed, ref)
+            rec.info["time_budget_s"] = budget
+        elif target and runnable:
+            rec = experiments.render_to_target(entry, sc, ref, target[0], target[1], seed, max_spp)
+        else:
+            rec = runner.run_one(entry, sc, spp, seed, ref)
+        records.append(rec)
         bar.update(1)
         if as_json:
             typer.echo(json.dumps(runner.json_safe(rec.row()), allow_nan=False))
-
-    records = runner.compare(sc, entries, spp, seed, ref, on_start=lambda e: bar.set_postfix_str(e.name), on_done=done)
     bar.close()
-    out.mkdir(parents=True, exist_ok=True)
-    frame = pd.DataFrame([r.row() for r in records])
-    with atomic_path(out / "metrics.csv") as tmp:
-        frame.to_csv(tmp, index=False)
-    write_json_atomic(out / "metrics.json", [runner.json_safe(r.row()) for r in records])
-    report = write_report(out / "report.html", scene=sc, reference_image=ref.image,
-                          reference_provenance=ref.provenance, records=records, command=_command_line())
+    report = _write_compare_outputs(out, sc, ref, records, _command_line())
     if not as_json:
+        import pandas as pd
+
+        frame = pd.DataFrame([r.row() for r in records])
         cols = [c for c in ("renderer", "status", "spp", "time_s", "delta_e2000_mean", "noise_delta_e2000_mean",
-                            "ssim", "rel_mse", "mean_radiance_rel_error", "nan_count") if c in frame]
+                            "ssim", "rel_mse", "mean_radiance_rel_error", "nan_count", "info_target_reached")
+                if c in frame]
         typer.echo(frame[cols].to_string(index=False))
         for r in records:
             if r.status != "ok":
@@ -153,15 +191,101 @@ def compare(
         None, "--renderer", "-r", help="Renderer to run (repeatable); default: every registered renderer."),
     spp: int = SppOpt,
     seed: int = SeedOpt,
-    out: Path = typer.Option(Path("out"), "--out", "-o", help="Folder for report.html, metrics.csv and metrics.json."),
+    out: Path = typer.Option(Path("out"), "--out", "-o", help="Folder for report.html, metrics.csv, metrics.json, "
+                                                               "results.parquet and the images."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON record per run on stdout."),
+    time_budget: Optional[str] = typer.Option(
+        None, "--time-budget", help="Equal-time mode: every renderer gets this wall time (e.g. 10s, 2m); "
+                                    "its spp is chosen from two short calibration renders and reported. "
+                                    "Overrides --spp."),
+    target_error: Optional[str] = typer.Option(
+        None, "--target-error", help="Equal-quality mode: METRIC=VALUE (e.g. delta_e2000_mean=1, rel_mse=1e-3; "
+                                     "a bare number means ΔE mean). Each renderer renders at 1, 2, 4, ... spp "
+                                     "until the metric is at most VALUE and reports the time it needed."),
+    max_spp: int = typer.Option(4096, "--max-spp", min=1, help="Upper spp limit of --target-error."),
 ) -> None:
     """Render with each renderer, score against the scene's reference, write a report.
 
     Exit code 1 if a renderer failed; renderers that are unavailable or do not
     model the scene are listed as such and are not failures.
     """
-    raise typer.Exit(_run_compare(scene, renderer, spp, seed, out, as_json))
+    if time_budget and target_error:
+        raise typer.BadParameter("give --time-budget or --target-error, not both")
+    raise typer.Exit(_run_compare(scene, renderer, spp, seed, out, as_json, time_budget, target_error, max_spp))
+
+
+@app.command()
+def converge(
+    scene: str = SceneOpt,
+    renderer: Optional[List[str]] = typer.Option(
+        None, "--renderer", "-r", help="Renderer to run (repeatable); default: every registered renderer."),
+    spp: str = typer.Option("1,2,4,...,256", "--spp", help="spp checkpoints: 1,2,4,...,256 or 1,4,16 or 1-256 "
+                                                         "(powers of two). Progressive renderers give them all "
+                                                         "from one render."),
+    seeds: int = typer.Option(4, "--seeds", min=1, help="Number of seeds (0 .. N-1); bias and variance need 2 or more."),
+    out: Path = typer.Option(Path("out/converge"), "--out", "-o", help="Experiment folder: results.parquet, "
+                                                                      "summary.csv, report.html, cells/, images/."),
+    target: Optional[List[str]] = typer.Option(
+        None, "--target", help="Target error for the time-to-target figure, METRIC=VALUE (repeatable); default: "
+                               "delta_e2000_mean=2, delta_e2000_mean=1, rel_mse=0.01, rel_mse=0.001."),
+) -> None:
+    """Convergence experiment: every metric at every spp checkpoint, per renderer and seed.
+
+    Results are a tidy table (one row per scene, renderer, settings, seed and
+    spp) in OUT/results.parquet. The run is resumable: finished (renderer,
+    seed) cells are written atomically, and running the same command again
+    renders only the cells that are missing.
+    """
+    from harness import experiments
+
+    from harness.convergence import DEFAULT_TARGETS, parse_target
+
+    try:
+        spps = experiments.parse_spp_list(spp)
+        targets = [parse_target(t) for t in target] if target else DEFAULT_TARGETS
+    except ValueError as e:
+        raise typer.BadParameter(str(e)) from None
+    sc = resolve_scene(scene)
+    ref = load_reference(sc)
+    entries = resolve(renderer)
+    runnable = [e for e in entries if e.available and not missing_features(e.renderer, sc)]
+    cells = sum(1 if getattr(e.renderer, "deterministic", False) else seeds for e in runnable)
+    bar = tqdm(total=cells, desc=f"converge {sc.name}", unit="cell", file=sys.stderr,
+               dynamic_ncols=True)
+
+    def on_cell(name: str, cached: bool) -> None:
+        bar.set_postfix_str(f"{name}{' (stored)' if cached else ''}")
+        bar.update(1)
+
+    runs = experiments.run_experiment(out, sc, ref, entries, spps, list(range(seeds)), _command_line(),
+                                      on_cell=on_cell, targets=targets)
+    bar.close()
+    report = experiments.write_experiment_report(out, sc, ref)
+    if (out / experiments.SUMMARY_FILE).exists():
+        import pandas as pd
+
+        summary = pd.read_csv(out / experiments.SUMMARY_FILE)
+        typer.echo(summary.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    for _, r in runs[runs["status"] != "ok"].iterrows():
+        typer.echo(f"{r['renderer']}: {r['status']}: {r['reason']}")
+    typer.echo(f"report: {report}", err=True)
+    raise typer.Exit(1 if (runs["status"] == "failed").any() else 0)
+
+
+@app.command()
+def report(
+    folder: Path = typer.Argument(..., help="Folder written by cbox converge or cbox compare."),
+) -> None:
+    """Rebuild FOLDER/report.html (and summary.csv) from stored results, without rendering."""
+    from harness import experiments
+
+    config, _ = experiments.load_results(folder)
+    sc = resolve_scene(config["scene"])
+    if sc.content_hash() != config["scene_hash"]:
+        raise experiments.ExperimentError(
+            f"{folder / experiments.CONFIG_FILE}: results were made for scene hash {config['scene_hash']}, but "
+            f"{config['scene']} now hashes to {sc.content_hash()}; rerun the experiment")
+    typer.echo(f"report: {experiments.write_experiment_report(folder, sc, load_reference(sc))}", err=True)
 
 
 @app.command()

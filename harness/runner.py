@@ -8,6 +8,7 @@ the other renderers still run.
 
 from __future__ import annotations
 
+import json
 import math
 import traceback
 from dataclasses import dataclass, field
@@ -23,6 +24,13 @@ from harness.scene import Scene
 STATUSES = ("ok", "skipped", "unavailable", "failed")
 
 
+def settings_of(scene: Scene) -> str:
+    """The scene settings that define what a run computes, as canonical JSON."""
+    cam = scene.camera
+    return json.dumps({"max_depth": scene.max_depth, "width": cam.width, "height": cam.height,
+                       "pixel_filter": scene.pixel_filter}, sort_keys=True)
+
+
 @dataclass
 class RunRecord:
     """One renderer on one scene at one (spp, seed): outcome, image and metrics."""
@@ -32,6 +40,8 @@ class RunRecord:
     status: str
     spp: int
     seed: int
+    scene_hash: str = ""
+    settings: str = "{}"
     reason: str | None = None
     version: str | None = None
     time_s: float | None = None
@@ -40,21 +50,30 @@ class RunRecord:
     metrics: dict = field(default_factory=dict)
     image: np.ndarray | None = field(default=None, repr=False)
 
+    @classmethod
+    def new(cls, scene: Scene, renderer: str, spp: int, seed: int, **fields) -> "RunRecord":
+        return cls(scene.name, renderer, "ok", spp, seed, scene.content_hash(), settings_of(scene), **fields)
+
     def row(self) -> dict:
-        """Flat, JSON-serialisable record (no image)."""
+        """Flat, JSON-serialisable record (no image): one row of the results table."""
         out = {
             "scene": self.scene,
+            "scene_hash": self.scene_hash,
             "renderer": self.renderer,
             "status": self.status,
             "reason": self.reason,
             "version": self.version,
+            "settings": self.settings,
+            "approximations": json.dumps(list(self.approximations)),
             "spp": self.spp,
             "seed": self.seed,
             "time_s": None if self.time_s is None else round(self.time_s, 4),
         }
         out.update(self.metrics)
+        if "mse" in self.metrics and self.time_s:
+            out["efficiency"] = 1.0 / (self.metrics["mse"] * self.time_s) if self.metrics["mse"] > 0 else math.inf
         for k, v in self.info.items():
-            out[f"info_{k}"] = v
+            out[f"info_{k}"] = v if isinstance(v, (str, int, float, bool)) or v is None else json.dumps(v)
         return out
 
 
@@ -65,7 +84,7 @@ def json_safe(row: dict) -> dict:
 
 def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: Reference | None) -> RunRecord:
     """Render and score one renderer; never raises for the renderer's own failures."""
-    rec = RunRecord(scene.name, entry.name, "ok", spp, seed)
+    rec = RunRecord.new(scene, entry.name, spp, seed)
     if not entry.available:
         rec.status, rec.reason = "unavailable", entry.reason
         return rec

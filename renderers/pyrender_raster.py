@@ -676,6 +676,7 @@ class Pyrender:
     """pyrender rasteriser: emission plus shadowed direct light, no indirect light."""
 
     name = "pyrender"
+    deterministic = True  # no sampling: the seed changes nothing
     features = frozenset({"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"})
     approximations: tuple[str, ...] = (
         f"area lights replaced by ~{DEFAULT_LIGHTS} one-sided point lights (pyrender SpotLights, cosine "

@@ -1,9 +1,15 @@
-"""The HTML report: self-contained, complete, escaped, and with a sound colour map."""
+"""The HTML report: self-contained, complete, escaped, with exact embedded data and sound charts.
+
+Synthetic inputs come from ``tests/report_fixtures.py``; the browser-side
+behaviour is tested in ``tests/test_report_browser.py``.
+"""
 
 from __future__ import annotations
 
 import base64
 import io
+import json
+import math
 import re
 from html.parser import HTMLParser
 from pathlib import Path
@@ -12,96 +18,118 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from harness.runner import RunRecord
-from harness.scene import load_scene
-from reports.html import DELTA_E_RANGE, apply_colormap, format_value, write_report
+import report_fixtures as rf
+from harness import metrics
+from reports import html as report_html
+from reports.html import (
+    DELTA_E_RANGE,
+    SINGLE_SPP_NOTE,
+    apply_colormap,
+    check_threshold,
+    column_label,
+    f16_base64,
+    f16_decode,
+    format_value,
+    parse_time_to,
+    rel_mse_map,
+    write_report,
+)
+from reports.plots import format_tick, log_ticks, pareto_front
 
-ROOT = Path(__file__).resolve().parent.parent
-W = H = 16
-EVIL = '<script>alert("x")</script> & more'
+W = H = 32
+OK_NAMES = ("alpha-tracer", "beta-photons", "gamma-raster")
+NOT_RUN = {"zeta-skip": "skipped", "eta-missing": "unavailable", "theta-crash": "failed"}
 
 
 class _Collector(HTMLParser):
-    """Collects every <img>, every src/href value and each <tr class="record">."""
+    """Every tag with its attributes, in order; plus the text of <script> elements."""
 
     def __init__(self):
         super().__init__()
-        self.imgs: list[dict] = []
-        self.links: list[str] = []
-        self.record_rows = 0
-        self.scripts = 0
+        self.tags: list[tuple[str, dict]] = []
+        self.scripts: list[tuple[dict, str]] = []
+        self._in_script: dict | None = None
 
     def handle_starttag(self, tag, attrs):
-        a = dict(attrs)
-        if tag == "img":
-            self.imgs.append(a)
+        a = {k: (v or "") for k, v in attrs}
+        self.tags.append((tag, a))
         if tag == "script":
-            self.scripts += 1
-        if tag == "tr" and "record" in (a.get("class") or "").split():
-            self.record_rows += 1
-        for key in ("src", "href"):
-            if a.get(key):
-                self.links.append(a[key])
+            self._in_script = a
+            self.scripts.append((a, ""))
+
+    def handle_endtag(self, tag):
+        if tag == "script":
+            self._in_script = None
+
+    def handle_data(self, data):
+        if self._in_script is not None:
+            a, text = self.scripts[-1]
+            self.scripts[-1] = (a, text + data)
+
+    def find(self, tag=None, **attrs) -> list[dict]:
+        out = []
+        for t, a in self.tags:
+            if tag and t != tag:
+                continue
+            if all((a.get(k.replace("_", "-")) == v) if v is not True else (k.replace("_", "-") in a)
+                   for k, v in attrs.items()):
+                out.append(a)
+        return out
 
 
-@pytest.fixture(scope="module")
-def scene():
-    return load_scene(ROOT / "references" / "cornell-box").with_resolution(W, H)
+def _parse(text: str) -> _Collector:
+    p = _Collector()
+    p.feed(text)
+    return p
 
 
-@pytest.fixture(scope="module")
-def reference():
-    rng = np.random.default_rng(0)
-    ref = rng.uniform(0.05, 1.0, (H, W, 3)).astype(np.float32)
-    ref[:2, 6:10] = 20.0  # a bright "light"
-    return ref
+def _data(parser: _Collector) -> dict:
+    text = next(t for a, t in parser.scripts if a.get("id") == "cbox-data")
+    return json.loads(text)
 
 
-def _ok(scene, name, image, approximations=()):
-    return RunRecord(
-        scene.name, name, "ok", 16, 7, version="1.2.3", time_s=0.25, approximations=tuple(approximations),
-        metrics={"rmse": 0.01, "rel_mse": 2e-4, "psnr": 35.1, "ssim": 0.93, "delta_e2000_mean": 1.2,
-                 "delta_e2000_p95": 3.4, "delta_e2000_max": 12.0, "delta_e2000_frac_gt_2_3": 0.125,
-                 "nan_count": 0, "inf_count": 0, "negative_count": 0, "mean_radiance_rel_error": -0.012,
-                 "noise_rmse": 0.02, "noise_delta_e2000_mean": 1.5, "noise_mean_radiance_z": 0.4},
-        image=np.asarray(image, dtype=np.float32),
-    )
+def _svg(text: str, uid: str) -> str:
+    m = re.search(rf'<svg id="{re.escape(uid)}".*?</svg>', text, re.S)
+    assert m, f"no svg {uid}"
+    return m.group(0)
 
 
-@pytest.fixture(scope="module")
-def report(tmp_path_factory, scene, reference):
-    rng = np.random.default_rng(1)
-    noisy = reference * rng.uniform(0.8, 1.2, reference.shape).astype(np.float32)
-    broken = reference.copy()
-    broken[3, 3] = np.nan
-    records = [
-        _ok(scene, "alpha-tracer", noisy, ["no caustics", "light leaks at corners"]),
-        _ok(scene, "beta-raster", reference * 1.1),
-        _ok(scene, "gamma-nan", broken),
-        RunRecord(scene.name, "delta-skip", "skipped", 16, 7, reason="does not model area_light"),
-        RunRecord(scene.name, "epsilon-missing", "unavailable", 16, 7, reason="epsilon is not installed; pip install eps"),
-        RunRecord(scene.name, "zeta-crash", "failed", 16, 7, reason=f"RuntimeError: {EVIL}",
-                  info={"traceback": "Traceback ...\nRuntimeError: boom"}),
-    ]
-    prov = {"renderer": "mitsuba", "renderer_version": "3.9.1 (llvm_ad_rgb)", "variant": "llvm_ad_rgb",
-            "spp": 4096, "batches": 64, "batch_spp": 64, "date": "2025-01-02T03:04:05+00:00",
-            "scene_hash": scene.content_hash()}
-    path = write_report(tmp_path_factory.mktemp("rep") / "sub" / "dir" / "report.html", scene=scene,
-                        reference_image=reference, reference_provenance=prov, records=records,
-                        command="cbox compare --spp 16 --seed 7")
-    text = path.read_text(encoding="utf-8")
-    parser = _Collector()
-    parser.feed(text)
-    return {"path": path, "text": text, "parser": parser, "records": records, "scene": scene}
-
-
-def _decode(uri: str) -> Image.Image:
+def _decode_png(uri: str) -> Image.Image:
     prefix = "data:image/png;base64,"
     assert uri.startswith(prefix), uri[:40]
     im = Image.open(io.BytesIO(base64.b64decode(uri[len(prefix):], validate=True)))
     im.load()
-    assert im.format == "PNG"
     return im
+
+
+def _f16(b64: str, shape) -> np.ndarray:
+    """Independent decoder: little-endian IEEE half floats."""
+    raw = base64.b64decode(b64, validate=True)
+    assert len(raw) == 2 * int(np.prod(shape))
+    return np.frombuffer(raw, dtype="<f2").astype(np.float64).reshape(shape)
+
+
+@pytest.fixture(scope="module")
+def case():
+    c = rf.make_case(W, H, names=OK_NAMES)
+    # Thresholds that some renderers pass and some fail.
+    top = c["runs"][(c["runs"]["status"] == "ok") & (c["runs"]["spp"] == 64)]
+    med = top.groupby("renderer")["delta_e2000_mean"].median()
+    c["thresholds"] = {"delta_e2000_mean": ("<=", float(med.median())), "ssim": (">=", 0.95),
+                       "time_to_rel_mse_le_0.001": ("<=", 1.0)}
+    return c
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory, case):
+    path = rf.write_case(tmp_path_factory.mktemp("rep") / "sub" / "dir" / "report.html", case)
+    text = path.read_text(encoding="utf-8")
+    return {"path": path, "text": text, "parser": _parse(text)}
+
+
+# --------------------------------------------------------------------------
+# The file
+# --------------------------------------------------------------------------
 
 
 def test_file_written_atomically_into_new_folders(report):
@@ -113,118 +141,412 @@ def test_file_written_atomically_into_new_folders(report):
 
 def test_self_contained(report):
     text, parser = report["text"], report["parser"]
-    assert not re.search(r"""(src|href)\s*=\s*["']?\s*(https?:)?//""", text, re.I)
-    assert not re.search(r"url\(\s*['\"]?(https?:)?//", text, re.I)
+    assert "http://" not in text and "https://" not in text
+    assert not re.search(r"""(src|href)\s*=\s*["']?\s*//""", text, re.I)
+    for target in re.findall(r"url\(\s*['\"]?([^)'\"]*)", text, re.I):
+        assert target.startswith("#") or target.startswith("data:"), target  # only in-document references
     assert "@import" not in text
-    for link in parser.links:
-        assert link.startswith("data:") or link.startswith("#"), link
-    assert parser.scripts == 0
+    for tag, a in parser.tags:
+        for key in ("src", "href"):
+            if key in a:
+                assert a[key].startswith("data:") or a[key].startswith("#"), (tag, a[key][:60])
+    for a, _ in parser.scripts:
+        assert "src" not in a  # every script is inline
+    assert not parser.find("link", rel="stylesheet")
 
 
-def test_header(report):
-    text, scene = report["text"], report["scene"]
-    assert scene.name in text
-    assert scene.content_hash() in text
-    assert "3.9.1 (llvm_ad_rgb)" in text and "4096" in text and "2025-01-02T03:04:05+00:00" in text
-    assert "cbox compare --spp 16 --seed 7" in text
-    assert "16 spp, seed 7" in text
-    assert "exposure" in text.lower()
-
-
-def test_every_renderer_named(report):
-    for rec in report["records"]:
-        assert rec.renderer in report["text"]
-
-
-def test_images_inlined_and_decodable(report):
-    imgs = report["parser"].imgs
-    for img in imgs:
-        _decode(img["src"])  # every image decodes
-    by_role = {}
-    for img in imgs:
-        by_role.setdefault(img.get("data-role"), []).append(img)
-    assert len(by_role["reference"]) == 1 and _decode(by_role["reference"][0]["src"]).size == (W, H)
-    assert len(by_role["colorbar"]) == 1
-    ok = [r for r in report["records"] if r.status == "ok"]
-    for role in ("render", "heatmap"):
-        assert sorted(i["data-renderer"] for i in by_role[role]) == sorted(r.renderer for r in ok)
-        for img in by_role[role]:
-            im = _decode(img["src"])
-            assert im.size == (W, H) and im.mode == "RGB"
-    assert len(imgs) == 1 + 2 * len(ok) + 1
-    # no images for records that did not run
-    for rec in report["records"]:
-        if rec.status != "ok":
-            assert not any(i.get("data-renderer") == rec.renderer for i in imgs)
-
-
-def test_rendered_images_use_the_shared_display_encoding(report, reference):
-    from harness import metrics
-
-    exposure = metrics.exposure_scale(reference)
-    imgs = report["parser"].imgs
-    ref_png = np.asarray(_decode(next(i for i in imgs if i.get("data-role") == "reference")["src"]))
-    expected = np.round(metrics.display_encode(reference, exposure) * 255).astype(np.uint8)
-    np.testing.assert_array_equal(ref_png, expected)
-    beta = next(i for i in imgs if i.get("data-role") == "render" and i["data-renderer"] == "beta-raster")
-    beta_png = np.asarray(_decode(beta["src"]))
-    expected = np.round(metrics.display_encode(reference * 1.1, exposure) * 255).astype(np.uint8)
-    assert np.abs(beta_png.astype(int) - expected).max() <= 1  # float32 rounding only
-
-
-def test_heatmap_colours_are_delta_e(report, reference):
-    from harness import metrics
-
-    exposure = metrics.exposure_scale(reference)
-    imgs = report["parser"].imgs
-    beta = next(i for i in imgs if i.get("data-role") == "heatmap" and i["data-renderer"] == "beta-raster")
-    _, de = metrics.delta_e2000(reference * 1.1, reference, exposure=exposure, full=True)
-    np.testing.assert_array_equal(np.asarray(_decode(beta["src"])), apply_colormap(de))
-
-
-def test_not_run_records_show_reason(report):
+def test_header_and_provenance(report, case):
     text = report["text"]
+    scene, prov = case["scene"], case["provenance"]
+    assert scene.name in text and scene.content_hash() in text
+    assert "3.9.1 (llvm_ad_rgb)" in text and "2025-01-02T03:04:05+00:00" in text  # reference's provenance
+    assert "4096 (64 batches × 64 spp)" in text  # reference spp
+    assert case["command"] in text
+    assert prov["machine"] in text and prov["date"] in text and "0, 1, 2" in text
+    versions = text[text.index('id="versions"'):]
+    for lib, ver in prov["versions"].items():
+        assert f"<dt>{lib}</dt><dd>{ver}</dd>" in versions
+    assert "<dt>threads</dt><dd>2</dd>" in text  # any other key is shown
+    assert "exposure" in text.lower() and f"{metrics.exposure_scale(case['reference'].image):.4g}" in text
+
+
+def test_every_renderer_appears(report):
+    text, parser = report["text"], report["parser"]
+    rows = [a["data-renderer"] for a in parser.find("tr") if "record" in a.get("class", "").split()]
+    assert rows == [*OK_NAMES, *NOT_RUN]
+    cards = [a["data-renderer"] for a in parser.find("div", **{"class": "card"})]
+    assert cards == [*OK_NAMES, *NOT_RUN]
+    for name in (*OK_NAMES, *NOT_RUN):
+        assert name in text
+
+
+def test_not_run_renderers_show_status_and_reason(report):
+    text = report["text"]
+    for name, status in NOT_RUN.items():
+        row = re.search(rf'<tr class="record {status} not-ok" data-renderer="{name}">(.*?)</tr>', text, re.S)
+        assert row, name
+        assert f'<span class="badge {status}">{status}</span>' in row.group(1)
+        assert 'class="reason"' in row.group(1)
     assert "does not model area_light" in text
-    assert "epsilon is not installed; pip install eps" in text
-    assert "RuntimeError: " in text
-    for status in ("skipped", "unavailable", "failed"):
-        assert status in text
+    assert "eta is not installed; pip install eta" in text
 
 
-def test_reason_is_escaped(report):
-    text = report["text"]
-    assert "<script>" not in text
+def test_reason_and_names_are_escaped(report):
+    text, parser = report["text"], report["parser"]
+    assert "<script>alert" not in text
     assert "&lt;script&gt;alert(&#34;x&#34;)&lt;/script&gt; &amp; more" in text
-    assert report["parser"].scripts == 0
+    assert len(parser.scripts) == 2  # the data and the viewer, nothing injected
 
 
-def test_metrics_table(report):
+def test_title_names_and_json_escaped(tmp_path, case):
+    evil = 'evil</script><b onmouseover="x">'
+    images = {evil: case["images"]["alpha-tracer"]}
+    runs = case["runs"][case["runs"]["renderer"] == "alpha-tracer"].assign(renderer=evil)
+    path = write_report(tmp_path / "r.html", scene=case["scene"], reference=case["reference"], runs=runs,
+                        images=images, provenance={}, title="My <b>title</b>")
+    text = path.read_text(encoding="utf-8")
+    parser = _parse(text)
+    assert "My &lt;b&gt;title&lt;/b&gt;" in text
+    assert "<b onmouseover" not in text and "<b>" not in text
+    assert len(parser.scripts) == 2
+    assert _data(parser)["renderers"][0]["name"] == evil  # the JSON round-trips the name exactly
+
+
+# --------------------------------------------------------------------------
+# Summary table
+# --------------------------------------------------------------------------
+
+
+def _cell(text: str, renderer: str, key: str) -> dict:
+    row = re.search(rf'<tr class="record [^"]*" data-renderer="{re.escape(renderer)}">(.*?)</tr>', text, re.S)
+    assert row, renderer
+    m = re.search(rf'<td data-key="{re.escape(key)}" data-sort="([^"]*)"(?: class="([^"]*)")?(?: title="[^"]*")?>(.*?)</td>',
+                  row.group(1), re.S)
+    assert m, (renderer, key)
+    return {"sort": m.group(1), "cls": (m.group(2) or "").split(), "text": m.group(3)}
+
+
+def test_summary_rows_are_medians_at_max_spp(report, case):
     text = report["text"]
-    assert report["parser"].record_rows == len(report["records"])
-    for key in ("rmse", "rel_mse", "psnr", "ssim", "delta_e2000_mean", "delta_e2000_p95", "delta_e2000_max",
-                "delta_e2000_frac_gt_2_3", "nan_count", "inf_count", "negative_count", "mean_radiance_rel_error",
-                "time_s", "spp", "version", "noise_rmse", "noise_delta_e2000_mean", "noise_mean_radiance_z"):
-        assert f'data-key="{key}"' in text, key
-    assert "35.10" in text and "0.9300" in text and "12.5 %" in text and "-1.20 %" in text
+    runs = case["runs"]
+    for name in OK_NAMES:
+        top = runs[(runs["renderer"] == name) & (runs["spp"] == 64)]
+        assert len(top) == 3
+        for key in ("rmse", "delta_e2000_mean", "ssim", "time_s"):
+            cell = _cell(text, name, key)
+            assert float(cell["sort"]) == pytest.approx(float(top[key].median()), rel=1e-12), (name, key)
+        assert _cell(text, name, "spp")["text"] == "64"
+        assert _cell(text, name, "seeds")["text"] == "3"
 
 
-def test_approximations_listed(report):
+def test_summary_figures_in_table(report, case):
     text = report["text"]
-    assert "no caustics" in text and "light leaks at corners" in text
+    summ = case["summary"].set_index("renderer")
+    for key in ("slope_rmse_spp", "slope_rmse_time", "efficiency", "bias2", "variance", "bias2_fraction",
+                "time_to_delta_e2000_mean_le_1", "time_to_rel_mse_le_0.001"):
+        assert f'<th data-key="{key}"' in text, key
+    for name in OK_NAMES:
+        slope = _cell(text, name, "slope_rmse_spp")
+        ci = summ.loc[name, "slope_rmse_spp_ci"]
+        assert slope["text"] == f"{summ.loc[name, 'slope_rmse_spp']:+.2f} ± {ci:.2f}"
+        frac = summ.loc[name, "bias2_fraction"]
+        sort = _cell(text, name, "bias2_fraction")["sort"]
+        assert (sort == "") if math.isnan(frac) else float(sort) == pytest.approx(frac), (name, sort, frac)
+    assert _cell(text, "beta-photons", "time_to_delta_e2000_mean_le_1")["text"] == "not reached"
+    assert "time to ΔE mean ≤ 1" in text and "time to relMSE ≤ 0.001" in text
+    # the group headers
+    for group in ("run", "error against the reference", "convergence", "bias / variance"):
+        assert f">{group}</th>" in text
 
 
-def test_colorbar_labelled(report):
+def test_threshold_colouring(report, case):
     text = report["text"]
-    assert 'id="colorbar"' in text
-    lo, hi = DELTA_E_RANGE
-    assert (lo, hi) == (0.0, 10.0)
-    bar = next(i for i in report["parser"].imgs if i.get("data-role") == "colorbar")
-    pixels = np.asarray(_decode(bar["src"]).convert("RGB"))
-    np.testing.assert_array_equal(pixels[0, 0], apply_colormap(0.0))
-    np.testing.assert_array_equal(pixels[0, -1], apply_colormap(10.0))
-    for tick in ("0", "2", "4", "6", "8", "10"):
-        assert re.search(rf'class="tick"[^>]*>{tick}\+?<', text), tick
-    assert "2.3" in text
+    (_, limit), (_, ssim_limit) = case["thresholds"]["delta_e2000_mean"], case["thresholds"]["ssim"]
+    seen = set()
+    for name in OK_NAMES:
+        de = _cell(text, name, "delta_e2000_mean")
+        expected = "pass" if float(de["sort"]) <= limit else "fail"
+        assert expected in de["cls"] and ({"pass", "fail"} - {expected}).isdisjoint(de["cls"]), (name, de)
+        seen.add(expected)
+        ss = _cell(text, name, "ssim")
+        assert ("pass" if float(ss["sort"]) >= ssim_limit else "fail") in ss["cls"]
+        # a column without a threshold is never coloured
+        assert not {"pass", "fail"} & set(_cell(text, name, "rmse")["cls"])
+    assert seen == {"pass", "fail"}  # the fixture's limit splits the renderers
+    # NaN (target never reached) fails its threshold
+    assert "fail" in _cell(text, "gamma-raster", "time_to_rel_mse_le_0.001")["cls"]
+    assert "pass" in _cell(text, "alpha-tracer", "time_to_rel_mse_le_0.001")["cls"]
+    legend = re.search(r'<span id="threshold-legend">(.*?)</span>\s*\n', text, re.S).group(1)
+    assert "ΔE mean ≤" in legend and "SSIM ≥ 0.95" in legend and "passes" in legend and "fails" in legend
+    # not-run rows carry no colouring
+    for name in NOT_RUN:
+        row = re.search(rf'data-renderer="{name}">(.*?)</tr>', text, re.S).group(1)
+        assert not re.search(r'class="[^"]*\b(pass|fail)\b', row), name
+
+
+def test_table_is_sortable_markup(report):
+    parser = report["parser"]
+    assert parser.find("table", id="summary-table")[0]["class"] == "summary sortable"
+    heads = [a for a in parser.find("th") if "data-key" in a]
+    assert {"renderer", "rmse", "delta_e2000_mean", "time_s"} <= {a["data-key"] for a in heads}
+    js = next(t for a, t in parser.scripts if "id" not in a)
+    assert "table.sortable" in js and "data-sort" in js
+
+
+def test_bad_threshold_is_refused(tmp_path, case):
+    with pytest.raises(ValueError, match="threshold"):
+        rf.write_case(tmp_path / "r.html", case, thresholds={"ssim": ("=>", 0.9)})
+
+
+# --------------------------------------------------------------------------
+# Viewer data
+# --------------------------------------------------------------------------
+
+
+def test_hdr_images_embedded_and_decode(report, case):
+    data = _data(report["parser"])
+    assert (data["width"], data["height"]) == (W, H)
+    assert data["exposure"] == pytest.approx(metrics.exposure_scale(case["reference"].image))
+    ref = case["reference"].image
+    got = _f16(data["reference"], (H, W, 3))
+    np.testing.assert_array_equal(got, ref.astype(np.float16).astype(np.float64))
+    np.testing.assert_allclose(got, ref, rtol=2**-11, atol=2**-24)
+    assert [r["name"] for r in data["renderers"]] == list(OK_NAMES)
+    for r in data["renderers"]:
+        img = case["images"][r["name"]]
+        np.testing.assert_allclose(_f16(r["img"], (H, W, 3)), img, rtol=2**-11, atol=2**-24)
+        assert r["spp"] == 64 and r["seed"] == 0
+        assert set(r["color"]) and r["color"].startswith("#")
+
+
+def test_f16_keeps_nan_and_clips_huge_values():
+    x = np.array([[[np.nan, 1e6, -1e6], [np.inf, 0.5, 1e-9]]])
+    y = _f16(f16_base64(x), x.shape)
+    assert np.isnan(y[0, 0, 0]) and y[0, 0, 1] == 65504 and y[0, 0, 2] == -65504
+    assert y[0, 1, 0] == np.inf and y[0, 1, 1] == 0.5
+    np.testing.assert_array_equal(f16_decode(f16_base64(x), x.shape), y.astype(np.float32))
+
+
+def test_error_maps_embedded(report, case):
+    data = _data(report["parser"])
+    ref = case["reference"].image
+    exposure = metrics.exposure_scale(ref)
+    import flip_evaluator
+
+    for r in data["renderers"]:
+        img = case["images"][r["name"]]
+        _, de = metrics.delta_e2000(img, ref, exposure=exposure, full=True)
+        np.testing.assert_allclose(_f16(r["de"], (H, W)), de, rtol=2**-10, atol=1e-6)
+        assert r["stats"]["de"] == pytest.approx(float(np.mean(de)))
+        rel = rel_mse_map(img, ref)
+        assert float(np.mean(rel)) == pytest.approx(metrics.rel_mse(img, ref), rel=1e-12)
+        # embedded as log10: float16 keeps it to ~0.002 decades (0.5 %), far below one colour step
+        np.testing.assert_allclose(_f16(r["relmse"], (H, W)), np.log10(np.maximum(rel, 1e-12)), atol=2.5e-3)
+        fl, _, _ = flip_evaluator.evaluate(ref, img, "HDR", applyMagma=False)
+        got = _f16(r["flip"], (H, W))
+        np.testing.assert_allclose(got, fl[..., 0], atol=1e-3)
+        assert 0 <= got.min() and got.max() <= 1
+    maps = data["maps"]
+    assert (maps["de"]["lo"], maps["de"]["hi"]) == DELTA_E_RANGE and maps["flip"]["available"]
+    assert maps["relmse"]["log"] and maps["relmse"]["cmap"] == "inferno" and maps["flip"]["cmap"] == "magma"
+    for name in ("viridis", "inferno", "magma"):
+        lut = bytes.fromhex(data["colormaps"][name])
+        assert len(lut) == 768
+        np.testing.assert_array_equal(np.frombuffer(lut, np.uint8).reshape(256, 3)[[0, -1]],
+                                      apply_colormap([0.0, 1.0], 0.0, 1.0, name))
+
+
+def test_legends_have_colour_bars_and_ticks(report):
+    text, parser = report["text"], report["parser"]
+    bars = {a["data-mode"]: a for a in parser.find("img", data_role="colorbar")}
+    assert set(bars) == {"de", "relmse", "flip"}
+    for mode, a in bars.items():
+        im = _decode_png(a["src"]).convert("RGB")
+        px = np.asarray(im)
+        cmap = report_html.MAP_COLORMAPS[mode]
+        np.testing.assert_array_equal(px[0, 0], apply_colormap(0.0, 0, 1, cmap))
+        np.testing.assert_array_equal(px[0, -1], apply_colormap(1.0, 0, 1, cmap))
+
+    def ticks(mode):
+        block = re.search(rf'id="legend-{mode}">(.*?)</div>\s*<p', text, re.S).group(1)
+        return re.findall(r'class="tick[^"]*"[^>]*>([^<]*)<', block)
+
+    assert ticks("de") == ["0", "2", "4", "6", "8", "10+"]
+    assert ticks("relmse") == ["10⁻⁶", "10⁻⁵", "10⁻⁴", "0.001", "0.01", "0.1", "1"]
+    assert ticks("flip") == ["0", "0.2", "0.4", "0.6", "0.8", "1"]
+    assert "JND 2.3" in text
+    for mode in ("image", "de", "relmse", "flip"):
+        assert f'data-mode="{mode}"' in text  # a mode button each
+
+
+def test_viewer_controls_present(report):
+    parser = report["parser"]
+    exposure = parser.find("input", id="exposure")[0]
+    assert (exposure["min"], exposure["max"], exposure["value"]) == ("-8", "8", "0")
+    assert parser.find("input", id="split") and parser.find("button", id="flip-toggle")
+    assert parser.find("button", id="exposure-reset") and parser.find("canvas", id="view")
+    assert len(parser.find("canvas", **{"class": "thumb"})) == len(OK_NAMES)
+    js = next(t for a, t in parser.scripts if "id" not in a)
+    assert "imageSmoothingEnabled = false" in js and "S.fit * 64" in js  # nearest neighbour, ≥ 16× zoom
+
+
+def test_flip_unavailable_disables_its_mode(tmp_path, case, monkeypatch):
+    monkeypatch.setattr(report_html, "flip_map", lambda img, ref: None)
+    text = rf.write_case(tmp_path / "r.html", case).read_text(encoding="utf-8")
+    data = _data(_parse(text))
+    assert not data["maps"]["flip"]["available"] and all(r["flip"] is None for r in data["renderers"])
+    assert re.search(r'data-mode="flip" disabled title="flip-evaluator is not installed"', text)
+
+
+def test_mismatched_image_is_noted_not_shown(tmp_path, case):
+    images = dict(case["images"], **{"gamma-raster": np.zeros((8, 8, 3), np.float32)})
+    text = rf.write_case(tmp_path / "r.html", case, images=images).read_text(encoding="utf-8")
+    assert "gamma-raster: image shape (8, 8, 3) does not match" in text
+    assert [r["name"] for r in _data(_parse(text))["renderers"]] == ["alpha-tracer", "beta-photons"]
+
+
+# --------------------------------------------------------------------------
+# Charts
+# --------------------------------------------------------------------------
+
+
+def test_convergence_plots_one_line_per_renderer_and_guide(report, case):
+    text = report["text"]
+    for metric, slope in (("rmse", "-0.5"), ("delta_e2000_mean", "-0.5"), ("rel_mse", "-1")):
+        for axis in ("spp", "time"):
+            svg = _svg(text, f"conv-{axis}-{metric}")
+            series = re.findall(r'<path class="series" data-renderer="([^"]+)"', svg)
+            assert series == list(OK_NAMES), (metric, axis)
+            assert len(re.findall(rf'<path class="guide" data-slope="{slope}"', svg)) == 1
+            # 3 seeds: a min–max band for each renderer whose seeds differ (the raster is deterministic)
+            bands = re.findall(r'<path class="band" data-renderer="([^"]+)"', svg)
+            assert bands == ["alpha-tracer", "beta-photons"], (metric, axis)
+            assert "samples per pixel" in svg if axis == "spp" else "wall time (s)" in svg
+            for name in OK_NAMES:
+                assert f">{name}<" in svg  # legend
+    assert "slope −½ (∝ 1/√N)" in _svg(text, "conv-spp-rmse")
+    # Each series has one vertex per spp level, at the median over seeds.
+    svg = _svg(text, "conv-spp-rmse")
+    d = re.search(r'<path class="series" data-renderer="alpha-tracer" d="([^"]+)"', svg).group(1)
+    assert d.count("L") == 2  # 3 spp levels
+    # metric selector buttons
+    assert 'data-metric-button="rmse"' in text and 'data-metric-button="delta_e2000_mean"' in text
+    assert SINGLE_SPP_NOTE not in text
+
+
+def test_guide_slope_is_minus_half_in_plot_coordinates(report):
+    svg = _svg(report["text"], "conv-spp-rmse")
+    d = re.search(r'<path class="guide"[^>]* d="M ([-\d.]+) ([-\d.]+) L ([-\d.]+) ([-\d.]+)"', svg).groups()
+    x0, y0, x1, y1 = map(float, d)
+    # axes are log-log; recover decades per pixel from two tick positions of each axis
+    xt = {t: float(x) for x, t in re.findall(r'<text class="tick x" x="([-\d.]+)"[^>]*>([^<]+)<', svg)}
+    yt = {t: float(y) for y, t in re.findall(r'<text class="tick y" x="[-\d.]+" y="([-\d.]+)"[^>]*>([^<]+)<', svg)}
+    (ax, bx), (ay, by) = list(xt.items())[:2], list(yt.items())[:2]
+    px_per_decade_x = (bx[1] - ax[1]) / (math.log10(float(bx[0])) - math.log10(float(ax[0])))
+    px_per_decade_y = -(by[1] - 4 - (ay[1] - 4)) / (math.log10(float(by[0].replace("×", ""))) -
+                                                   math.log10(float(ay[0].replace("×", ""))))
+    slope = -((y1 - y0) / px_per_decade_y) / ((x1 - x0) / px_per_decade_x)
+    assert slope == pytest.approx(-0.5, abs=0.01)
+
+
+def test_pareto_front_pure_function():
+    # time, error: points 0, 1, 4, 3 are non-dominated; 2 is beaten by 1.
+    x = [1.0, 2.0, 3.0, 4.0, 2.5]
+    y = [5.0, 3.0, 4.0, 1.0, 2.0]
+    assert pareto_front(x, y) == [0, 1, 4, 3]
+    # ties: an identical pair both stay; equal x with worse y is dominated
+    assert pareto_front([1, 1, 1, 2], [2, 2, 3, 1]) == [0, 1, 3]
+    # NaN and inf never on the front; empty input
+    assert pareto_front([1, np.nan, 0.5, 3], [1, 0.1, np.inf, 0.5]) == [0, 3]
+    assert pareto_front([], []) == []
+    # a single point is its own front; brute force agrees on random data
+    assert pareto_front([3], [4]) == [0]
+    rng = np.random.default_rng(3)
+    px, py = rng.random(60), rng.random(60)
+    brute = [i for i in range(60) if not any(px[j] <= px[i] and py[j] <= py[i] and (px[j], py[j]) != (px[i], py[i])
+                                             for j in range(60))]
+    assert sorted(pareto_front(px, py)) == brute
+    with pytest.raises(ValueError):
+        pareto_front([1, 2], [1])
+
+
+def test_speed_accuracy_chart_marks_the_frontier(report, case):
+    svg = _svg(report["text"], "pareto-rmse")
+    points = re.findall(r'<circle class="(point(?: on-front)?)" data-renderer="([^"]+)" cx="([-\d.]+)" cy="([-\d.]+)"',
+                        svg)
+    assert len(points) == len(OK_NAMES) * 3  # every (renderer, spp)
+    ok = case["runs"][case["runs"]["status"] == "ok"]
+    med = ok.groupby(["renderer", "spp"], sort=False)[["time_s", "rmse"]].median().reset_index()
+    expected = {(r, s) for i, (r, s) in enumerate(zip(med["renderer"], med["spp"]))
+                if i in pareto_front(med["time_s"], med["rmse"])}
+    on_front = [p for p in points if p[0] == "point on-front"]
+    assert len(on_front) == len(expected) >= 2
+    assert len(re.findall(r'<path class="frontier" d="M [^"]+"', svg)) == 1
+    front_d = re.search(r'<path class="frontier" d="M ([^"]+)"', svg).group(1)
+    assert front_d.count("L") == len(expected) - 1
+    for _, _, cx, cy in on_front:
+        assert f"{cx} {cy}" in front_d
+
+
+def test_bias_variance_bars(report, case):
+    svg = _svg(report["text"], "bias-variance")
+    bars = re.findall(r'<rect class="bar" data-renderer="([^"]+)" data-kind="([^"]+)"', svg)
+    summ = case["summary"].set_index("renderer")
+    expected = [(n, k) for n in OK_NAMES for k, col in (("bias²", "bias2"), ("variance", "variance"))
+                if summ.loc[n, col] > 0]
+    assert bars == expected
+    for n in OK_NAMES:
+        if summ.loc[n, "bias2_fraction"] == summ.loc[n, "bias2_fraction"]:
+            assert f"bias {100 * summ.loc[n, 'bias2_fraction']:.0f} %" in svg
+    assert ">bias²<" in svg and ">variance<" in svg  # legend
+
+
+def test_single_spp_compare_omits_convergence_gracefully(tmp_path):
+    case = rf.make_case(W, H, names=OK_NAMES, spps=(16,), seeds=(0,), with_summary=False)
+    path = rf.write_case(tmp_path / "compare.html", case, thresholds={"mse": ("<", 1.0)})
+    text = path.read_text(encoding="utf-8")
+    assert SINGLE_SPP_NOTE in text
+    assert "line-plot" not in text and 'class="series"' not in text
+    svg = _svg(text, "pareto-rmse")  # one point per renderer, still a speed/accuracy picture
+    assert len(re.findall(r'<circle class="point', svg)) == len(OK_NAMES)
+    assert "No bias/variance figures" in text
+    assert "16 spp, seed 0" in text
+    for name in OK_NAMES:
+        assert _cell(text, name, "spp")["text"] == "16"
+        assert "pass" in _cell(text, name, "mse")["cls"]  # a threshold on a column not shown by default
+    assert ">other thresholds</th>" in text
+
+
+def test_only_not_run_renderers(tmp_path, case):
+    runs = case["runs"][case["runs"]["status"] != "ok"]
+    text = write_report(tmp_path / "r.html", scene=case["scene"], reference=case["reference"], runs=runs,
+                        images={}, provenance={}).read_text(encoding="utf-8")
+    assert "No renderer images to show." in text and SINGLE_SPP_NOTE in text
+    assert "no successful runs" in text
+    for name in NOT_RUN:
+        assert name in text
+
+
+def test_approximations_and_settings_listed(report):
+    text = report["text"]
+    assert "<li>no caustics</li>" in text and "<li>light leaks at corners</li>" in text
+    assert "<li>density estimation blurs the lighting</li>" in text
+    assert "<dt>max_depth</dt><dd>-1</dd>" in text
+
+
+def test_report_size_256_five_renderers(tmp_path):
+    names = tuple(rf.RENDERERS)
+    assert len(names) == 5
+    case = rf.make_case(256, 256, names=names, spps=(16, 64), seeds=(0,), not_run=False)
+    path = rf.write_case(tmp_path / "big.html", case)
+    size = path.stat().st_size
+    assert size < 10 * 1024 * 1024, f"report is {size / 2**20:.1f} MiB"
+    assert len(_data(_parse(path.read_text(encoding="utf-8")))["renderers"]) == 5
+
+
+# --------------------------------------------------------------------------
+# Small pure pieces
+# --------------------------------------------------------------------------
 
 
 def _luminance(rgb_u8: np.ndarray) -> np.ndarray:
@@ -233,18 +555,21 @@ def _luminance(rgb_u8: np.ndarray) -> np.ndarray:
     return lin @ np.array([0.2126, 0.7152, 0.0722])
 
 
-def test_colormap_is_perceptual_and_clipped():
+@pytest.mark.parametrize("cmap", ["viridis", "inferno", "magma"])
+def test_colormaps_are_perceptual_and_clipped(cmap):
     values = np.linspace(0.0, 10.0, 201)
-    rgb = apply_colormap(values)
+    rgb = apply_colormap(values, 0.0, 10.0, cmap)
     assert rgb.shape == (201, 3) and rgb.dtype == np.uint8
-    np.testing.assert_array_equal(apply_colormap(0.0), [68, 1, 84])  # viridis' first colour
-    np.testing.assert_array_equal(apply_colormap(10.0), [253, 231, 37])  # and its last
-    assert not np.array_equal(rgb[0], rgb[-1])
     y = _luminance(rgb)
-    assert np.all(np.diff(y) >= 0) and y[-1] > 5 * y[0]  # monotone in luminance
-    np.testing.assert_array_equal(apply_colormap(-3.0), rgb[0])  # clipped below
-    np.testing.assert_array_equal(apply_colormap(250.0), rgb[-1])  # and above
-    np.testing.assert_array_equal(apply_colormap(np.nan), rgb[-1])  # undefined reads as worst
+    assert np.all(np.diff(y) >= -1e-9) and y[-1] > 5 * y[0] + 0.01  # monotone in luminance
+    np.testing.assert_array_equal(apply_colormap(-3.0, 0, 10, cmap), rgb[0])  # clipped below
+    np.testing.assert_array_equal(apply_colormap(250.0, 0, 10, cmap), rgb[-1])  # and above
+    np.testing.assert_array_equal(apply_colormap(np.nan, 0, 10, cmap), rgb[-1])  # undefined reads as worst
+
+
+def test_viridis_ends():
+    np.testing.assert_array_equal(apply_colormap(0.0), [68, 1, 84])
+    np.testing.assert_array_equal(apply_colormap(10.0), [253, 231, 37])
     assert apply_colormap(np.zeros((4, 5))).shape == (4, 5, 3)
 
 
@@ -256,15 +581,28 @@ def test_format_value():
     assert format_value("delta_e2000_frac_gt_2_3", 0.5) == "50.0 %"
     assert format_value("mean_radiance_rel_error", 0.0123) == "+1.23 %"
     assert format_value("rel_mse", 1.5e-6) == "1.500e-06"
+    assert format_value("slope_rmse_spp", -0.5) == "-0.50"
+    assert format_value("time_to_rel_mse_le_0.001", 12.3456) == "12.346"
+    assert format_value("bias2_fraction", 0.25) == "25.0 %"
 
 
-def test_title_and_no_ok_records(tmp_path, scene, reference):
-    records = [RunRecord(scene.name, "only-skipped", "skipped", 4, 0, reason="nothing to do")]
-    path = write_report(tmp_path / "r.html", scene=scene, reference_image=reference, reference_provenance={},
-                        records=records, title="My <b>title</b>")
-    text = path.read_text(encoding="utf-8")
-    assert "My &lt;b&gt;title&lt;/b&gt;" in text and "nothing to do" in text
-    parser = _Collector()
-    parser.feed(text)
-    assert parser.record_rows == 1
-    assert {i.get("data-role") for i in parser.imgs} == {"reference", "colorbar"}
+def test_time_to_columns_and_thresholds():
+    assert parse_time_to("time_to_delta_e2000_mean_le_1") == ("delta_e2000_mean", "<=", 1.0)
+    assert parse_time_to("time_to_rel_mse_le_0.001") == ("rel_mse", "<=", 0.001)
+    assert parse_time_to("time_to_ssim_ge_0.95") == ("ssim", ">=", 0.95)
+    assert parse_time_to("rmse") is None
+    assert column_label("time_to_rel_mse_le_0.001")[0] == "time to relMSE ≤ 0.001"
+    assert column_label("noise_foo_bar")[0] == "foo bar (noise)"
+    assert check_threshold(3.0, "<=", 3.0) and not check_threshold(3.0, "<", 3.0)
+    assert check_threshold(0.95, ">=", 0.9) and not check_threshold(0.85, ">", 0.9)
+    assert not check_threshold(float("nan"), "<=", 3.0) and not check_threshold(None, ">=", 0.0)
+    with pytest.raises(ValueError):
+        check_threshold(1.0, "=<", 2.0)
+
+
+def test_axis_ticks():
+    assert log_ticks(0.0, 3.0) == [1.0, 10.0, 100.0, 1000.0]
+    assert log_ticks(0.0, math.log10(64), base2=True) == [1, 2, 4, 8, 16, 32, 64]
+    assert len(log_ticks(0.0, math.log10(2**20), base2=True)) <= 9
+    assert log_ticks(-0.2, 0.4) == [1.0, 2.0]
+    assert format_tick(1e-6) == "10⁻⁶" and format_tick(2e-5) == "2×10⁻⁵" and format_tick(0.01) == "0.01"

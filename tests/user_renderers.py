@@ -74,3 +74,21 @@ class SeededNoise(FlatGrey):
         shape = (scene.camera.height, scene.camera.width, 3)
         img = 0.25 + rng.standard_normal(shape) / np.sqrt(spp)
         return RenderResult(img.astype(np.float32), 0.001, spp, seed)
+
+
+class CountingNoise(SeededNoise):
+    """Seeded noise that logs each render to $CBOX_TEST_RENDER_LOG and takes a little time.
+
+    Lets a test kill a run midway and see which cells were rendered again.
+    """
+
+    name = "counting-noise"
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        import os
+        import time
+
+        time.sleep(float(os.environ.get("CBOX_TEST_RENDER_SLEEP", "0")))
+        with open(os.environ["CBOX_TEST_RENDER_LOG"], "a") as f:
+            f.write(f"{seed} {spp}\n")
+        return super().render(scene, spp, seed, checkpoints)

@@ -1,0 +1,122 @@
+"""Convergence experiments: the stored table, resuming after a kill, equal-time and equal-quality modes."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pandas as pd
+import pytest
+
+from conftest import ROOT, run_cbox
+from test_adapters import TESTS
+
+SEEDS = 6
+
+
+def _converge_cmd(out, seeds=SEEDS):
+    return [sys.executable, "-m", "harness", "converge", "--scene", "cornell-box", "--renderer",
+            "user_renderers:CountingNoise", "--spp", "1,2", "--seeds", str(seeds), "--out", str(out)]
+
+
+def _env(log, sleep="0"):
+    env = dict(os.environ, PYTHONPATH=str(TESTS), CBOX_TEST_RENDER_LOG=str(log), CBOX_TEST_RENDER_SLEEP=sleep)
+    return env
+
+
+def _rendered_seeds(lines):
+    return {int(line.split()[0]) for line in lines}
+
+
+def test_killed_run_resumes_without_losing_or_repeating_cells(tmp_path):
+    """SIGKILL a converge run after two cells; the rerun keeps them and renders only the rest."""
+    out, log = tmp_path / "exp", tmp_path / "renders.log"
+    proc = subprocess.Popen(_converge_cmd(out), cwd=ROOT, env=_env(log, sleep="0.4"),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    cells = out / "cells"
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list(cells.glob("*.parquet"))) < 2:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    finished = {int(p.stem.rsplit("seed", 1)[1]) for p in cells.glob("*.parquet")}
+    assert 2 <= len(finished) < SEEDS, finished
+    before = {s: pd.read_parquet(cells / f"counting-noise__seed{s}.parquet") for s in finished}
+    first_run = log.read_text().splitlines()
+
+    again = subprocess.run(_converge_cmd(out), cwd=ROOT, env=_env(log), capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    second_run = log.read_text().splitlines()[len(first_run):]
+    assert not (_rendered_seeds(second_run) & finished), "a finished cell was rendered again"
+    assert _rendered_seeds(first_run) | _rendered_seeds(second_run) == set(range(SEEDS))
+
+    results = pd.read_parquet(out / "results.parquet")
+    assert sorted(zip(results["seed"], results["spp"])) == [(s, p) for s in range(SEEDS) for p in (1, 2)]
+    assert (results["status"] == "ok").all()
+    for s, rows in before.items():  # nothing finished was lost or changed
+        kept = results[results["seed"] == s].reset_index(drop=True)
+        pd.testing.assert_frame_equal(kept[rows.columns], rows, check_dtype=False)
+    assert (out / "report.html").exists() and (out / "summary.csv").exists()
+
+
+def test_results_table_is_tidy_and_report_rebuilds(tmp_path):
+    out, log = tmp_path / "exp", tmp_path / "renders.log"
+    proc = subprocess.run(_converge_cmd(out, seeds=2), cwd=ROOT, env=_env(log), capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    runs = pd.read_parquet(out / "results.parquet")
+    key = ["scene", "renderer", "settings", "seed", "spp"]
+    assert not runs.duplicated(key).any()
+    for col in key + ["time_s", "version", "rmse", "rel_mse", "ssim", "delta_e2000_mean", "efficiency"]:
+        assert col in runs, col
+    assert json.loads(runs["settings"].iloc[0]) == {"height": 256, "max_depth": -1, "pixel_filter": "box",
+                                                     "width": 256}
+    config = json.loads((out / "experiment.json").read_text())
+    assert config["spp"] == [1, 2] and config["seeds"] == [0, 1] and "converge" in config["command"]
+    # A second run renders nothing, and `cbox report` rebuilds the report without rendering.
+    n_renders = len(log.read_text().splitlines())
+    (out / "report.html").unlink()
+    rebuilt = run_cbox("report", str(out), env_path=TESTS)
+    assert rebuilt.returncode == 0, rebuilt.stderr
+    assert (out / "report.html").exists() and len(log.read_text().splitlines()) == n_renders
+
+
+def test_report_of_missing_folder_is_a_clear_error(tmp_path):
+    proc = run_cbox("report", str(tmp_path / "nothing"))
+    assert proc.returncode == 2 and "experiment.json: not found" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_equal_time_mode_reports_spp_and_respects_the_budget(tmp_path):
+    proc = run_cbox("compare", "--scene", "cornell-box", "--renderer", "pathtracer", "--renderer", "mitsuba",
+                    "--time-budget", "2s", "--json", "--out", str(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    recs = [json.loads(line) for line in proc.stdout.splitlines()]
+    for r in recs:
+        assert r["status"] == "ok" and r["spp"] >= 1 and r["info_time_budget_s"] == 2.0
+        # Calibrated from two short renders: within a factor 2 of the budget on a noisy machine.
+        assert 1.0 <= r["time_s"] <= 4.0, r
+
+
+def test_equal_quality_mode_reports_time_to_target(tmp_path):
+    proc = run_cbox("compare", "--scene", "cornell-box", "--renderer", "mitsuba", "--target-error",
+                    "delta_e2000_mean=6", "--json", "--out", str(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    (rec,) = [json.loads(line) for line in proc.stdout.splitlines()]
+    assert rec["info_target_reached"] is True and rec["delta_e2000_mean"] <= 6
+    # The previous power of two did not reach it (ΔE ~ 1/sqrt(spp)): the first spp that does.
+    assert 4 <= rec["spp"] <= 64 and rec["time_s"] > 0
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--time-budget", "soon"], "time budget 'soon'"),
+    (["--target-error", "ssim>=0.9"], "target error"),
+    (["--time-budget", "1s", "--target-error", "1"], "not both"),
+])
+def test_bad_mode_options(tmp_path, args, words):
+    proc = run_cbox("compare", "--scene", "cornell-box", "--renderer", "mitsuba", *args, "--out", str(tmp_path))
+    assert proc.returncode == 2 and words in proc.stderr
