@@ -1,13 +1,23 @@
 #!/usr/bin/env bash
 # Set up cornell-harness on a fresh Debian/Ubuntu machine: system libraries
-# (when missing), then a virtual environment in .venv with the project and its
-# test tools. Safe to run again: it only installs what is missing or changed.
+# (when missing), then a virtual environment in .venv with the project.
+# Safe to run again: it only installs what is missing or changed.
 #
-#   scripts/setup.sh            # runtime + tests
+#   scripts/setup.sh                 # what `cbox demo` needs
+#   scripts/setup.sh --tests         # plus the test tools: pytest, Playwright, Debian's chromium
 #   CBOX_NO_APT=1 scripts/setup.sh   # never call apt-get (renderers needing
 #                                    # missing libraries then report themselves unavailable)
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+TESTS=""
+for arg in "$@"; do
+  case "$arg" in
+    --tests) TESTS=1 ;;
+    -h|--help) sed -n '2,9p' "$0"; exit 0 ;;
+    *) echo "setup: unknown option $arg (see --help)" >&2; exit 2 ;;
+  esac
+done
 
 say() { printf 'setup: %s\n' "$*" >&2; }
 
@@ -25,6 +35,9 @@ have_lib 'libGL\.so\.1' || need_pkgs+=(libgl1)
 have_lib 'libEGL_mesa\.so\.0' || need_pkgs+=(libegl-mesa0)
 ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || need_pkgs+=(libgl1-mesa-dri)
 have_lib 'libOSMesa\.so' || need_pkgs+=(libosmesa6)
+# chromium: the report's browser test (Playwright drives Debian's build;
+# Playwright's own browser download is not used).
+[[ -n $TESTS ]] && ! command -v chromium >/dev/null 2>&1 && need_pkgs+=(chromium)
 
 if ((${#need_pkgs[@]})); then
   if [[ -n "${CBOX_NO_APT:-}" ]]; then
@@ -45,13 +58,14 @@ PY=${PYTHON:-python3}
   || { say "Python 3.11 or newer is needed (found $("$PY" --version 2>&1))"; exit 1; }
 [[ -x .venv/bin/python ]] || { say "creating .venv"; "$PY" -m venv .venv; }
 
-# Reinstall only when the dependency list changed.
+# Reinstall only when the dependency list (or the --tests choice) changed.
+extras=""; [[ -n $TESTS ]] && extras="[test]"
 stamp=.venv/.cbox-installed
-want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+want="$(sha256sum pyproject.toml | cut -d' ' -f1)$extras"
 if [[ ! -f $stamp || $(cat "$stamp") != "$want" ]]; then
   say "installing Python packages into .venv (first run takes a minute)"
   .venv/bin/python -m pip install -q --upgrade pip 2>&1 | grep -v "is ignored" >&2 || true
-  .venv/bin/python -m pip install -q -e '.[test]' 2>&1 | grep -v "is ignored" >&2 || true
+  .venv/bin/python -m pip install -q -e ".$extras" 2>&1 | grep -v "is ignored" >&2 || true
   .venv/bin/python -c 'import harness.cli, renderers.mitsuba3' \
     || { say "installation failed"; exit 1; }
   echo "$want" > "$stamp"

@@ -4,7 +4,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 DEMO = "scripts/setup.sh && .venv/bin/cbox demo"
-TEST = "scripts/setup.sh && .venv/bin/python -m pytest"
+TEST = "scripts/setup.sh --tests && .venv/bin/python -m pytest"
 
 
 def test_readme_gives_the_two_commands():
