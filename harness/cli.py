@@ -6,6 +6,7 @@ a one-line ``cbox: error: ...`` on stderr and exit code 2, never a traceback.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import json
 import shlex
@@ -20,6 +21,7 @@ from harness.adapter import RendererError, missing_features, resolve
 from harness.atomic import atomic_path, write_json_atomic
 from harness.exr import ImageFileError, write_exr
 from harness.experiments import ExperimentError
+from harness.gate import GateConfigError
 from harness.reference import ReferenceError, build_reference, load_reference, resolve_scene, scene_names
 from harness.scene import FEATURES, SceneError
 
@@ -32,7 +34,7 @@ app = typer.Typer(
 reference_app = typer.Typer(help="Build and inspect stored reference images.", no_args_is_help=True)
 app.add_typer(reference_app, name="reference")
 
-USER_ERRORS = (SceneError, ReferenceError, RendererError, ImageFileError, ExperimentError)
+USER_ERRORS = (SceneError, ReferenceError, RendererError, ImageFileError, ExperimentError, GateConfigError)
 
 SceneOpt = typer.Option(..., "--scene", "-s", help="Stored scene name (see `cbox scenes`) or path to a scene .toml file or folder.")
 SppOpt = typer.Option(64, "--spp", min=1, help="Samples per pixel.")
@@ -113,7 +115,7 @@ def render(
     typer.echo(f"wrote {out} ({sc.camera.width}x{sc.camera.height}, {spp} spp, {result.time_s:.2f} s)", err=True)
 
 
-def _write_compare_outputs(out: Path, sc, ref, records, command: str) -> Path:
+def _write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(), title=None) -> Path:
     """Store a comparison as an experiment folder (results, images, CSV/JSON) and build its report."""
     import pandas as pd
 
@@ -134,7 +136,7 @@ def _write_compare_outputs(out: Path, sc, ref, records, command: str) -> Path:
     with atomic_path(out / "metrics.csv") as tmp:
         frame.to_csv(tmp, index=False)
     write_json_atomic(out / "metrics.json", [runner.json_safe(r) for r in rows])
-    return experiments.write_experiment_report(out, sc, ref)
+    return experiments.write_experiment_report(out, sc, ref, sections=sections, title=title)
 
 
 def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool,
@@ -296,6 +298,68 @@ def demo(
 ) -> None:
     """The main job: every available renderer on cornell-box against the stored reference → out/report.html."""
     raise typer.Exit(_run_compare("cornell-box", None, spp, seed, out, False))
+
+
+@app.command()
+def gate(
+    config: Path = typer.Option(Path("gate.toml"), "--config", "-c", help="Gate config (TOML): expectations per "
+                                                                        "scene, renderer and budget; see harness/gate.py."),
+    out: Path = typer.Option(Path("out/gate"), "--out", "-o", help="Folder for report.html, gate-junit.xml and "
+                                                                  "gate-summary.md."),
+    junit: Optional[Path] = typer.Option(None, "--junit", help="JUnit XML path (default OUT/gate-junit.xml)."),
+    markdown: Optional[Path] = typer.Option(None, "--markdown", help="Markdown summary path (default "
+                                                                    "OUT/gate-summary.md); also appended to "
+                                                                    "$GITHUB_STEP_SUMMARY when that is set."),
+    update_baseline: bool = typer.Option(False, "--update-baseline", help="Record this run's metrics as the "
+                                                                          "baseline named in the config."),
+) -> None:
+    """CI quality gate: exit 0 if every expectation holds, 1 if one fails, 2 for a bad config or input.
+
+    Unbiased renderers are tested for statistical agreement with the reference
+    (tiled z-tests, family-wise false-alarm rate alpha); others against metric
+    budgets; all must have zero NaN/Inf pixels; optionally, convergence slopes
+    and regressions against a recorded baseline.
+    """
+    import os
+
+    from harness import gate as gate_mod
+    from harness.atomic import write_text_atomic
+    from reports.gate import gate_section
+
+    cfg = gate_mod.load_config(config)
+    bar = tqdm(total=len(cfg.expectations), desc="gate", unit="check", file=sys.stderr, dynamic_ncols=True)
+
+    def started(exp) -> None:
+        bar.set_postfix_str(exp.name)
+
+    outcomes = gate_mod.run_gate(cfg, on_start=started)
+    bar.update(len(cfg.expectations))
+    bar.close()
+    if update_baseline:
+        typer.echo(f"baseline: {gate_mod.write_baseline(cfg, outcomes)}", err=True)
+        outcomes = [dataclasses.replace(o, checks=[c for c in o.checks if not c.name.startswith("baseline.")])
+                    for o in outcomes]
+    md = gate_mod.markdown_summary(outcomes, cfg.alpha)
+    write_text_atomic(junit or out / "gate-junit.xml", gate_mod.junit_xml(outcomes))
+    write_text_atomic(markdown or out / "gate-summary.md", md)
+    if os.environ.get("GITHUB_STEP_SUMMARY"):
+        with open(os.environ["GITHUB_STEP_SUMMARY"], "a") as f:
+            f.write(md)
+    scenes = list(dict.fromkeys(o.expectation.scene for o in outcomes))
+    for scene_name in scenes:
+        mine = [o for o in outcomes if o.expectation.scene == scene_name]
+        folder = out if len(scenes) == 1 else out / Path(scene_name).stem
+        sc = resolve_scene(scene_name)
+        report = _write_compare_outputs(folder, sc, load_reference(sc), [o.record for o in mine], _command_line(),
+                                        sections=[("gate", "Gate", gate_section(mine, cfg.alpha))],
+                                        title=f"cbox gate — {sc.name}")
+        typer.echo(f"report: {report}", err=True)
+    for o in outcomes:
+        for c in o.checks:
+            typer.echo(f"{'PASS' if c.passed else 'FAIL'}  {o.expectation.name}  {c.name}: {c.message}")
+    failed = sum(not c.passed for o in outcomes for c in o.checks)
+    typer.echo(f"gate {'passed' if not failed else f'failed: {failed} check(s)'}")
+    raise typer.Exit(1 if failed else 0)
 
 
 @reference_app.command("build")

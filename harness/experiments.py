@@ -340,7 +340,8 @@ def provenance(config: dict, runs: pd.DataFrame) -> dict:
             "seeds": seeds, "date": config.get("date", ""), "kind": config.get("kind", "")}
 
 
-def write_experiment_report(out: Path, scene: Scene, reference: Reference, thresholds: dict | None = None) -> Path:
+def write_experiment_report(out: Path, scene: Scene, reference: Reference, thresholds: dict | None = None,
+                            sections=(), title: str | None = None) -> Path:
     """(Re)build ``out/report.html`` and ``out/summary.csv`` from what is stored in ``out``; no rendering."""
     from reports.html import write_report
 
@@ -354,4 +355,5 @@ def write_experiment_report(out: Path, scene: Scene, reference: Reference, thres
     shown = {r: imgs[0] for r, imgs in images.items() if imgs}
     return write_report(Path(out) / "report.html", scene=scene, reference=reference, runs=runs, images=shown,
                         summary=summary if not summary.empty else None, thresholds=thresholds,
-                        provenance=provenance(config, runs), command=config.get("command", ""))
+                        provenance=provenance(config, runs), command=config.get("command", ""),
+                        sections=sections, title=title)

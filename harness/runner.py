@@ -49,6 +49,8 @@ class RunRecord:
     info: dict = field(default_factory=dict)
     metrics: dict = field(default_factory=dict)
     image: np.ndarray | None = field(default=None, repr=False)
+    variance: np.ndarray | None = field(default=None, repr=False)  # of the image, when the renderer gives it
+    checkpoints: list = field(default_factory=list, repr=False)  # harness.adapter.Checkpoint
 
     @classmethod
     def new(cls, scene: Scene, renderer: str, spp: int, seed: int, **fields) -> "RunRecord":
@@ -82,7 +84,8 @@ def json_safe(row: dict) -> dict:
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
 
 
-def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: Reference | None) -> RunRecord:
+def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: Reference | None,
+            checkpoints: Sequence[int] = ()) -> RunRecord:
     """Render and score one renderer; never raises for the renderer's own failures."""
     rec = RunRecord.new(scene, entry.name, spp, seed)
     if not entry.available:
@@ -95,7 +98,8 @@ def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: 
         return rec
     try:
         rec.version = str(r.version())
-        result = r.render(scene, spp, seed)
+        result = r.render(scene, spp, seed, checkpoints=list(checkpoints)) if checkpoints else \
+            r.render(scene, spp, seed)
         image = np.asarray(result.image, dtype=np.float32)
         expected = (scene.camera.height, scene.camera.width, 3)
         if image.shape != expected:
@@ -106,6 +110,7 @@ def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: 
         rec.info = {"traceback": traceback.format_exc(limit=8)}
         return rec
     rec.time_s, rec.info, rec.image = float(result.time_s), dict(result.info), image
+    rec.variance, rec.checkpoints = result.variance, list(result.checkpoints)
     if reference is not None:
         rec.metrics = score(image, reference, spp)
     else:

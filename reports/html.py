@@ -58,6 +58,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import jinja2
+import markupsafe
 import numpy as np
 import pandas as pd
 from markupsafe import Markup
@@ -871,8 +872,14 @@ def render_html(
     provenance: Mapping,
     command: str = "",
     title: str | None = None,
+    sections: Sequence[tuple[str, str, str]] = (),
 ) -> str:
-    """The report's HTML text (see :func:`write_report`)."""
+    """The report's HTML text (see :func:`write_report`).
+
+    ``sections`` are extra (id, title, HTML fragment) sections other parts of
+    the harness add (e.g. the gate's verdicts), placed after the summary; the
+    fragments must be built with escaping already done.
+    """
     ref_img = np.asarray(reference.image, dtype=np.float32)
     exposure = metrics.exposure_scale(ref_img)
     scene_hash = scene.content_hash()
@@ -899,6 +906,7 @@ def render_html(
 
     env = _environment()
     ctx = {
+        "sections": [(sid, stitle, markupsafe.Markup(frag)) for sid, stitle, frag in sections],
         "title": title or f"Renderer comparison — {scene.name}",
         "scene": {
             "name": scene.name,
@@ -951,6 +959,7 @@ def write_report(
     provenance: Mapping,
     command: str = "",
     title: str | None = None,
+    sections: Sequence[tuple[str, str, str]] = (),
 ) -> Path:
     """Write the self-contained HTML report to ``path`` atomically; return the path.
 
@@ -966,12 +975,14 @@ def write_report(
     - ``thresholds``: optional metric → (op, value), op in ``<= >= < >``, for
       pass/fail colouring of the summary table;
     - ``provenance``: ``versions``, ``machine``, ``seeds``, ``date`` and any
-      other key/value to show; ``command``: the command line.
+      other key/value to show; ``command``: the command line;
+    - ``sections``: extra (id, title, escaped HTML fragment) sections, shown
+      after the summary (the gate's verdicts use this).
     """
     path = Path(path)
     html = render_html(
         scene=scene, reference=reference, runs=runs, images=images, summary=summary, thresholds=thresholds,
-        provenance=provenance, command=command, title=title,
+        provenance=provenance, command=command, title=title, sections=sections,
     )
     write_text_atomic(path, html)
     return path

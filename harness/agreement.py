@@ -1,0 +1,107 @@
+"""Statistical agreement of a render with the reference: tiled z-tests with a Šidák correction.
+
+For an unbiased renderer, render − reference is zero-mean noise. Pixels are
+independent, so a tile's summed difference D has variance V = Σ (var_img +
+var_ref) over its pixels, and z = D / √V is close to standard normal (a tile
+sums thousands of samples). The test runs one two-sided z-test per tile and
+channel, plus one per channel on the whole image (which catches global
+energy errors far below a tile's noise), and controls the family-wise
+false-alarm rate at α with Šidák's correction: each of the m tests uses
+level 1 − (1 − α)^(1/m) (Šidák 1967, J. Am. Stat. Assoc. 62, 626-633).
+
+``var_img`` is the render's own per-pixel variance of its mean when the
+renderer reports it; otherwise the reference renderer's noise model
+(``var_ref · ref_spp / spp``: same per-sample variance as the reference), which
+is exact for the reference renderer itself.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import norm
+
+CHANNELS = "RGB"
+
+
+def sidak_level(alpha: float, tests: int) -> float:
+    """Per-test level that keeps the family-wise false-alarm rate at ``alpha`` over ``tests`` independent tests."""
+    return 1.0 - (1.0 - alpha) ** (1.0 / max(tests, 1))
+
+
+def tile_sums(a: np.ndarray, tile: int) -> np.ndarray:
+    """Sums of ``a`` (H, W, C) over tile×tile blocks; edge tiles may be smaller. Shape (rows, cols, C)."""
+    h, w, c = a.shape
+    rows, cols = -(-h // tile), -(-w // tile)
+    padded = np.zeros((rows * tile, cols * tile, c))
+    padded[:h, :w] = a
+    return padded.reshape(rows, tile, cols, tile, c).sum(axis=(1, 3))
+
+
+def _z(diff: np.ndarray, var: np.ndarray) -> np.ndarray:
+    """diff/√var; 0 where both are 0, ±inf where only the variance is 0 (a noise-free disagreement)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = diff / np.sqrt(var)
+    z[(var <= 0) & (diff == 0)] = 0.0
+    return z
+
+
+@dataclass
+class Agreement:
+    """Outcome of :func:`agreement_test`."""
+
+    passed: bool
+    alpha: float
+    tests: int
+    level: float  # per-test level after Šidák
+    z_tiles: np.ndarray  # (rows, cols, 3)
+    p_tiles: np.ndarray  # two-sided p-values, same shape
+    z_global: np.ndarray  # (3,)
+    p_global: np.ndarray  # (3,)
+    tile: int
+    failures: list[dict] = field(default_factory=list)  # worst first
+
+    @property
+    def p_min(self) -> float:
+        return float(min(self.p_tiles.min(initial=1.0), self.p_global.min(initial=1.0)))
+
+    def message(self) -> str:
+        if self.passed:
+            return (f"agrees with the reference: smallest p = {self.p_min:.3g} ≥ per-test level {self.level:.3g} "
+                    f"({self.tests} tests, family-wise α = {self.alpha:g})")
+        head = (f"{len(self.failures)} of {self.tests} tests reject agreement at family-wise α = {self.alpha:g} "
+                f"(per-test level {self.level:.3g})")
+        return head + "; worst: " + "; ".join(f["where"] for f in self.failures[:3])
+
+
+def agreement_test(img: np.ndarray, var_img: np.ndarray, ref: np.ndarray, var_ref: np.ndarray,
+                   tile: int = 16, alpha: float = 0.01) -> Agreement:
+    """Tiled and global z-tests of ``img`` against ``ref``, Šidák-corrected to family-wise ``alpha``."""
+    img, ref = np.asarray(img, np.float64), np.asarray(ref, np.float64)
+    var = np.asarray(var_img, np.float64) + np.asarray(var_ref, np.float64)
+    diff = img - ref
+    d_t, v_t, r_t = tile_sums(diff, tile), tile_sums(var, tile), tile_sums(ref, tile)
+    z_tiles = _z(d_t, v_t)
+    z_global = _z(diff.sum(axis=(0, 1)), var.sum(axis=(0, 1)))
+    p_tiles, p_global = 2 * norm.sf(np.abs(z_tiles)), 2 * norm.sf(np.abs(z_global))
+    tests = z_tiles.size + z_global.size
+    level = sidak_level(alpha, tests)
+    failures = []
+    h, w, _ = img.shape
+    for ch in range(3):
+        if p_global[ch] < level:
+            rel = diff[..., ch].sum() / max(abs(ref[..., ch].sum()), 1e-300)
+            failures.append({"p": float(p_global[ch]), "z": float(z_global[ch]), "where":
+                             f"whole image, channel {CHANNELS[ch]}: z = {z_global[ch]:.2f}, mean off by {rel:+.3%}"})
+    for r, c, ch in zip(*np.nonzero(p_tiles < level)):
+        y0, x0 = r * tile, c * tile
+        y1, x1 = min(y0 + tile, h), min(x0 + tile, w)
+        rel = d_t[r, c, ch] / max(abs(r_t[r, c, ch]), 1e-300)
+        failures.append({"p": float(p_tiles[r, c, ch]), "z": float(z_tiles[r, c, ch]), "x": (int(x0), int(x1)),
+                         "y": (int(y0), int(y1)), "channel": CHANNELS[ch], "where":
+                         f"pixels x {x0}-{x1 - 1}, y {y0}-{y1 - 1}, channel {CHANNELS[ch]}: "
+                         f"z = {z_tiles[r, c, ch]:.2f}, tile mean off by {rel:+.2%}"})
+    failures.sort(key=lambda f: (f["p"], -abs(f["z"]) if math.isfinite(f["z"]) else -math.inf))
+    return Agreement(not failures, alpha, tests, level, z_tiles, p_tiles, z_global, p_global, tile, failures)
