@@ -92,3 +92,28 @@ class CountingNoise(SeededNoise):
         with open(os.environ["CBOX_TEST_RENDER_LOG"], "a") as f:
             f.write(f"{seed} {spp}\n")
         return super().render(scene, spp, seed, checkpoints)
+
+
+class ScaledMitsubaNoise(FlatGrey):
+    """The stored reference plus noise of the reference's own model, times SCALE: unbiased when SCALE is 1.
+
+    Lets the gate be tested without rendering: its noise is exactly what the
+    agreement test assumes, and SCALE != 1 is a known bias.
+    """
+
+    name = "reference-noise"
+    SCALE = 1.0
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        from harness.reference import load_reference
+
+        ref = load_reference(scene)
+        rng = np.random.default_rng(seed)
+        var = ref.variance.astype(np.float64) * ref.spp / spp
+        img = (ref.image + np.sqrt(var) * rng.standard_normal(ref.image.shape)) * self.SCALE
+        return RenderResult(img.astype(np.float32), 0.01, spp, seed, variance=var.astype(np.float32))
+
+
+class Biased1Percent(ScaledMitsubaNoise):
+    name = "biased-1pct"
+    SCALE = 0.99
