@@ -232,9 +232,11 @@ def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, m
     """Renders at 1, 2, 4, ... spp until ``metric`` ≤ ``target`` (or ``max_spp``); the record says which.
 
     The reported time is that of the render that reached the target (a
-    renderer that resumed its last render would need at most that).
+    renderer that resumed its last render would need at most that). A
+    deterministic renderer stops early once more spp no longer changes its error.
     """
-    spp = 1
+    spp, previous = 1, None
+    deterministic = getattr(entry.renderer, "deterministic", False)
     while True:
         rec = runner.run_one(entry, scene, spp, seed, reference)
         if rec.status != "ok":
@@ -244,9 +246,12 @@ def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, m
             raise ExperimentError(f"--target-error: unknown metric {metric!r}")
         rec.info["target"] = f"{metric}<={target:g}"
         rec.info["target_reached"] = bool(value <= target)
-        if value <= target or spp >= max_spp:
+        # A deterministic renderer whose error stopped changing will not reach it with more samples
+        # (1e-6: GL rasterisers are repeatable only to float rounding).
+        stalled = deterministic and previous is not None and abs(value - previous) <= 1e-6 * abs(previous)
+        if value <= target or spp >= max_spp or stalled:
             return rec
-        spp = min(2 * spp, max_spp)
+        spp, previous = min(2 * spp, max_spp), value
 
 
 def parse_duration(text: str) -> float:
