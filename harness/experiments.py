@@ -233,9 +233,9 @@ def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, m
 
     The reported time is that of the render that reached the target (a
     renderer that resumed its last render would need at most that). A
-    deterministic renderer stops early once more spp no longer changes its error.
+    deterministic renderer stops early once two doublings of spp leave its error unchanged.
     """
-    spp, previous = 1, None
+    spp, previous, stalls = 1, None, 0
     deterministic = getattr(entry.renderer, "deterministic", False)
     while True:
         rec = runner.run_one(entry, scene, spp, seed, reference)
@@ -246,10 +246,11 @@ def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, m
             raise ExperimentError(f"--target-error: unknown metric {metric!r}")
         rec.info["target"] = f"{metric}<={target:g}"
         rec.info["target_reached"] = bool(value <= target)
-        # A deterministic renderer whose error stopped changing will not reach it with more samples
-        # (1e-6: GL rasterisers are repeatable only to float rounding).
-        stalled = deterministic and previous is not None and abs(value - previous) <= 1e-6 * abs(previous)
-        if value <= target or spp >= max_spp or stalled:
+        # A deterministic renderer whose error stopped changing for two doublings will not reach it
+        # with more samples (1e-6: GL rasterisers are repeatable only to float rounding).
+        same = deterministic and previous is not None and abs(value - previous) <= 1e-6 * abs(previous)
+        stalls = stalls + 1 if same else 0
+        if value <= target or spp >= max_spp or stalls >= 2:
             return rec
         spp, previous = min(2 * spp, max_spp), value
 
