@@ -100,11 +100,30 @@ def _select_variant() -> tuple[str, str]:
     return "scalar_rgb", f"{note}; using scalar_rgb (about 4x slower)"
 
 
+def unit_frame(scene: Scene) -> tuple[np.ndarray, float]:
+    """(centre, scale) that map the scene's bounding box to the origin with diagonal 1."""
+    lo, hi = scene.bounds()
+    return (lo + hi) / 2.0, 1.0 / scene.extent()
+
+
 def scene_dict(scene: Scene, spp: int) -> dict:
-    """The scene as a ``mi.load_dict`` dictionary (Mitsuba must be imported)."""
+    """The scene as a ``mi.load_dict`` dictionary (Mitsuba must be imported).
+
+    Geometry and camera are first moved and scaled so the scene's bounding
+    box is centred on the origin with a diagonal of 1. Mitsuba offsets new
+    rays by about 1e-4·(1 + |p|) scene units whatever the scene's size, which
+    lets light leak through the walls of a box 1e-3 units wide (cbox stress
+    found this: +1.2% mean, +60% in some tiles). A uniform change of units
+    leaves radiance images unchanged, so this costs nothing in exactness.
+    """
     import mitsuba as mi
 
+    centre, k = unit_frame(scene)
     cam = scene.camera
+
+    def point(p) -> list[float]:
+        return ((np.asarray(p, dtype=np.float64) - centre) * k).tolist()
+
     d: dict = {
         "type": "scene",
         # Our max_depth convention is Mitsuba's own: no translation needed.
@@ -113,9 +132,10 @@ def scene_dict(scene: Scene, spp: int) -> dict:
             "type": "perspective",
             "fov": cam.fov_deg,
             "fov_axis": cam.fov_axis,
-            "near_clip": 1e-4 * scene.extent(),
-            "far_clip": 1e4 * scene.extent(),
-            "to_world": mi.ScalarTransform4f().look_at(origin=cam.position, target=cam.look_at, up=cam.up),
+            "near_clip": 1e-4,
+            "far_clip": 1e4,
+            "to_world": mi.ScalarTransform4f().look_at(origin=point(cam.position), target=point(cam.look_at),
+                                                       up=cam.up),
             "sampler": {"type": "independent", "sample_count": spp},
             "film": {
                 "type": "hdrfilm",
@@ -139,7 +159,7 @@ def scene_dict(scene: Scene, spp: int) -> dict:
         mesh = mi.Mesh(m.name, len(m.vertices), len(m.triangles), has_vertex_normals=False,
                        has_vertex_texcoords=False, props=props)
         params = mi.traverse(mesh)
-        params["vertex_positions"] = mi.Float(m.vertices.astype(np.float32).ravel())
+        params["vertex_positions"] = mi.Float(((m.vertices - centre) * k).astype(np.float32).ravel())
         params["faces"] = mi.UInt32(m.triangles.astype(np.uint32).ravel())
         params.update()
         d[f"mesh_{i}"] = mesh
