@@ -362,6 +362,29 @@ def gate(
     raise typer.Exit(1 if failed else 0)
 
 
+@app.command()
+def stress(
+    renderer: Optional[List[str]] = typer.Option(
+        None, "--renderer", "-r", help="Renderer to stress (repeatable); default: every registered renderer."),
+    variant: Optional[List[str]] = typer.Option(
+        None, "--variant", "-v", help="Variant to run (repeatable); default: all (see harness/stress.py)."),
+    out: Path = typer.Option(Path("out/stress"), "--out", "-o", help="Folder for stress.csv and stress.html."),
+) -> None:
+    """Numerical stability at the extremes: each scene variant with each renderer that models it.
+
+    Checks finite, non-negative output, a time bound, a memory bound and the
+    mean radiance against the analytic value or the reference. Exit code 1 if
+    any check fails, so CI can run it.
+    """
+    from harness.stress import stress_main
+
+    try:
+        code = stress_main(renderer, variant, out, command=_command_line())
+    except ValueError as e:
+        raise typer.BadParameter(str(e), param_hint="--variant") from None
+    raise typer.Exit(code)
+
+
 @reference_app.command("build")
 def reference_build(
     scene: str = SceneOpt,

@@ -1,4 +1,7 @@
-"""Scenes with analytic answers, written as scene files, and their exact solutions."""
+"""Scenes with analytic answers, written as scene files, and their exact solutions.
+
+The white furnace lives in :mod:`harness.stress` (the stress suite uses it too).
+"""
 
 from __future__ import annotations
 
@@ -8,57 +11,9 @@ import numpy as np
 
 from harness.scene import Scene, load_scene
 
-# Faces of the cube [-1, 1]^3 wound so their normals point INTO the box.
-# Vertex index = 4*(x>0) + 2*(y>0) + (z>0).
-_CUBE_INWARD = [[0, 1, 5, 4], [2, 6, 7, 3], [4, 5, 7, 6], [0, 2, 3, 1], [1, 3, 7, 5], [0, 4, 6, 2]]
-_CUBE_VERTS = [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
-
 
 def _fmt(v) -> str:
     return "[" + ", ".join(repr(float(x)) for x in v) + "]"
-
-
-def furnace_scene(folder: Path, albedo: float, radiance: float, max_depth: int = -1, res: int = 8,
-                  scale: float = 1.0) -> Scene:
-    """A closed cube, every face of reflectance ``albedo`` emitting ``radiance``; camera inside.
-
-    Radiance everywhere: Le·Σ_{k<D} ρ^k for max_depth D, Le/(1-ρ) unbounded.
-    """
-    verts = [[c * scale for c in v] for v in _CUBE_VERTS]
-    text = f"""format = 1
-name = "furnace"
-features = ["triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"]
-[camera]
-type = "pinhole"
-position = [0.0, 0.0, 0.0]
-look_at = [0.0, 0.0, {-scale}]
-up = [0.0, 1.0, 0.0]
-fov_deg = 100.0
-fov_axis = "smaller"
-resolution = [{res}, {res}]
-[render]
-max_depth = {max_depth}
-pixel_filter = "box"
-[materials.grey]
-type = "diffuse"
-reflectance = {_fmt([albedo] * 3)}
-[[meshes]]
-name = "box"
-material = "grey"
-vertices = [{", ".join(_fmt(v) for v in verts)}]
-faces = {_CUBE_INWARD}
-emitter = {{ radiance = {_fmt([radiance] * 3)} }}
-"""
-    path = folder / f"furnace-{albedo}-{max_depth}-{scale}.toml"
-    path.write_text(text)
-    return load_scene(path)
-
-
-def furnace_radiance(albedo: float, radiance: float, max_depth: int) -> float:
-    if max_depth < 0:
-        return radiance / (1.0 - albedo)
-    return radiance * sum(albedo**k for k in range(max_depth))
-
 
 # Rectangle light over a floor: light of half-sizes (A, B) at height H, facing down.
 LIGHT_A, LIGHT_B, LIGHT_H, LIGHT_LE, FLOOR_RHO = 0.3, 0.2, 1.0, 5.0, 0.75

@@ -14,11 +14,12 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from analytic_scenes import (furnace_radiance, furnace_scene, rectangle_light_image, rectangle_light_scene)
+from analytic_scenes import rectangle_light_image, rectangle_light_scene
 from conftest import CORNELL
 from harness import metrics, stats
 from harness.reference import load_reference
 from harness.scene import load_scene
+from harness.stress import furnace_radiance, furnace_scene
 from renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")
@@ -46,13 +47,13 @@ FURNACE_CASES = [(0.0, -1), (0.5, -1), (0.9, -1), (0.99, -1), (0.5, 2), (0.8, 4)
 
 
 @pytest.mark.parametrize("albedo, max_depth", FURNACE_CASES)
-def test_white_furnace(tmp_path, albedo, max_depth):
+def test_white_furnace(albedo, max_depth):
     """Closed box, all surfaces albedo ρ emitting Le: L = Le/(1-ρ), or Le·Σ_{k<D} ρ^k at max_depth D.
 
     Every pixel has the same expectation, so the spread of pixel values gives
     the standard error of the image mean. α = 1e-3 over the 7 cases (Šidák).
     """
-    scene = furnace_scene(tmp_path, albedo, 1.0, max_depth, res=16)
+    scene = furnace_scene(albedo, 1.0, max_depth, res=16)
     img = PathTracer().render(scene, 64, seed=11).image.astype(np.float64)
     expected = furnace_radiance(albedo, 1.0, max_depth)
     se = img.std() / math.sqrt(img.size)
@@ -62,9 +63,9 @@ def test_white_furnace(tmp_path, albedo, max_depth):
     assert abs(img.mean() - expected) / se < z_crit(1e-3, len(FURNACE_CASES))
 
 
-def test_albedo_one_unbounded_terminates(tmp_path):
+def test_albedo_one_unbounded_terminates():
     """Albedo 1 with unbounded depth: infinite radiance, but every path still ends (RR cap < 1)."""
-    scene = furnace_scene(tmp_path, 1.0, 1.0, -1, res=8)
+    scene = furnace_scene(1.0, 1.0, -1, res=8)
     img = PathTracer().render(scene, 4, seed=1).image
     assert np.all(np.isfinite(img)) and img.min() > 1.0
 

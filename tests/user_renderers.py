@@ -117,3 +117,44 @@ class ScaledMitsubaNoise(FlatGrey):
 class Biased1Percent(ScaledMitsubaNoise):
     name = "biased-1pct"
     SCALE = 0.99
+
+
+class BrokenPixels(FlatGrey):
+    """Grey with one NaN, one +Inf and one negative pixel: what ``cbox stress`` must catch."""
+
+    name = "broken-pixels"
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        img = np.full((scene.camera.height, scene.camera.width, 3), 0.25, dtype=np.float32)
+        flat = img.reshape(-1, 3)
+        flat[0, 0] = np.nan
+        flat[-1, 1] = -0.5
+        if len(flat) > 2:
+            flat[1, 2] = np.inf
+        return RenderResult(img, 0.001, spp, seed)
+
+
+class Slow(FlatGrey):
+    """Sleeps far past any stress time bound before it returns."""
+
+    name = "slow"
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        import time
+
+        time.sleep(120)
+        return super().render(scene, spp, seed, checkpoints)
+
+
+class MemoryHog(FlatGrey):
+    """Touches 1 GiB of memory before it returns: over a lowered stress memory bound."""
+
+    name = "memory-hog"
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        import time
+
+        hog = np.ones(1 << 27)  # 1 GiB of float64, every page touched
+        time.sleep(5)
+        del hog
+        return super().render(scene, spp, seed, checkpoints)
