@@ -167,7 +167,9 @@ def _shade(prim, o, d, path, beta, pdf_bsdf, key, first, depth, extend, roulette
             continue
         if roulette:
             survive = min(bmax, Q_MAX)
-            if uniform(key, j, dim0 + 5) >= survive:
+            # Written so a NaN throughput ends the path (NaN < x is false): its NaN
+            # has already reached L, where the NaN count reports it.
+            if not uniform(key, j, dim0 + 5) < survive:
                 continue
             b0, b1_, b2_ = b0 / survive, b1_ / survive, b2_ / survive
         ox, oy, oz = x0 + eps * n0, x1 + eps * n1, x2 + eps * n2
