@@ -28,6 +28,7 @@ import pandas as pd
 from markupsafe import Markup
 
 from harness.atomic import write_text_atomic
+from reports.html import _missing
 
 #: Badge class (from report.css) of each row status.
 _BADGE = {"pass": "ok", "fail": "failed", "error": "failed", "skipped": "skipped"}
@@ -44,14 +45,6 @@ def _css(env: jinja2.Environment) -> Markup:
         raise ValueError("report.css must not contain a closing style tag")
     return Markup(text)
 
-
-def _missing(x: Any) -> bool:
-    if x is None:
-        return True
-    try:
-        return bool(pd.isna(x))
-    except (TypeError, ValueError):
-        return False
 
 
 def _num(x: Any, digits: int = 4) -> str:
