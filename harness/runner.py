@@ -12,7 +12,7 @@ import json
 import math
 import traceback
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -125,22 +125,7 @@ def score(image: np.ndarray, reference: Reference, spp: int) -> dict:
     return out
 
 
-def compare(
-    scene: Scene,
-    entries: Sequence[RendererEntry],
-    spp: int,
-    seed: int,
-    reference: Reference | None,
-    on_start: Callable[[RendererEntry], None] | None = None,
-    on_done: Callable[[RunRecord], None] | None = None,
-) -> list[RunRecord]:
-    """:func:`run_one` for each renderer, in order, with optional progress callbacks."""
-    records = []
-    for entry in entries:
-        if on_start:
-            on_start(entry)
-        rec = run_one(entry, scene, spp, seed, reference)
-        records.append(rec)
-        if on_done:
-            on_done(rec)
-    return records
+def compare(scene: Scene, entries: Sequence[RendererEntry], spp: int, seed: int,
+            reference: Reference | None) -> list[RunRecord]:
+    """:func:`run_one` for each renderer, in order."""
+    return [run_one(entry, scene, spp, seed, reference) for entry in entries]
