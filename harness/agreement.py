@@ -85,7 +85,9 @@ def agreement_test(img: np.ndarray, var_img: np.ndarray, ref: np.ndarray, var_re
     d_t, v_t, r_t = tile_sums(diff, tile), tile_sums(var, tile), tile_sums(ref, tile)
     z_tiles = _z(d_t, v_t)
     z_global = _z(diff.sum(axis=(0, 1)), var.sum(axis=(0, 1)))
-    p_tiles, p_global = 2 * norm.sf(np.abs(z_tiles)), 2 * norm.sf(np.abs(z_global))
+    # A test that cannot be evaluated (NaN from a NaN variance) rejects: p = 0, never a silent pass.
+    p_tiles = np.nan_to_num(2 * norm.sf(np.abs(z_tiles)), nan=0.0)
+    p_global = np.nan_to_num(2 * norm.sf(np.abs(z_global)), nan=0.0)
     tests = z_tiles.size + z_global.size
     level = sidak_level(alpha, tests)
     failures = []

@@ -64,6 +64,17 @@ def test_agreement_locates_a_local_error():
     assert "pixels x 48-63, y 16-31, channel G" in a.message()
 
 
+def test_agreement_rejects_what_it_cannot_evaluate():
+    """A NaN variance (e.g. from a NaN sample) makes its tile and the whole image fail, not pass silently."""
+    ref = np.full((32, 32, 3), 0.5)
+    var = np.full_like(ref, 1e-4)
+    bad = var.copy()
+    bad[3, 5, 0] = np.nan
+    a = agreement.agreement_test(ref, bad, ref, var, tile=16, alpha=0.01)
+    assert not a.passed and a.p_min == 0.0
+    assert any(f.get("x") == (0, 16) and f.get("channel") == "R" for f in a.failures)
+
+
 # -- config ----------------------------------------------------------------------------
 
 @pytest.mark.parametrize("text, field", [
