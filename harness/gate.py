@@ -20,6 +20,8 @@ A gate config (TOML) lists expectations::
     abs_max = { mean_radiance_rel_error = 0.3 }
 
 Every expectation also checks that the image has no NaN and no Inf pixel.
+Baseline checks compare runs at the seed the baseline was recorded with
+only (a metric's spread between seeds can exceed any useful margin).
 Each check becomes one JUnit test case; the Markdown summary and the HTML
 report say which expectation failed, by how much, and where in the image.
 """
@@ -285,6 +287,7 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
     run the same gate over many seeds).
     """
     baseline = load_baseline(cfg)
+    metrics, seeds = baseline.get("expectations", {}), baseline.get("seeds", {})
     outcomes = []
     for exp in cfg.expectations:
         if on_start:
@@ -298,7 +301,10 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
             from harness.experiments import spp_for_time_budget
             spp = spp_for_time_budget(entry, scene, exp.time_s, seed) if entry.available else 1
         rec = runner.run_one(entry, scene, spp, seed, ref, checkpoints=_checkpoints(exp, spp))
-        outcomes.append(evaluate(exp, rec, ref, cfg, baseline.get(exp.name)))
+        # A baseline compares like with like: the same seed, so the same noise. Runs at other seeds
+        # (false-alarm measurements) are not compared: a metric's spread between seeds can exceed the margin.
+        same_seed = seeds.get(exp.name, seed) == seed
+        outcomes.append(evaluate(exp, rec, ref, cfg, metrics.get(exp.name) if same_seed else None))
     return outcomes
 
 
@@ -306,8 +312,9 @@ def load_baseline(cfg: GateConfig) -> dict:
     if cfg.baseline is None or not cfg.baseline.exists():
         return {}
     try:
-        return json.loads(cfg.baseline.read_text())["expectations"]
-    except (json.JSONDecodeError, KeyError) as e:
+        data = json.loads(cfg.baseline.read_text())
+        return {"expectations": data["expectations"], "seeds": data.get("seeds", {})}
+    except (json.JSONDecodeError, KeyError, TypeError) as e:
         raise GateConfigError(cfg.baseline, "(file)", f"not a gate baseline ({e}); rerun with --update-baseline")
 
 

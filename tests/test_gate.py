@@ -169,6 +169,10 @@ def test_baseline_regression(tmp_path):
     worse = run_cbox("gate", "--config", cfg_path, "--out", str(tmp_path / "c"), env_path=TESTS)
     assert worse.returncode == 1
     assert "FAIL  " + name + "  baseline.delta_e2000_mean" in worse.stdout and "+11.1%" in worse.stdout
+    # Another seed is other noise: not compared with a baseline recorded at seed 0.
+    other = _config(tmp_path, body.replace("unbiased = true", "unbiased = true\nseed = 5"))
+    moved = run_cbox("gate", "--config", other, "--out", str(tmp_path / "d"), env_path=TESTS)
+    assert moved.returncode == 0 and "baseline." not in moved.stdout
 
 
 def test_same_commit_same_verdict(tmp_path):
