@@ -50,11 +50,12 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import mutants  # noqa: E402
 from harness.agreement import tile_sums  # noqa: E402
-from harness.gate import run_gate  # noqa: E402
+from harness.gate import load_baseline, run_gate  # noqa: E402
 from harness.reference import load_reference, resolve_scene  # noqa: E402
 from renderers.core.wavefront import default_threads  # noqa: E402
 
 POWER = 0.99
+STATISTICAL = {"agreement", "finite"}  # the checks with a stated false-alarm rate
 HANG_TIMEOUT_S = 120  # ~10 gate runs: a mutant of mutants.ISOLATED that has not ended by then never will
 MULTIPLES = [2.0 ** k for k in range(-8, 17)]  # budget multiples searched for 99% power
 
@@ -183,7 +184,11 @@ def main(argv=None) -> int:
 
     # (1) false alarms; seed offset 0 is also the common-random-numbers baseline of (3)
     alarms, wall, render, clean_p, clean0, clean_z = [], [], [], [], {}, {e.name: [] for e in exps}
-    alarms_by_exp = {e.name: 0 for e in exps}
+    alarms_by_exp = {e.name: 0 for e in exps}  # statistical checks (agreement, finite)
+    base_fail = {}  # (expectation, check) -> runs where that baseline check failed
+    base_change = {}  # (expectation, metric) -> relative changes against the baseline, one per seed
+    baseline = load_baseline(cfg)
+    base_runs = 0
     for off in range(args.seeds):
         t0 = time.perf_counter()
         outcomes = run_gate(cfg, seed_offset=off)
@@ -197,10 +202,20 @@ def main(argv=None) -> int:
             if o.agreement is not None:
                 z = o.agreement.z_tiles.ravel()
                 clean_z[o.expectation.name].append(z[z != 0.0])  # 0: a noise-free tile (both images 0)
-            alarms_by_exp[o.expectation.name] += not o.passed
-        if not v.passed:
+            stat = [c for c in o.checks if not c.passed and c.name in STATISTICAL]
+            alarms_by_exp[o.expectation.name] += bool(stat)
+            for c in o.checks:
+                if c.name.startswith("baseline.") and not c.passed:
+                    key = (o.expectation.name, c.name)
+                    base_fail[key] = base_fail.get(key, 0) + 1
+            for metric, b in baseline.get("expectations", {}).get(o.expectation.name, {}).items():
+                if metric in cfg.regression_metrics and b and metric in o.record.metrics:
+                    base_change.setdefault((o.expectation.name, metric), []).append(
+                        (float(o.record.metrics[metric]) - b) / abs(b))
+        base_runs += any(c.name.startswith("baseline.") and not c.passed for o in outcomes for c in o.checks)
+        if v.checks & STATISTICAL:
             alarms.append((off, v))
-        print(f"unmutated seed offset {off:3d}: {'pass' if v.passed else 'FALSE ALARM ' + ', '.join(v.failing)} "
+        print(f"unmutated seed offset {off:3d}: {'pass' if v.passed else 'FAIL ' + ', '.join(v.failing)} "
               f"p_min={v.p_min:.3g} (level {v.level:.2g}) {v.where} | gate {wall[-1]:.1f}s", flush=True)
     levels = {o.expectation.name: o.agreement.level for o in outcomes if o.agreement is not None}
 
@@ -251,11 +266,23 @@ def main(argv=None) -> int:
                          f"mean {z.mean():+.3f}, sd {z.std():.3f}, {np.mean(np.abs(z) > 2.5758):.2%} beyond ±2.576")
     calib_text = "; ".join(calib) + " (N(0, 1) if the noise model holds: sd 1, 1% beyond ±2.576)"
     per_exp = ", ".join(f"{mutants.label(e)} {alarms_by_exp[e.name]}" for e in exps)
-    false_line = (f"false alarms: {k} of {n} seeds (gate runs; expected {n * alpha_run:.2g}: α = {cfg.alpha:g} for "
+    false_line = (f"false alarms of the statistical checks (agreement, finite): {k} of {n} seeds (gate runs; "
+                  f"expected {n * alpha_run:.2g}: α = {cfg.alpha:g} for "
                   f"each of {len(levels)} agreement tests, {alpha_run:.3g} per run; P(≥ {k}) = {p_tail:.3g}); per "
                   f"expectation: {per_exp} of {n} (expected {n * cfg.alpha:.2g} each)")
+    base_parts = []
+    for (name_, metric), changes in base_change.items():
+        ch = np.array(changes)
+        fails = base_fail.get((name_, f"baseline.{metric}"), 0)
+        base_parts.append(f"{mutants.label(next(e for e in exps if e.name == name_))} {metric}: fails {fails} of "
+                          f"{n}, change {ch.mean():+.1%} ± {ch.std(ddof=1) if ch.size > 1 else 0:.1%} (max "
+                          f"{ch.max():+.1%})")
+    base_line = (f"baseline checks (margin {cfg.regression_margin:.0%}, recorded at seed offset 0): the gate fails "
+                 f"{base_runs} of {n} clean runs on them; per metric, failing runs and relative change against "
+                 f"the baseline over the seeds (mean ± sd): " + "; ".join(base_parts))
     print(f"\ndetected {detected} of {len(rows)} mutants")
     print(false_line)
+    print(base_line)
     print(f"gate run (render + checks): {timing}")
     print(f"calibration: {calib_text}")
 
@@ -299,6 +326,9 @@ def main(argv=None) -> int:
             "",
             f"**F{false_line[1:]}**" + (f": {alarm_text}." if alarms else ".")
             + f" Smallest agreement p-value over the {n} clean runs: {min(clean_p):.3g}.",
+            "",
+            f"**B{base_line[1:]}.**",
+            ""
             f"Calibration of the clean runs: {calib_text}.",
             "",
             f"Time per gate run (the {len(exps)} pathtracer expectations, render + checks, {len(wall)} runs): "
