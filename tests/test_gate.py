@@ -193,3 +193,20 @@ def test_project_gate_passes(tmp_path):
     outcomes = gate.run_gate(cfg)
     for o in outcomes:
         assert o.passed, [c.message for c in o.checks if not c.passed]
+
+
+def test_slope_check(tmp_path):
+    """An optional RMSE-vs-spp slope range: met by our unbiased path tracer, failed by an impossible range.
+
+    One progressive render gives the checkpoints 1..64; at 256² the single-seed
+    slope lies within ±0.1 of -0.5 (the range here is ±0.2).
+    """
+    body = EXPECT.format(renderer="pathtracer") + "slope = [-0.7, -0.3]\n" + \
+        EXPECT.format(renderer="pathtracer").replace('[[expect]]', '[[expect]]\nname = "too steep"') + \
+        "slope = [-2.0, -1.0]\n"
+    cfg = load_config(_config(tmp_path, body))
+    ok, steep = gate.run_gate(cfg)
+    good = next(c for c in ok.checks if c.name == "slope.rmse_spp")
+    bad = next(c for c in steep.checks if c.name == "slope.rmse_spp")
+    assert good.passed and -0.7 <= good.value <= -0.3 and "spp 1..64" in good.message
+    assert not bad.passed and bad.value == good.value
