@@ -50,7 +50,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import mutants  # noqa: E402
 from harness.agreement import tile_sums  # noqa: E402
-from harness.gate import load_baseline, run_gate  # noqa: E402
+from harness.gate import HIGHER_IS_BETTER, load_baseline, run_gate  # noqa: E402
 from harness.reference import load_reference, resolve_scene  # noqa: E402
 from renderers.core.wavefront import default_threads  # noqa: E402
 
@@ -185,10 +185,11 @@ def main(argv=None) -> int:
     # (1) false alarms; seed offset 0 is also the common-random-numbers baseline of (3)
     alarms, wall, render, clean_p, clean0, clean_z = [], [], [], [], {}, {e.name: [] for e in exps}
     alarms_by_exp = {e.name: 0 for e in exps}  # statistical checks (agreement, finite)
-    base_fail = {}  # (expectation, check) -> runs where that baseline check failed
+    # The gate compares with its baseline at the recorded seed only; what a margin would say at other seeds
+    # (a renderer change that alters its random numbers is a new seed to it) is computed here.
     base_change = {}  # (expectation, metric) -> relative changes against the baseline, one per seed
     baseline = load_baseline(cfg)
-    base_runs = 0
+    base_exceed = [False] * args.seeds  # runs where some metric is worse than its baseline by more than the margin
     for off in range(args.seeds):
         t0 = time.perf_counter()
         outcomes = run_gate(cfg, seed_offset=off)
@@ -204,15 +205,12 @@ def main(argv=None) -> int:
                 clean_z[o.expectation.name].append(z[z != 0.0])  # 0: a noise-free tile (both images 0)
             stat = [c for c in o.checks if not c.passed and c.name in STATISTICAL]
             alarms_by_exp[o.expectation.name] += bool(stat)
-            for c in o.checks:
-                if c.name.startswith("baseline.") and not c.passed:
-                    key = (o.expectation.name, c.name)
-                    base_fail[key] = base_fail.get(key, 0) + 1
             for metric, b in baseline.get("expectations", {}).get(o.expectation.name, {}).items():
-                if metric in cfg.regression_metrics and b and metric in o.record.metrics:
-                    base_change.setdefault((o.expectation.name, metric), []).append(
-                        (float(o.record.metrics[metric]) - b) / abs(b))
-        base_runs += any(c.name.startswith("baseline.") and not c.passed for o in outcomes for c in o.checks)
+                if off > 0 and metric in cfg.regression_metrics and b and metric in o.record.metrics:
+                    change = (float(o.record.metrics[metric]) - b) / abs(b)
+                    base_change.setdefault((o.expectation.name, metric), []).append(change)
+                    worse = -change if metric in HIGHER_IS_BETTER else change
+                    base_exceed[off] |= worse > cfg.regression_margin
         if v.checks & STATISTICAL:
             alarms.append((off, v))
         print(f"unmutated seed offset {off:3d}: {'pass' if v.passed else 'FAIL ' + ', '.join(v.failing)} "
@@ -273,13 +271,15 @@ def main(argv=None) -> int:
     base_parts = []
     for (name_, metric), changes in base_change.items():
         ch = np.array(changes)
-        fails = base_fail.get((name_, f"baseline.{metric}"), 0)
-        base_parts.append(f"{mutants.label(next(e for e in exps if e.name == name_))} {metric}: fails {fails} of "
-                          f"{n}, change {ch.mean():+.1%} ± {ch.std(ddof=1) if ch.size > 1 else 0:.1%} (max "
-                          f"{ch.max():+.1%})")
-    base_line = (f"baseline checks (margin {cfg.regression_margin:.0%}, recorded at seed offset 0): the gate fails "
-                 f"{base_runs} of {n} clean runs on them; per metric, failing runs and relative change against "
-                 f"the baseline over the seeds (mean ± sd): " + "; ".join(base_parts))
+        worse = -ch if metric in HIGHER_IS_BETTER else ch
+        base_parts.append(f"{mutants.label(next(e for e in exps if e.name == name_))} {metric}: "
+                          f"{int((worse > cfg.regression_margin).sum())} of {n - 1}, change {ch.mean():+.1%} ± "
+                          f"{ch.std(ddof=1) if ch.size > 1 else 0:.1%}")
+    base_line = (f"baseline margins across seeds: the gate compares with its baseline only at the recorded seed "
+                 f"(offset 0), where the clean runs match it exactly; at the other seeds (what any change of the "
+                 f"renderer's random numbers amounts to) {sum(base_exceed)} of {n - 1} clean runs have some metric worse "
+                 f"than its baseline by more than the {cfg.regression_margin:.0%} margin. Per metric, runs over the "
+                 f"margin and relative change against the baseline (mean ± sd over seeds): " + "; ".join(base_parts))
     print(f"\ndetected {detected} of {len(rows)} mutants")
     print(false_line)
     print(base_line)

@@ -35,8 +35,8 @@ from harness.gate import run_gate
 
 pytest.importorskip("embreex")
 
-#: Seed offsets for the false-alarm test: 0 (the CI seeds themselves), 1, 2.
-SEEDS = 3
+#: Seed offsets for the false-alarm tests: 0 (the CI seeds themselves) .. 4.
+SEEDS = 5
 #: Time limit of a mutants.ISOLATED mutant's gate run (normally ~10 s, the small scenes catch it).
 ISOLATED_TIMEOUT_S = 120
 
@@ -136,17 +136,17 @@ def test_unmutated_path_tracer_passes_the_gate_at_its_seeds(clean_runs):
 
 
 def test_unmutated_path_tracer_few_false_alarms_over_seeds(cfg, clean_runs):
-    """At most one of SEEDS = 3 seed offsets fails a statistical check (agreement or finite).
+    """At most one of SEEDS = 5 seed offsets fails a statistical check (agreement or finite).
 
     Each expectation's agreement test has family-wise false-alarm rate
     α = 0.01, so a gate run of E = 3 expectations fails with probability
     at most 1 - 0.99^3 = 0.0297, and a correct gate fails this test with
-    probability P(Binomial(3, 0.0297) ≥ 2) = 2.6e-3. With these fixed seeds
+    probability P(Binomial(5, 0.0297) ≥ 2) = 8.3e-3. With these fixed seeds
     it passes (the benchmark saw no false alarm in 20 seeds).
     """
     alarms = {off: f for off, outcomes in clean_runs.items() if (f := _failing(outcomes, STATISTICAL.__contains__))}
     per_run = 1.0 - (1.0 - cfg.alpha) ** len(cfg.expectations)
-    assert binom.sf(1, SEEDS, per_run) < 3e-3, "gate.toml changed: update the rate this docstring states"
+    assert binom.sf(1, SEEDS, per_run) < 8.5e-3, "gate.toml changed: update the rate this docstring states"
     assert len(alarms) <= 1, alarms
 
 
