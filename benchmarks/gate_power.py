@@ -2,7 +2,7 @@
 
 Everything runs the ``pathtracer`` expectations of ``gate.toml`` (their
 scenes, spp, seeds, tiles, α and baseline; the other renderers' expectations
-are left out) through :func:`harness.gate.run_gate`.
+are left out) through :func:`harness.gate.run.run_gate`.
 
 (1) False alarms: the unmutated path tracer, with ``--seeds`` seed offsets
     (0, 1, ...). A gate run has several expectations, each a family-wise
@@ -49,10 +49,12 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 
 import mutants  # noqa: E402
-from harness.agreement import tile_sums  # noqa: E402
-from harness.gate import HIGHER_IS_BETTER, load_baseline, run_gate  # noqa: E402
-from harness.reference import load_reference, resolve_scene  # noqa: E402
-from renderers.core.wavefront import default_threads  # noqa: E402
+from harness.evaluate.agreement import tile_sums  # noqa: E402
+from harness.evaluate.registry import HIGHER_IS_BETTER  # noqa: E402
+from harness.gate.run import load_baseline, run_gate  # noqa: E402
+from harness.store.references import load_reference
+from harness.scenes.library import resolve_scene  # noqa: E402
+from renderers.core.schedule import default_threads  # noqa: E402
 
 POWER = 0.99
 STATISTICAL = {"agreement", "finite"}  # the checks with a stated false-alarm rate
@@ -91,7 +93,7 @@ def _tests(label: str, mut_image, clean_image, clean_var, ref, tile: int) -> Tes
 
 
 def _mu(d: np.ndarray, var: np.ndarray) -> np.ndarray:
-    """|d|/√var; 0 where both are 0, inf where only the variance is (as harness.agreement does)."""
+    """|d|/√var; 0 where both are 0, inf where only the variance is (as harness.evaluate.agreement does)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         mu = np.abs(d) / np.sqrt(var)
     mu[(var <= 0) & (d == 0)] = 0.0

@@ -25,9 +25,9 @@ import time
 
 import numpy as np
 
-from harness.reference import resolve_scene
-from harness.scene import Scene, triangle_arrays
-from renderers.core.wavefront import default_threads
+from harness.scenes.library import resolve_scene
+from harness.scenes.model import Scene, triangle_arrays
+from renderers.core.schedule import default_threads
 from renderers.mitsuba3 import Mitsuba3, scene_dict
 from renderers.pathtracer import PathTracer
 

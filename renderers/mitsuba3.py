@@ -27,9 +27,9 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapter import Checkpoint, RenderResult
-from harness.sampling import pass_seed, spp_passes
-from harness.scene import Scene
+from harness.adapters.registry import Checkpoint, RenderResult
+from harness.adapters.seeds import pass_seed, spp_passes
+from harness.scenes.model import Scene
 
 MIN_LLVM_MAJOR = 17
 #: Upper bound on width × height × spp of one ``mi.render`` call (~1.5 GB of wavefront state).

@@ -12,7 +12,7 @@ from html import escape
 
 import numpy as np
 
-from reports.html import apply_colormap, png_data_uri
+from reports.images import apply_colormap, png_data_uri
 
 Z_MAX = 6.0
 TILE_PX = 8  # on-screen pixels per tile in the z map

@@ -27,8 +27,8 @@ import jinja2
 import pandas as pd
 from markupsafe import Markup
 
-from harness.atomic import write_text_atomic
-from reports.html import _missing
+from harness.store.atomic import write_text_atomic
+from reports.tables import _missing
 
 #: Badge class (from report.css) of each row status.
 _BADGE = {"pass": "ok", "fail": "failed", "error": "failed", "skipped": "skipped"}

@@ -68,7 +68,7 @@ if [[ $have != "$want" && $have != "${want%\[test\]}[test]" ]]; then
   say "installing Python packages into .venv (first run takes a minute)"
   .venv/bin/python -m pip install -q --upgrade pip 2>&1 | grep -v "is ignored" >&2 || true
   .venv/bin/python -m pip install -q -e ".$extras" 2>&1 | grep -v "is ignored" >&2 || true
-  .venv/bin/python -c 'import harness.cli, renderers.mitsuba3' \
+  .venv/bin/python -c 'import harness.cli.app, renderers.mitsuba3' \
     || { say "installation failed"; exit 1; }
   echo "$want" > "$stamp"
 fi

@@ -4,8 +4,8 @@ Each :class:`Mutant` is a realistic bug, written as a source patch of
 ``renderers/pathtracer.py``: an exact ``old`` snippet replaced by ``new``.
 :func:`load_mutant` writes the patched source to a real file (so numba's
 ``cache=True`` has a locator) as a uniquely named module, imports it, and
-returns a :class:`harness.adapter.RendererEntry` named ``pathtracer`` that
-:func:`harness.gate.run_gate` takes as an override.
+returns a :class:`harness.adapters.registry.RendererEntry` named ``pathtracer`` that
+:func:`harness.gate.run.run_gate` takes as an override.
 
 Every patch must apply exactly once: if a refactor of the path tracer moves or
 rewrites a snippet, :func:`patched_source` raises instead of silently testing
@@ -21,7 +21,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from harness.adapter import RendererEntry
+from harness.adapters.registry import RendererEntry
 
 SOURCE = Path(__file__).resolve().parent.parent / "renderers" / "pathtracer.py"
 
@@ -217,7 +217,7 @@ def pathtracer_gate_config(path: str | Path = GATE_TOML):
     """The project's gate config (alpha, baseline, margins) with only its ``pathtracer`` expectations."""
     import dataclasses
 
-    from harness.gate import load_config
+    from harness.gate.config import load_config
 
     cfg = load_config(path)
     keep = [e for e in cfg.expectations if e.renderer == "pathtracer"]
@@ -245,7 +245,7 @@ class Verdict:
 
 
 def verdict(outcomes) -> Verdict:
-    """Summarise the :class:`harness.gate.Outcome` list of one :func:`harness.gate.run_gate` call."""
+    """Summarise the :class:`harness.gate.checks.Outcome` list of one :func:`harness.gate.run.run_gate` call."""
     import math
 
     failing, checks, evidence, p_min, level, time_s = [], set(), [], math.inf, math.nan, 0.0
@@ -284,7 +284,7 @@ def verdict(outcomes) -> Verdict:
 
 def cost(exp) -> int:
     """Paths an expectation traces (pixels × spp): its render time, roughly."""
-    from harness.reference import resolve_scene
+    from harness.scenes.library import resolve_scene
 
     cam = resolve_scene(exp.scene).camera
     return cam.width * cam.height * (exp.spp or 1)
@@ -294,12 +294,12 @@ def run_until_failure(cfg, overrides=None, seed_offset: int = 0) -> list:
     """The gate's expectations one by one, cheapest first, up to the first that fails.
 
     The gate fails as soon as one expectation fails, so this decides the same
-    verdict as :func:`harness.gate.run_gate` over all of them, often for the
+    verdict as :func:`harness.gate.run.run_gate` over all of them, often for the
     price of the small scenes alone. Returns the outcomes it ran.
     """
     import dataclasses
 
-    from harness.gate import run_gate
+    from harness.gate.run import run_gate
 
     outcomes = []
     for exp in sorted(cfg.expectations, key=cost):
@@ -313,7 +313,7 @@ _CHILD = """
 import dataclasses, json, sys
 sys.path.insert(0, sys.argv[1])
 import mutants
-from harness.gate import run_gate
+from harness.gate.run import run_gate
 name, gate, work, until = sys.argv[2:6]
 cfg = mutants.pathtracer_gate_config(gate)
 entry = {"pathtracer": mutants.load_mutant(name, work)}

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from harness import metrics
-from harness.reference import Reference
-from harness.scene import load_scene
+from harness.evaluate import metrics
+from harness.store.references import Reference
+from harness.scenes.loader import load_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 EVIL = '<script>alert("x")</script> & more'
@@ -37,7 +37,7 @@ def scene(width: int = 32, height: int = 32):
 
 def _stored_reference(h: int, w: int) -> np.ndarray | None:
     """The stored Cornell-box reference, box-filtered down to (h, w) when 256 is a multiple of both."""
-    from harness.exr import read_exr
+    from harness.store.exr import read_exr
 
     path = ROOT / "references" / "cornell-box" / "reference.exr"
     try:

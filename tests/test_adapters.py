@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 
 from conftest import CORNELL, run_cbox
-from harness import runner
-from harness.adapter import RendererError, discover, load_spec, resolve
-from harness.scene import load_scene
+from harness.workflows import runner
+from harness.adapters.registry import RendererError, discover, load_spec, resolve
+from harness.scenes.loader import load_scene
 
 TESTS = Path(__file__).resolve().parent  # pytest puts it on sys.path; subprocesses need PYTHONPATH
 
@@ -48,7 +48,7 @@ def test_runner_statuses_and_reasons():
     scene = load_scene(CORNELL).with_resolution(8, 8)
     entries = resolve(["user_renderers:FlatGrey", "user_renderers:MeshOnly", "user_renderers:NeedsGPU",
                        "user_renderers:Crashes", "user_renderers:WrongShape"])
-    recs = {r.renderer: r for r in runner.compare(scene, entries, spp=1, seed=0, reference=None)}
+    recs = {r.renderer: r for r in (runner.run_one(e, scene, 1, 0, None) for e in entries)}
     assert recs["flat-grey"].status == "ok" and recs["flat-grey"].image.shape == (8, 8, 3)
     assert recs["mesh-only"].status == "skipped"
     assert recs["mesh-only"].reason == "does not model area_light, box_filter, diffuse"
@@ -63,7 +63,7 @@ def test_cli_render_with_user_renderer(tmp_path):
     proc = run_cbox("render", "--scene", "cornell-box", "--renderer", "user_renderers:FlatGrey",
                     "--spp", "1", "--out", str(out), env_path=TESTS)
     assert proc.returncode == 0, proc.stderr
-    from harness.exr import read_exr
+    from harness.store.exr import read_exr
 
     img = read_exr(out)
     assert img.shape == (256, 256, 3) and float(img.mean()) == pytest.approx(0.25)

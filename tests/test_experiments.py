@@ -73,8 +73,9 @@ def test_results_table_is_tidy_and_report_rebuilds(tmp_path):
     assert not runs.duplicated(key).any()
     for col in key + ["time_s", "version", "rmse", "rel_mse", "ssim", "delta_e2000_mean", "efficiency"]:
         assert col in runs, col
-    assert json.loads(runs["settings"].iloc[0]) == {"height": 256, "max_depth": -1, "pixel_filter": "box",
-                                                     "width": 256}
+    assert json.loads(runs["scene_settings"].iloc[0]) == {"height": 256, "max_depth": -1, "pixel_filter": "box",
+                                                           "width": 256}
+    assert json.loads(runs["settings"].iloc[0]) == {}  # the renderer declares no settings
     config = json.loads((out / "experiment.json").read_text())
     assert config["spp"] == [1, 2] and config["seeds"] == [0, 1] and "converge" in config["command"]
     # A second run renders nothing, and `cbox report` rebuilds the report without rendering.

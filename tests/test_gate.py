@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 from conftest import run_cbox
-from harness import agreement, gate
-from harness.gate import GateConfigError, load_config
+from harness.evaluate import agreement
+from harness.gate.checks import evaluate
+from harness.gate.config import GateConfigError, load_config
+from harness.gate.run import run_gate
 from test_adapters import TESTS
 
 EXPECT = """
@@ -136,17 +138,20 @@ def test_gate_passes_unbiased_and_fails_biased_with_outputs(tmp_path):
 
 
 def test_nan_is_never_tolerated(tmp_path):
-    from harness.reference import load_reference, resolve_scene
-    from harness.runner import RunRecord
-    from harness import metrics
+    from harness.store.references import load_reference
+    from harness.scenes.library import resolve_scene
+    from harness.adapters.registry import resolve
+    from harness.workflows.runner import RunRecord
+    from harness.evaluate import metrics
 
     cfg = load_config(_config(tmp_path, EXPECT.format(renderer="x")))
     scene = resolve_scene("cornell-box")
     ref = load_reference(scene)
     img = ref.image.copy()
     img[10, 20, 1] = np.nan
-    rec = RunRecord.new(scene, "x", 64, 0, time_s=1.0, image=img, metrics=metrics.image_metrics(img, ref.image))
-    out = gate.evaluate(cfg.expectations[0], rec, ref, cfg)
+    (entry,) = resolve(["user_renderers:FlatGrey"])
+    rec = RunRecord.new(scene, entry, 64, 0, time_s=1.0, image=img, metrics=metrics.image_metrics(img, ref.image))
+    out = evaluate(cfg.expectations[0], rec, ref, cfg)
     finite = next(c for c in out.checks if c.name == "finite")
     assert not finite.passed and "1 NaN" in finite.message and "(x 20, y 10)" in finite.message
 
@@ -178,10 +183,10 @@ def test_baseline_regression(tmp_path):
 def test_same_commit_same_verdict(tmp_path):
     """Seeds are fixed: two runs give identical metrics and checks."""
     cfg = load_config(_config(tmp_path, EXPECT.format(renderer="pathtracer")))
-    from harness.scene import load_scene  # noqa: F401
+    from harness.scenes.loader import load_scene  # noqa: F401
 
-    a = gate.run_gate(cfg)[0]
-    b = gate.run_gate(cfg)[0]
+    a = run_gate(cfg)[0]
+    b = run_gate(cfg)[0]
     assert a.record.metrics == b.record.metrics
     assert [(c.name, c.passed, c.message) for c in a.checks] == [(c.name, c.passed, c.message) for c in b.checks]
 
@@ -190,7 +195,7 @@ def test_project_gate_passes(tmp_path):
     """The acceptance check: `cbox gate` passes our path tracer and Mitsuba on cornell-box."""
     cfg = load_config(TESTS.parent / "gate.toml")
     cfg.expectations = [e for e in cfg.expectations if e.renderer in ("pathtracer", "mitsuba")]
-    outcomes = gate.run_gate(cfg)
+    outcomes = run_gate(cfg)
     for o in outcomes:
         assert o.passed, [c.message for c in o.checks if not c.passed]
 
@@ -205,7 +210,7 @@ def test_slope_check(tmp_path):
         EXPECT.format(renderer="pathtracer").replace('[[expect]]', '[[expect]]\nname = "too steep"') + \
         "slope = [-2.0, -1.0]\n"
     cfg = load_config(_config(tmp_path, body))
-    ok, steep = gate.run_gate(cfg)
+    ok, steep = run_gate(cfg)
     good = next(c for c in ok.checks if c.name == "slope.rmse_spp")
     bad = next(c for c in steep.checks if c.name == "slope.rmse_spp")
     assert good.passed and -0.7 <= good.value <= -0.3 and "spp 1..64" in good.message

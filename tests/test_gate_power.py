@@ -2,7 +2,7 @@
 
 Both run the gate's own ``pathtracer`` expectations of ``gate.toml`` (their
 scenes, spp, seeds, tiles, α and baseline; the other renderers'
-expectations are left out) through :func:`harness.gate.run_gate`.
+expectations are left out) through :func:`harness.gate.run.run_gate`.
 
 - **Power**: each mutant of ``tests/mutants.py`` (a realistic bug patched
   into a copy of ``renderers/pathtracer.py``) must fail the gate at the CI
@@ -31,7 +31,7 @@ import pytest
 from scipy.stats import binom
 
 import mutants
-from harness.gate import run_gate
+from harness.gate.run import run_gate
 
 pytest.importorskip("embreex")
 

@@ -1,4 +1,4 @@
-"""Tests for harness.metrics: published CIEDE2000 data, analytic values, properties."""
+"""Tests for harness.evaluate.metrics: published CIEDE2000 data, analytic values, properties."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from harness import metrics as m
+from harness.evaluate import metrics as m
 
 # Sharma, Wu & Dalal (2005), Table 1: (L1, a1, b1), (L2, a2, b2), ΔE00.
 SHARMA_2005 = [

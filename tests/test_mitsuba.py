@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from conftest import CORNELL
-from harness import stats
-from harness.reference import load_reference
-from harness.scene import load_scene
+from harness.evaluate import noise as stats
+from harness.store.references import load_reference
+from harness.scenes.loader import load_scene
 from renderers import mitsuba3
 from renderers.mitsuba3 import Mitsuba3
 
@@ -90,7 +90,7 @@ def test_same_seed_same_image_and_checkpoints():
 def test_low_spp_render_agrees_with_stored_reference():
     """Mean radiance of a 16-spp render is within noise of the 16384-spp reference.
 
-    The z-score uses the reference's variance image (see harness.stats); the
+    The z-score uses the reference's variance image (see harness.evaluate.noise); the
     test is two-sided at alpha = 0.001. Mean radiance must also be within 1%.
     """
     scene = load_scene(CORNELL)

@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from analytic_scenes import rectangle_light_image, rectangle_light_scene
 from conftest import CORNELL
-from harness import metrics, stats
-from harness.reference import load_reference
-from harness.scene import load_scene
-from harness.stress import furnace_radiance, furnace_scene
+from harness.evaluate import metrics
+from harness.evaluate import noise as stats
+from harness.store.references import load_reference
+from harness.scenes.analytic import furnace_radiance, furnace_scene, rectangle_light_image, rectangle_light_scene
+from harness.scenes.loader import load_scene
 from renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")

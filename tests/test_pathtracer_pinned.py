@@ -15,7 +15,7 @@ import hashlib
 import numpy as np
 import pytest
 
-from harness.reference import resolve_scene
+from harness.scenes.library import resolve_scene
 from renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")

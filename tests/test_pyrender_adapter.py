@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 from conftest import CORNELL, ROOT
-from harness.adapter import RenderResult
-from harness.scene import load_scene
-from renderers.pyrender_raster import Pyrender, light_samples
+from harness.adapters.registry import RenderResult
+from harness.scenes.loader import load_scene
+from renderers.raster.lights import light_samples
+from renderers.raster.pyrender_adapter import Pyrender
 
 
 def _run_python(code: str, env_updates: dict[str, str | None]) -> subprocess.CompletedProcess:
@@ -29,7 +30,7 @@ def _run_python(code: str, env_updates: dict[str, str | None]) -> subprocess.Com
 
 
 _REASON = """
-from renderers.pyrender_raster import Pyrender
+from renderers.raster.pyrender_adapter import Pyrender
 r = Pyrender().unavailable_reason()
 assert r is None or (isinstance(r, str) and r and "\\n" not in r), repr(r)
 print("REASON:", r)
@@ -60,12 +61,13 @@ def renderer() -> Pyrender:
 @pytest.mark.skipif(not ctypes.util.find_library("OSMesa"), reason="no OSMesa library (apt-get install libosmesa6)")
 def test_osmesa_is_used_when_only_its_library_is_found(renderer):
     code = f"""
-import renderers.pyrender_raster as m
-m._libraries_present = lambda platform: platform == "osmesa"
-from harness.scene import load_scene
-r = m.Pyrender()
+import renderers.raster.platform as gl_platform
+from renderers.raster.pyrender_adapter import Pyrender
+gl_platform._libraries_present = lambda platform: platform == "osmesa"
+from harness.scenes.loader import load_scene
+r = Pyrender()
 assert r.unavailable_reason() is None, r.unavailable_reason()
-assert m.availability()[0] == "osmesa"
+assert gl_platform.availability()[0] == "osmesa"
 img = r.render(load_scene({str(CORNELL)!r}).with_resolution(16, 16), spp=1, seed=0).image
 assert img.shape == (16, 16, 3) and (img >= 0).all() and img.max() > 1.0
 print("OK")

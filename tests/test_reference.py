@@ -9,15 +9,22 @@ import numpy as np
 import pytest
 
 from conftest import CORNELL, MINIMAL_SCENE
-from harness.reference import REFERENCE_SEED_BASE, ReferenceError, build_reference, load_reference
-from harness.scene import load_scene
+from harness.adapters.registry import resolve
+from harness.store.references import REFERENCE_SEED_BASE, ReferenceError, load_reference
+from harness.workflows.reference_build import build_reference
+from harness.scenes.loader import load_scene
 from user_renderers import SeededNoise
+
+
+def _entry():
+    (entry,) = resolve(["user_renderers:SeededNoise"])
+    return entry
 
 
 def test_build_stores_mean_variance_and_provenance(write_scene, tmp_path):
     scene = load_scene(write_scene())
     r = SeededNoise()
-    ref = build_reference(scene, spp=8, batches=4, renderer=r)
+    ref = build_reference(scene, spp=8, batches=4, entry=_entry())
     np.testing.assert_array_equal(ref.noise, r.render(scene, 2, REFERENCE_SEED_BASE + 4).image)
     batches = np.stack([r.render(scene, 2, REFERENCE_SEED_BASE + b).image.astype(np.float64) for b in range(4)])
     np.testing.assert_allclose(ref.image, batches.mean(0), rtol=1e-6)
@@ -36,7 +43,7 @@ def test_build_stores_mean_variance_and_provenance(write_scene, tmp_path):
 
 def test_changed_scene_is_refused_with_rebuild_command(write_scene, tmp_path):
     scene = load_scene(write_scene())
-    build_reference(scene, spp=4, batches=2, renderer=SeededNoise())
+    build_reference(scene, spp=4, batches=2, entry=_entry())
     changed = load_scene(write_scene(MINIMAL_SCENE.replace("0.8, 0.8, 0.8", "0.7, 0.8, 0.8")))
     with pytest.raises(ReferenceError) as exc:
         load_reference(changed)
@@ -52,7 +59,7 @@ def test_missing_reference_says_how_to_build(write_scene):
 def test_bad_batches():
     scene = load_scene(CORNELL)
     with pytest.raises(ValueError, match="multiple"):
-        build_reference(scene, spp=10, batches=4, renderer=SeededNoise(), folder="/nonexistent")
+        build_reference(scene, spp=10, batches=4, entry=_entry(), folder="/nonexistent")
 
 
 def test_stored_cornell_reference_is_current_and_converged():

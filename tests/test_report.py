@@ -19,21 +19,12 @@ import pytest
 from PIL import Image
 
 import report_fixtures as rf
-from harness import metrics
-from reports import html as report_html
-from reports.html import (
-    DELTA_E_RANGE,
-    SINGLE_SPP_NOTE,
-    apply_colormap,
-    check_threshold,
-    column_label,
-    f16_base64,
-    f16_decode,
-    format_value,
-    parse_time_to,
-    rel_mse_map,
-    write_report,
-)
+from harness.evaluate import metrics
+from reports import images as report_images
+from reports.charts import SINGLE_SPP_NOTE
+from reports.html import write_report
+from reports.images import DELTA_E_RANGE, apply_colormap, f16_base64, f16_decode, rel_mse_map
+from reports.tables import check_threshold, column_label, format_value, parse_time_to
 from reports.plots import format_tick, log_ticks, pareto_front
 
 W = H = 32
@@ -363,7 +354,7 @@ def test_legends_have_colour_bars_and_ticks(report):
     for mode, a in bars.items():
         im = _decode_png(a["src"]).convert("RGB")
         px = np.asarray(im)
-        cmap = report_html.MAP_COLORMAPS[mode]
+        cmap = report_images.MAP_COLORMAPS[mode]
         np.testing.assert_array_equal(px[0, 0], apply_colormap(0.0, 0, 1, cmap))
         np.testing.assert_array_equal(px[0, -1], apply_colormap(1.0, 0, 1, cmap))
 
@@ -391,7 +382,7 @@ def test_viewer_controls_present(report):
 
 
 def test_flip_unavailable_disables_its_mode(tmp_path, case, monkeypatch):
-    monkeypatch.setattr(report_html, "flip_map", lambda img, ref: None)
+    monkeypatch.setattr(report_images, "flip_map", lambda img, ref: None)
     text = rf.write_case(tmp_path / "r.html", case).read_text(encoding="utf-8")
     data = _data(_parse(text))
     assert not data["maps"]["flip"]["available"] and all(r["flip"] is None for r in data["renderers"])

@@ -1,8 +1,9 @@
 """Pass schedules and pass seeds."""
 
+import numpy as np
 import pytest
 
-from harness.sampling import pass_seed, spp_passes
+from harness.adapters.seeds import pass_seed, spp_passes
 
 
 @pytest.mark.parametrize("spp, cap, checkpoints", [(1, 8, ()), (10, 4, ()), (300, 128, (1, 2, 4, 100)), (64, 1, ())])
@@ -23,3 +24,12 @@ def test_pass_seeds_distinct_and_stable():
     assert pass_seed(3, 7) == pass_seed(3, 7)
     with pytest.raises(ValueError):
         pass_seed(-1, 0)
+
+
+def test_one_seed_derivation_for_every_renderer():
+    """Mitsuba's 32-bit pass seed is the low word of our 64-bit pass key: one derivation, two widths."""
+    from harness.adapters.seeds import pass_key
+
+    for s, k in [(0, 0), (5, 3), (123456, 77)]:
+        assert pass_seed(s, k) == int(pass_key(s, k)) & 0xFFFFFFFF
+        assert pass_seed(s, k) == int(np.random.SeedSequence([s, k]).generate_state(1, dtype=np.uint32)[0])

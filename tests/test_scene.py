@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from conftest import CORNELL, MINIMAL_SCENE, run_cbox
-from harness.scene import SceneError, load_scene, triangle_arrays
+from harness.scenes.model import SceneError, triangle_arrays
+from harness.scenes.loader import load_scene
 
 
 def test_minimal_scene_parses(write_scene):

@@ -10,17 +10,21 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from conftest import CORNELL
-from harness import stress
-from harness.reference import load_reference
-from harness.scene import load_scene
+from conftest import CORNELL, run_cbox
+from harness.scenes import analytic, transforms
+from harness.scenes.loader import load_scene
+from harness.store.references import load_reference
+from harness.stress import expectations, judge, sandbox, suite, variants
 
 pytest.importorskip("embreex")
+
+TESTS = Path(__file__).resolve().parent
 
 
 @pytest.fixture(scope="module")
@@ -32,27 +36,27 @@ def cornell():
 
 
 def test_variant_names_are_unique_and_documented():
-    names = stress.variant_names()
+    names = variants.variant_names()
     assert len(names) == len(set(names)) == 12
-    doc = stress.__doc__
+    doc = variants.__doc__
     for name in names:
         assert re.search(rf"^{re.escape(name)}\s", doc, re.M), f"{name} missing from the module docstring's table"
-    for v in stress.VARIANTS:
+    for v in variants.VARIANTS:
         assert v.time_bound_s > 0 and v.rss_bound_mb > 0 and v.spp >= 1 and v.stresses and v.expected_note
         assert v.expected in ("furnace", "reference", "variant-reference", "none")
 
 
 def test_unknown_variant_names_the_known_ones():
     with pytest.raises(ValueError, match=r"unknown stress variant\(s\) 'nope'; known: albedo-0, "):
-        stress.select_variants(["albedo-0.5", "nope"])
-    assert [v.name for v in stress.select_variants(["spp-1", "albedo-0"])] == ["albedo-0", "spp-1"]
-    assert len(stress.select_variants(None)) == len(stress.VARIANTS)
+        variants.select_variants(["albedo-0.5", "nope"])
+    assert [v.name for v in variants.select_variants(["spp-1", "albedo-0"])] == ["albedo-0", "spp-1"]
+    assert len(variants.select_variants(None)) == len(variants.VARIANTS)
 
 
 def test_furnace_is_a_closed_inward_facing_emitting_box():
     """Every face of the furnace faces its centre (where the camera is) and emits; it is closed."""
     for albedo in (0.0, 0.5, 0.99, 1.0):
-        built = stress.furnace_scene(albedo, 1.0, -1, res=16)
+        built = analytic.furnace_scene(albedo, 1.0, -1, res=16)
         (mesh,) = built.meshes
         a, b, c = (mesh.vertices[mesh.triangles[:, k]] for k in range(3))
         normals = np.cross(b - a, c - a)
@@ -63,16 +67,16 @@ def test_furnace_is_a_closed_inward_facing_emitting_box():
                                         mesh.triangles[:, [2, 0]]]), axis=1)
         _, counts = np.unique(edges, axis=0, return_counts=True)
         assert np.all(counts == 2)  # every edge shared by two triangles: closed
-    assert stress.furnace_radiance(0.5, 1.0, -1) == 2.0
-    assert stress.furnace_radiance(0.99, 2.0, -1) == pytest.approx(200.0)
-    assert stress.furnace_radiance(1.0, 1.0, -1) == math.inf
-    assert stress.furnace_radiance(0.5, 1.0, 3) == 1.75
+    assert analytic.furnace_radiance(0.5, 1.0, -1) == 2.0
+    assert analytic.furnace_radiance(0.99, 2.0, -1) == pytest.approx(200.0)
+    assert analytic.furnace_radiance(1.0, 1.0, -1) == math.inf
+    assert analytic.furnace_radiance(0.5, 1.0, 3) == 1.75
 
 
 def test_small_light_has_1e4_less_area_and_equal_power(cornell):
-    small = stress.shrink_lights(cornell, 1e-4)
-    assert stress.emitter_area(small) / stress.emitter_area(cornell) == pytest.approx(1e-4, rel=1e-9)
-    np.testing.assert_allclose(stress.emitter_power(small), stress.emitter_power(cornell), rtol=1e-9)
+    small = transforms.shrink_lights(cornell, 1e-4)
+    assert transforms.emitter_area(small) / transforms.emitter_area(cornell) == pytest.approx(1e-4, rel=1e-9)
+    np.testing.assert_allclose(transforms.emitter_power(small), transforms.emitter_power(cornell), rtol=1e-9)
     (before,), (after,) = cornell.emitters, small.emitters
     np.testing.assert_allclose(after.vertices.mean(axis=0), before.vertices.mean(axis=0), atol=1e-15)
     np.testing.assert_allclose(after.radiance, np.multiply(before.radiance, 1e4))
@@ -84,27 +88,27 @@ def test_small_light_has_1e4_less_area_and_equal_power(cornell):
 
 
 def test_small_light_footprint_covers_the_light(cornell):
-    small = stress.shrink_lights(cornell, 1e-4)
-    mask = stress.emitter_footprint(small)
-    (col, row), = stress.project_to_pixels(small.camera, small.emitters[0].vertices.mean(axis=0)[None])
+    small = transforms.shrink_lights(cornell, 1e-4)
+    mask = transforms.emitter_footprint(small)
+    (col, row), = small.camera.project_to_pixels(small.emitters[0].vertices.mean(axis=0)[None])
     assert mask[int(row), int(col)]
     assert 1 <= mask.sum() <= 25  # a sub-pixel light: its pixel and the 1-pixel margin
-    keep = ~stress._small_light_exclude(small)
-    assert not keep[stress.emitter_footprint(cornell)].any()  # the original light's pixels are out too
+    keep = ~variants._small_light_exclude(small)
+    assert not keep[transforms.emitter_footprint(cornell)].any()  # the original light's pixels are out too
 
 
 def test_radiance_variant_scale(cornell):
-    scaled, s = stress.scale_radiance(cornell, 1e6)
+    scaled, s = transforms.scale_radiance(cornell, 1e6)
     (light,) = scaled.emitters
     assert max(light.radiance) == pytest.approx(1e6, rel=1e-12)
     assert s == pytest.approx(1e6 / max(cornell.emitters[0].radiance), rel=1e-12)
     np.testing.assert_allclose(light.radiance, np.multiply(cornell.emitters[0].radiance, s), rtol=1e-12)
-    assert stress._radiance_scale() == pytest.approx(s, rel=1e-12)
+    assert variants._radiance_scale() == pytest.approx(s, rel=1e-12)
 
 
-@pytest.mark.parametrize("s", stress.SCALES)
+@pytest.mark.parametrize("s", variants.SCALES)
 def test_scaled_geometry(cornell, s):
-    scaled = stress.scale_geometry(cornell, s)
+    scaled = transforms.scale_geometry(cornell, s)
     for a, b in zip(scaled.meshes, cornell.meshes):
         np.testing.assert_allclose(a.vertices, b.vertices * s)
     np.testing.assert_allclose(scaled.camera.position, np.multiply(cornell.camera.position, s))
@@ -116,20 +120,20 @@ def test_scaled_geometry(cornell, s):
 
 
 def test_grazing_camera_looks_along_the_back_wall(cornell):
-    g = stress.grazing_camera(cornell, 128)
+    g = transforms.grazing_camera(cornell, 128)
     pos = np.asarray(g.camera.position)
-    assert pos[2] - (-1.0) == pytest.approx(stress.GRAZING_DISTANCE)
+    assert pos[2] - (-1.0) == pytest.approx(transforms.GRAZING_DISTANCE)
     assert np.all(np.abs(pos) < 1.0)  # inside the box
     _, _, forward = g.camera.frame()
     # Angle between the view direction and the wall's plane (normal +z), towards the wall.
-    assert math.degrees(math.asin(-forward[2])) == pytest.approx(stress.GRAZING_ANGLE_DEG)
+    assert math.degrees(math.asin(-forward[2])) == pytest.approx(transforms.GRAZING_ANGLE_DEG)
     assert g.meshes is cornell.meshes and (g.camera.width, g.camera.height) == (128, 128)
 
 
 def test_1x1_expected_value_is_the_reference_mean(cornell):
     ref = load_reference(cornell)
-    (v,) = stress.select_variants(["res-1x1"])
-    exp = stress._reference_expectation(v, v.build(), ref)
+    (v,) = variants.select_variants(["res-1x1"])
+    exp = expectations._reference_expectation(v, v.build(), ref)
     assert exp.value == pytest.approx(np.asarray(ref.image, np.float64).mean(), rel=1e-13)
     assert exp.keep is None and exp.model_se_1spp > 0
     # Per-sample sd of a 1x1 pixel: the spread of the reference's pixels plus its per-pixel noise.
@@ -139,9 +143,9 @@ def test_1x1_expected_value_is_the_reference_mean(cornell):
 
 def test_radiance_expected_is_reference_times_scale(cornell):
     ref = load_reference(cornell)
-    (v,) = stress.select_variants(["radiance-1e6"])
-    exp = stress._reference_expectation(v, v.build(), ref)
-    _, s = stress.scale_radiance(cornell, stress.PEAK_RADIANCE)
+    (v,) = variants.select_variants(["radiance-1e6"])
+    exp = expectations._reference_expectation(v, v.build(), ref)
+    _, s = transforms.scale_radiance(cornell, variants.PEAK_RADIANCE)
     assert exp.value == pytest.approx(np.asarray(ref.image, np.float64).mean() * s, rel=1e-12)
     assert exp.scale == pytest.approx(s)
 
@@ -151,9 +155,9 @@ def test_radiance_expected_is_reference_times_scale(cornell):
 
 def test_cheap_subset_passes_for_pathtracer():
     seen = []
-    table = stress.run_stress(["pathtracer"], ["albedo-0.5", "albedo-1", "spp-1", "res-1x1"],
+    table = suite.run_stress(["pathtracer"], ["albedo-0.5", "albedo-1", "spp-1", "res-1x1"],
                               progress=lambda done, total, label: seen.append((done, total)))
-    assert list(table.columns) == list(stress.COLUMNS)
+    assert list(table.columns) == list(judge.COLUMNS)
     assert list(table["variant"]) == ["albedo-0.5", "albedo-1", "spp-1", "res-1x1"]
     assert (table["renderer"] == "pathtracer").all()
     assert (table["status"] == "pass").all(), table[["variant", "status", "message"]].to_string()
@@ -176,14 +180,17 @@ def test_cheap_subset_passes_for_pathtracer():
     assert by.loc["res-1x1", "resolution"] == "1x1"
 
 
-def test_broken_renderers_fail_and_stress_main_returns_1(tmp_path):
+def test_broken_renderers_fail_and_cbox_stress_exits_1(tmp_path):
+    """Through the CLI, as a user runs it: the suite writes stress.csv, the CLI stress.html."""
     out = tmp_path / "out"
-    code = stress.stress_main(["user_renderers:BrokenPixels", "user_renderers:Crashes",
-                               "user_renderers:MeshOnly", "user_renderers:NeedsGPU"],
-                              ["albedo-0", "spp-1"], out, command="cbox stress test")
-    assert code == 1
+    args = ["stress", "-r", "user_renderers:BrokenPixels", "-r", "user_renderers:Crashes",
+            "-r", "user_renderers:MeshOnly", "-r", "user_renderers:NeedsGPU", "-v", "albedo-0", "-v", "spp-1",
+            "--out", str(out)]
+    proc = run_cbox(*args, env_path=TESTS)
+    assert proc.returncode == 1, proc.stderr
+    assert f"wrote {out / 'stress.csv'} and {out / 'stress.html'}" in proc.stdout
     table = pd.read_csv(out / "stress.csv")
-    assert list(table.columns) == list(stress.COLUMNS)
+    assert list(table.columns) == list(judge.COLUMNS)
     assert len(table) == 8
     status = {(r.variant, r.renderer): r.status for r in table.itertuples()}
     for variant in ("albedo-0", "spp-1"):
@@ -206,15 +213,18 @@ def test_broken_renderers_fail_and_stress_main_returns_1(tmp_path):
         assert re.search(rf'<td class="variant">{re.escape(r.variant)}</td>\s*<td>{re.escape(r.renderer)}</td>', html)
     assert html.count('<tr data-status="') == len(table)
     assert 'class="num fail"' in html and 'class="num pass"' in html
-    assert 'id="verdict">fail<' in html and "cbox stress test" in html
+    assert 'id="verdict">fail<' in html and "cbox stress -r user_renderers:BrokenPixels" in html
     # Self-contained: no external resources.
     assert not re.search(r'(src|href)="(https?:)?//', html)
     assert "<style>" in html and "--pass-bg" in html  # report.css inlined
 
 
-def test_a_passing_run_exits_0(tmp_path):
-    code = stress.stress_main(["user_renderers:FlatGrey"], ["albedo-0"], tmp_path)
-    assert code == 0
+def test_a_passing_run_exits_0(tmp_path, capsys):
+    run = suite.run_suite(["user_renderers:FlatGrey"], ["albedo-0"], tmp_path)
+    assert run.exit_code == 0 and run.csv_path == tmp_path / "stress.csv"
+    assert run.provenance["seed"] == variants.SEED and run.provenance["kind"] == "stress"
+    assert suite.print_summary(run) == 0
+    assert "1 pass in " in capsys.readouterr().out
     table = pd.read_csv(tmp_path / "stress.csv")
     assert list(table["status"]) == ["pass"]
     assert table["mean_check"][0].startswith("n/a (approximates:")
@@ -222,9 +232,9 @@ def test_a_passing_run_exits_0(tmp_path):
 
 def test_time_and_memory_bounds_kill_the_run(monkeypatch):
     fast = [dataclasses.replace(v, time_bound_s=3.0, rss_bound_mb=600.0) if v.name == "albedo-0" else v
-            for v in stress.VARIANTS]
-    monkeypatch.setattr(stress, "VARIANTS", fast)
-    table = stress.run_stress(["user_renderers:Slow", "user_renderers:MemoryHog"], ["albedo-0"])
+            for v in variants.VARIANTS]
+    monkeypatch.setattr(variants, "VARIANTS", fast)
+    table = suite.run_stress(["user_renderers:Slow", "user_renderers:MemoryHog"], ["albedo-0"])
     slow, hog = (table[table["renderer"] == n].iloc[0] for n in ("slow", "memory-hog"))
     assert slow.status == "fail" and slow.time_check == "fail"
     assert "did not end within the 3 s bound" in slow.message
@@ -234,17 +244,30 @@ def test_time_and_memory_bounds_kill_the_run(monkeypatch):
     assert hog.time_s < 5.0  # killed as soon as it passed the bound, before its 5 s sleep ended
 
 
+def test_sandbox_returns_each_render_and_checks_its_shape():
+    """The sandbox on its own, as the gate uses it: images in order, each checked against its scene."""
+    small, large = analytic.furnace_scene(0.5, res=4), analytic.furnace_scene(0.5, res=8)
+    out = sandbox.run_sandboxed("user_renderers:FlatGrey", [(small, 1, 0), (large, 1, 1)], time_bound_s=60.0)
+    assert out.ended == "ok" and out.problem() is None, out.message
+    assert [np.shape(i) for i in out.images] == [(4, 4, 3), (8, 8, 3)] and len(out.render_times) == 2
+    assert 0 < out.time_s < 60.0 and out.peak_rss_mb > 20
+    out.shapes[1] = (9, 9, 3)
+    assert out.problem() == "image has shape (8, 8, 3), expected (9, 9, 3)"
+    bad = sandbox.run_sandboxed("no-such-renderer", [(small, 1, 0)], time_bound_s=60.0)
+    assert bad.ended == "error" and "unknown renderer" in bad.message and bad.problem() == bad.message
+
+
 def test_unknown_renderer_is_a_usage_error():
-    from harness.adapter import RendererError
+    from harness.adapters.registry import RendererError
 
     with pytest.raises(RendererError, match="unknown renderer"):
-        stress.run_stress(["no-such-renderer"], ["albedo-0"])
+        suite.run_stress(["no-such-renderer"], ["albedo-0"])
 
 
 def test_report_from_a_table_alone(tmp_path):
     from reports.stress import write_stress_report
 
-    rows = [dict.fromkeys(stress.COLUMNS) for _ in range(2)]
+    rows = [dict.fromkeys(judge.COLUMNS) for _ in range(2)]
     rows[0].update(variant="albedo-0.5", renderer="x", status="pass", spp=4, resolution="16x16", time_s=1.0,
                    time_bound_s=60.0, peak_rss_mb=100.0, rss_bound_mb=4096.0, nan_count=0, inf_count=0,
                    negative_count=0, mean=2.0, expected=2.0, tolerance=0.01, rel_error=0.0, z=0.0,
@@ -252,14 +275,17 @@ def test_report_from_a_table_alone(tmp_path):
                    linearity_check="n/a", checks="all good", expected_source="formula", tolerance_basis="z")
     rows[1].update(variant="albedo-0.5", renderer="y <b>", status="skipped", message="unavailable: <none>",
                    spp=4, resolution="16x16", time_bound_s=60.0, rss_bound_mb=4096.0)
-    path = write_stress_report(tmp_path / "s.html", pd.DataFrame(rows, columns=list(stress.COLUMNS)),
+    path = write_stress_report(tmp_path / "s.html", pd.DataFrame(rows, columns=list(judge.COLUMNS)),
                                {"versions": {"numpy": "2"}, "machine": "m"}, "cmd")
     html = path.read_text()
     assert "y &lt;b&gt;" in html and "unavailable: &lt;none&gt;" in html  # escaped
     assert 'id="verdict">pass<' in html and "2 ≤ 60 s" not in html and "1 ≤ 60 s" in html
 
 
-def test_stress_main_rejects_unknown_variants_before_running(tmp_path):
+def test_unknown_variants_are_rejected_before_running(tmp_path):
     with pytest.raises(ValueError, match="known: albedo-0"):
-        stress.stress_main(["pathtracer"], ["albedo-7"], tmp_path / "out")
+        suite.run_suite(["pathtracer"], ["albedo-7"], tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    proc = run_cbox("stress", "-r", "pathtracer", "-v", "albedo-7", "--out", str(tmp_path / "out"))
+    assert proc.returncode == 2 and "albedo-7" in proc.stderr
     assert not (tmp_path / "out").exists()

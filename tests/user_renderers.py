@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.adapter import RenderResult
+from harness.adapters.registry import RenderResult
+from harness.adapters.settings import Setting
 
 ALL = frozenset({"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"})
 
@@ -105,7 +106,7 @@ class ScaledMitsubaNoise(FlatGrey):
     SCALE = 1.0
 
     def render(self, scene, spp, seed, checkpoints=()):
-        from harness.reference import load_reference
+        from harness.store.references import load_reference
 
         ref = load_reference(scene)
         rng = np.random.default_rng(seed)
@@ -158,3 +159,17 @@ class MemoryHog(FlatGrey):
         time.sleep(5)
         del hog
         return super().render(scene, spp, seed, checkpoints)
+
+
+class Tunable(SeededNoise):
+    """Seeded noise around ``level`` (a declared setting), records the settings it was handed."""
+
+    name = "tunable"
+    settings = (Setting("level", float, 0.25, "mean radiance of the image", low=0.0, high=10.0),
+                Setting("mode", str, "plain", "a word setting", choices=("plain", "fancy")))
+
+    def render(self, scene, spp, seed, checkpoints=(), settings=None):
+        result = super().render(scene, spp, seed, checkpoints)
+        result.image = result.image - 0.25 + settings["level"]
+        result.info["seen_settings"] = dict(settings)
+        return result

@@ -4,8 +4,10 @@ A uniform number is a pure function of (key, path, dimension): the 64-bit
 SplitMix64 finaliser (Steele, Lea & Flood 2014, "Fast splittable
 pseudorandom number generators", OOPSLA) applied twice. No state is carried
 between calls, so the numbers a path sees do not depend on how paths are
-batched, ordered or shared among threads. Each work unit gets its own
-``key`` from ``SeedSequence([seed, pass, unit])``.
+batched, ordered or shared among threads. The key is per pass, never per
+work unit (units are cut by thread count, and the image must not depend on
+it): :func:`harness.adapters.seeds.pass_key`, the seed derivation every
+renderer shares.
 """
 
 from __future__ import annotations
@@ -36,8 +38,3 @@ def uniform(key, path, dim) -> float:
     counter = (np.uint64(path) << _DIM_BITS) | np.uint64(dim)
     z = mix64(np.uint64(key) ^ mix64(counter * _GOLDEN))
     return float(z >> _S11) * _TO_UNIT
-
-
-def stream_key(*words: int) -> np.uint64:
-    """64-bit key of the stream named by ``words`` (e.g. seed, pass, unit)."""
-    return np.random.SeedSequence(list(words)).generate_state(1, dtype=np.uint64)[0]

@@ -1,0 +1,226 @@
+"""The renderer adapter interface and the registry that finds adapters.
+
+An adapter is a small class (state: the renderer's own handles) with
+
+- ``name``: short id used on the command line (``mitsuba``, ``pyrender``);
+- ``features``: the scene features (:data:`harness.scenes.model.FEATURES`) it models;
+- ``approximations``: one line per thing it only approximates (shown in reports);
+- ``unavailable_reason()``: ``None`` if it can run here, else why not;
+- ``version()``: the renderer's version string (only called when available);
+- ``render(scene, spp, seed, checkpoints=())``: a :class:`RenderResult`;
+- optionally ``deterministic = True`` for a renderer whose image does not
+  depend on the seed (a rasteriser): experiments then run it for one seed only.
+
+Adapters are found through the entry-point group ``cbox.renderers`` (ours are
+registered in ``pyproject.toml`` the same way a third party's would be), or
+given directly as ``package.module:ClassName``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.metadata
+from dataclasses import dataclass, field
+from typing import Protocol, Sequence, runtime_checkable
+
+import numpy as np
+
+from harness.adapters.settings import declared, label, resolve_settings, split_spec
+from harness.scenes.model import Scene
+
+ENTRY_POINT_GROUP = "cbox.renderers"
+
+
+@dataclass
+class Checkpoint:
+    """The image after the first ``spp`` samples per pixel, and the time to get there."""
+
+    spp: int
+    image: np.ndarray
+    time_s: float
+
+
+@dataclass
+class RenderResult:
+    """What a render returns.
+
+    ``image`` is linear-sRGB radiance, float32, shape (height, width, 3).
+    ``time_s`` is wall time of the render proper (scene set-up excluded,
+    JIT compilation included unless the adapter warmed up beforehand).
+    ``info`` carries adapter details worth recording (e.g. Mitsuba's variant).
+    ``variance``, when the renderer can give it, is the per-pixel variance of
+    ``image`` (of the mean, not of one sample), float32 (height, width, 3).
+    """
+
+    image: np.ndarray
+    time_s: float
+    spp: int
+    seed: int
+    checkpoints: list[Checkpoint] = field(default_factory=list)
+    info: dict = field(default_factory=dict)
+    variance: np.ndarray | None = None
+
+
+@runtime_checkable
+class Renderer(Protocol):
+    name: str
+    features: frozenset[str]
+    approximations: tuple[str, ...]
+
+    def unavailable_reason(self) -> str | None: ...
+
+    def version(self) -> str: ...
+
+    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = ()) -> RenderResult: ...
+
+
+class RendererError(RuntimeError):
+    """A renderer could not be found or loaded (bad spec, import failure)."""
+
+
+@dataclass
+class RendererEntry:
+    """A renderer as the registry knows it: loaded, or the reason it is not, and its settings.
+
+    ``name`` is the label results carry: the renderer's name plus the settings
+    that differ from its defaults (``pathtracer[rr_depth=3]``). ``settings``
+    holds every declared setting, validated (:mod:`harness.adapters.settings`).
+    """
+
+    name: str
+    spec: str
+    renderer: Renderer | None
+    reason: str | None  # why it is unavailable; None when available
+    settings: dict = field(default_factory=dict)
+
+    @property
+    def available(self) -> bool:
+        return self.renderer is not None and self.reason is None
+
+    def with_settings(self, given: dict) -> "RendererEntry":
+        """The same renderer with ``given`` settings (validated; SettingsError if not allowed)."""
+        if self.renderer is None:
+            # Cannot validate against a renderer that did not load; it will not run anyway.
+            return RendererEntry(self.name, self.spec, None, self.reason, dict(given))
+        base = getattr(self.renderer, "name", self.name)
+        values = resolve_settings(self.renderer, {**self.settings, **given}, base)
+        defaults = {st.name: st.default for st in declared(self.renderer)}
+        return RendererEntry(label(base, values, defaults), self.spec, self.renderer, self.reason, values)
+
+
+def missing_features(renderer: Renderer, scene: Scene) -> list[str]:
+    """Scene features the renderer does not model (empty: it can run)."""
+    return sorted(scene.features - set(renderer.features))
+
+
+def load_spec(spec: str) -> Renderer:
+    """Instantiate ``package.module:ClassName``; raise RendererError if impossible."""
+    module_name, _, attr = spec.partition(":")
+    if not module_name or not attr:
+        raise RendererError(f"renderer {spec!r}: expected a registered name or package.module:ClassName")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as e:
+        raise RendererError(f"renderer {spec!r}: cannot import {module_name}: {e}") from None
+    try:
+        cls = getattr(module, attr)
+    except AttributeError:
+        raise RendererError(f"renderer {spec!r}: {module_name} has no attribute {attr!r}") from None
+    return _instantiate(cls, spec)
+
+
+def _instantiate(cls, spec: str) -> Renderer:
+    try:
+        obj = cls()
+    except Exception as e:  # a third-party constructor may raise anything
+        raise RendererError(f"renderer {spec!r}: constructing it failed: {type(e).__name__}: {e}") from None
+    for attr in ("name", "features", "render", "unavailable_reason", "version"):
+        if not hasattr(obj, attr):
+            raise RendererError(f"renderer {spec!r}: does not implement the adapter interface (no {attr!r})")
+    return obj
+
+
+def _entry(name: str, spec: str, load) -> RendererEntry:
+    try:
+        r = load()
+    except RendererError as e:
+        return RendererEntry(name, spec, None, str(e))
+    try:
+        reason = r.unavailable_reason()
+    except Exception as e:  # availability probes must never crash a run
+        reason = f"availability check failed: {type(e).__name__}: {e}"
+    return RendererEntry(getattr(r, "name", name), spec, r, reason, resolve_settings(r, {}, name))
+
+
+def _entry_points() -> dict:
+    eps = importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)
+    return {ep.name: ep for ep in sorted(eps, key=lambda e: e.name)}
+
+
+def _load_entry_point(ep) -> RendererEntry:
+    def load():
+        try:
+            cls = ep.load()
+        except Exception as e:
+            raise RendererError(f"renderer {ep.name!r}: cannot import {ep.value}: {type(e).__name__}: {e}") from None
+        return _instantiate(cls, ep.value)
+
+    return _entry(ep.name, ep.value, load)
+
+
+def registered_names() -> list[str]:
+    """Names registered under ``cbox.renderers``, without loading anything."""
+    return list(_entry_points())
+
+
+def discover() -> dict[str, RendererEntry]:
+    """All renderers registered under ``cbox.renderers``, loaded and probed, by name."""
+    return {name: _load_entry_point(ep) for name, ep in _entry_points().items()}
+
+
+def resolve(specs: Sequence[str] | None) -> list[RendererEntry]:
+    """Renderers named by ``specs`` (registered names or module:Class), or all registered.
+
+    A spec may carry settings, ``pathtracer[rr_depth=3]``; they are validated
+    against the renderer's declared settings (SettingsError, a usage error).
+    Only the renderers named are loaded and probed. An unknown name raises
+    RendererError (a usage error); a renderer that exists but cannot run here
+    comes back unavailable, with its reason.
+    """
+    eps = _entry_points()
+    if not specs:
+        return [_load_entry_point(ep) for ep in eps.values()]
+    out = []
+    for spec in specs:
+        name, given = split_spec(spec)
+        if name in eps:
+            entry = _load_entry_point(eps[name])
+        elif ":" in name:
+            entry = _entry(name, name, lambda name=name: load_spec(name))
+        else:
+            known = ", ".join(eps) or "(none)"
+            raise RendererError(f"unknown renderer {name!r}; registered: {known}; or give package.module:ClassName")
+        out.append(entry.with_settings(given) if given else entry)
+    return out
+
+
+def sweep(entries: Sequence[RendererEntry], renderer: str, setting: str, values: Sequence) -> list[RendererEntry]:
+    """``entries`` with the one named ``renderer`` replaced by one entry per value of ``setting``.
+
+    ``renderer`` is matched against a registered name, a ``module:Class`` spec
+    or the adapter's own name; one not among ``entries`` is resolved and added.
+    Each value becomes its own series (its own label) in results and reports.
+    """
+    def matches(e: RendererEntry) -> bool:
+        return renderer in (e.spec, e.name, getattr(e.renderer, "name", None)) or e.spec.endswith(f":{renderer}")
+
+    out, found = [], False
+    for e in entries:
+        if matches(e):
+            found = True
+            out += [e.with_settings({setting: v}) for v in values]
+        else:
+            out.append(e)
+    if not found:
+        out += sweep(resolve([renderer]), renderer, setting, values)
+    return out

@@ -1,0 +1,272 @@
+"""Image-error metrics of a rendered image against a reference.
+
+This module owns the numbers that say how far a renderer's image is from the
+reference. Like ``skimage.metrics`` it is a set of small pure functions on
+arrays: no I/O, no state, inputs are never modified, all maths is float64.
+
+Inputs
+------
+``img`` and ``ref`` are HDR radiance images in linear sRGB (ITU-R BT.709
+primaries, D65 white, no transfer function; see ``harness.scenes.model``), float
+arrays of shape ``(H, W, 3)``. Every two-image function checks that the shapes
+match and raises ``ValueError`` naming both otherwise.
+
+Conventions
+-----------
+- **Exposure.** HDR radiance has no natural scale, so perceptual metrics need
+  one. We use the key-value exposure of Reinhard et al. 2002, "Photographic
+  Tone Reproduction for Digital Images", eq. 1-2: the log-average luminance
+  ``L̄ = exp(mean(log(δ + Y)))`` is mapped to the key ``a = 0.18``, i.e.
+  ``exposure = a / L̄`` with ``δ = 1e-4``. It is derived from the *reference
+  only* (finite pixels), and this one scale is shared by every renderer for
+  ΔE, SSIM, PSNR and display, so a renderer cannot improve its score by being
+  uniformly too bright or too dark -- that error stays visible.
+- **Display encoding** (:func:`display_encode`): multiply by the exposure,
+  NaN -> 0 (black; NaNs are still counted by :func:`invalid_pixel_counts`),
+  clip to [0, 1], then the piecewise sRGB OETF of IEC 61966-2-1. SSIM, PSNR
+  and the HTML report all see exactly this encoding, with data range 1.
+- **CIEDE2000** (Sharma, Wu & Dalal 2005, "The CIEDE2000 color-difference
+  formula: implementation notes, supplementary test data, and mathematical
+  observations"). Both images are multiplied by the shared exposure, taken
+  linear sRGB -> XYZ -> CIELAB with the D65 white of the CIE 1931 2°
+  observer, *without* clipping: L* may exceed 100 on the light source, and
+  that is a real difference we want to see. ΔE00 is then computed per pixel.
+  Summary statistics report the fraction above 2.3, the just-noticeable
+  difference (Sharma 2003, *Digital Color Imaging Handbook*; Mahy et al.
+  1994).
+- **SSIM** (Wang et al. 2004, "Image quality assessment: from error
+  visibility to structural similarity"), as implemented by
+  ``skimage.metrics.structural_similarity`` with its defaults (uniform 7x7
+  window), per channel, on the display-encoded images.
+- **RMSE** and **relMSE** are on linear radiance, over all channels.
+  relMSE = mean((img - ref)² / (ref² + ε)) with ε = 1e-2, the value used by
+  Rousselle et al. 2011 and much of the denoising literature: it stops
+  near-black reference pixels from dominating the mean.
+- **Invalid pixels** (NaN, ±Inf, negative) are counted per pixel. In
+  :func:`image_metrics` (and for the ΔE map) a pixel with any non-finite
+  channel is replaced by black before the error metrics are computed,
+  so one broken pixel is reported as a count instead of poisoning every mean.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+with warnings.catch_warnings():
+    # colour-science warns at import when matplotlib is missing; we never plot.
+    warnings.filterwarnings("ignore", message=".*Matplotlib.*")
+    import colour
+
+# BT.709 luminance weights (the Y row of the sRGB -> XYZ matrix, as rounded
+# in IEC 61966-2-1).
+_LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+
+_D65_XY = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
+
+# Derived from the BT.709 primaries and the same D65 xy used as the CIELAB
+# white, not the 4-decimal IEC matrix: the rounded matrix maps RGB (1, 1, 1)
+# to a white slightly off D65 (a* ≈ 0.008 for RGB white), so greys would
+# not be exactly neutral.
+_RGB_TO_XYZ = colour.normalised_primary_matrix(
+    colour.RGB_COLOURSPACES["sRGB"].primaries, _D65_XY
+)
+
+REINHARD_KEY = 0.18
+REINHARD_DELTA = 1e-4
+REL_MSE_EPS = 1e-2
+#: Fraction of pixels with the largest relMSE terms that ``rel_mse_trimmed`` drops:
+#: a handful of fireflies should not decide a comparison (0.1%, as is common in
+#: denoising papers' trimmed relMSE).
+REL_MSE_TRIM = 1e-3
+JND_DELTA_E2000 = 2.3
+
+
+def _as_image(img) -> np.ndarray:
+    arr = np.asarray(img, dtype=np.float64)
+    if arr.ndim != 3 or arr.shape[-1] != 3:
+        raise ValueError(f"expected an (H, W, 3) image, got shape {arr.shape}")
+    return arr
+
+
+def _as_pair(img, ref) -> tuple[np.ndarray, np.ndarray]:
+    img, ref = np.asarray(img), np.asarray(ref)
+    if img.shape != ref.shape:
+        raise ValueError(
+            f"image shape {img.shape} does not match reference shape {ref.shape}"
+        )
+    return _as_image(img), _as_image(ref)
+
+
+def _finite_pixels(img: np.ndarray) -> np.ndarray:
+    return np.all(np.isfinite(img), axis=-1)
+
+
+def zero_broken_pixels(img: np.ndarray) -> np.ndarray:
+    """The image with every broken pixel (a NaN or Inf in any channel) black: the harness's one rule.
+
+    Whole pixel, not just the bad channel: the other channels of a pixel that
+    produced a NaN are not trustworthy either. Broken pixels are counted
+    separately (:func:`invalid_pixel_counts`), and every error metric, the
+    gate's agreement test and its slope check score them as black.
+    """
+    return np.where(_finite_pixels(img)[..., None], img, 0.0)
+
+
+def luminance(img) -> np.ndarray:
+    """Relative luminance Y of a linear-sRGB image, shape (H, W)."""
+    return _as_image(img) @ _LUMINANCE_WEIGHTS
+
+
+def exposure_scale(ref, key: float = REINHARD_KEY, delta: float = REINHARD_DELTA) -> float:
+    """Reinhard key-value exposure ``key / exp(mean(log(delta + Y)))`` of ``ref``."""
+    ref = _as_image(ref)
+    y = luminance(ref)[_finite_pixels(ref)]
+    if y.size == 0:
+        raise ValueError("reference has no finite pixels; cannot derive an exposure")
+    # Reconstruction filters with negative lobes can leave slightly negative
+    # luminance; log(delta + Y) would then be NaN.
+    y = np.maximum(y, 0.0)
+    return float(key / np.exp(np.mean(np.log(delta + y))))
+
+
+def display_encode(img, exposure: float) -> np.ndarray:
+    """Exposed, NaN->0, clipped to [0, 1], sRGB-OETF-encoded float64 image."""
+    exposed = _as_image(img) * float(exposure)
+    exposed = np.clip(np.nan_to_num(exposed, nan=0.0), 0.0, 1.0)
+    return np.asarray(colour.models.eotf_inverse_sRGB(exposed), dtype=np.float64)
+
+
+def rmse(img, ref) -> float:
+    """Root-mean-square error on linear radiance, over all channels."""
+    img, ref = _as_pair(img, ref)
+    return float(np.sqrt(np.mean((img - ref) ** 2)))
+
+
+def rel_mse(img, ref, eps: float = REL_MSE_EPS, trim: float = 0.0) -> float:
+    """Mean of ``(img - ref)² / (ref² + eps)``, dropping the worst ``trim`` fraction of pixels."""
+    img, ref = _as_pair(img, ref)
+    if not 0.0 <= trim < 1.0:
+        raise ValueError(f"trim must be in [0, 1), got {trim}")
+    per_pixel = np.mean((img - ref) ** 2 / (ref**2 + eps), axis=-1).ravel()
+    # The epsilon keeps e.g. 0.29 * 100 = 28.999999999999996 from dropping 28.
+    n_drop = int(np.floor(trim * per_pixel.size + 1e-9))
+    if n_drop:
+        per_pixel = np.sort(per_pixel)[: per_pixel.size - n_drop]
+    return float(np.mean(per_pixel))
+
+
+def psnr(img, ref, exposure: float | None = None) -> float:
+    """PSNR in dB of the display-encoded images (data range 1); inf if identical."""
+    img, ref = _as_pair(img, ref)
+    if exposure is None:
+        exposure = exposure_scale(ref)
+    with np.errstate(divide="ignore"):  # identical images: log10(1/0) = inf, as intended
+        value = peak_signal_noise_ratio(
+            display_encode(ref, exposure), display_encode(img, exposure), data_range=1.0
+        )
+    return float(value)
+
+
+def ssim(img, ref, exposure: float | None = None) -> float:
+    """Mean SSIM of the display-encoded images (skimage defaults, data range 1)."""
+    img, ref = _as_pair(img, ref)
+    if exposure is None:
+        exposure = exposure_scale(ref)
+    return float(
+        structural_similarity(
+            display_encode(img, exposure),
+            display_encode(ref, exposure),
+            channel_axis=-1,
+            data_range=1.0,
+        )
+    )
+
+
+def linear_srgb_to_lab(img) -> np.ndarray:
+    """CIELAB (D65, 2° observer) of a linear-sRGB image, unclipped."""
+    xyz = _as_image(img) @ _RGB_TO_XYZ.T
+    return np.asarray(colour.XYZ_to_Lab(xyz, _D65_XY), dtype=np.float64)
+
+
+def delta_e2000_lab(lab1, lab2) -> np.ndarray:
+    """CIEDE2000 between CIELAB arrays of shape (..., 3)."""
+    lab1 = np.asarray(lab1, dtype=np.float64)
+    lab2 = np.asarray(lab2, dtype=np.float64)
+    return np.asarray(colour.delta_E(lab1, lab2, method="CIE 2000"), dtype=np.float64)
+
+
+def delta_e2000(img, ref, exposure: float | None = None, full: bool = False):
+    """Mean CIEDE2000 of the exposed images; with ``full=True`` also the (H, W) map."""
+    img, ref = _as_pair(img, ref)
+    if exposure is None:
+        exposure = exposure_scale(ref)
+    de_map = delta_e2000_lab(
+        linear_srgb_to_lab(zero_broken_pixels(img) * exposure),
+        linear_srgb_to_lab(ref * exposure),
+    )
+    mean = float(np.mean(de_map))
+    return (mean, de_map) if full else mean
+
+
+def delta_e2000_stats(de_map, threshold: float = JND_DELTA_E2000) -> dict:
+    """Mean, 95th percentile, max and fraction above ``threshold`` of a ΔE00 map."""
+    de = np.asarray(de_map, dtype=np.float64).ravel()
+    if de.size == 0:
+        raise ValueError("empty ΔE map")
+    frac_key = f"delta_e2000_frac_gt_{threshold}".replace(".", "_")
+    return {
+        "delta_e2000_mean": float(np.mean(de)),
+        "delta_e2000_p95": float(np.percentile(de, 95)),
+        "delta_e2000_max": float(np.max(de)),
+        frac_key: float(np.mean(de > threshold)),
+    }
+
+
+def invalid_pixel_counts(img) -> dict:
+    """Pixels with any NaN, any ±Inf, and any negative finite channel."""
+    img = _as_image(img)
+    return {
+        "nan_count": int(np.count_nonzero(np.any(np.isnan(img), axis=-1))),
+        "inf_count": int(np.count_nonzero(np.any(np.isinf(img), axis=-1))),
+        "negative_count": int(
+            np.count_nonzero(np.any(np.isfinite(img) & (img < 0), axis=-1))
+        ),
+    }
+
+
+def mean_radiance(img) -> np.ndarray:
+    """Per-channel mean radiance over the finite pixels, shape (3,); NaN if none."""
+    img = _as_image(img)
+    finite = img[_finite_pixels(img)]
+    if finite.shape[0] == 0:
+        return np.full(3, np.nan)
+    return finite.mean(axis=0)
+
+
+def image_metrics(img, ref, exposure: float | None = None) -> dict:
+    """Every metric of ``img`` against ``ref`` as one flat, JSON-serialisable dict."""
+    img, ref = _as_pair(img, ref)
+    if exposure is None:
+        exposure = exposure_scale(ref)
+    clean = zero_broken_pixels(img)
+    _, de_map = delta_e2000(clean, ref, exposure=exposure, full=True)
+    # Mean radiance skips broken pixels rather than zeroing them: they are
+    # counted separately and should not also read as missing energy.
+    mean_img, mean_ref = mean_radiance(img), mean_radiance(ref)
+    return {
+        "rmse": rmse(clean, ref),
+        "mse": float(np.mean((clean - ref) ** 2)),
+        "rel_mse": rel_mse(clean, ref),
+        "rel_mse_trimmed": rel_mse(clean, ref, trim=REL_MSE_TRIM),
+        "psnr": psnr(clean, ref, exposure=exposure),
+        "ssim": ssim(clean, ref, exposure=exposure),
+        **delta_e2000_stats(de_map),
+        **invalid_pixel_counts(img),
+        "mean_radiance_r": float(mean_img[0]),
+        "mean_radiance_g": float(mean_img[1]),
+        "mean_radiance_b": float(mean_img[2]),
+        "mean_radiance_rel_error": float(np.mean(mean_img) / np.mean(mean_ref) - 1.0),
+    }

@@ -1,0 +1,157 @@
+"""The CI quality gate: expectations per (scene, renderer, budget), checked with stated error rates.
+
+A gate config (TOML) lists expectations::
+
+    alpha = 0.01                      # family-wise false-alarm rate of each agreement test
+    baseline = "gate-baseline.json"   # optional, relative to this file
+    regression_margin = 0.05          # relative; a metric worse than baseline by more fails
+    regression_metrics = ["delta_e2000_mean", "rel_mse_trimmed", "ssim"]
+
+    [[expect]]
+    scene = "cornell-box"             # stored name or path
+    renderer = "pathtracer"           # registered name or package.module:Class
+    spp = 256                         # budget: spp, or time = "10s" (spp is then calibrated)
+    seed = 0                          # fixed: the same commit gives the same verdict
+    unbiased = true                   # tiled z-test against the reference (harness.evaluate.agreement)
+    tile = 16
+    slope = [-0.55, -0.45]            # optional: RMSE-vs-spp slope over checkpoints spp/64 .. spp
+    max = { delta_e2000_mean = 3.0 }  # optional budgets on any harness metric
+    min = { ssim = 0.7 }
+    abs_max = { mean_radiance_rel_error = 0.3 }
+    settings = { rr_depth = 3 }       # optional: the renderer's settings (`cbox renderers --settings`)
+
+Every expectation also checks that the image has no NaN and no Inf pixel.
+Baseline checks compare runs at the seed the baseline was recorded with
+only (a metric's spread between seeds can exceed any useful margin).
+Each check becomes one JUnit test case; the Markdown summary and the HTML
+report say which expectation failed, by how much, and where in the image.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from harness.workflows.compare import parse_duration
+
+DEFAULT_REGRESSION_METRICS = ("delta_e2000_mean", "rel_mse_trimmed", "ssim")
+
+
+class GateConfigError(ValueError):
+    """Bad gate config; ``str()`` names the file and the field."""
+
+    def __init__(self, file, field: str, message: str):
+        super().__init__(f"{file}: {field}: {message}")
+
+
+@dataclass
+class Expectation:
+    name: str
+    scene: str
+    renderer: str
+    spp: int | None = None
+    time_s: float | None = None
+    seed: int = 0
+    unbiased: bool = False
+    tile: int = 16
+    slope: tuple[float, float] | None = None
+    max: dict = field(default_factory=dict)
+    min: dict = field(default_factory=dict)
+    abs_max: dict = field(default_factory=dict)
+    settings: dict = field(default_factory=dict)  # the renderer's settings (validated when the gate resolves it)
+
+
+@dataclass
+class GateConfig:
+    path: Path
+    alpha: float
+    expectations: list[Expectation]
+    baseline: Path | None = None
+    regression_margin: float = 0.05
+    regression_metrics: tuple[str, ...] = DEFAULT_REGRESSION_METRICS
+
+
+def load_config(path: str | Path) -> GateConfig:
+    """Parse and validate a gate config; GateConfigError names the file and field of any problem."""
+    path = Path(path)
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise GateConfigError(path, "(file)", "no such file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise GateConfigError(path, "(syntax)", f"invalid TOML: {e}") from None
+
+    def num(table, key, where, default, kind=(int, float)):
+        v = table.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, kind) or (isinstance(v, float) and not math.isfinite(v)):
+            raise GateConfigError(path, f"{where}{key}", f"expected a finite number, got {v!r}")
+        return v
+
+    alpha = float(num(doc, "alpha", "", 0.01))
+    if not 0 < alpha < 1:
+        raise GateConfigError(path, "alpha", f"must be in (0, 1), got {alpha}")
+    margin = float(num(doc, "regression_margin", "", 0.05))
+    if margin < 0:
+        raise GateConfigError(path, "regression_margin", "must be >= 0")
+    reg = doc.get("regression_metrics", list(DEFAULT_REGRESSION_METRICS))
+    if not isinstance(reg, list) or not all(isinstance(m, str) for m in reg):
+        raise GateConfigError(path, "regression_metrics", "expected a list of metric names")
+    baseline = doc.get("baseline")
+    if baseline is not None and not isinstance(baseline, str):
+        raise GateConfigError(path, "baseline", "expected a file name")
+    raw = doc.get("expect")
+    if not isinstance(raw, list) or not raw:
+        raise GateConfigError(path, "expect", "a gate needs at least one [[expect]] table")
+    exps, names = [], set()
+    for i, t in enumerate(raw):
+        w = f"expect[{i}]."
+        for key in ("scene", "renderer"):
+            if not isinstance(t.get(key), str):
+                raise GateConfigError(path, f"{w}{key}", "missing or not a string")
+        if ("spp" in t) == ("time" in t):
+            raise GateConfigError(path, f"{w}spp", "give exactly one budget: spp = N or time = \"10s\"")
+        spp = time_s = None
+        if "spp" in t:
+            spp = num(t, "spp", w, None, int)
+            if spp < 1:
+                raise GateConfigError(path, f"{w}spp", "must be >= 1")
+        else:
+            try:
+                time_s = parse_duration(str(t["time"]))
+            except ValueError as e:
+                raise GateConfigError(path, f"{w}time", str(e)) from None
+        slope = t.get("slope")
+        if slope is not None:
+            if not (isinstance(slope, list) and len(slope) == 2 and all(isinstance(x, (int, float)) for x in slope)
+                    and slope[0] < slope[1]):
+                raise GateConfigError(path, f"{w}slope", "expected [low, high] with low < high")
+            slope = (float(slope[0]), float(slope[1]))
+        budgets = {}
+        for key in ("max", "min", "abs_max"):
+            b = t.get(key, {})
+            if not isinstance(b, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                  for v in b.values()):
+                raise GateConfigError(path, f"{w}{key}", "expected a table of metric = number")
+            budgets[key] = {k: float(v) for k, v in b.items()}
+        unbiased = t.get("unbiased", False)
+        if not isinstance(unbiased, bool):
+            raise GateConfigError(path, f"{w}unbiased", "expected true or false")
+        budget = f"{spp}spp" if spp else f"{time_s:g}s"
+        settings = t.get("settings", {})
+        if not isinstance(settings, dict):
+            raise GateConfigError(path, f"{w}settings", "expected a table of setting = value")
+        shown = f"[{','.join(f'{k}={v}' for k, v in sorted(settings.items()))}]" if settings else ""
+        name = t.get("name") or f"{t['scene']}/{t['renderer']}{shown}@{budget}"
+        if name in names:
+            raise GateConfigError(path, f"{w}name", f"two expectations are named {name!r}; give one a name")
+        names.add(name)
+        tile = num(t, "tile", w, 16, int)
+        if tile < 1:
+            raise GateConfigError(path, f"{w}tile", "must be >= 1")
+        exps.append(Expectation(name, t["scene"], t["renderer"], spp, time_s, num(t, "seed", w, 0, int), unbiased,
+                                tile, slope, budgets["max"], budgets["min"], budgets["abs_max"], settings))
+    return GateConfig(path, alpha, exps, path.parent / baseline if baseline else None, margin, tuple(reg))
+
+

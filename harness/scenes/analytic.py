@@ -1,0 +1,179 @@
+"""Scenes whose images have analytic answers, and those answers.
+
+- **White furnace** (:func:`furnace_scene`, :func:`furnace_radiance`): a closed
+  cube, every face of albedo ρ emitting Le, the camera inside. Built directly
+  from the dataclasses (no file); the stress suite (:mod:`harness.stress`)
+  and the path tracer's tests use it.
+- **Rectangle light over a floor** (:func:`rectangle_light_scene`,
+  :func:`rectangle_light_image`): one-bounce direct light with an exact
+  box-filtered image from Lambert's polygon formula
+  (:func:`polygon_irradiance`). Written as a scene file, so the loader is
+  exercised too.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from harness.scenes.loader import load_scene
+from harness.scenes.model import Camera, Diffuse, Mesh, Scene
+
+# ----------------------------------------------------------------------------------------
+# White furnace
+# ----------------------------------------------------------------------------------------
+
+#: Faces of the cube [-1, 1]^3 wound so their normals point INTO the box.
+#: Vertex index = 4*(x>0) + 2*(y>0) + (z>0).
+_CUBE_INWARD = ((0, 1, 5, 4), (2, 6, 7, 3), (4, 5, 7, 6), (0, 2, 3, 1), (1, 3, 7, 5), (0, 4, 6, 2))
+_CUBE_VERTS = tuple((x, y, z) for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0))
+_ALL_FEATURES = frozenset({"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"})
+
+
+def _quads_to_triangles(quads) -> np.ndarray:
+    return np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))], dtype=np.int64)
+
+
+def furnace_scene(albedo: float, radiance: float = 1.0, max_depth: int = -1, res: int = 16,
+                  scale: float = 1.0) -> Scene:
+    """A closed cube, every face of reflectance ``albedo`` emitting ``radiance``; pinhole camera at its centre.
+
+    Its radiance everywhere, in every direction, is :func:`furnace_radiance`.
+    """
+    name = f"furnace-albedo-{albedo:g}"
+    camera = Camera(position=(0.0, 0.0, 0.0), look_at=(0.0, 0.0, -scale), up=(0.0, 1.0, 0.0), fov_deg=100.0,
+                    fov_axis="smaller", width=int(res), height=int(res))
+    mesh = Mesh("box", np.asarray(_CUBE_VERTS, dtype=np.float64) * scale, _quads_to_triangles(_CUBE_INWARD),
+                "grey", (float(radiance),) * 3)
+    return Scene(name=name, path=Path("stress") / f"{name}.toml", features=_ALL_FEATURES, camera=camera,
+                 materials={"grey": Diffuse("grey", (float(albedo),) * 3)}, meshes=(mesh,),
+                 max_depth=int(max_depth), pixel_filter="box",
+                 description=f"white furnace: closed cube, albedo {albedo:g}, emission {radiance:g}")
+
+
+def furnace_radiance(albedo: float, radiance: float, max_depth: int) -> float:
+    """Radiance in the furnace: Le·Σ_{k<D} ρ^k at max_depth D; Le/(1-ρ) unbounded (inf at ρ = 1).
+
+    Every surface sees uniform radiance L, and a Lambertian surface lit by
+    uniform radiance L reflects ρ·L, so the rendering equation (Kajiya 1986)
+    reduces to L = Le + ρ·L; its Neumann series, cut after D path segments,
+    is the sum above (the white-furnace test, e.g. Pharr, Jakob and Humphreys,
+    "Physically Based Rendering", 4th ed., 2023).
+    """
+    if max_depth < 0:
+        return math.inf if albedo >= 1.0 else radiance / (1.0 - albedo)
+    return radiance * sum(albedo**k for k in range(max_depth))
+
+
+# ----------------------------------------------------------------------------------------
+# Rectangle light over a floor
+# ----------------------------------------------------------------------------------------
+
+# Rectangle light over a floor: light of half-sizes (A, B) at height H, facing down.
+LIGHT_A, LIGHT_B, LIGHT_H, LIGHT_LE, FLOOR_RHO = 0.3, 0.2, 1.0, 5.0, 0.75
+
+
+def _fmt(v) -> str:
+    return "[" + ", ".join(repr(float(x)) for x in v) + "]"
+
+
+def rectangle_light_scene(folder: Path, res: int = 16, max_depth: int = -1) -> Scene:
+    """A white floor [-1,1]² at z=0 under a rectangular emitter; camera straight above, looking down.
+
+    Written to ``folder/rectangle-light.toml`` and loaded from there. Nothing
+    else is in the scene, so the floor's radiance is ρ/π · E(x) (Lambert's
+    law: a Lambertian surface reflects ρ/π of its irradiance as radiance),
+    E from the polygon irradiance formula (:func:`polygon_irradiance`). The
+    camera sees the light's black back side in the middle of the image.
+    """
+    a, b, h = LIGHT_A, LIGHT_B, LIGHT_H
+    text = f"""format = 1
+name = "rectangle-light"
+features = ["triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"]
+[camera]
+type = "pinhole"
+position = [0.0, 0.0, 3.0]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_deg = 30.0
+fov_axis = "smaller"
+resolution = [{res}, {res}]
+[render]
+max_depth = {max_depth}
+pixel_filter = "box"
+[materials.white]
+type = "diffuse"
+reflectance = {_fmt([FLOOR_RHO] * 3)}
+[materials.black]
+type = "diffuse"
+reflectance = [0.0, 0.0, 0.0]
+[[meshes]]
+name = "floor"
+material = "white"
+vertices = [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]]
+faces = [[0, 1, 2, 3]]
+[[meshes]]
+name = "light"
+material = "black"
+vertices = [[{-a}, {-b}, {h}], [{-a}, {b}, {h}], [{a}, {b}, {h}], [{a}, {-b}, {h}]]
+faces = [[0, 1, 2, 3]]
+emitter = {{ radiance = {_fmt([LIGHT_LE] * 3)} }}
+"""
+    path = folder / "rectangle-light.toml"
+    path.write_text(text)
+    return load_scene(path)
+
+
+def polygon_irradiance(points: np.ndarray, normal: np.ndarray, polygon: np.ndarray, radiance: float) -> np.ndarray:
+    """Irradiance at ``points`` (n,3) with ``normal`` from a Lambertian polygon of radiance L.
+
+    Lambert's polygon formula (Arvo 1995, "Applications of Irradiance Tensors", eq. 4):
+    E = (L/2) Σ_i Θ_i (u_i · n), Θ_i the angle subtended by edge i and u_i the
+    unit normal of the plane through the point and that edge, for a polygon
+    wound counter-clockwise as seen from the point.
+    """
+    e = np.zeros(len(points))
+    for i in range(len(polygon)):
+        r1 = polygon[i] - points
+        r2 = polygon[(i + 1) % len(polygon)] - points
+        r1 /= np.linalg.norm(r1, axis=1, keepdims=True)
+        r2 /= np.linalg.norm(r2, axis=1, keepdims=True)
+        theta = np.arccos(np.clip(np.einsum("ij,ij->i", r1, r2), -1, 1))
+        c = np.cross(r1, r2)
+        c /= np.linalg.norm(c, axis=1, keepdims=True)
+        e += theta * (c @ normal)
+    return 0.5 * radiance * np.abs(e)
+
+
+def rectangle_light_image(scene: Scene, sub: int = 16) -> np.ndarray:
+    """Exact box-filtered image of :func:`rectangle_light_scene` (sub×sub points per pixel).
+
+    Each point's radiance is ρ/π · E (Lambert's law), E from
+    :func:`polygon_irradiance`; the box filter is the mean over a pixel's
+    sub×sub grid.
+    """
+    cam = scene.camera
+    right, up, forward = cam.frame()
+    tx, ty = cam.tan_half_fov()
+    offs = (np.arange(sub) + 0.5) / sub
+    col = (np.arange(cam.width)[:, None] + offs[None, :]).ravel()
+    row = (np.arange(cam.height)[:, None] + offs[None, :]).ravel()
+    rr, cc = np.meshgrid(row, col, indexing="ij")
+    sx = (2 * cc / cam.width - 1) * tx
+    sy = (1 - 2 * rr / cam.height) * ty
+    d = forward + sx[..., None] * right + sy[..., None] * up
+    o = np.asarray(cam.position)
+    t = -o[2] / d[..., 2]
+    pts = (o + t[..., None] * d).reshape(-1, 3)
+    a, b, h = LIGHT_A, LIGHT_B, LIGHT_H
+    poly = np.array([[-a, -b, h], [a, -b, h], [a, b, h], [-a, b, h]], float)
+    e = polygon_irradiance(pts, np.array([0, 0, 1.0]), poly, LIGHT_LE)
+    inside = (np.abs(pts[:, 0]) <= 1) & (np.abs(pts[:, 1]) <= 1)
+    # The light's black back side hides the middle of the floor from the camera.
+    tl = (h - o[2]) / d[..., 2]
+    pl = (o + tl[..., None] * d).reshape(-1, 3)
+    inside &= ~((np.abs(pl[:, 0]) <= a) & (np.abs(pl[:, 1]) <= b))
+    radiance = np.where(inside, FLOOR_RHO / np.pi * e, 0.0).reshape(cam.height, sub, cam.width, sub)
+    return np.repeat(radiance.mean(axis=(1, 3))[..., None], 3, axis=2)

@@ -1,0 +1,227 @@
+"""The scene model: what a scene file says, validated, and nothing more.
+
+A scene file is TOML. It is parsed once into the frozen dataclasses below;
+every renderer adapter reads these, never the file.
+
+Units and colour space (named here once for the whole harness)
+---------------------------------------------------------------
+- **Lengths** are in *scene units*; the harness never assumes metres.
+- **Angles** in the file are in degrees (``fov_deg``).
+- **Colour space** is linear sRGB: ITU-R BT.709 primaries, D65 white point,
+  no transfer function. Every RGB triple in a scene, and every image a
+  renderer returns, is in this space.
+- **Radiance** (``emitter.radiance`` and image pixels) is per linear-sRGB
+  channel, in W·sr⁻¹·m⁻² relative to the scene unit; images are the
+  box-filtered mean of the radiance arriving through each pixel.
+- **Reflectance** of a diffuse material is its albedo per channel, in [0, 1].
+
+Conventions
+-----------
+- ``max_depth`` counts path *segments* from the camera, as Mitsuba 3 does:
+  1 = emitters seen directly, 2 = direct lighting, 3 = one indirect bounce,
+  and -1 = unbounded (renderers terminate paths with Russian roulette).
+  Each adapter translates this to its renderer's own convention.
+- A triangle's front side is the one its counter-clockwise winding faces:
+  ``n = (v1 - v0) × (v2 - v0)``. Area emitters emit from the front side only;
+  diffuse surfaces reflect on the front side only (Mitsuba 3's ``diffuse``).
+- Quads ``[a, b, c, d]`` are split into triangles ``(a, b, c)`` and ``(a, c, d)``.
+- Pixel ``(row, col)`` = ``(0, 0)`` is the top-left of the image.
+
+Features
+--------
+A scene declares, in ``features``, the set of :data:`FEATURES` it uses; the
+loader checks the declaration against the content. Each renderer declares the
+features it models, and the runner skips a renderer that lacks one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+#: Every feature a scene may use, with what it means.
+FEATURES: dict[str, str] = {
+    "triangle_mesh": "geometry given as triangle or quad meshes",
+    "diffuse": "Lambertian reflection with a linear-sRGB reflectance",
+    "area_light": "one-sided diffuse area emitters on meshes",
+    "pinhole_camera": "a pinhole perspective camera",
+    "box_filter": "each pixel is the unweighted mean over its own square",
+}
+
+PIXEL_FILTERS = ("box",)
+FOV_AXES = ("x", "y", "smaller", "larger")
+#: Below this area (relative to the scene's squared size) a triangle is degenerate.
+_DEGENERATE_REL_AREA = 1e-12
+
+
+class SceneError(ValueError):
+    """Bad scene input. ``str()`` is the one-line message the CLI prints."""
+
+    def __init__(self, file: Path | str, field: str, message: str):
+        self.file, self.field, self.message = str(file), field, message
+        super().__init__(f"{file}: {field}: {message}")
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera. ``fov_deg`` is the full angle along ``fov_axis``."""
+
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    up: tuple[float, float, float]
+    fov_deg: float
+    fov_axis: str
+    width: int
+    height: int
+
+    def frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Orthonormal (right, up, forward) in world space, float64.
+
+        ``right`` = forward × up points to increasing pixel column and ``up``
+        to decreasing row, as in Mitsuba 3's perspective sensor.
+        """
+        forward = np.subtract(self.look_at, self.position, dtype=np.float64)
+        forward /= np.linalg.norm(forward)
+        right = np.cross(forward, np.asarray(self.up, dtype=np.float64))
+        right /= np.linalg.norm(right)
+        up = np.cross(right, forward)
+        return right, up, forward
+
+    def tan_half_fov(self) -> tuple[float, float]:
+        """tan of half the field of view along x (columns) and y (rows)."""
+        t = math.tan(math.radians(self.fov_deg) / 2.0)
+        aspect = self.width / self.height
+        axis = self.fov_axis
+        if axis == "smaller":
+            axis = "x" if self.width <= self.height else "y"
+        elif axis == "larger":
+            axis = "x" if self.width >= self.height else "y"
+        return (t, t / aspect) if axis == "x" else (t * aspect, t)
+
+    def project_to_pixels(self, points: np.ndarray) -> np.ndarray:
+        """(col, row) image coordinates (continuous, pixel units) of world ``points`` (n, 3) in front of the camera."""
+        right, up, forward = self.frame()
+        tx, ty = self.tan_half_fov()
+        d = np.asarray(points, dtype=np.float64) - np.asarray(self.position, dtype=np.float64)
+        z = d @ forward
+        sx = (d @ right) / z / tx
+        sy = (d @ up) / z / ty
+        return np.stack([(sx + 1.0) / 2.0 * self.width, (1.0 - sy) / 2.0 * self.height], axis=1)
+
+
+@dataclass(frozen=True)
+class Diffuse:
+    """Lambertian BRDF ρ/π, front side only."""
+
+    name: str
+    reflectance: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """Triangles with one material, optionally a one-sided area emitter."""
+
+    name: str
+    vertices: np.ndarray  # (V, 3) float64
+    triangles: np.ndarray  # (T, 3) int64 indices into vertices
+    material: str
+    radiance: tuple[float, float, float] | None = None  # emitted, if an emitter
+
+    @property
+    def is_emitter(self) -> bool:
+        return self.radiance is not None
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene. Build it with :func:`harness.scenes.loader.load_scene`."""
+
+    name: str
+    path: Path
+    features: frozenset[str]
+    camera: Camera
+    materials: dict[str, Diffuse]
+    meshes: tuple[Mesh, ...]
+    max_depth: int
+    pixel_filter: str
+    description: str = ""
+
+    @property
+    def emitters(self) -> tuple[Mesh, ...]:
+        return tuple(m for m in self.meshes if m.is_emitter)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned bounding box of all geometry (lo, hi), float64."""
+        v = np.concatenate([m.vertices for m in self.meshes])
+        return v.min(axis=0), v.max(axis=0)
+
+    def extent(self) -> float:
+        """Length of the bounding-box diagonal: the scene's size."""
+        lo, hi = self.bounds()
+        return float(np.linalg.norm(hi - lo))
+
+    def content_hash(self) -> str:
+        """SHA-256 of the parsed content (not the file's bytes).
+
+        Comments, formatting and OBJ-vs-inline choices do not change it; any
+        change to geometry, materials, camera or transport settings does.
+        """
+        payload = {
+            "camera": dataclasses.asdict(self.camera),
+            "materials": {k: dataclasses.asdict(v) for k, v in sorted(self.materials.items())},
+            "meshes": [
+                {
+                    "name": m.name,
+                    "material": m.material,
+                    "radiance": m.radiance,
+                    "vertices": np.round(m.vertices, 12).tolist(),
+                    "triangles": m.triangles.tolist(),
+                }
+                for m in self.meshes
+            ],
+            "max_depth": self.max_depth,
+            "pixel_filter": self.pixel_filter,
+            "features": sorted(self.features),
+        }
+        blob = json.dumps(payload, sort_keys=True, separators=(",", ":")).encode()
+        return "sha256:" + hashlib.sha256(blob).hexdigest()
+
+    def with_resolution(self, width: int, height: int) -> "Scene":
+        """The same scene rendered at another resolution (for quick runs)."""
+        cam = dataclasses.replace(self.camera, width=int(width), height=int(height))
+        return dataclasses.replace(self, camera=cam)
+
+    def with_max_depth(self, max_depth: int) -> "Scene":
+        return dataclasses.replace(self, max_depth=int(max_depth))
+
+
+def triangle_arrays(scene: Scene) -> dict[str, np.ndarray]:
+    """Flatten all meshes into shared arrays, the form ray tracers want.
+
+    Returns float64 ``vertices`` (V,3), int64 ``triangles`` (T,3), and per
+    triangle: ``mesh`` index, ``reflectance`` (T,3), ``radiance`` (T,3, zero
+    for non-emitters).
+    """
+    verts, tris, mesh_id, rho, le = [], [], [], [], []
+    offset = 0
+    for k, m in enumerate(scene.meshes):
+        verts.append(m.vertices)
+        tris.append(m.triangles + offset)
+        offset += len(m.vertices)
+        n = len(m.triangles)
+        mesh_id.append(np.full(n, k))
+        rho.append(np.tile(scene.materials[m.material].reflectance, (n, 1)))
+        le.append(np.tile(m.radiance or (0.0, 0.0, 0.0), (n, 1)))
+    return {
+        "vertices": np.concatenate(verts),
+        "triangles": np.concatenate(tris),
+        "mesh": np.concatenate(mesh_id),
+        "reflectance": np.concatenate(rho).astype(np.float64),
+        "radiance": np.concatenate(le).astype(np.float64),
+    }

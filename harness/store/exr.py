@@ -1,0 +1,61 @@
+"""Reading and writing float32 RGB OpenEXR images through OpenImageIO.
+
+Writes are atomic (:mod:`harness.store.atomic`): an interrupted write never leaves
+a truncated EXR behind.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from harness.store.atomic import atomic_path
+
+
+class ImageFileError(OSError):
+    """An image file is missing, unreadable, or not an RGB image."""
+
+
+def write_exr(path: str | Path, image: np.ndarray, metadata: dict[str, str] | None = None) -> None:
+    """Write an (H, W, 3) image as a float32, ZIP-compressed EXR."""
+    import OpenImageIO as oiio
+
+    path = Path(path)
+    img = np.ascontiguousarray(image, dtype=np.float32)
+    if img.ndim != 3 or img.shape[2] != 3:
+        raise ValueError(f"expected an (H, W, 3) image, got shape {img.shape}")
+    spec = oiio.ImageSpec(img.shape[1], img.shape[0], 3, oiio.FLOAT)
+    spec.attribute("compression", "zip")
+    for k, v in (metadata or {}).items():
+        spec.attribute(k, str(v))
+    with atomic_path(path) as tmp:
+        out = oiio.ImageOutput.create("exr")
+        if out is None or not out.open(str(tmp), spec):
+            raise ImageFileError(f"{path}: cannot write EXR: {oiio.geterror()}")
+        ok = out.write_image(img)
+        out.close()
+        if not ok:
+            raise ImageFileError(f"{path}: cannot write EXR: {oiio.geterror()}")
+
+
+def read_exr(path: str | Path) -> np.ndarray:
+    """Read an RGB image as float32 (H, W, 3)."""
+    import OpenImageIO as oiio
+
+    path = Path(path)
+    if not path.exists():
+        raise ImageFileError(f"{path}: no such file")
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise ImageFileError(f"{path}: cannot read image: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        if spec.nchannels < 3:
+            raise ImageFileError(f"{path}: expected 3 channels (RGB), found {spec.nchannels}")
+        data = inp.read_image(0, 0, 0, 3, oiio.FLOAT)
+    finally:
+        inp.close()
+    if data is None:
+        raise ImageFileError(f"{path}: cannot read image: {oiio.geterror()}")
+    return np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, 3)

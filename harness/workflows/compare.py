@@ -1,0 +1,92 @@
+"""Equal-time and equal-quality comparisons: the spp a time budget buys, the time a target error costs."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import re
+from pathlib import Path
+from typing import Sequence
+
+import pandas as pd
+
+from harness.adapters.registry import RendererEntry
+from harness.scenes.model import Scene
+from harness.store.atomic import atomic_path, write_json_atomic
+from harness.store.experiments import (CONFIG_FILE, RESULTS_FILE, ExperimentError, cell_name,
+                                       write_parquet_atomic)
+from harness.store.exr import write_exr
+from harness.store.references import Reference
+from harness.workflows import runner
+
+
+def spp_for_time_budget(entry: RendererEntry, scene: Scene, budget_s: float, seed: int) -> int:
+    """The spp that should take ``budget_s`` seconds, from two short timed renders (1 and 4 spp).
+
+    Per-render overhead (scene set-up) and per-sample cost are separated by
+    the two timings. The calibration renders are not counted in the budget;
+    the final render's own time is what is reported.
+    """
+    t1 = runner.render_checked(entry, scene, 1, seed).time_s
+    t4 = runner.render_checked(entry, scene, 4, seed).time_s
+    per_spp = max((t4 - t1) / 3.0, 1e-9)
+    overhead = max(t1 - per_spp, 0.0)
+    return max(1, int((budget_s - overhead) / per_spp))
+
+
+def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, metric: str, target: float,
+                     seed: int, max_spp: int) -> runner.RunRecord:
+    """Renders at 1, 2, 4, ... spp until ``metric`` ≤ ``target`` (or ``max_spp``); the record says which.
+
+    The reported time is that of the render that reached the target (a
+    renderer that resumed its last render would need at most that). A
+    deterministic renderer stops early once two doublings of spp leave its error unchanged.
+    """
+    spp, previous, stalls = 1, None, 0
+    deterministic = getattr(entry.renderer, "deterministic", False)
+    while True:
+        rec = runner.run_one(entry, scene, spp, seed, reference)
+        if rec.status != "ok":
+            return rec
+        value = rec.metrics.get(metric)
+        if value is None:
+            raise ExperimentError(f"--target-error: unknown metric {metric!r}")
+        rec.info["target"] = f"{metric}<={target:g}"
+        rec.info["target_reached"] = bool(value <= target)
+        # A deterministic renderer whose error stopped changing for two doublings will not reach it
+        # with more samples (1e-6: GL rasterisers are repeatable only to float rounding).
+        same = deterministic and previous is not None and abs(value - previous) <= 1e-6 * abs(previous)
+        stalls = stalls + 1 if same else 0
+        if value <= target or spp >= max_spp or stalls >= 2:
+            return rec
+        spp, previous = min(2 * spp, max_spp), value
+
+
+def parse_duration(text: str) -> float:
+    """``"10s"``, ``"2m"``, ``"500ms"``, ``"1.5"`` (seconds) → seconds."""
+    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*(ms|s|m|min|h)?\s*", text)
+    if not m:
+        raise ValueError(f"time budget {text!r}: expected e.g. 10s, 2m, 500ms")
+    scale = {"ms": 1e-3, "s": 1.0, None: 1.0, "m": 60.0, "min": 60.0, "h": 3600.0}[m.group(2)]
+    value = float(m.group(1)) * scale
+    if value <= 0:
+        raise ValueError(f"time budget {text!r}: must be positive")
+    return value
+
+
+def store_comparison(out: Path, scene: Scene, records: Sequence[runner.RunRecord], command: str) -> None:
+    """A comparison as an experiment folder: images, results table, CSV and JSON (a report can then be built)."""
+    out.mkdir(parents=True, exist_ok=True)
+    for r in records:
+        if r.image is not None:
+            write_exr(out / "images" / f"{cell_name(r.renderer, r.seed)}.exr", r.image)
+    rows = [r.row() for r in records]
+    frame = pd.DataFrame(rows)
+    write_json_atomic(out / CONFIG_FILE, {
+        "kind": "compare", "scene": str(scene.path), "scene_name": scene.name, "scene_hash": scene.content_hash(),
+        "renderers": [r.renderer for r in records], "spp": sorted({r.spp for r in records}),
+        "seeds": sorted({r.seed for r in records}), "command": command,
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")})
+    write_parquet_atomic(frame, out / RESULTS_FILE)
+    with atomic_path(out / "metrics.csv") as tmp:
+        frame.to_csv(tmp, index=False)
+    write_json_atomic(out / "metrics.json", [runner.json_safe(r) for r in rows])

@@ -1,0 +1,190 @@
+"""The runner: the one place that calls a renderer's ``render``, checks what it returned, and scores it.
+
+Every command (compare, converge, gate, equal time, equal quality) renders
+through :func:`render_checked` and records through :func:`run_one` or
+:func:`run_checkpoints`. A renderer that is unavailable here, or does not
+model a feature the scene uses, is never run; its record says why
+(``status`` "unavailable" or "skipped"). A renderer that raises, or returns
+an image of the wrong shape, is recorded as "failed" with the reason, and the
+other renderers still run.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import traceback
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from harness.evaluate import metrics
+from harness.evaluate import noise as stats
+from harness.adapters.registry import RenderResult, RendererEntry, missing_features
+from harness.adapters.settings import canonical, declared
+from harness.store.references import Reference
+from harness.scenes.model import Scene
+
+STATUSES = ("ok", "skipped", "unavailable", "failed")
+
+
+def scene_settings(scene: Scene) -> str:
+    """The scene settings that define what a run computes, as canonical JSON."""
+    cam = scene.camera
+    return json.dumps({"max_depth": scene.max_depth, "width": cam.width, "height": cam.height,
+                       "pixel_filter": scene.pixel_filter}, sort_keys=True)
+
+
+@dataclass
+class RunRecord:
+    """One renderer on one scene at one (spp, seed): outcome, image and metrics."""
+
+    scene: str
+    renderer: str
+    status: str
+    spp: int
+    seed: int
+    scene_hash: str = ""
+    scene_settings: str = "{}"
+    settings: str = "{}"  # the renderer's settings, every declared one (canonical JSON)
+    reason: str | None = None
+    version: str | None = None
+    time_s: float | None = None
+    approximations: tuple[str, ...] = ()
+    info: dict = field(default_factory=dict)
+    metrics: dict = field(default_factory=dict)
+    image: np.ndarray | None = field(default=None, repr=False)
+    variance: np.ndarray | None = field(default=None, repr=False)  # of the image, when the renderer gives it
+    checkpoints: list = field(default_factory=list, repr=False)  # harness.adapters.registry.Checkpoint
+
+    @classmethod
+    def new(cls, scene: Scene, entry: RendererEntry, spp: int, seed: int, **fields) -> "RunRecord":
+        rec = cls(scene.name, entry.name, "ok", spp, seed, scene.content_hash(), scene_settings(scene),
+                  canonical(entry.settings), **fields)
+        if not entry.available:
+            rec.status, rec.reason = "unavailable", entry.reason
+        elif missing := missing_features(entry.renderer, scene):
+            rec.status, rec.reason = "skipped", f"does not model {', '.join(missing)}"
+        else:
+            rec.approximations = tuple(getattr(entry.renderer, "approximations", ()))
+        return rec
+
+    def failed(self, error: Exception) -> "RunRecord":
+        """This record marked failed by ``error`` (a renderer bug is reported, never raised)."""
+        self.status, self.reason = "failed", f"{type(error).__name__}: {error}"
+        self.info = {"traceback": traceback.format_exc(limit=8)}
+        return self
+
+    def row(self) -> dict:
+        """Flat, JSON-serialisable record (no image): one row of the results table."""
+        out = {
+            "scene": self.scene,
+            "scene_hash": self.scene_hash,
+            "renderer": self.renderer,
+            "status": self.status,
+            "reason": self.reason,
+            "version": self.version,
+            "settings": self.settings,
+            "scene_settings": self.scene_settings,
+            "approximations": json.dumps(list(self.approximations)),
+            "spp": self.spp,
+            "seed": self.seed,
+            "time_s": None if self.time_s is None else round(self.time_s, 4),
+        }
+        out.update(self.metrics)
+        if "mse" in self.metrics and self.time_s:
+            out["efficiency"] = 1.0 / (self.metrics["mse"] * self.time_s) if self.metrics["mse"] > 0 else math.inf
+        for k, v in self.info.items():
+            out[f"info_{k}"] = v if isinstance(v, (str, int, float, bool)) or v is None else json.dumps(v)
+        return out
+
+
+def json_safe(row: dict) -> dict:
+    """The row with non-finite floats (e.g. PSNR of identical images) as None: strict JSON."""
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
+
+
+class RenderError(ValueError):
+    """A renderer returned something the harness cannot use (wrong shape, wrong spp)."""
+
+
+def render_checked(entry: RendererEntry, scene: Scene, spp: int, seed: int,
+                   checkpoints: Sequence[int] = ()) -> RenderResult:
+    """``entry``'s render with its settings, its image, variance and checkpoints checked; may raise."""
+    kwargs = {}
+    if checkpoints:
+        kwargs["checkpoints"] = list(checkpoints)
+    if declared(entry.renderer):  # adapters without settings keep the plain signature
+        kwargs["settings"] = dict(entry.settings)
+    result = entry.renderer.render(scene, spp, seed, **kwargs)
+    expected = (scene.camera.height, scene.camera.width, 3)
+    result.image = _checked_image(result.image, expected, "an image")
+    if result.variance is not None:
+        result.variance = _checked_image(result.variance, expected, "a variance image")
+    for c in result.checkpoints:
+        c.image = _checked_image(c.image, expected, f"a checkpoint image at {c.spp} spp")
+    return result
+
+
+def _checked_image(image, expected: tuple[int, int, int], what: str) -> np.ndarray:
+    image = np.asarray(image, dtype=np.float32)
+    if image.shape != expected:
+        raise RenderError(f"returned {what} of shape {image.shape}, expected {expected}")
+    return image
+
+
+def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: Reference | None,
+            checkpoints: Sequence[int] = ()) -> RunRecord:
+    """Render and score one renderer; never raises for the renderer's own failures."""
+    rec = RunRecord.new(scene, entry, spp, seed)
+    if rec.status != "ok":
+        return rec
+    try:
+        rec.version = str(entry.renderer.version())
+        result = render_checked(entry, scene, spp, seed, checkpoints)
+    except Exception as e:  # any renderer bug must be reported, not crash the run
+        return rec.failed(e)
+    rec.time_s, rec.info, rec.image = float(result.time_s), dict(result.info), result.image
+    rec.variance, rec.checkpoints = result.variance, list(result.checkpoints)
+    rec.metrics = score(result.image, reference, spp) if reference is not None else \
+        metrics.invalid_pixel_counts(result.image)
+    return rec
+
+
+def run_checkpoints(entry: RendererEntry, scene: Scene, spps: Sequence[int], seed: int,
+                    reference: Reference) -> list[RunRecord]:
+    """One scored record per spp of one (renderer, seed); the last holds the highest-spp image.
+
+    A progressive renderer gives every checkpoint from one render; for one
+    that does not, each missing spp is a render of its own (its time then is
+    that render's time). A failure gives a single failed record.
+    """
+    spps = sorted(set(spps))
+    top = run_one(entry, scene, spps[-1], seed, None, checkpoints=spps)
+    if top.status != "ok":
+        return [top]
+    shots = {c.spp: (c.image, c.time_s) for c in top.checkpoints}
+    shots[top.spp] = (top.image, top.time_s)
+    try:
+        for spp in spps:
+            if spp not in shots:
+                extra = render_checked(entry, scene, spp, seed)
+                shots[spp] = (extra.image, extra.time_s)
+    except Exception as e:  # as in run_one: recorded, not raised
+        return [top.failed(e)]
+    out = []
+    for spp in spps:
+        image, t = shots[spp]
+        rec = RunRecord.new(scene, entry, spp, seed, version=top.version, time_s=float(t), info=dict(top.info))
+        rec.image, rec.metrics = image, score(image, reference, spp)
+        out.append(rec)
+    out[-1].variance = top.variance
+    return out
+
+
+def score(image: np.ndarray, reference: Reference, spp: int) -> dict:
+    """Every metric of ``image`` against the reference, plus its noise yardsticks."""
+    out = metrics.image_metrics(image, reference.image)
+    out.update(stats.noise_yardsticks(image, reference, spp))
+    return out

@@ -1,0 +1,143 @@
+"""The report's charts: convergence, speed/accuracy (Pareto) and bias²/variance, as inline SVG.
+
+- **Convergence plots** (error against spp and against time, log-log,
+  median over seeds with a min–max band, slope guide), one pair per metric
+  of :data:`PLOT_METRICS` with a metric selector. With a single spp per
+  renderer they are omitted with a one-line note (:data:`SINGLE_SPP_NOTE`).
+- **Speed/accuracy chart**: every (renderer, spp) point, medians over seeds
+  (:func:`convergence_table`), with the Pareto frontier
+  (:func:`reports.plots.pareto_front`).
+- **Bias² and variance bars** per renderer from ``summary``.
+
+The SVG is drawn by :mod:`reports.plots`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+import numpy as np
+import pandas as pd
+from markupsafe import Markup
+
+from harness.evaluate import registry
+from reports import plots
+from reports.tables import _finite, _nanstat, _numeric, ok_runs
+
+SINGLE_SPP_NOTE = "single spp: run `cbox converge` for convergence plots"
+
+# Metrics that the convergence and speed/accuracy charts offer: key -> (axis label, guide slope).
+PLOT_METRICS: dict[str, tuple[str, float | None]] = {
+    k: (registry.METRICS[k].axis_label, registry.METRICS[k].guide_slope) for k in registry.PLOT_METRICS}
+_GUIDE_LABELS = {-0.5: "slope −½ (∝ 1/√N)", -1.0: "slope −1 (∝ 1/N)"}
+
+
+def convergence_table(runs: pd.DataFrame, metric_keys: Sequence[str]) -> pd.DataFrame:
+    """One row per (renderer, spp) of the ok runs: median, min and max over seeds of each metric, median time."""
+    ok = ok_runs(runs)
+    rows = []
+    for (name, spp), g in ok.groupby(["renderer", "spp"], sort=False):
+        row = {"renderer": str(name), "spp": float(spp), "n": len(g),
+               "time_s": _nanstat(np.nanmedian, _numeric(g, "time_s"))}
+        for k in metric_keys:
+            v = _numeric(g, k)
+            row[k] = _nanstat(np.nanmedian, v)
+            row[k + "_min"] = _nanstat(np.nanmin, v)
+            row[k + "_max"] = _nanstat(np.nanmax, v)
+        rows.append(row)
+    df = pd.DataFrame(rows)
+    if not len(df):
+        return df
+    order = {n: i for i, n in enumerate(dict.fromkeys(df["renderer"]))}  # renderers in the order of the runs
+    return df.assign(_o=df["renderer"].map(order)).sort_values(["_o", "spp"], kind="stable").drop(columns="_o")
+
+
+def has_convergence(runs: pd.DataFrame) -> bool:
+    """True when some renderer has ok rows at two or more spp: convergence plots then make sense."""
+    ok = ok_runs(runs)
+    return bool(len(ok)) and bool((ok.groupby("renderer")["spp"].nunique() >= 2).any())
+
+
+def _series_for(conv: pd.DataFrame, metric: str, x: str, names: Sequence[str], colors: dict) -> list[plots.Series]:
+    out = []
+    for name in names:
+        g = conv[conv["renderer"] == name].sort_values(x if x == "spp" else "spp")
+        if not len(g) or not np.isfinite(g[metric].to_numpy(float)).any():
+            continue
+        labels = [
+            f"{name}: {int(r['spp'])} spp, {r['time_s']:.3g} s, {metric} = {r[metric]:.4g} "
+            f"(median of {int(r['n'])} seed{'s' if r['n'] != 1 else ''}; range {r[metric + '_min']:.4g}–"
+            f"{r[metric + '_max']:.4g})"
+            for _, r in g.iterrows()
+        ]
+        multi = (g["n"] > 1).any()
+        out.append(plots.Series(
+            name=name, color=colors[name], x=g[x].astype(float).tolist(), y=g[metric].astype(float).tolist(),
+            lo=g[metric + "_min"].astype(float).tolist() if multi else None,
+            hi=g[metric + "_max"].astype(float).tolist() if multi else None, labels=labels,
+        ))
+    return out
+
+
+def _plot_metrics(conv: pd.DataFrame) -> list[str]:
+    if not len(conv):
+        return []
+    out = []
+    for k in PLOT_METRICS:
+        if k in conv.columns:
+            v = conv[k].to_numpy(float)
+            if (np.isfinite(v) & (v > 0)).any():
+                out.append(k)
+    return out
+
+
+def _charts(runs, names, colors) -> dict:
+    ok = ok_runs(runs)
+    conv = convergence_table(runs, [k for k in PLOT_METRICS if k in ok.columns])
+    metric_keys = _plot_metrics(conv)
+    charts: dict[str, Any] = {"metrics": [{"key": k, "label": PLOT_METRICS[k][0]} for k in metric_keys],
+                              "convergence": [], "pareto": [], "has_convergence": has_convergence(runs)}
+    for i, k in enumerate(metric_keys):
+        label, slope = PLOT_METRICS[k]
+        hidden = "" if i == 0 else ' style="display:none"'
+        attrs = f' data-metric="{k}"{hidden}'
+        if charts["has_convergence"]:
+            guide = _GUIDE_LABELS.get(slope, f"slope {slope:g}")
+            spp = plots.line_plot_svg(_series_for(conv, k, "spp", names, colors), uid=f"conv-spp-{k}",
+                                      xlabel="samples per pixel", ylabel=label, guide_slope=slope,
+                                      guide_label=guide, xbase2=True)
+            tim = plots.line_plot_svg(_series_for(conv, k, "time_s", names, colors), uid=f"conv-time-{k}",
+                                      xlabel="wall time (s)", ylabel=label, guide_slope=slope, guide_label=guide)
+            charts["convergence"].append({"key": k, "attrs": Markup(attrs), "spp": Markup(spp),
+                                          "time": Markup(tim)})
+        points = [
+            plots.Point(name=r["renderer"], color=colors[r["renderer"]], x=float(r["time_s"]), y=float(r[k]),
+                        label=f"{r['renderer']}: {int(r['spp'])} spp, {r['time_s']:.3g} s, {k} = {r[k]:.4g}",
+                        tag=f"{int(r['spp'])}")
+            for _, r in conv.iterrows()
+        ]
+        charts["pareto"].append({"key": k, "attrs": Markup(attrs), "svg": Markup(plots.scatter_svg(
+            points, uid=f"pareto-{k}", xlabel="wall time (s)", ylabel=label))})
+    return charts
+
+
+def _bias_variance_chart(summary, names, colors) -> Markup | None:
+    if summary is None or not len(summary) or "bias2" not in summary.columns or "variance" not in summary.columns:
+        return None
+    by_name = {str(r["renderer"]): r for r in summary.to_dict("records")}
+    groups = []
+    for name in names:
+        r = by_name.get(name)
+        if r is None:
+            continue
+        b2, var = float(r.get("bias2", math.nan)), float(r.get("variance", math.nan))
+        if not (math.isfinite(b2) or math.isfinite(var)):
+            continue
+        frac = r.get("bias2_fraction")
+        note = f"bias {100 * float(frac):.0f} %" if _finite(frac) else ""
+        groups.append(plots.BarGroup(name, [b2, var], note))
+    if not groups:
+        return None
+    return Markup(plots.bars_svg(groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")), uid="bias-variance",
+                                 ylabel="mean over pixels and channels"))
