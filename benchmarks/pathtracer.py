@@ -27,7 +27,7 @@ import numpy as np
 
 from harness.scenes.library import resolve_scene
 from harness.scenes.model import Scene, triangle_arrays
-from renderers.core.wavefront import default_threads
+from renderers.core.schedule import default_threads
 from renderers.mitsuba3 import Mitsuba3, scene_dict
 from renderers.pathtracer import PathTracer
 

@@ -1,32 +1,37 @@
 """Unidirectional path tracing with next-event estimation and MIS, on Embree.
 
 The estimator is the standard one of Veach 1997 (thesis §9.2) as in
-pbrt-v4 §13.4 (``PathIntegrator``), for one-sided Lambertian surfaces and
-one-sided diffuse area emitters:
+pbrt-v4 §13.4 (``PathIntegrator``), for one-sided BSDFs (Lambertian today)
+and one-sided diffuse area emitters. This module is the integrator only:
+cameras, rays, geometry, emitters, BSDFs, sample dimensions, threads and
+the film are the shared toolkit's (``renderers/core/``).
 
 - **Next-event estimation**: at each surface vertex an emitter triangle is
   picked in proportion to its power and a point on it uniformly by area
-  (:meth:`SceneGeometry.sample_emitter`); the area pdf is converted to solid
-  angle, ``p_ω = p_A · r² / cos θ_y``.
-- **BSDF sampling**: cosine-weighted directions (pdf cos θ / π), which for a
-  Lambertian BRDF ρ/π make the throughput update exactly ρ.
+  (:func:`renderers.core.lights.sample_emitter`); the area pdf is converted
+  to solid angle, ``p_ω = p_A · r² / cos θ_y``.
+- **BSDF sampling** (:func:`renderers.core.bsdf.bsdf_sample`): for a
+  Lambertian BRDF ρ/π, cosine-weighted directions (pdf cos θ / π), which make
+  the throughput update exactly ρ.
 - **MIS**: both strategies are weighted by the power heuristic (β = 2,
   Veach eq. 9.13). Emission found by a BSDF-sampled ray is weighted against
   the NEE pdf of that point; emission seen by the camera ray is not weighted.
-- **Russian roulette** from the :data:`RR_DEPTH`-th vertex on: a path goes on
-  with probability ``q = min(max_c β_c, Q_MAX)`` and its throughput is
-  divided by ``q``, so the estimate stays unbiased (pbrt-v4 §13.1.5 uses the
-  same rule; Mitsuba 3 too, with 0.95). Capping ``q`` at ``Q_MAX < 1`` ends
-  every path with probability 1 even when every albedo is 1: the expected
-  length past ``RR_DEPTH`` is at most ``1 / (1 - Q_MAX)`` = 20 vertices.
+- **Russian roulette** from the ``rr_depth``-th vertex on (setting, default
+  :data:`RR_DEPTH`): a path goes on with probability
+  ``q = min(max_c β_c, Q_MAX)`` and its throughput is divided by ``q``, so
+  the estimate stays unbiased (pbrt-v4 §13.1.5 uses the same rule; Mitsuba 3
+  too, with 0.95). Capping ``q`` at ``Q_MAX < 1`` ends every path with
+  probability 1 even when every albedo is 1: the expected length past
+  ``rr_depth`` is at most ``1 / (1 - Q_MAX)`` = 20 vertices.
 - ``max_depth`` is the harness's convention (segments from the camera;
   -1 unbounded): emission at vertex k counts if k ≤ max_depth, NEE at vertex
   k adds a segment and counts if k + 1 ≤ max_depth.
 
-Robustness: maths in float64; every pdf division is guarded (a zero pdf
-gives a zero contribution, never NaN or Inf); a surface hit from its back
-side reflects nothing and ends the path (one-sided BSDF, as Mitsuba's
-``diffuse``).
+Random numbers: vertex k of a path uses the named dimensions of
+:mod:`renderers.core.sampler` (emitter pick and point, BSDF direction,
+roulette). Robustness: maths in float64; every pdf division is guarded (a
+zero pdf gives a zero contribution, never NaN or Inf); a surface hit from
+its back side reflects and emits nothing and ends the path.
 """
 
 from __future__ import annotations
@@ -40,157 +45,133 @@ import numpy as np
 from harness.adapters.registry import RenderResult
 from harness.adapters.settings import Setting
 from harness.scenes.model import Scene
-from renderers.core.geometry import SceneGeometry
-from renderers.core.rng import uniform
-from renderers.core.sampling import (INV_PI, camera_basis, camera_ray, cosine_hemisphere, jit, power_heuristic,
-                                     triangle_barycentrics)
-from renderers.core.wavefront import render_wavefront
+from renderers.core.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta
+from renderers.core.camera import camera_basis, camera_rays
+from renderers.core.geometry import SceneGeometry, hit_distance, offset_origin, triangle_normal
+from renderers.core.lights import emits, emitter_cos, sample_emitter, solid_angle_pdf, solid_angle_pdf_along
+from renderers.core.rays import (add_unoccluded, head, ray_buffer, set_path, set_ray, set_shadow, shadow_buffer,
+                                 shadow_segment)
+from renderers.core.sampler import BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, vertex_1d, vertex_2d
+from renderers.core.sampling import jit, power_heuristic
+from renderers.core.schedule import render_image
 
 RR_DEPTH = 5
 Q_MAX = 0.99
-#: Random dimensions per vertex: emitter choice, 2 for the point on it, 2 for the BSDF direction, RR.
-_DIMS = 6
-
-
-class _Rays:
-    """A wavefront's ray buffers: float64 for shading, float32 copies for embreex."""
-
-    def __init__(self, m: int):
-        self.o, self.d = np.empty((m, 3)), np.empty((m, 3))
-        self.o32, self.d32 = np.empty((m, 3), np.float32), np.empty((m, 3), np.float32)
-        self.path = np.empty(m, np.int64)
-        self.beta = np.empty((m, 3))
-        self.pdf = np.empty(m)  # solid-angle pdf of the BSDF sample that made the ray (0: camera ray)
-
-    def fields(self):
-        return self.o, self.d, self.o32, self.d32, self.path, self.beta, self.pdf
 
 
 @jit
-def _camera_rays(basis, width, height, first, pixels, key, o, d, o32, d32, path, beta, pdf):
-    """Camera rays for paths first .. first + len(path) - 1 (path j sees pixel j mod pixels)."""
-    for i in range(path.size):
-        j = first + i
-        d0, d1, d2 = camera_ray(basis, width, height, j % pixels, uniform(key, j, 0), uniform(key, j, 1))
-        for c in range(3):
-            o[i, c] = basis[0, c]
-            o32[i, c] = basis[0, c]
-            beta[i, c] = 1.0
-        d[i, 0], d[i, 1], d[i, 2] = d0, d1, d2
-        d32[i, 0], d32[i, 1], d32[i, 2] = d0, d1, d2
-        path[i] = i
-        pdf[i] = 0.0
+def _emission_weight(depth, pdf_bsdf, pa, t, cos_o) -> float:
+    """MIS weight of emission found at distance ``t`` by a ray sampled with ``pdf_bsdf``; 1 for camera rays."""
+    return 1.0 if depth == 1 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))
 
 
 @jit
-def _shade(prim, o, d, path, beta, pdf_bsdf, key, first, depth, extend, roulette,
-           v0, e1, e2, nrm, rho, le, light_pdf_area, emitter_ids, emitter_cdf, eps,
-           L, sh_o, sh_d, sh_t, sh_path, sh_c, nx_o, nx_d, nx_o32, nx_d32, nx_path, nx_beta, nx_pdf):
-    """Shade one bounce of a wavefront.
+def _light_sample(x, n, mat, y, ny, pe):
+    """NEE from ``x`` (normal ``n``) to emitter point ``y`` (normal ``ny``, area pdf ``pe``).
 
-    For each ray that hit a surface (``prim >= 0``): add the emission it found
-    (MIS-weighted except for camera rays, depth 1); then, if ``extend``
-    (max_depth allows another segment), make one NEE shadow ray (``sh_*``:
-    float32 origin, direction, tfar; path; unoccluded contribution) and one
-    continuation ray (``nx_*``), with Russian roulette if ``roulette``.
-    ``path`` holds indices local to the unit; random numbers are drawn for
-    path ``first + path``, its index in the pass. Returns (shadow rays, next rays).
+    Returns (cos θ_x, g) with g = cos θ_x cos θ_y / r² · w_light / p_A, the
+    factor that turns β·f·Le into the estimate; cos θ_x = 0 when the sample
+    gives nothing (emitter seen from behind, receiver facing away).
+    """
+    w0, w1, w2 = y[0] - x[0], y[1] - x[1], y[2] - x[2]
+    dist2 = w0 * w0 + w1 * w1 + w2 * w2
+    if not (dist2 > 0.0 and pe > 0.0):
+        return 0.0, 0.0
+    dist = math.sqrt(dist2)
+    wi = (w0 / dist, w1 / dist, w2 / dist)
+    cos_x = n[0] * wi[0] + n[1] * wi[1] + n[2] * wi[2]
+    cos_y = emitter_cos(ny, wi)
+    if not (cos_x > 0.0 and emits(cos_y)):
+        return 0.0, 0.0
+    w = power_heuristic(solid_angle_pdf(pe, dist2, cos_y), bsdf_pdf(mat, cos_x))
+    g = cos_x * cos_y / dist2 * w / pe
+    return cos_x, g
+
+
+@jit
+def _continue_path(mat, cos_w, f, beta, u_rr, roulette):
+    """Throughput after a BSDF sample at cosine ``cos_w`` with weight ``f``: (alive, β', pdf of the sample).
+
+    Russian roulette with the vertex's number ``u_rr`` when ``roulette``.
+    """
+    if cos_w <= 0.0:
+        return False, beta, 0.0  # zero-pdf direction
+    b0, b1, b2 = beta[0] * f[0], beta[1] * f[1], beta[2] * f[2]
+    bmax = max(b0, b1, b2)
+    if bmax <= 0.0:
+        return False, beta, 0.0
+    if roulette:
+        survive = min(bmax, Q_MAX)
+        # Written so a NaN throughput ends the path (NaN < x is false): its NaN
+        # has already reached L, where the NaN count reports it.
+        if not u_rr < survive:
+            return False, beta, 0.0
+        b0, b1, b2 = b0 / survive, b1 / survive, b2 / survive
+    return True, (b0, b1, b2), bsdf_pdf(mat, cos_w)
+
+
+# The kernel is the algorithm of one bounce (emission, NEE, continuation) and
+# reads/writes the buffers itself: helpers that take arrays and branch cost
+# reference counting and inlining (renderers/core/rays.py), so they stay here.
+@jit
+def _shade(prim, rays, key, first, depth, extend, roulette, geo, L, shadow, nxt):
+    """Shade one bounce of a wavefront: ray i of ``rays`` hit triangle ``prim[i]`` (-1: missed).
+
+    Adds the emission each ray found; then, if ``extend`` (max_depth allows
+    another segment), writes one NEE shadow segment into ``shadow`` and one
+    continuation ray into ``nxt`` per path, with Russian roulette if
+    ``roulette``. Ray paths are indices local to the unit; random numbers are
+    drawn for path ``first + path``, its index in the pass. Returns (shadow
+    segments, next rays).
     """
     ns = 0
     nn = 0
-    n_emit = emitter_ids.size
-    dim0 = 2 + (depth - 1) * 6  # this vertex's random dimensions (2 went to the camera ray)
     for i in range(prim.size):
         p = prim[i]
         if p < 0:
             continue
-        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
-        n0, n1, n2 = nrm[p, 0], nrm[p, 1], nrm[p, 2]
-        cos_o = -(dx * n0 + dy * n1 + dz * n2)
+        d = (rays.d[i, 0], rays.d[i, 1], rays.d[i, 2])
+        n = triangle_normal(geo, p)
+        cos_o = -(d[0] * n[0] + d[1] * n[1] + d[2] * n[2])
         if cos_o <= 0.0:
             continue  # back side (or grazing): one-sided emitters and BSDFs give nothing, the path ends
-        # Distance to the triangle's plane in float64 (Embree gave the triangle).
-        ti = ((v0[p, 0] - o[i, 0]) * n0 + (v0[p, 1] - o[i, 1]) * n1 + (v0[p, 2] - o[i, 2]) * n2) / -cos_o
-        if ti < 0.0:
-            ti = 0.0
-        x0, x1, x2 = o[i, 0] + ti * dx, o[i, 1] + ti * dy, o[i, 2] + ti * dz
-        q = path[i]
-        j = first + q
-        pa = light_pdf_area[p]
+        o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
+        t = hit_distance(geo, p, o, d, cos_o)
+        x = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
+        q = rays.path[i]
+        beta = (rays.beta[i, 0], rays.beta[i, 1], rays.beta[i, 2])
+        pa = geo.light_pdf_area[p]
         if pa > 0.0:
-            w = 1.0 if depth == 1 else power_heuristic(pdf_bsdf[i], pa * ti * ti / cos_o)
+            w = _emission_weight(depth, rays.pdf[i], pa, t, cos_o)
             for c in range(3):
-                L[q, c] += beta[i, c] * le[p, c] * w
+                L[q, c] += beta[c] * geo.radiance[p, c] * w
         if not extend:
             continue
-
-        # Next-event estimation: a point on an emitter triangle chosen by power.
-        if n_emit > 0:
-            k = min(np.searchsorted(emitter_cdf, uniform(key, j, dim0), side="right"), n_emit - 1)
-            e = emitter_ids[k]
-            b1, b2 = triangle_barycentrics(uniform(key, j, dim0 + 1), uniform(key, j, dim0 + 2))
-            y0 = v0[e, 0] + b1 * e1[e, 0] + b2 * e2[e, 0]
-            y1 = v0[e, 1] + b1 * e1[e, 1] + b2 * e2[e, 1]
-            y2 = v0[e, 2] + b1 * e1[e, 2] + b2 * e2[e, 2]
-            w0, w1, w2 = y0 - x0, y1 - x1, y2 - x2
-            dist2 = w0 * w0 + w1 * w1 + w2 * w2
-            pe = light_pdf_area[e]
-            if dist2 > 0.0 and pe > 0.0:
-                dist = math.sqrt(dist2)
-                w0, w1, w2 = w0 / dist, w1 / dist, w2 / dist
-                cos_x = n0 * w0 + n1 * w1 + n2 * w2
-                cos_y = -(nrm[e, 0] * w0 + nrm[e, 1] * w1 + nrm[e, 2] * w2)
-                if cos_x > 0.0 and cos_y > 0.0:
-                    # Shadow ray between the two offset points, stopping short of the light.
-                    a0, a1, a2 = x0 + eps * n0, x1 + eps * n1, x2 + eps * n2
-                    s0 = y0 + eps * nrm[e, 0] - a0
-                    s1 = y1 + eps * nrm[e, 1] - a1
-                    s2 = y2 + eps * nrm[e, 2] - a2
-                    sl = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-                    if sl > 0.0:
-                        w = power_heuristic(pe * dist2 / cos_y, cos_x * INV_PI)
-                        g = cos_x * cos_y / dist2 * w / pe
-                        sh_o[ns, 0], sh_o[ns, 1], sh_o[ns, 2] = a0, a1, a2
-                        sh_d[ns, 0], sh_d[ns, 1], sh_d[ns, 2] = s0 / sl, s1 / sl, s2 / sl
-                        sh_t[ns] = sl * (1.0 - 1e-6)
-                        sh_path[ns] = q
-                        for c in range(3):
-                            sh_c[ns, c] = beta[i, c] * rho[p, c] * INV_PI * le[e, c] * g
-                        ns += 1
-
-        # BSDF sampling: for cosine-weighted Lambertian, f·cos/pdf = ρ.
-        wx, wy, wz, cos_w = cosine_hemisphere(n0, n1, n2, uniform(key, j, dim0 + 3), uniform(key, j, dim0 + 4))
-        if cos_w <= 0.0:
-            continue  # zero-pdf direction
-        b0, b1_, b2_ = beta[i, 0] * rho[p, 0], beta[i, 1] * rho[p, 1], beta[i, 2] * rho[p, 2]
-        bmax = max(b0, b1_, b2_)
-        if bmax <= 0.0:
-            continue
-        if roulette:
-            survive = min(bmax, Q_MAX)
-            # Written so a NaN throughput ends the path (NaN < x is false): its NaN
-            # has already reached L, where the NaN count reports it.
-            if not uniform(key, j, dim0 + 5) < survive:
-                continue
-            b0, b1_, b2_ = b0 / survive, b1_ / survive, b2_ / survive
-        ox, oy, oz = x0 + eps * n0, x1 + eps * n1, x2 + eps * n2
-        nx_o[nn, 0], nx_o[nn, 1], nx_o[nn, 2] = ox, oy, oz
-        nx_o32[nn, 0], nx_o32[nn, 1], nx_o32[nn, 2] = ox, oy, oz
-        nx_d[nn, 0], nx_d[nn, 1], nx_d[nn, 2] = wx, wy, wz
-        nx_d32[nn, 0], nx_d32[nn, 1], nx_d32[nn, 2] = wx, wy, wz
-        nx_path[nn] = q
-        nx_beta[nn, 0], nx_beta[nn, 1], nx_beta[nn, 2] = b0, b1_, b2_
-        nx_pdf[nn] = cos_w * INV_PI
-        nn += 1
+        j = first + q
+        mat = geo.material[p]
+        rho = (geo.reflectance[p, 0], geo.reflectance[p, 1], geo.reflectance[p, 2])
+        if geo.emitter_ids.size > 0 and not is_delta(mat):
+            u = vertex_2d(key, j, depth, EMITTER_U)
+            y, ny, e, pe = sample_emitter(vertex_1d(key, j, depth, EMITTER_PICK), u[0], u[1], geo)
+            cos_x, g = _light_sample(x, n, mat, y, ny, pe)
+            if cos_x > 0.0:
+                # Between the two offset points, stopping short of the light (which must not shadow itself).
+                a = offset_origin(x, n, geo.offset)
+                sd, tfar, sl = shadow_segment(a, offset_origin(y, ny, geo.offset))
+                if sl > 0.0:
+                    set_shadow(shadow, ns, a, sd, tfar, q)
+                    for c in range(3):
+                        shadow.c[ns, c] = bsdf_eval(mat, beta[c] * rho[c], cos_x) * geo.radiance[e, c] * g
+                    ns += 1
+        u = vertex_2d(key, j, depth, BSDF_U)
+        wi, cos_w, f = bsdf_sample(mat, n, rho, u[0], u[1])
+        alive, b, pdf = _continue_path(mat, cos_w, f, beta, vertex_1d(key, j, depth, ROULETTE) if roulette else 1.0,
+                                       roulette)
+        if alive:
+            set_ray(nxt, nn, offset_origin(x, n, geo.offset), wi)
+            set_path(nxt, nn, q, b, pdf)
+            nn += 1
     return ns, nn
-
-
-@jit
-def _add_visible(L, sh_path, sh_c, visible):
-    for j in range(sh_path.size):
-        if visible[j]:
-            for c in range(3):
-                L[sh_path[j], c] += sh_c[j, c]
 
 
 def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: int, key: np.uint64,
@@ -199,23 +180,20 @@ def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels
     m = stop - first
     cam = scene.camera
     unbounded = scene.max_depth < 0
-    g = geom
-    tables = (g.v0, g.e1, g.e2, g.normal, g.reflectance, g.radiance, g.light_pdf_area, g.emitter_ids,
-              g.emitter_cdf, g.offset)
+    geo = geom.tables()
     L = np.zeros((m, 3))
-    cur, nxt = _Rays(m), _Rays(m)  # double buffer: shade reads one wavefront, writes the next
-    sh_o, sh_d = np.empty((m, 3), np.float32), np.empty((m, 3), np.float32)
-    sh_t, sh_path, sh_c = np.empty(m, np.float32), np.empty(m, np.int64), np.empty((m, 3))
-    _camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, key, *cur.fields())
+    cur, nxt = ray_buffer(m), ray_buffer(m)  # double buffer: shade reads one wavefront, writes the next
+    shadow = shadow_buffer(m)
+    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, key, cur)
     n, depth = m, 1  # live rays; segments so far, the current ray included
     while n:
-        prim = geom.intersect(cur.o32[:n], cur.d32[:n])
+        rays = head(cur, n)
+        prim = geom.intersect(rays.o32, rays.d32)
         extend = unbounded or depth + 1 <= scene.max_depth
-        o, d, _, _, path, beta, pdf = (a[:n] for a in cur.fields())
-        ns, n = _shade(prim, o, d, path, beta, pdf, key, first, depth, extend, depth >= rr_depth,
-                       *tables, L, sh_o, sh_d, sh_t, sh_path, sh_c, *nxt.fields())
+        ns, n = _shade(prim, rays, key, first, depth, extend, depth >= rr_depth, geo, L, shadow, nxt)
         if ns:
-            _add_visible(L, sh_path[:ns], sh_c[:ns], geom.unoccluded(sh_o[:ns], sh_d[:ns], sh_t[:ns]))
+            seg = head(shadow, ns)
+            add_unoccluded(L, seg, geom.unoccluded(seg.o, seg.d, seg.t))
         cur, nxt = nxt, cur
         depth += 1
     return L
@@ -254,7 +232,7 @@ class PathTracer:
         trace_paths(geom, scene, 0, 1, 1, np.uint64(0), rr_depth)
         geom.rays = 0
         setup_s = time.perf_counter() - t0
-        result = render_wavefront(scene, spp, seed, lambda *unit: trace_paths(geom, scene, *unit, rr_depth),
-                                  checkpoints, self.threads, {"rr_depth": rr_depth, "rr_q_max": Q_MAX})
+        result = render_image(scene, spp, seed, lambda *unit: trace_paths(geom, scene, *unit, rr_depth),
+                              checkpoints, self.threads, {"rr_depth": rr_depth, "rr_q_max": Q_MAX})
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
         return result

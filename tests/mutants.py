@@ -1,15 +1,23 @@
 """Deliberately broken copies of our path tracer, for measuring the CI gate's power.
 
-Each :class:`Mutant` is a realistic bug, written as a source patch of
-``renderers/pathtracer.py``: an exact ``old`` snippet replaced by ``new``.
-:func:`load_mutant` writes the patched source to a real file (so numba's
-``cache=True`` has a locator) as a uniquely named module, imports it, and
-returns a :class:`harness.adapters.registry.RendererEntry` named ``pathtracer`` that
-:func:`harness.gate.run.run_gate` takes as an override.
+Each :class:`Mutant` is a realistic bug, written as exact source patches: an
+``old`` snippet replaced by ``new`` in ``renderers/pathtracer.py`` (the
+integrator) or in a module of the toolkit it is built on (``renderers/core/``),
+wherever the line now lives. :func:`load_mutant` writes the patched sources to
+real files (so numba's ``cache=True`` has a locator) as uniquely named
+modules, imports them, and returns a :class:`harness.adapters.registry.RendererEntry`
+named ``pathtracer`` that :func:`harness.gate.checks.run_gate` takes as an override.
 
-Every patch must apply exactly once: if a refactor of the path tracer moves or
-rewrites a snippet, :func:`patched_source` raises instead of silently testing
-an unmutated renderer. ``renderers/pathtracer.py`` itself is never modified.
+A mutant is a set of modules: the integrator is ``cbox_mutant_<name>``; each
+patched core module ``renderers/core/<stem>.py`` becomes
+``cbox_mutant_<name>__<stem>``, and so does every core module that imports one
+of those (so no part of the renderer still sees the unpatched code); their
+``from renderers.core.<stem> import`` lines are pointed at the copies.
+Unpatched core modules are shared with the real renderer.
+
+Every patch must apply exactly once: if a refactor moves or rewrites a
+snippet, :func:`patched_sources` raises instead of silently testing an
+unmutated renderer. The sources themselves are never modified.
 
 Used by ``tests/test_gate_power.py`` and ``benchmarks/gate_power.py`` only.
 """
@@ -17,20 +25,34 @@ Used by ``tests/test_gate_power.py`` and ``benchmarks/gate_power.py`` only.
 from __future__ import annotations
 
 import importlib.util
+import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 from harness.adapters.registry import RendererEntry
 
-SOURCE = Path(__file__).resolve().parent.parent / "renderers" / "pathtracer.py"
+ROOT = Path(__file__).resolve().parent.parent
+PATHTRACER = "renderers/pathtracer.py"
+SOURCE = ROOT / PATHTRACER
+CORE = "renderers/core"
+
+
+class Patch(NamedTuple):
+    old: str  # occurs exactly once in ``file``
+    new: str
+    file: str = PATHTRACER  # relative to the repository root
 
 
 @dataclass(frozen=True)
 class Mutant:
     name: str
     description: str  # the bug, as a developer would make it
-    patches: tuple[tuple[str, str], ...]  # (old, new): each old occurs exactly once in the source
+    patches: tuple[Patch, ...]
+
+    def __post_init__(self):
+        object.__setattr__(self, "patches", tuple(Patch(*p) for p in self.patches))
 
 
 MUTANTS: tuple[Mutant, ...] = (
@@ -42,24 +64,27 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "light_pdf_2pct",
         "light pdf 2% too high where NEE reads it (pe = light_pdf_area[e] * 1.02, e.g. a stale area table)",
-        (("pe = light_pdf_area[e]\n", "pe = light_pdf_area[e] * 1.02\n"),),
+        (("pe = sample_emitter(vertex_1d(key, j, depth, EMITTER_PICK), u[0], u[1], geo)\n",
+          "pe = sample_emitter(vertex_1d(key, j, depth, EMITTER_PICK), u[0], u[1], geo)\n"
+          "            pe = pe * 1.02\n"),),
     ),
     Mutant(
         "rr_no_compensation",
         "Russian roulette kills paths but survivors are not divided by the survival probability",
-        (("            b0, b1_, b2_ = b0 / survive, b1_ / survive, b2_ / survive\n", ""),),
+        (("        b0, b1, b2 = b0 / survive, b1 / survive, b2 / survive\n", ""),),
     ),
     Mutant(
         "mis_emitter_double",
         "emission found by BSDF-sampled rays weighted 1 instead of its MIS weight (emitter counted twice)",
-        (("w = 1.0 if depth == 1 else power_heuristic(pdf_bsdf[i], pa * ti * ti / cos_o)", "w = 1.0"),),
+        (("return 1.0 if depth == 1 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))",
+          "return 1.0"),),
     ),
     Mutant(
         "camera_half_pixel",
         "pixel jitter recentred to [-0.5, 0.5) though camera_ray adds it to the pixel corner: "
         "image shifted half a pixel",
-        (("j % pixels, uniform(key, j, 0), uniform(key, j, 1))",
-          "j % pixels, uniform(key, j, 0) - 0.5, uniform(key, j, 1) - 0.5)"),),
+        (("camera_ray(basis, width, height, j % pixels, u, v)",
+          "camera_ray(basis, width, height, j % pixels, u - 0.5, v - 0.5)", f"{CORE}/camera.py"),),
     ),
     Mutant(
         "swap_rb",
@@ -70,9 +95,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "energy_loss_1pct",
         "an 'energy-conserving' fudge: the BSDF-sampled throughput multiplied by 0.99 at every bounce "
         "(indirect light only; the camera-visible direct light is untouched)",
-        (("b0, b1_, b2_ = beta[i, 0] * rho[p, 0], beta[i, 1] * rho[p, 1], beta[i, 2] * rho[p, 2]",
-          "b0, b1_, b2_ = (0.99 * beta[i, 0] * rho[p, 0], 0.99 * beta[i, 1] * rho[p, 1],\n"
-          "                        0.99 * beta[i, 2] * rho[p, 2])"),),
+        (("b0, b1, b2 = beta[0] * f[0], beta[1] * f[1], beta[2] * f[2]",
+          "b0, b1, b2 = 0.99 * beta[0] * f[0], 0.99 * beta[1] * f[1], 0.99 * beta[2] * f[2]"),),
     ),
     Mutant(
         "nan_one_pixel",
@@ -90,39 +114,37 @@ MUTANTS: tuple[Mutant, ...] = (
         "nan_throughput",
         "the same lens-distortion weight r'/r folded into the camera ray's throughput: a NaN throughput at "
         "the principal-point pixel, which Russian roulette never ends (u >= NaN is false)",
-        (("        for c in range(3):\n            o[i, c] = basis[0, c]\n            o32[i, c] = basis[0, c]\n"
-          "            beta[i, c] = 1.0\n",
+        (("        set_path(rays, i, i, (1.0, 1.0, 1.0), 0.0)\n",
           "        px = j % pixels\n"
           "        r = math.hypot(px % width - width // 2, px // width - height // 2)\n"
           "        k1 = 0.0  # no radial distortion\n"
           "        weight = r * (1.0 + k1 * r * r) / r\n"
-          "        for c in range(3):\n            o[i, c] = basis[0, c]\n            o32[i, c] = basis[0, c]\n"
-          "            beta[i, c] = weight\n"),),
+          "        set_path(rays, i, i, (weight, weight, weight), 0.0)\n", f"{CORE}/camera.py"),),
     ),
     Mutant(
         "shadow_tfar_past_light",
         "shadow-ray tfar lengthened (sl * (1 + 1e-3), a sign slip) so it reaches the emitter: "
         "the light occludes itself",
-        (("sh_t[ns] = sl * (1.0 - 1e-6)", "sh_t[ns] = sl * (1.0 + 1e-3)"),),
+        (("sl * SHADOW_TFAR_REL, sl", "sl * (1.0 + 1e-3), sl", f"{CORE}/rays.py"),),
     ),
     Mutant(
         "mis_pdf_area_measure",
         "MIS weight of BSDF-found emission compares the cosine pdf (solid angle) with the light pdf "
         "left in area measure (no r²/cos θ_y conversion)",
-        (("power_heuristic(pdf_bsdf[i], pa * ti * ti / cos_o)", "power_heuristic(pdf_bsdf[i], pa)"),),
+        (("power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))", "power_heuristic(pdf_bsdf, pa)"),),
     ),
     Mutant(
         "offset_minus_n",
         "continuation-ray origin offset along −n instead of +n: the ray starts behind the surface "
         "and hits it from the back (self-intersection ends every path)",
-        (("ox, oy, oz = x0 + eps * n0, x1 + eps * n1, x2 + eps * n2",
-          "ox, oy, oz = x0 - eps * n0, x1 - eps * n1, x2 - eps * n2"),),
+        (("set_ray(nxt, nn, offset_origin(x, n, geo.offset), wi)",
+          "set_ray(nxt, nn, offset_origin(x, n, -geo.offset), wi)"),),
     ),
     Mutant(
         "cosine_pdf_mismatch",
         "continuation ray's pdf recorded as uniform-hemisphere 1/(2π) though it is sampled cosine-weighted "
         "(MIS weights no longer sum to 1)",
-        (("nx_pdf[nn] = cos_w * INV_PI", "nx_pdf[nn] = 0.5 * INV_PI"),),
+        (("return True, (b0, b1, b2), bsdf_pdf(mat, cos_w)", "return True, (b0, b1, b2), 0.5 / math.pi"),),
     ),
     Mutant(
         "two_sided_emitter",
@@ -130,12 +152,12 @@ MUTANTS: tuple[Mutant, ...] = (
         "NEE)",
         (("        if cos_o <= 0.0:\n            continue  # back side",
           "        if cos_o <= 0.0:\n"
-          "            if light_pdf_area[p] > 0.0:  # area lights emit on both sides; NEE never samples the back\n"
+          "            if geo.light_pdf_area[p] > 0.0:  # area lights emit on both sides; NEE never samples the back\n"
           "                for c in range(3):\n"
-          "                    L[path[i], c] += beta[i, c] * le[p, c]\n"
+          "                    L[rays.path[i], c] += rays.beta[i, c] * geo.radiance[p, c]\n"
           "            continue  # back side"),
-         ("cos_y = -(nrm[e, 0] * w0 + nrm[e, 1] * w1 + nrm[e, 2] * w2)",
-          "cos_y = abs(nrm[e, 0] * w0 + nrm[e, 1] * w1 + nrm[e, 2] * w2)")),
+         ("return -(ny[0] * w[0] + ny[1] * w[1] + ny[2] * w[2])",
+          "return abs(ny[0] * w[0] + ny[1] * w[1] + ny[2] * w[2])", f"{CORE}/lights.py")),
     ),
 )
 
@@ -157,49 +179,106 @@ assert ISOLATED <= set(BY_NAME)
 
 
 def original_source() -> str:
+    """The integrator's source, ``renderers/pathtracer.py``."""
     return SOURCE.read_text(encoding="utf-8")
 
 
-def patched_source(mutant: Mutant | str, source: str | None = None) -> str:
-    """The path tracer's source with ``mutant``'s patches; AssertionError if a patch does not apply exactly once."""
+def module_name(name: str, file: str = PATHTRACER) -> str:
+    """The mutant's module for ``file``: ``cbox_mutant_<name>`` for the integrator, ``..__<stem>`` for core."""
+    return f"cbox_mutant_{name}" if file == PATHTRACER else f"cbox_mutant_{name}__{Path(file).stem}"
+
+
+def _core_module(file: str) -> str:
+    return file[: -len(".py")].replace("/", ".")
+
+
+def _imports(text: str, module: str) -> bool:
+    return re.search(rf"^\s*from {re.escape(module)} import ", text, re.M) is not None
+
+
+def _redirect(text: str, module: str, to: str) -> str:
+    return re.sub(rf"^(\s*from ){re.escape(module)}( import )", rf"\g<1>{to}\g<2>", text, flags=re.M)
+
+
+def patched_sources(mutant: Mutant | str, sources: dict[str, str] | None = None) -> dict[str, str]:
+    """Every module of the mutant: {file it replaces: patched text with imports redirected to the copies}.
+
+    ``sources`` overrides the text of some files (default: read from the
+    repository). AssertionError if a patch does not apply exactly once, or
+    if the mutant changes nothing.
+    """
     m = BY_NAME[mutant] if isinstance(mutant, str) else mutant
-    original = original_source() if source is None else source
-    text = original
-    for old, new in m.patches:
-        count = text.count(old)
-        assert count == 1, (f"mutant {m.name!r}: the snippet {old!r} occurs {count} times in {SOURCE.name} "
+    sources = dict(sources or {})
+
+    def read(file: str) -> str:
+        if file not in sources:
+            sources[file] = (ROOT / file).read_text(encoding="utf-8")
+        return sources[file]
+
+    texts = {PATHTRACER: read(PATHTRACER)}
+    for p in m.patches:
+        text = texts.get(p.file, read(p.file))
+        count = text.count(p.old)
+        assert count == 1, (f"mutant {m.name!r}: the snippet {p.old!r} occurs {count} times in {p.file} "
                             f"(expected exactly once); update tests/mutants.py to the refactored source")
-        text = text.replace(old, new)
-    assert text != original, f"mutant {m.name!r} does not change the source"
-    return text
+        texts[p.file] = text.replace(p.old, p.new)
+    assert any(texts[f] != read(f) for f in texts), f"mutant {m.name!r} does not change the source"
+    # Core modules that import a copied one are copied too, until nothing more does.
+    core = sorted(str(f.relative_to(ROOT)) for f in (ROOT / CORE).glob("*.py"))
+    copied = {f for f in texts if f != PATHTRACER}
+    while True:
+        more = {f for f in core if f not in copied and any(_imports(read(f), _core_module(c)) for c in copied)}
+        if not more:
+            break
+        copied |= more
+        texts.update({f: read(f) for f in more})
+    for f in texts:
+        for c in copied:
+            texts[f] = _redirect(texts[f], _core_module(c), module_name(m.name, c))
+    return texts
 
 
-def module_name(name: str) -> str:
-    return f"cbox_mutant_{name}"
+def patched_source(mutant: Mutant | str, source: str | None = None) -> str:
+    """The integrator's source for ``mutant`` (``source``: the integrator's text to patch instead of the file's)."""
+    return patched_sources(mutant, None if source is None else {PATHTRACER: source})[PATHTRACER]
 
 
 def load_module(name: str, tmp_dir: str | Path):
-    """Write the mutant's source to ``tmp_dir/cbox_mutant_<name>.py`` and import it (cached per process)."""
-    mod_name = module_name(name)
-    text = patched_source(name)
-    path = Path(tmp_dir) / f"{mod_name}.py"
-    loaded = sys.modules.get(mod_name)
-    if loaded is not None and getattr(loaded, "__file__", None) == str(path) and path.exists() \
-            and path.read_text(encoding="utf-8") == text:
+    """Write the mutant's modules to ``tmp_dir/cbox_mutant_<name>*.py``, import them, return the integrator.
+
+    Cached per process. Either every file is rewritten or none: numba's cache
+    of the integrator's kernels does not notice a change in a core module they
+    inline, only in their own file.
+    """
+    files = {module_name(name, f): (Path(tmp_dir) / f"{module_name(name, f)}.py", text)
+             for f, text in patched_sources(name).items()}
+    current = all(path.exists() and path.read_text(encoding="utf-8") == text for path, text in files.values())
+    top = module_name(name)
+    loaded = sys.modules.get(top)
+    if current and loaded is not None and getattr(loaded, "__file__", None) == str(files[top][0]):
         return loaded
-    path.parent.mkdir(parents=True, exist_ok=True)
-    # Rewrite only when the text changed: an unchanged file keeps its stamp, so numba's cache stays valid.
-    if not path.exists() or path.read_text(encoding="utf-8") != text:
-        path.write_text(text, encoding="utf-8")
-    spec = importlib.util.spec_from_file_location(mod_name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[mod_name] = module
-    try:
-        spec.loader.exec_module(module)
-    except BaseException:
-        del sys.modules[mod_name]
-        raise
-    return module
+    Path(tmp_dir).mkdir(parents=True, exist_ok=True)
+    if not current:
+        for path, text in files.values():
+            path.write_text(text, encoding="utf-8")
+    for mod in files:
+        sys.modules.pop(mod, None)
+    # Dependencies first: a module is executed once every copy it imports is.
+    pending = dict(files)
+    while pending:
+        mod = next(k for k, (_, text) in pending.items()
+                   if not any(_imports(text, d) for d in pending if d != k))
+        path, _ = pending.pop(mod)
+        spec = importlib.util.spec_from_file_location(mod, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[mod] = module
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            for m in files:
+                sys.modules.pop(m, None)
+            raise
+    return sys.modules[top]
 
 
 def load_mutant(name: str, tmp_dir: str | Path) -> RendererEntry:

@@ -39,3 +39,20 @@ def test_pure_function_of_its_inputs():
     assert uniform(k, 123, 4) == uniform(k, 123, 4)
     assert uniform(k, 123, 4) != uniform(k, 124, 4)
     assert pass_key(7, 3) == k and pass_key(7, 4) != k
+
+
+def test_kernel_caches_follow_every_renderer_source(tmp_path):
+    """An edit of any renderer module drops numba's cached kernels (inlined toolkit code is not tracked by numba)."""
+    from renderers.core.sampling import drop_stale_kernel_caches
+
+    (tmp_path / "core").mkdir()
+    (tmp_path / "core" / "lights.py").write_text("x = 1\n")
+    cache = tmp_path / "__pycache__"
+    cache.mkdir()
+    (cache / "pathtracer._shade-1.py311.nbi").write_text("stale")
+    assert drop_stale_kernel_caches(tmp_path)
+    assert not (cache / "pathtracer._shade-1.py311.nbi").exists()
+    (cache / "pathtracer._shade-1.py311.nbi").write_text("fresh")
+    assert not drop_stale_kernel_caches(tmp_path)  # nothing changed: the cache is kept
+    (tmp_path / "core" / "lights.py").write_text("x = 2\n")
+    assert drop_stale_kernel_caches(tmp_path) and not (cache / "pathtracer._shade-1.py311.nbi").exists()

@@ -1,19 +1,66 @@
-"""Sampling routines shared by our renderers.
+"""Generic sample warps shared by our renderers, and the ``jit`` they are compiled with.
 
-They are scalar numba functions (``nogil``), called from each renderer's
-kernels. Everything is float64.
+Scalar numba functions (``nogil``) that turn uniform numbers into points and
+directions, called from every renderer's kernels; everything is float64.
+What the numbers mean for a path (which dimension feeds which decision) is
+:mod:`renderers.core.sampler`'s; cameras are :mod:`renderers.core.camera`'s.
+
+:data:`jit` is the one decorator of every kernel and helper of ours:
+``cache=True`` (compiled once per machine), ``nogil`` (threads run kernels in
+parallel) and ``error_model="numpy"`` (a division by zero gives inf/NaN
+instead of raising, so no zero checks in inner loops; every pdf division is
+guarded by its caller instead).
+
+numba's cache checks only the source file of the function it compiled, not
+the toolkit functions that were inlined into it: after an edit of
+``renderers/core/lights.py`` the path tracer's cached kernel would still run
+the old code. :func:`drop_stale_kernel_caches` therefore keys every cache
+under ``renderers/`` on a hash of all our renderer sources.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+import os
+from pathlib import Path
 
 import numba
-import numpy as np
-
-from harness.scenes.model import Camera
 
 INV_PI = 1.0 / math.pi
+_RENDERERS = Path(__file__).resolve().parents[1]
+_STAMP = "cbox-kernel-sources.sha256"
+
+
+def drop_stale_kernel_caches(root: Path = _RENDERERS) -> bool:
+    """Delete numba's cached kernels under ``root`` if any ``.py`` below it changed since they were made.
+
+    Returns True when caches were dropped. Cheap (one hash of a few hundred
+    KB of source per process), and a read-only install is left alone.
+    """
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
+    want = digest.hexdigest()
+    stamp = root / "__pycache__" / _STAMP
+    try:
+        if stamp.read_text() == want:
+            return False
+    except OSError:
+        pass
+    try:
+        for cached in [*root.rglob("__pycache__/*.nbi"), *root.rglob("__pycache__/*.nbc")]:
+            cached.unlink(missing_ok=True)
+        stamp.parent.mkdir(exist_ok=True)
+        tmp = stamp.with_name(f"{_STAMP}.{os.getpid()}.tmp")
+        tmp.write_text(want)
+        tmp.replace(stamp)  # atomic: a concurrent process sees the old stamp or the new one
+    except OSError:
+        return False
+    return True
+
+
+drop_stale_kernel_caches()
 jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
 
@@ -55,27 +102,3 @@ def power_heuristic(pdf_a: float, pdf_b: float) -> float:
     """Veach's power heuristic (β = 2), Veach 1997 thesis eq. 9.13; 0 when both pdfs are 0."""
     a2, b2 = pdf_a * pdf_a, pdf_b * pdf_b
     return a2 / (a2 + b2) if a2 + b2 > 0.0 else 0.0
-
-
-def camera_basis(camera: Camera) -> np.ndarray:
-    """(4, 3) float64: position, and right, up, forward scaled to the image plane at distance 1.
-
-    Pixel (row, col) spans directions forward + sx·right + sy·up with
-    sx in [-tan_x, tan_x] left to right and sy in [tan_y, -tan_y] top to bottom.
-    """
-    right, up, forward = camera.frame()
-    tx, ty = camera.tan_half_fov()
-    return np.stack([np.asarray(camera.position, dtype=np.float64), right * tx, up * ty, forward])
-
-
-@jit
-def camera_ray(basis, width: int, height: int, pixel: int, u1: float, u2: float):
-    """Unit direction through a uniformly jittered point of ``pixel`` (box filter), from basis[0]."""
-    row, col = pixel // width, pixel % width
-    sx = 2.0 * (col + u1) / width - 1.0
-    sy = 1.0 - 2.0 * (row + u2) / height
-    d0 = basis[3, 0] + sx * basis[1, 0] + sy * basis[2, 0]
-    d1 = basis[3, 1] + sx * basis[1, 1] + sy * basis[2, 1]
-    d2 = basis[3, 2] + sx * basis[1, 2] + sy * basis[2, 2]
-    inv = 1.0 / math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-    return d0 * inv, d1 * inv, d2 * inv

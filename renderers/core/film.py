@@ -1,0 +1,64 @@
+"""The film: per-path estimates summed into pixels, and the images made from the sums.
+
+Path j of a pass looks through pixel ``j mod P`` (:mod:`renderers.core.camera`).
+:func:`accumulate` adds each path's estimate, and its square, into its
+pixel one path at a time in path order, so a pixel's floating-point sum is
+the same however the paths were cut into work units or threads: that is
+what makes an image bit-identical for any thread count.
+
+From the sums after n samples per pixel: the image is the mean ``S/n``, and
+the variance of that mean is the unbiased sample variance over n,
+``(S₂/n - (S/n)²) / (n - 1)``, clamped at 0 against rounding: what the
+harness's z-tests compare, and what the references store as their variance
+image.
+
+A box filter is the only pixel filter (each path belongs to exactly one
+pixel), as in the references; a filter with wider support would splat.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from harness.adapters.registry import Checkpoint
+from renderers.core.sampling import jit
+
+
+@jit
+def accumulate(acc, acc2, first, values):
+    """acc[(first + i) mod P] += values[i] and acc2 likewise with squares, i in order."""
+    p = acc.shape[0]
+    for i in range(values.shape[0]):
+        k = (first + i) % p
+        for c in range(values.shape[1]):
+            v = values[i, c]
+            acc[k, c] += v
+            acc2[k, c] += v * v
+
+
+class Film:
+    """Sums over the samples of a (height, width) image, three channels, float64."""
+
+    def __init__(self, width: int, height: int):
+        self.shape = (height, width, 3)
+        self.pixels = width * height
+        self.acc = np.zeros((self.pixels, 3))
+        self.acc2 = np.zeros((self.pixels, 3))  # sums of squares, for the variance
+
+    def add(self, first: int, values: np.ndarray) -> None:
+        """Estimates (m, 3) of paths first .. first + m - 1 of a pass (in order, after the paths before them)."""
+        accumulate(self.acc, self.acc2, first, values)
+
+    def image(self, n: int) -> np.ndarray:
+        """The mean after ``n`` samples per pixel, float32 (height, width, 3)."""
+        return (self.acc / n).reshape(self.shape).astype(np.float32)
+
+    def variance(self, n: int) -> np.ndarray | None:
+        """Per-pixel variance of :meth:`image` ``(n)``, float32; None for one sample (no estimate)."""
+        if n < 2:
+            return None
+        mean = self.acc / n
+        return (np.maximum(self.acc2 / n - mean * mean, 0.0) / (n - 1)).reshape(self.shape).astype(np.float32)
+
+    def checkpoint(self, n: int, time_s: float) -> Checkpoint:
+        return Checkpoint(n, self.image(n), time_s)

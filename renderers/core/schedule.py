@@ -1,0 +1,145 @@
+"""How our renderers spread work over threads: passes, work units, an order-preserving pipeline.
+
+:func:`run_units` is the generic part: any list of jobs (a pass's paths,
+a batch of photons, a round of probe rays), each computed on a thread pool
+by ``work_fn`` and handed to ``reduce_fn`` **in submission order**, with at
+most ``2·threads`` jobs in flight, so memory stays bounded and the reduced
+result cannot depend on which thread finished first.
+
+:func:`render_image` is the image loop built on it. A render of ``spp``
+samples per pixel is split into passes (:func:`harness.adapters.seeds.spp_passes`;
+pass sizes double, so power-of-two checkpoints come free). A pass of ``n``
+samples over ``P`` pixels is a range of ``n·P`` paths (path j looks through
+pixel j mod P), cut into work units.
+
+- Random numbers are a pure function of (pass key, path index, dimension)
+  (:mod:`renderers.core.rng`; the pass key is
+  :func:`harness.adapters.seeds.pass_key`), so they do not depend on how the
+  paths are cut into units.
+- Each unit returns one estimate per path; they are added into the film
+  path by path, in path order (:mod:`renderers.core.film`), units in order.
+
+So the image depends on the seed only: it is bit-identical for any number
+of threads, though the unit size follows the thread count to keep every
+thread busy. Units of all passes flow through one pipeline (no barrier
+between passes). Unit sizes (2^13 to 2^15 paths) were measured on the
+Cornell box (BENCHMARKS.md): smaller units keep a unit's arrays in cache,
+and embreex still releases the GIL for batches of that size (2 threads: 1.7-2x).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable, Iterable, Iterator, NamedTuple, Sequence, TypeVar
+
+import numpy as np
+
+from harness.adapters.registry import Checkpoint, RenderResult
+from harness.adapters.seeds import pass_key, spp_passes
+from harness.scenes.model import Scene
+from renderers.core.film import Film
+
+MAX_UNIT_PATHS = 1 << 15
+MIN_UNIT_PATHS = 1 << 13
+#: Pass sizes double without a cap: the unit size already bounds memory.
+_NO_CAP = 1 << 40
+
+#: trace(first, stop, pixels, key) -> radiance estimates (stop - first, 3) float64
+#: for the paths first..stop-1 of a pass; path j looks through pixel j mod pixels.
+TraceFn = Callable[[int, int, int, np.uint64], np.ndarray]
+
+J = TypeVar("J")
+R = TypeVar("R")
+
+
+def default_threads() -> int:
+    """Worker threads: ``$CBOX_THREADS`` or the machine's CPU count."""
+    env = os.environ.get("CBOX_THREADS")
+    if env:
+        return max(1, int(env))
+    return os.cpu_count() or 1
+
+
+def run_units(jobs: Iterable[J], work_fn: Callable[[J], R], reduce_fn: Callable[[J, R], None],
+              threads: int) -> None:
+    """``reduce_fn(job, work_fn(job))`` for every job, work on ``threads`` threads, reductions in job order.
+
+    Reductions run on the calling thread; at most ``2·threads`` jobs are in
+    flight (submitted, not yet reduced), so a slow reduction throttles the
+    producers instead of piling up results. An exception in a job is
+    raised here, at its turn.
+    """
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        pending: deque = deque()
+        for job in jobs:
+            pending.append((job, pool.submit(work_fn, job)))
+            if len(pending) >= 2 * threads:
+                done, fut = pending.popleft()
+                reduce_fn(done, fut.result())
+        while pending:
+            done, fut = pending.popleft()
+            reduce_fn(done, fut.result())
+
+
+class Unit(NamedTuple):
+    """Paths first .. stop-1 of pass ``index``; ``last``: the pass's last unit."""
+
+    index: int
+    first: int
+    stop: int
+    last: bool
+
+
+def unit_size(total: int, threads: int) -> int:
+    """Paths per unit: enough units to keep ``threads`` busy, within [MIN, MAX]_UNIT_PATHS."""
+    return int(min(MAX_UNIT_PATHS, max(MIN_UNIT_PATHS, -(-total // (2 * threads)))))
+
+
+def pass_units(passes: Sequence[int], pixels: int, threads: int) -> Iterator[Unit]:
+    """The work units of consecutive passes of ``passes[k]`` samples per pixel, in order."""
+    for k, n in enumerate(passes):
+        total, size = n * pixels, unit_size(n * pixels, threads)
+        for first in range(0, total, size):
+            yield Unit(k, first, min(first + size, total), first + size >= total)
+
+
+def render_image(
+    scene: Scene,
+    spp: int,
+    seed: int,
+    trace: TraceFn,
+    checkpoints: Sequence[int] = (),
+    threads: int | None = None,
+    info: dict | None = None,
+) -> RenderResult:
+    """Run ``trace`` over every (pixel, sample) and average into an image, with its variance and checkpoints."""
+    if spp < 1:
+        raise ValueError(f"spp must be >= 1, got {spp}")
+    cam = scene.camera
+    film = Film(cam.width, cam.height)
+    threads = threads or default_threads()
+    passes = list(spp_passes(spp, _NO_CAP, checkpoints))
+    keys = [pass_key(seed, k) for k in range(len(passes))]
+    done, shots = 0, []
+    t0 = time.perf_counter()
+
+    def work(unit: Unit) -> np.ndarray:
+        return trace(unit.first, unit.stop, film.pixels, keys[unit.index])
+
+    def reduce(unit: Unit, values: np.ndarray) -> None:
+        nonlocal done
+        film.add(unit.first, values)
+        if unit.last:
+            done += passes[unit.index]
+            if done in checkpoints and done < spp:
+                shots.append(film.checkpoint(done, time.perf_counter() - t0))
+
+    run_units(pass_units(passes, film.pixels, threads), work, reduce, threads)
+    elapsed = time.perf_counter() - t0
+    image = film.image(spp)
+    if spp in checkpoints:
+        shots.append(Checkpoint(spp, image, elapsed))
+    return RenderResult(image, elapsed, spp, seed, shots, {"threads": threads, **(info or {})}, film.variance(spp))
