@@ -143,6 +143,34 @@ def _runs_text(runs: pd.DataFrame) -> str:
     return f"{spp_text}, {seed_text}"
 
 
+def _checked_thresholds(thresholds) -> dict:
+    thresholds = dict(thresholds or {})
+    for key, spec in thresholds.items():
+        if not (isinstance(spec, (tuple, list)) and len(spec) == 2 and spec[0] in _OPS):
+            raise ValueError(f"threshold for {key!r}: expected (op, value) with op in {', '.join(_OPS)}, got {spec!r}")
+    return thresholds
+
+
+def _renderer_colors(runs: pd.DataFrame, images: Mapping[str, Any], names: Sequence[str]) -> dict[str, str]:
+    """Palette colours for renderers with something to show; grey for those that did not run."""
+    ran = set(ok_runs(runs).get("renderer", pd.Series(dtype=str)).astype(str))
+    shown = [n for n in names if n in images or n in ran]
+    colors = {n: plots.color_for(i) for i, n in enumerate(shown)}
+    colors.update({n: NOT_RUN_COLOR for n in names if n not in colors})
+    return colors
+
+
+def _scene_context(scene, scene_hash: str) -> dict:
+    return {
+        "name": scene.name,
+        "hash": scene_hash,
+        "description": getattr(scene, "description", "") or "",
+        "resolution": f"{scene.camera.width} × {scene.camera.height}",
+        "max_depth": _max_depth_text(scene.max_depth),
+        "pixel_filter": scene.pixel_filter,
+    }
+
+
 def render_html(
     *,
     scene,
@@ -167,17 +195,11 @@ def render_html(
     scene_hash = scene.content_hash()
     runs = runs if runs is not None else pd.DataFrame()
     images = dict(images or {})
-    thresholds = dict(thresholds or {})
-    for key, spec in thresholds.items():
-        if not (isinstance(spec, (tuple, list)) and len(spec) == 2 and spec[0] in _OPS):
-            raise ValueError(f"threshold for {key!r}: expected (op, value) with op in {', '.join(_OPS)}, got {spec!r}")
+    thresholds = _checked_thresholds(thresholds)
     provenance = dict(provenance or {})
 
     names = renderer_order(runs, images)
-    # Palette colours for renderers with something to show; grey for those that did not run.
-    shown = [n for n in names if n in images or n in set(ok_runs(runs).get("renderer", pd.Series(dtype=str)).astype(str))]
-    colors = {n: plots.color_for(i) for i, n in enumerate(shown)}
-    colors.update({n: NOT_RUN_COLOR for n in names if n not in colors})
+    colors = _renderer_colors(runs, images, names)
     info = _renderer_info(runs, names, colors)
     table_head, table_rows = _summary_rows(runs, summary, names, info, thresholds)
     charts = _charts(runs, names, colors)
@@ -188,16 +210,9 @@ def render_html(
 
     env = _environment()
     ctx = {
+        "scene": _scene_context(scene, scene_hash),
         "sections": [(sid, stitle, markupsafe.Markup(frag)) for sid, stitle, frag in sections],
         "title": title or f"Renderer comparison — {scene.name}",
-        "scene": {
-            "name": scene.name,
-            "hash": scene_hash,
-            "description": getattr(scene, "description", "") or "",
-            "resolution": f"{scene.camera.width} × {scene.camera.height}",
-            "max_depth": _max_depth_text(scene.max_depth),
-            "pixel_filter": scene.pixel_filter,
-        },
         "reference_rows": _provenance_rows(ref_prov, scene_hash),
         "reference_spp": ref_prov.get("spp", "—"),
         "run": _run_provenance(provenance),

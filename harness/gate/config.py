@@ -73,6 +73,13 @@ class GateConfig:
     regression_metrics: tuple[str, ...] = DEFAULT_REGRESSION_METRICS
 
 
+def _number(path: Path, table: dict, key: str, where: str, default, kind=(int, float)):
+    v = table.get(key, default)
+    if isinstance(v, bool) or not isinstance(v, kind) or (isinstance(v, float) and not math.isfinite(v)):
+        raise GateConfigError(path, f"{where}{key}", f"expected a finite number, got {v!r}")
+    return v
+
+
 def load_config(path: str | Path) -> GateConfig:
     """Parse and validate a gate config; GateConfigError names the file and field of any problem."""
     path = Path(path)
@@ -82,17 +89,10 @@ def load_config(path: str | Path) -> GateConfig:
         raise GateConfigError(path, "(file)", "no such file") from None
     except tomllib.TOMLDecodeError as e:
         raise GateConfigError(path, "(syntax)", f"invalid TOML: {e}") from None
-
-    def num(table, key, where, default, kind=(int, float)):
-        v = table.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, kind) or (isinstance(v, float) and not math.isfinite(v)):
-            raise GateConfigError(path, f"{where}{key}", f"expected a finite number, got {v!r}")
-        return v
-
-    alpha = float(num(doc, "alpha", "", 0.01))
+    alpha = float(_number(path, doc, "alpha", "", 0.01))
     if not 0 < alpha < 1:
         raise GateConfigError(path, "alpha", f"must be in (0, 1), got {alpha}")
-    margin = float(num(doc, "regression_margin", "", 0.05))
+    margin = float(_number(path, doc, "regression_margin", "", 0.05))
     if margin < 0:
         raise GateConfigError(path, "regression_margin", "must be >= 0")
     reg = doc.get("regression_metrics", list(DEFAULT_REGRESSION_METRICS))
@@ -104,54 +104,57 @@ def load_config(path: str | Path) -> GateConfig:
     raw = doc.get("expect")
     if not isinstance(raw, list) or not raw:
         raise GateConfigError(path, "expect", "a gate needs at least one [[expect]] table")
-    exps, names = [], set()
-    for i, t in enumerate(raw):
-        w = f"expect[{i}]."
-        for key in ("scene", "renderer"):
-            if not isinstance(t.get(key), str):
-                raise GateConfigError(path, f"{w}{key}", "missing or not a string")
-        if ("spp" in t) == ("time" in t):
-            raise GateConfigError(path, f"{w}spp", "give exactly one budget: spp = N or time = \"10s\"")
-        spp = time_s = None
-        if "spp" in t:
-            spp = num(t, "spp", w, None, int)
-            if spp < 1:
-                raise GateConfigError(path, f"{w}spp", "must be >= 1")
-        else:
-            try:
-                time_s = parse_duration(str(t["time"]))
-            except ValueError as e:
-                raise GateConfigError(path, f"{w}time", str(e)) from None
-        slope = t.get("slope")
-        if slope is not None:
-            if not (isinstance(slope, list) and len(slope) == 2 and all(isinstance(x, (int, float)) for x in slope)
-                    and slope[0] < slope[1]):
-                raise GateConfigError(path, f"{w}slope", "expected [low, high] with low < high")
-            slope = (float(slope[0]), float(slope[1]))
-        budgets = {}
-        for key in ("max", "min", "abs_max"):
-            b = t.get(key, {})
-            if not isinstance(b, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                                  for v in b.values()):
-                raise GateConfigError(path, f"{w}{key}", "expected a table of metric = number")
-            budgets[key] = {k: float(v) for k, v in b.items()}
-        unbiased = t.get("unbiased", False)
-        if not isinstance(unbiased, bool):
-            raise GateConfigError(path, f"{w}unbiased", "expected true or false")
-        budget = f"{spp}spp" if spp else f"{time_s:g}s"
-        settings = t.get("settings", {})
-        if not isinstance(settings, dict):
-            raise GateConfigError(path, f"{w}settings", "expected a table of setting = value")
-        shown = f"[{','.join(f'{k}={v}' for k, v in sorted(settings.items()))}]" if settings else ""
-        name = t.get("name") or f"{t['scene']}/{t['renderer']}{shown}@{budget}"
-        if name in names:
-            raise GateConfigError(path, f"{w}name", f"two expectations are named {name!r}; give one a name")
-        names.add(name)
-        tile = num(t, "tile", w, 16, int)
-        if tile < 1:
-            raise GateConfigError(path, f"{w}tile", "must be >= 1")
-        exps.append(Expectation(name, t["scene"], t["renderer"], spp, time_s, num(t, "seed", w, 0, int), unbiased,
-                                tile, slope, budgets["max"], budgets["min"], budgets["abs_max"], settings))
+    exps = [_parse_expectation(path, i, t) for i, t in enumerate(raw)]
+    names = [e.name for e in exps]
+    for i, name in enumerate(names):
+        if name in names[:i]:
+            raise GateConfigError(path, f"expect[{i}].name", f"two expectations are named {name!r}; give one a name")
     return GateConfig(path, alpha, exps, path.parent / baseline if baseline else None, margin, tuple(reg))
 
 
+def _parse_expectation(path: Path, i: int, t: dict) -> Expectation:
+    w = f"expect[{i}]."
+    if not isinstance(t, dict):
+        raise GateConfigError(path, f"expect[{i}]", "expected a table ([[expect]])")
+    for key in ("scene", "renderer"):
+        if not isinstance(t.get(key), str):
+            raise GateConfigError(path, f"{w}{key}", "missing or not a string")
+    if ("spp" in t) == ("time" in t):
+        raise GateConfigError(path, f"{w}spp", "give exactly one budget: spp = N or time = \"10s\"")
+    spp = time_s = None
+    if "spp" in t:
+        spp = _number(path, t, "spp", w, None, int)
+        if spp < 1:
+            raise GateConfigError(path, f"{w}spp", "must be >= 1")
+    else:
+        try:
+            time_s = parse_duration(str(t["time"]))
+        except ValueError as e:
+            raise GateConfigError(path, f"{w}time", str(e)) from None
+    slope = t.get("slope")
+    if slope is not None:
+        if not (isinstance(slope, list) and len(slope) == 2 and all(isinstance(x, (int, float)) for x in slope)
+                and slope[0] < slope[1]):
+            raise GateConfigError(path, f"{w}slope", "expected [low, high] with low < high")
+        slope = (float(slope[0]), float(slope[1]))
+    budgets = {}
+    for key in ("max", "min", "abs_max"):
+        b = t.get(key, {})
+        if not isinstance(b, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                              for v in b.values()):
+            raise GateConfigError(path, f"{w}{key}", "expected a table of metric = number")
+        budgets[key] = {k: float(v) for k, v in b.items()}
+    unbiased = t.get("unbiased", False)
+    if not isinstance(unbiased, bool):
+        raise GateConfigError(path, f"{w}unbiased", "expected true or false")
+    settings = t.get("settings", {})
+    if not isinstance(settings, dict):
+        raise GateConfigError(path, f"{w}settings", "expected a table of setting = value")
+    tile = _number(path, t, "tile", w, 16, int)
+    if tile < 1:
+        raise GateConfigError(path, f"{w}tile", "must be >= 1")
+    budget = f"{spp}spp" if spp else f"{time_s:g}s"
+    shown = f"[{','.join(f'{k}={v}' for k, v in sorted(settings.items()))}]" if settings else ""
+    name = t.get("name") or f"{t['scene']}/{t['renderer']}{shown}@{budget}"
+    return Expectation(name, t["scene"], t["renderer"], spp, time_s, _number(path, t, "seed", w, 0, int), unbiased,
+                       tile, slope, budgets["max"], budgets["min"], budgets["abs_max"], settings)

@@ -42,7 +42,6 @@ def build_reference(
         raise ValueError("need at least 2 batches to estimate the variance")
     if spp % batches:
         raise ValueError(f"spp ({spp}) must be a multiple of batches ({batches})")
-    renderer = entry.renderer
     folder = Path(folder) if folder else scene.path.parent
     batch_spp = spp // batches
     seeds = [REFERENCE_SEED_BASE + b for b in range(batches)]
@@ -66,12 +65,25 @@ def build_reference(
     if progress:
         progress(batches + 1, batches + 1)
     variance_of_mean = m2 / (batches - 1) / batches
-    prov = {
+    prov = _provenance(scene, entry, info, spp, batches, seeds, noise_seed, wall)
+    meta = {"cbox:scene_hash": prov["scene_hash"], "cbox:spp": str(spp), "cbox:renderer": prov["renderer_version"]}
+    write_exr(folder / REFERENCE_FILE, mean, meta)
+    write_exr(folder / VARIANCE_FILE, variance_of_mean, meta)
+    write_exr(folder / NOISE_FILE, noise, meta)
+    write_json_atomic(folder / PROVENANCE_FILE, prov)
+    return Reference(mean.astype(np.float32), variance_of_mean.astype(np.float32), noise, prov, folder)
+
+
+def _provenance(scene: Scene, entry: RendererEntry, info: dict, spp: int, batches: int, seeds: list[int],
+                noise_seed: int, wall: float) -> dict:
+    """What a reader needs to trust and rebuild the reference."""
+    batch_spp = spp // batches
+    return {
         "scene": scene.name,
         "scene_hash": scene.content_hash(),
         "renderer": entry.name,
         "settings": entry.settings,
-        "renderer_version": renderer.version(),
+        "renderer_version": entry.renderer.version(),
         "variant": info.get("variant"),
         "spp": spp,
         "batches": batches,
@@ -88,9 +100,3 @@ def build_reference(
         "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {platform.system()} {platform.release()}",
         "variance": "variance of the mean: unbiased sample variance over batches / batches",
     }
-    meta = {"cbox:scene_hash": prov["scene_hash"], "cbox:spp": str(spp), "cbox:renderer": prov["renderer_version"]}
-    write_exr(folder / REFERENCE_FILE, mean, meta)
-    write_exr(folder / VARIANCE_FILE, variance_of_mean, meta)
-    write_exr(folder / NOISE_FILE, noise, meta)
-    write_json_atomic(folder / PROVENANCE_FILE, prov)
-    return Reference(mean.astype(np.float32), variance_of_mean.astype(np.float32), noise, prov, folder)

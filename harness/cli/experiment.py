@@ -1,0 +1,97 @@
+"""``cbox converge`` (convergence experiments, sweeps) and ``cbox report`` (rebuild a report, no rendering)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+from tqdm import tqdm
+
+from harness.adapters.registry import missing_features, resolve
+from harness.cli.common import SceneOpt, _command_line, app
+from harness.scenes.library import resolve_scene
+from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results
+from harness.store.references import load_reference
+from reports.experiment import write_experiment_report
+
+
+@app.command()
+def converge(
+    scene: str = SceneOpt,
+    renderer: Optional[List[str]] = typer.Option(
+        None, "--renderer", "-r", help="Renderer to run (repeatable), with settings as "
+                                          "NAME[setting=value,...]; default: every registered renderer."),
+    spp: str = typer.Option("1,2,4,...,256", "--spp", help="spp checkpoints: 1,2,4,...,256 or 1,4,16 or 1-256 "
+                                                         "(powers of two). Progressive renderers give them all "
+                                                         "from one render."),
+    seeds: int = typer.Option(4, "--seeds", min=1, help="Number of seeds (0 .. N-1); bias and variance need 2 or more."),
+    out: Path = typer.Option(Path("out/converge"), "--out", "-o", help="Experiment folder: results.parquet, "
+                                                                      "summary.csv, report.html, cells/, images/."),
+    target: Optional[List[str]] = typer.Option(
+        None, "--target", help="Target error for the time-to-target figure, METRIC=VALUE (repeatable); default: "
+                               "delta_e2000_mean=2, delta_e2000_mean=1, rel_mse=0.01, rel_mse=0.001."),
+    sweep: Optional[str] = typer.Option(
+        None, "--sweep", help="Sweep one renderer setting, RENDERER.SETTING=V1,V2,... (e.g. "
+                              "pathtracer.rr_depth=3,5,8): each value is its own series in the table and report. "
+                              "See `cbox renderers --settings`."),
+) -> None:
+    """Convergence experiment: every metric at every spp checkpoint, per renderer and seed.
+
+    Results are a tidy table (one row per scene, renderer, settings, seed and
+    spp) in OUT/results.parquet. The run is resumable: finished (renderer,
+    seed) cells are written atomically, and running the same command again
+    renders only the cells that are missing.
+    """
+    from harness.adapters.registry import sweep as sweep_entries
+    from harness.adapters.settings import parse_sweep
+    from harness.evaluate.convergence import DEFAULT_TARGETS, parse_target
+    from harness.workflows.converge import parse_spp_list, run_experiment
+
+    try:
+        spps = parse_spp_list(spp)
+        targets = [parse_target(t) for t in target] if target else DEFAULT_TARGETS
+    except ValueError as e:
+        raise typer.BadParameter(str(e)) from None
+    sc = resolve_scene(scene)
+    ref = load_reference(sc)
+    entries = resolve(renderer)
+    if sweep:
+        entries = sweep_entries(entries, *parse_sweep(sweep))
+    runnable = [e for e in entries if e.available and not missing_features(e.renderer, sc)]
+    cells = sum(1 if getattr(e.renderer, "deterministic", False) else seeds for e in runnable)
+    bar = tqdm(total=cells, desc=f"converge {sc.name}", unit="cell", file=sys.stderr,
+               dynamic_ncols=True)
+
+    def on_cell(name: str, cached: bool) -> None:
+        bar.set_postfix_str(f"{name}{' (stored)' if cached else ''}")
+        bar.update(1)
+
+    runs = run_experiment(out, sc, ref, entries, spps, list(range(seeds)), _command_line(), on_cell=on_cell,
+                          targets=targets)
+    bar.close()
+    report = write_experiment_report(out, sc, ref)
+    if (out / SUMMARY_FILE).exists():
+        import pandas as pd
+
+        summary = pd.read_csv(out / SUMMARY_FILE)
+        typer.echo(summary.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    for _, r in runs[runs["status"] != "ok"].iterrows():
+        typer.echo(f"{r['renderer']}: {r['status']}: {r['reason']}")
+    typer.echo(f"report: {report}", err=True)
+    raise typer.Exit(1 if (runs["status"] == "failed").any() else 0)
+
+
+@app.command()
+def report(
+    folder: Path = typer.Argument(..., help="Folder written by cbox converge or cbox compare."),
+) -> None:
+    """Rebuild FOLDER/report.html (and summary.csv) from stored results, without rendering."""
+    config, _ = load_results(folder)
+    sc = resolve_scene(config["scene"])
+    if sc.content_hash() != config["scene_hash"]:
+        raise ExperimentError(
+            f"{folder / CONFIG_FILE}: results were made for scene hash {config['scene_hash']}, but "
+            f"{config['scene']} now hashes to {sc.content_hash()}; rerun the experiment")
+    typer.echo(f"report: {write_experiment_report(folder, sc, load_reference(sc))}", err=True)

@@ -1,0 +1,63 @@
+"""``cbox scenes``, ``cbox renderers``, ``cbox features``: what is here, and what can run."""
+
+from __future__ import annotations
+
+import typer
+
+from harness.adapters.registry import resolve
+from harness.adapters.settings import declared, describe
+from harness.cli.common import app
+from harness.scenes.library import resolve_scene, scene_names
+from harness.scenes.model import FEATURES, SceneError
+from harness.store.references import ReferenceError, load_reference
+
+
+@app.command()
+def scenes() -> None:
+    """List the stored scenes, with the features each uses and whether it has a reference."""
+    for name in scene_names():
+        try:
+            scene = resolve_scene(name)
+        except SceneError as e:
+            typer.echo(f"{name:16s} INVALID: {e}")
+            continue
+        try:
+            ref = load_reference(scene)
+            status = f"reference {ref.spp} spp"
+        except ReferenceError as e:
+            status = f"no usable reference ({str(e).split(';')[0].split(': ', 1)[-1]})"
+        cam = scene.camera
+        typer.echo(f"{name:16s} {cam.width}x{cam.height}  max_depth={scene.max_depth}  {status}")
+        typer.echo(f"{'':16s} features: {', '.join(sorted(scene.features))}")
+
+
+@app.command()
+def renderers(
+    settings: bool = typer.Option(False, "--settings", help="Also list each renderer's settings: name, default, "
+                                                            "allowed values and what it does."),
+) -> None:
+    """List the registered renderers, whether each can run here, and why not."""
+    for entry in resolve(None):
+        r = entry.renderer
+        if entry.available:
+            try:
+                version = r.version()
+            except Exception as e:  # a version probe must not break the listing
+                version = f"version unknown ({type(e).__name__})"
+            typer.echo(f"{entry.name:12s} available    {version}")
+        else:
+            typer.echo(f"{entry.name:12s} unavailable  {entry.reason}")
+        if r is not None:
+            typer.echo(f"{'':12s} models: {', '.join(sorted(r.features))}")
+            for a in getattr(r, "approximations", ()):
+                typer.echo(f"{'':12s} approximates: {a}")
+            if settings:
+                for line in describe(declared(r)) or ["(no settings)"]:
+                    typer.echo(f"{'':12s} setting: {line}")
+
+
+@app.command()
+def features() -> None:
+    """List the scene features a scene can declare and a renderer can model."""
+    for name, meaning in FEATURES.items():
+        typer.echo(f"{name:16s} {meaning}")

@@ -1,0 +1,136 @@
+"""``cbox render``, ``cbox compare`` (equal spp, equal time, equal quality) and ``cbox demo``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from harness.adapters.registry import RendererError, missing_features, resolve
+from harness.adapters.settings import canonical
+from harness.cli.common import SceneOpt, SeedOpt, SppOpt, _command_line, _progress, app
+from harness.scenes.library import resolve_scene
+from harness.store.exr import write_exr
+from harness.store.references import load_reference
+from harness.workflows import runner
+from reports.experiment import write_experiment_report
+
+
+@app.command()
+def render(
+    scene: str = SceneOpt,
+    renderer: str = typer.Option(..., "--renderer", "-r", help="Registered renderer name or package.module:ClassName, "
+                                                             "with settings as NAME[setting=value,...]."),
+    spp: int = SppOpt,
+    seed: int = SeedOpt,
+    out: Path = typer.Option(..., "--out", "-o", help="Output OpenEXR file (float32 linear sRGB)."),
+) -> None:
+    """Render one scene with one renderer and write the HDR image."""
+    sc = resolve_scene(scene)
+    (entry,) = resolve([renderer])
+    if not entry.available:
+        raise RendererError(f"renderer {entry.name!r} is unavailable: {entry.reason}")
+    if missing := missing_features(entry.renderer, sc):
+        raise RendererError(f"renderer {entry.name!r} does not model {', '.join(missing)}, which {sc.name} uses")
+    result = runner.render_checked(entry, sc, spp, seed)
+    write_exr(out, result.image, {"cbox:renderer": entry.name, "cbox:settings": canonical(entry.settings), "cbox:spp": str(spp), "cbox:seed": str(seed),
+                                  "cbox:scene_hash": sc.content_hash()})
+    typer.echo(f"wrote {out} ({sc.camera.width}x{sc.camera.height}, {spp} spp, {result.time_s:.2f} s)", err=True)
+
+
+def _write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(), title=None) -> Path:
+    """Store a comparison as an experiment folder (results, images, CSV/JSON) and build its report."""
+    from harness.workflows.compare import store_comparison
+
+    store_comparison(out, sc, records, command)
+    return write_experiment_report(out, sc, ref, sections=sections, title=title)
+
+
+def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool,
+                 time_budget: Optional[str] = None, target_error: Optional[str] = None, max_spp: int = 4096) -> int:
+    from harness.evaluate.convergence import parse_target
+    from harness.workflows import compare as cmp
+
+    try:
+        budget = cmp.parse_duration(time_budget) if time_budget else None
+        target = parse_target(target_error) if target_error else None
+    except ValueError as e:
+        raise typer.BadParameter(str(e)) from None
+    sc = resolve_scene(scene)
+    ref = load_reference(sc)
+    entries = resolve(renderer)
+    mode = f"{budget:g} s each" if budget else f"to {target[0]}<={target[1]:g}" if target else f"{spp} spp"
+    bar = _progress(len(entries), f"{sc.name} @ {mode}")
+    records = []
+    for entry in entries:
+        bar.set_postfix_str(entry.name)
+        runnable = entry.available and not missing_features(entry.renderer, sc)
+        if budget and runnable:
+            rec = runner.run_one(entry, sc, cmp.spp_for_time_budget(entry, sc, budget, seed), seed, ref)
+            rec.info["time_budget_s"] = budget
+        elif target and runnable:
+            rec = cmp.render_to_target(entry, sc, ref, target[0], target[1], seed, max_spp)
+        else:
+            rec = runner.run_one(entry, sc, spp, seed, ref)
+        records.append(rec)
+        bar.update(1)
+        if as_json:
+            typer.echo(json.dumps(runner.json_safe(rec.row()), allow_nan=False))
+    bar.close()
+    report = _write_compare_outputs(out, sc, ref, records, _command_line())
+    if not as_json:
+        import pandas as pd
+
+        frame = pd.DataFrame([r.row() for r in records])
+        cols = [c for c in ("renderer", "status", "spp", "time_s", "delta_e2000_mean", "noise_delta_e2000_mean",
+                            "ssim", "rel_mse", "mean_radiance_rel_error", "nan_count", "info_target_reached")
+                if c in frame]
+        typer.echo(frame[cols].to_string(index=False))
+        for r in records:
+            if r.status != "ok":
+                typer.echo(f"{r.renderer}: {r.status}: {r.reason}")
+    typer.echo(f"report: {report}", err=True)
+    return 1 if any(r.status == "failed" for r in records) else 0
+
+
+@app.command()
+def compare(
+    scene: str = SceneOpt,
+    renderer: Optional[List[str]] = typer.Option(
+        None, "--renderer", "-r", help="Renderer to run (repeatable), with settings as "
+                                          "NAME[setting=value,...]; default: every registered renderer."),
+    spp: int = SppOpt,
+    seed: int = SeedOpt,
+    out: Path = typer.Option(Path("out"), "--out", "-o", help="Folder for report.html, metrics.csv, metrics.json, "
+                                                               "results.parquet and the images."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON record per run on stdout."),
+    time_budget: Optional[str] = typer.Option(
+        None, "--time-budget", help="Equal-time mode: every renderer gets this wall time (e.g. 10s, 2m); "
+                                    "its spp is chosen from two short calibration renders and reported. "
+                                    "Overrides --spp."),
+    target_error: Optional[str] = typer.Option(
+        None, "--target-error", help="Equal-quality mode: METRIC=VALUE (e.g. delta_e2000_mean=1, rel_mse=1e-3; "
+                                     "a bare number means ΔE mean). Each renderer renders at 1, 2, 4, ... spp "
+                                     "until the metric is at most VALUE and reports the time it needed."),
+    max_spp: int = typer.Option(4096, "--max-spp", min=1, help="Upper spp limit of --target-error."),
+) -> None:
+    """Render with each renderer, score against the scene's reference, write a report.
+
+    Exit code 1 if a renderer failed; renderers that are unavailable or do not
+    model the scene are listed as such and are not failures.
+    """
+    if time_budget and target_error:
+        raise typer.BadParameter("give --time-budget or --target-error, not both")
+    raise typer.Exit(_run_compare(scene, renderer, spp, seed, out, as_json, time_budget, target_error, max_spp))
+
+
+@app.command()
+def demo(
+    out: Path = typer.Option(Path("out"), "--out", "-o", help="Folder for report.html and metrics.csv."),
+    spp: int = typer.Option(64, "--spp", min=1, help="Samples per pixel for every renderer."),
+    seed: int = SeedOpt,
+) -> None:
+    """The main job: every available renderer on cornell-box against the stored reference → out/report.html."""
+    raise typer.Exit(_run_compare("cornell-box", None, spp, seed, out, False))

@@ -1,0 +1,35 @@
+"""``cbox stress``: numerical stability at the extremes, and its report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from harness.cli.common import _command_line, app
+
+
+@app.command()
+def stress(
+    renderer: Optional[List[str]] = typer.Option(
+        None, "--renderer", "-r", help="Renderer to stress (repeatable); default: every registered renderer."),
+    variant: Optional[List[str]] = typer.Option(
+        None, "--variant", "-v", help="Variant to run (repeatable); default: all (see harness/stress/variants.py)."),
+    out: Path = typer.Option(Path("out/stress"), "--out", "-o", help="Folder for stress.csv and stress.html."),
+) -> None:
+    """Numerical stability at the extremes: each scene variant with each renderer that models it.
+
+    Checks finite, non-negative output, a time bound, a memory bound and the
+    mean radiance against the analytic value or the reference. Exit code 1 if
+    any check fails, so CI can run it.
+    """
+    from harness.stress.suite import print_summary, run_suite
+    from reports.stress import write_stress_report
+
+    try:
+        run = run_suite(renderer, variant, out)
+    except ValueError as e:
+        raise typer.BadParameter(str(e), param_hint="--variant") from None
+    report = write_stress_report(Path(out) / "stress.html", run.table, run.provenance, _command_line())
+    raise typer.Exit(print_summary(run, report))
