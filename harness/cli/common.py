@@ -39,6 +39,8 @@ USER_ERRORS = (SceneError, ReferenceError, RendererError, ImageFileError, Experi
 
 SceneOpt = typer.Option(..., "--scene", "-s", help="Stored scene name (see `cbox scenes`) or path to a scene .toml file or folder.")
 SppOpt = typer.Option(64, "--spp", min=1, help="Samples per pixel.")
+RenderersOpt = typer.Option(None, "--renderer", "-r", help="Renderer to run (repeatable), with settings as "
+                            "NAME\\[setting=value,...]; default: every registered renderer.")
 SeedOpt = typer.Option(0, "--seed", min=0, help="Random seed; the same seed gives the same image.")
 
 

@@ -10,7 +10,7 @@ import typer
 from tqdm import tqdm
 
 from harness.adapters.registry import missing_features, resolve
-from harness.cli.common import SceneOpt, _command_line, app
+from harness.cli.common import RenderersOpt, SceneOpt, _command_line, app
 from harness.scenes.library import resolve_scene
 from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results
 from harness.store.references import load_reference
@@ -20,9 +20,7 @@ from reports.experiment import write_experiment_report
 @app.command()
 def converge(
     scene: str = SceneOpt,
-    renderer: Optional[List[str]] = typer.Option(
-        None, "--renderer", "-r", help="Renderer to run (repeatable), with settings as "
-                                          "NAME[setting=value,...]; default: every registered renderer."),
+    renderer: Optional[List[str]] = RenderersOpt,
     spp: str = typer.Option("1,2,4,...,256", "--spp", help="spp checkpoints: 1,2,4,...,256 or 1,4,16 or 1-256 "
                                                          "(powers of two). Progressive renderers give them all "
                                                          "from one render."),

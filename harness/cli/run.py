@@ -10,7 +10,7 @@ import typer
 
 from harness.adapters.registry import RendererError, missing_features, resolve
 from harness.adapters.settings import canonical
-from harness.cli.common import SceneOpt, SeedOpt, SppOpt, _command_line, _progress, app
+from harness.cli.common import RenderersOpt, SceneOpt, SeedOpt, SppOpt, _command_line, _progress, app
 from harness.scenes.library import resolve_scene
 from harness.store.exr import write_exr
 from harness.store.references import load_reference
@@ -22,7 +22,7 @@ from reports.experiment import write_experiment_report
 def render(
     scene: str = SceneOpt,
     renderer: str = typer.Option(..., "--renderer", "-r", help="Registered renderer name or package.module:ClassName, "
-                                                             "with settings as NAME[setting=value,...]."),
+                                                             "with settings as NAME\\[setting=value,...]."),
     spp: int = SppOpt,
     seed: int = SeedOpt,
     out: Path = typer.Option(..., "--out", "-o", help="Output OpenEXR file (float32 linear sRGB)."),
@@ -98,9 +98,7 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
 @app.command()
 def compare(
     scene: str = SceneOpt,
-    renderer: Optional[List[str]] = typer.Option(
-        None, "--renderer", "-r", help="Renderer to run (repeatable), with settings as "
-                                          "NAME[setting=value,...]; default: every registered renderer."),
+    renderer: Optional[List[str]] = RenderersOpt,
     spp: int = SppOpt,
     seed: int = SeedOpt,
     out: Path = typer.Option(Path("out"), "--out", "-o", help="Folder for report.html, metrics.csv, metrics.json, "
