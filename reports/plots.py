@@ -259,6 +259,34 @@ def _usable(*vals: float) -> bool:
     return all(v is not None and math.isfinite(v) and v > 0 for v in vals)
 
 
+def _guide_anchor(series: Sequence[Series]) -> tuple[float, float] | None:
+    """Where the slope guide starts: a little above the first point of the series that starts highest
+    (preferring real curves of two or more points), so it runs beside the data, not on it."""
+    firsts = []
+    for s in series:
+        pts = [(x, y) for x, y in zip(s.x, s.y) if _usable(x, y)]
+        if pts:
+            firsts.append((len(pts) >= 2, pts[0][1], pts[0][0]))
+    if not firsts:
+        return None
+    _, y_first, x_first = max(firsts)
+    return x_first, y_first * GUIDE_OFFSET
+
+
+def _draw_band(ax: "_Axes", s: Series, clip: str) -> None:
+    """The series' min-max band over seeds, where it has one that is not flat."""
+    if s.lo is None or s.hi is None:
+        return
+    pts = [(x, lo, hi) for x, lo, hi in zip(s.x, s.lo, s.hi) if _usable(x, lo, hi)]
+    if len(pts) >= 2 and any(hi > lo for _, lo, hi in pts):
+        upper = " L ".join(f"{_f(ax.x(x))} {_f(ax.y(hi))}" for x, _, hi in pts)
+        lower = " L ".join(f"{_f(ax.x(x))} {_f(ax.y(lo))}" for x, lo, _ in reversed(pts))
+        ax.parts.append(
+            f'<path class="band" data-renderer="{escape(s.name)}" d="M {upper} L {lower} Z" '
+            f'fill="{s.color}" fill-opacity="0.18" stroke="none" {clip}/>'
+        )
+
+
 def line_plot_svg(
     series: Sequence[Series],
     *,
@@ -273,19 +301,9 @@ def line_plot_svg(
     """Log-log lines (one ``<path class="series">`` per series), bands and a slope guide."""
     xs = [v for s in series for v in s.x]
     ys = [v for s in series for v in (*s.y, *(s.lo or ()), *(s.hi or ()))]
-    anchor = None
-    if guide_slope is not None:
-        # The guide starts a little above the first point of the series that starts highest
-        # (preferring real curves of two or more points), so it runs beside the data, not on it.
-        firsts = []
-        for s in series:
-            pts = [(x, y) for x, y in zip(s.x, s.y) if _usable(x, y)]
-            if pts:
-                firsts.append((len(pts) >= 2, pts[0][1], pts[0][0]))
-        if firsts:
-            _, y_first, x_first = max(firsts)
-            anchor = (x_first, y_first * GUIDE_OFFSET)
-            ys.append(anchor[1])
+    anchor = _guide_anchor(series) if guide_slope is not None else None
+    if anchor is not None:
+        ys.append(anchor[1])
     xdom, ydom = log_domain(xs), log_domain(ys)
     if xdom is None or ydom is None:
         return f'<p class="note">No positive values to plot for {escape(ylabel)}.</p>'
@@ -293,15 +311,7 @@ def line_plot_svg(
     ax.frame(uid, xlabel, ylabel, xbase2=xbase2)
     clip = f'clip-path="url(#{uid}-clip)"'
     for s in series:
-        if s.lo is not None and s.hi is not None:
-            pts = [(x, lo, hi) for x, lo, hi in zip(s.x, s.lo, s.hi) if _usable(x, lo, hi)]
-            if len(pts) >= 2 and any(hi > lo for _, lo, hi in pts):
-                upper = " L ".join(f"{_f(ax.x(x))} {_f(ax.y(hi))}" for x, _, hi in pts)
-                lower = " L ".join(f"{_f(ax.x(x))} {_f(ax.y(lo))}" for x, lo, _ in reversed(pts))
-                ax.parts.append(
-                    f'<path class="band" data-renderer="{escape(s.name)}" d="M {upper} L {lower} Z" '
-                    f'fill="{s.color}" fill-opacity="0.18" stroke="none" {clip}/>'
-                )
+        _draw_band(ax, s, clip)
     if anchor is not None:
         x_first, y_first = anchor
         lx0, lx1 = xdom
