@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -81,3 +83,111 @@ def test_stale_reference_is_refused(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.startswith("cbox: error: ") and "cbox reference build --scene" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
+
+
+# Issue 9: each bad input ends in exactly one stderr line and exit code 2, naming the file and field or the
+# option; nothing renders. Each case builds (cbox arguments, extra environment, texts the line must contain).
+def _scene_file(tmp_path, old: str = "", new: str = "", data: bytes | None = None) -> Path:
+    from conftest import MINIMAL_SCENE
+
+    assert old in MINIMAL_SCENE
+    path = tmp_path / "scene.toml"
+    path.write_bytes(data if data is not None else MINIMAL_SCENE.replace(old, new, 1).encode())
+    return path
+
+
+def _render(scene, tmp_path, *extra: str) -> list[str]:
+    return ["render", "--scene", str(scene), "--renderer", "pathtracer", "--out", str(tmp_path / "x.exr"), *extra]
+
+
+def _file_case(make_scene, field: str, *words: str):
+    def case(tmp_path):
+        path = make_scene(tmp_path)
+        return _render(path, tmp_path), {}, (f"cbox: error: {path}: {field}: ", *words)
+    return case
+
+
+def _out_case(command: str, make_out, *words: str):
+    def case(tmp_path):
+        out = make_out(tmp_path)
+        args = {"render": ["render", "--scene", "cornell-box", "--renderer", "pathtracer"],
+                "compare": ["compare", "--scene", "cornell-box", "--renderer", "pathtracer"],
+                "converge": ["converge", "--scene", "cornell-box", "--renderer", "pathtracer"],
+                "gate": ["gate"], "stress": ["stress", "--renderer", "pathtracer"]}[command]
+        return [*args, "--out", str(out)], {}, ("cbox: error: --out: ", *words)
+    return case
+
+
+def _a_file(tmp_path) -> Path:
+    (tmp_path / "a-file").write_text("x")
+    return tmp_path / "a-file"
+
+
+def _garbage_obj(tmp_path) -> Path:
+    (tmp_path / "garbage.obj").write_bytes(np.random.default_rng(9).bytes(4096))
+    return _scene_file(tmp_path, 'vertices = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]\nfaces = [[0, 1, 2, 3]]',
+                       'obj = "garbage.obj"')
+
+
+_QUAD = "[-1, -1, 0], [1, -1, 0]"
+ISSUE_9 = {
+    "non-UTF-8 scene": _file_case(lambda t: _scene_file(t, data=b"format = 1\nname = \"\xff\xfe\"\n"), "(file)",
+                                  "not UTF-8"),
+    "50 MB of random bytes": _file_case(lambda t: _scene_file(t, data=np.random.default_rng(9).bytes(50 * 2**20)),
+                                        "(file)", "not UTF-8"),
+    "OBJ of garbage bytes": _file_case(_garbage_obj, "meshes[0] (floor).obj", "not UTF-8"),
+    "100,000 nested arrays": _file_case(
+        lambda t: _scene_file(t, 'name = "minimal"\n', 'name = "minimal"\ndescription = ' + "[" * 100_000
+                              + "]" * 100_000 + "\n"), "(syntax)", "nested too deeply"),
+    "resolution 2^70": _file_case(lambda t: _scene_file(t, "resolution = [8, 6]", f"resolution = [{2**70}, 6]"),
+                                  "camera.resolution", "estimated", "16 GiB"),
+    "resolution 200000^2": _file_case(lambda t: _scene_file(t, "resolution = [8, 6]", "resolution = [200000, 200000]"),
+                                      "camera.resolution", "estimated", "16 GiB"),
+    "radiance 1e308": _file_case(lambda t: _scene_file(t, "radiance = [10, 10, 10]", "radiance = [1e308, 10, 10]"),
+                                 "meshes[1] (light).emitter.radiance[0]", "out of range"),
+    "vertex 1e308": _file_case(lambda t: _scene_file(t, _QUAD, "[-1, -1, 0], [1e308, -1, 0]"),
+                               "meshes[0] (floor).vertices[1][0]", "out of range"),
+    "unknown key max_depht": _file_case(lambda t: _scene_file(t, "max_depth = -1", "max_depht = -1"),
+                                        "render.max_depht", "unknown key (did you mean 'max_depth'?)"),
+    "unknown key two_sided": _file_case(
+        lambda t: _scene_file(t, 'name = "light"\n', 'name = "light"\ntwo_sided = true\n'),
+        "meshes[1] (light).two_sided", "unknown key"),
+    "unknown key roughness": _file_case(
+        lambda t: _scene_file(t, 'type = "diffuse"\n', 'type = "diffuse"\nroughness = 0.1\n'),
+        "materials.white.roughness", "unknown key"),
+    "CBOX_THREADS=abc": lambda t: (_render("cornell-box", t), {"CBOX_THREADS": "abc"},
+                                   ("cbox: error: CBOX_THREADS: ", "'abc'")),
+    "--spp 0": lambda t: (_render("cornell-box", t, "--spp", "0"), {}, ("cbox: error: --spp: ",)),
+    "--spp -3": lambda t: (_render("cornell-box", t, "--spp", "-3"), {}, ("cbox: error: --spp: ",)),
+    "--seed -1": lambda t: (_render("cornell-box", t, "--seed", "-1"), {}, ("cbox: error: --seed: ",)),
+    "render --out x.png": _out_case("render", lambda t: t / "x.png", "unsupported extension '.png'", ".exr"),
+    "render --out existing folder": _out_case("render", lambda t: t, "is an existing folder"),
+    "render --out under a file": _out_case("render", lambda t: _a_file(t) / "x.exr", "is not a folder"),
+    "render --out unwritable": _out_case("render", lambda t: Path("/proc/cbox-test/x.exr"), "cannot write in /proc"),
+    "compare --out a file": _out_case("compare", _a_file, "is an existing file"),
+    "compare --out unwritable": _out_case("compare", lambda t: Path("/proc/cbox-test"), "cannot write in /proc"),
+    "converge --out a file": _out_case("converge", _a_file, "is an existing file"),
+    "gate --out a file": _out_case("gate", _a_file, "is an existing file"),
+    "stress --out a file": _out_case("stress", _a_file, "is an existing file"),
+}
+
+
+@pytest.mark.parametrize("case", list(ISSUE_9))
+def test_bad_input_is_one_line_exit_2(case, tmp_path, monkeypatch):
+    args, env, words = ISSUE_9[case](tmp_path)
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    proc = run_cbox(*args, timeout=120)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert lines[0].startswith(words[0]), lines[0]
+    for w in words[1:]:
+        assert w in lines[0], lines[0]
+    assert not (tmp_path / "x.exr").exists()
+
+
+def test_help_still_works():
+    for args in (["--help"], ["render", "--help"]):
+        proc = run_cbox(*args)
+        assert proc.returncode == 0 and "Usage" in proc.stdout, proc.stderr

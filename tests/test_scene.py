@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import CORNELL, MINIMAL_SCENE, run_cbox
-from harness.scenes.model import SceneError, triangle_arrays
+from harness.scenes.model import IMAGE_BUFFERS, MAX_IMAGE_BYTES, SceneError, image_memory_bytes, triangle_arrays
 from harness.scenes.loader import load_scene
 
 
@@ -85,6 +85,43 @@ BAD_INPUTS = {
     "unknown filter": (_replace('pixel_filter = "box"', 'pixel_filter = "gaussian"'), "render.pixel_filter", "unknown"),
     "boolean as number": (_replace("fov_deg = 40", "fov_deg = true"), "camera.fov_deg", "boolean"),
     "TOML syntax": (_replace("[camera]", "[camera"), "(syntax)", "invalid TOML"),
+    # Unknown keys, at every level, with a did-you-mean where one is close.
+    "unknown top-level key": (_replace("format = 1", "format = 1\nfeature = []"), "feature",
+                              "unknown key (did you mean 'features'?)"),
+    "unknown camera key": (_replace("fov_deg = 40", "fov_deg = 40\nfov = 40"), "camera.fov",
+                           "unknown key (did you mean 'fov_deg'?)"),
+    "unknown render key": (_replace("max_depth = -1", "max_depht = -1"), "render.max_depht",
+                           "unknown key (did you mean 'max_depth'?)"),
+    "unknown material key": (_replace('type = "diffuse"\n', 'type = "diffuse"\nroughness = 0.1\n'),
+                             "materials.white.roughness", "unknown key (known: type, reflectance)"),
+    "unknown mesh key": (_replace('name = "light"\n', 'name = "light"\ntwo_sided = true\n'),
+                         "meshes[1] (light).two_sided", "unknown key"),
+    "misspelt mesh name key": (_replace('name = "floor"', 'nmae = "floor"'), "meshes[0].nmae",
+                               "unknown key (did you mean 'name'?)"),
+    "unknown emitter key": (_replace("radiance = [10, 10, 10] }", "radiance = [10, 10, 10], power = 1 }"),
+                            "meshes[1] (light).emitter.power", "unknown key"),
+    "odd key quoted, one line": (_replace("[materials.white]", '[materials."wh\\nite"]\nx = 1\n[materials.white]'),
+                                 'materials."wh\\nite".x', "unknown key"),
+    # Values whose products overflow float64, and integers beyond it.
+    "radiance 1e308": (_replace("radiance = [10, 10, 10]", "radiance = [1e308, 10, 10]"),
+                       "meshes[1] (light).emitter.radiance[0]", "out of range"),
+    "radiance above 1e30": (_replace("radiance = [10, 10, 10]", "radiance = [10, 2e30, 10]"),
+                            "meshes[1] (light).emitter.radiance[1]", "<= 1e+30"),
+    "vertex 1e308 (not 'degenerate')": (_replace("[1, -1, 0], [1, 1, 0]", "[1e308, -1, 0], [1, 1, 0]"),
+                                        "meshes[0] (floor).vertices[1][0]", "out of range"),
+    "camera position 1e31": (_replace("position = [0, 0, 3]", "position = [0, 0, 1e31]"), "camera.position[2]",
+                             "out of range"),
+    "integer beyond float64": (_replace("fov_deg = 40", "fov_deg = 1" + "0" * 400), "camera.fov_deg", "out of range"),
+    "integer vertex beyond float64": (_replace("[1, 1, 0]", "[1" + "0" * 400 + ", 1, 0]"),
+                                      "meshes[0] (floor).vertices[2][0]", "out of range"),
+    "max_depth beyond int32": (_replace("max_depth = -1", f"max_depth = {2**40}"), "render.max_depth", "out of range"),
+    # Resolutions whose image buffers cannot fit: refused by the memory estimate, before any renderer.
+    "resolution 2^70": (_replace("resolution = [8, 6]", f"resolution = [{2**70}, 6]"), "camera.resolution",
+                        "estimated"),
+    "resolution 200000^2": (_replace("resolution = [8, 6]", "resolution = [200000, 200000]"), "camera.resolution",
+                            "6.98 TiB"),
+    "100,000 nested arrays": (_replace('name = "minimal"\n', 'name = "minimal"\ndescription = ' + "[" * 100_000
+                                       + "]" * 100_000 + "\n"), "(syntax)", "nested too deeply"),
 }
 
 
@@ -98,6 +135,56 @@ def test_bad_input_names_file_and_field(case, write_scene):
     assert exc.value.field == field
     assert words in exc.value.message
     assert "\n" not in str(exc.value)
+
+
+@pytest.mark.parametrize("data, words", [
+    (b"format = 1\nname = \"\xff\"\n", "not UTF-8 text: byte 0xff at offset 19"),
+    (np.random.default_rng(9).bytes(1 << 20), "not UTF-8 text"),
+], ids=["non-UTF-8", "random bytes"])
+def test_undecodable_scene_file(data, words, tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_bytes(data)
+    with pytest.raises(SceneError) as exc:
+        load_scene(path)
+    assert exc.value.field == "(file)" and words in exc.value.message
+
+
+@pytest.mark.parametrize("obj, field, words", [
+    (np.random.default_rng(9).bytes(4096), "meshes[0] (floor).obj", "not UTF-8"),
+    (b"v -1 -1 0\nv 1e308 -1 0\nv 1 1 0\nf 1 2 3\n", "line 2", "out of range"),
+    (b"v -1 -1 0\nv 1 -1 0\nv 1 1 0\nf 1 2 x\n", "line 4", "invalid literal"),
+], ids=["garbage bytes", "1e308 vertex", "bad face"])
+def test_bad_obj_file(obj, field, words, write_scene, tmp_path):
+    (tmp_path / "bad.obj").write_bytes(obj)
+    path = write_scene(_replace('vertices = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]\nfaces = [[0, 1, 2, 3]]',
+                                'obj = "bad.obj"'))
+    with pytest.raises(SceneError) as exc:
+        load_scene(path)
+    assert exc.value.field == field and words in exc.value.message
+
+
+def test_memory_estimate_bounds_resolution(write_scene):
+    """The estimate is width x height x 3 x 8 bytes x IMAGE_BUFFERS; 9000^2 fits in 16 GiB, 9500^2 does not."""
+    assert image_memory_bytes(2048, 2048) == 2048 * 2048 * 3 * 8 * IMAGE_BUFFERS
+    assert image_memory_bytes(9000, 9000) <= MAX_IMAGE_BYTES < image_memory_bytes(9500, 9500)
+    assert load_scene(write_scene(_replace("resolution = [8, 6]", "resolution = [9000, 9000]"))).camera.width == 9000
+    with pytest.raises(SceneError, match="camera.resolution"):
+        load_scene(write_scene(_replace("resolution = [8, 6]", "resolution = [9500, 9500]"), "big.toml"))
+
+
+def test_tiny_scene_is_not_degenerate(write_scene):
+    """The degenerate-triangle test is relative to the scene's size: a box 1e-150 across still loads."""
+    import re
+
+    tiny = re.sub(r"(vertices = .*|position = .*)", lambda m: re.sub(r"(-?\d+(?:\.\d+)?)", r"\1e-150", m.group(0)),
+                  MINIMAL_SCENE)
+    s = load_scene(write_scene(tiny))
+    assert np.abs(s.meshes[0].vertices).max() == pytest.approx(1e-150)
+
+
+@pytest.mark.parametrize("scene", ["cornell-box", "furnace", "light-panel"])
+def test_stored_scenes_have_no_unknown_keys(scene):
+    load_scene(CORNELL.parent.parent / scene / "scene.toml")
 
 
 def test_missing_scene_file(tmp_path):

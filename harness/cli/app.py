@@ -9,18 +9,40 @@ from __future__ import annotations
 
 import sys
 
-# Importing a command module registers its commands, in this order in `cbox --help`.
-from harness.cli import listing, run, experiment, gate, stress, reference  # noqa: F401, I001
-from harness.cli.common import USER_ERRORS, app
+import typer
+
+# Importing a command module registers its commands, in this order in `cbox --help` (so not sorted).
+from harness.cli import listing, run, experiment, gate, stress, reference  # isort: skip
+from harness.cli.common import (PATH_ERRORS, USER_ERRORS, ClickException, NoArgsIsHelpError, UsageError, app,
+                                check_environment, fail, usage_message)
+
+
+#: The command modules, registered on the app by their import above.
+COMMAND_MODULES = (listing, run, experiment, gate, stress, reference)
 
 
 def main() -> None:
-    """Console entry point: user errors become one line on stderr and exit code 2."""
+    """Console entry point: bad input of any kind becomes one line on stderr and exit code 2.
+
+    Typer runs in non-standalone mode so that its usage errors (``--spp 0``)
+    come here instead of being drawn as a multi-line box; ``--help`` and a
+    command's own exit code pass through unchanged.
+    """
     try:
-        app()
+        check_environment()
+        rv = typer.main.get_command(app).main(prog_name="cbox", standalone_mode=False)
+    except NoArgsIsHelpError as e:  # `cbox` or `cbox reference` alone: the help, as typer shows it
+        e.show()
+        sys.exit(e.exit_code)
+    except UsageError as e:
+        fail(usage_message(e), e.exit_code)
+    except ClickException as e:
+        fail(e.format_message(), e.exit_code)
     except USER_ERRORS as e:
-        print(f"cbox: error: {e}", file=sys.stderr)
-        sys.exit(2)
+        fail(str(e))
+    except PATH_ERRORS as e:  # an output path that went bad during the run (checked beforehand where possible)
+        fail(f"{e.filename}: {e.strerror}" if e.filename else str(e))
     except KeyboardInterrupt:
         print("cbox: interrupted", file=sys.stderr)
         sys.exit(130)
+    sys.exit(rv if isinstance(rv, int) else 0)

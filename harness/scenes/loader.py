@@ -1,21 +1,56 @@
 """Reading scene files: TOML in, a validated :class:`~harness.scenes.model.Scene` out.
 
 Every error is a :class:`~harness.scenes.model.SceneError` that names the file
-and the field. The format itself (fields, units, conventions) is documented in
+and the field, on one line; no other exception escapes :func:`load_scene`,
+whatever the bytes of the file (``tests/test_fuzz.py`` keeps it so). The
+format itself (fields, units, conventions, limits) is documented in
 :mod:`harness.scenes.model`.
 """
 
 from __future__ import annotations
 
+import difflib
 import math
+import re
 import tomllib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from harness.scenes.model import (_DEGENERATE_REL_AREA, FEATURES, FOV_AXES, PIXEL_FILTERS, Camera, Diffuse, Mesh,
-                                  Scene, SceneError)
+from harness.scenes.model import (_DEGENERATE_REL_AREA, FEATURES, FOV_AXES, IMAGE_BUFFERS, MAX_COORDINATE,
+                                  MAX_DEPTH, MAX_IMAGE_BYTES, MAX_OBJ_FILE_BYTES, MAX_RADIANCE, MAX_SCENE_FILE_BYTES,
+                                  PIXEL_FILTERS, Camera, Diffuse, Mesh, Scene, SceneError, image_memory_bytes)
+
+#: The keys each table of a scene file may have; any other is an error (with a did-you-mean).
+_KEYS = {
+    "": ("format", "name", "description", "features", "camera", "render", "materials", "meshes"),
+    "camera": ("type", "position", "look_at", "up", "fov_deg", "fov_axis", "resolution"),
+    "render": ("max_depth", "pixel_filter"),
+    "material": ("type", "reflectance"),
+    "mesh": ("name", "material", "obj", "vertices", "faces", "emitter"),
+    "emitter": ("radiance",),
+}
+#: Longest text of a field or message in an error; longer user text (a 50 MB key) is cut.
+_MAX_TEXT = 300
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def _one_line(text: str, limit: int = _MAX_TEXT) -> str:
+    """``text`` with control characters escaped (so it stays one line) and cut to ``limit`` characters."""
+    if len(text) > limit:
+        text = text[: limit - 1] + "…"
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+def _key(key: str) -> str:
+    """A table key as it is written in a field path: bare if it can be, else TOML-quoted."""
+    key = key if len(key) <= 60 else key[:59] + "…"
+    return key if _BARE_KEY.fullmatch(key) else '"' + key.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _error(file: Path | str, field: str, message: str) -> SceneError:
+    return SceneError(_one_line(str(file), 1000), _one_line(field), _one_line(message))
 
 
 class _Reader:
@@ -25,7 +60,17 @@ class _Reader:
         self.file = file
 
     def err(self, field: str, message: str) -> SceneError:
-        return SceneError(self.file, field, message)
+        return _error(self.file, field, message)
+
+    def known(self, table: dict, where: str, keys: tuple[str, ...]) -> None:
+        """Refuse a key of ``table`` that is not in ``keys``, suggesting the closest known one."""
+        for key in table:
+            if key in keys:
+                continue
+            field = f"{where}.{_key(key)}" if where else _key(key)
+            close = difflib.get_close_matches(key[:100], keys, n=1)
+            hint = f"did you mean {close[0]!r}?" if close else f"known: {', '.join(keys)}"
+            raise self.err(field, f"unknown key ({hint})")
 
     def get(self, table: dict, key: str, where: str, kind: type | tuple, default: Any = ...) -> Any:
         field = f"{where}.{key}" if where else key
@@ -39,30 +84,41 @@ class _Reader:
         if isinstance(value, bool) and bool not in kinds:
             raise self.err(field, f"expected {_kind_name(kind)}, got a boolean")
         if float in kinds and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
+            value = self.to_float(value, field)
         if not isinstance(value, kinds):
             raise self.err(field, f"expected {_kind_name(kind)}, got {type(value).__name__}")
         if isinstance(value, float) and not math.isfinite(value):
             raise self.err(field, f"must be finite, got {value}")
         return value
 
-    def vec(self, table: dict, key: str, where: str, n: int = 3, default: Any = ...) -> tuple[float, ...]:
+    def to_float(self, x: int | float, field: str) -> float:
+        try:
+            return float(x)
+        except OverflowError:  # an integer beyond float64 (TOML integers are unbounded here)
+            raise self.err(field, f"out of range: an integer of {len(str(abs(x)))} digits") from None
+
+    def vec(self, table: dict, key: str, where: str, n: int = 3, default: Any = ...,
+            bound: float | None = None) -> tuple[float, ...]:
         field = f"{where}.{key}" if where else key
         raw = self.get(table, key, where, list, default)
         if raw is default and default is not ...:
             return default
-        return self.numbers(raw, field, n)
+        return self.numbers(raw, field, n, bound)
 
-    def numbers(self, raw: Any, field: str, n: int) -> tuple[float, ...]:
+    def numbers(self, raw: Any, field: str, n: int, bound: float | None = None) -> tuple[float, ...]:
+        """``n`` finite numbers; with ``bound``, each of magnitude at most ``bound``."""
         if not isinstance(raw, list) or len(raw) != n:
             raise self.err(field, f"expected a list of {n} numbers")
         out = []
         for i, x in enumerate(raw):
             if isinstance(x, bool) or not isinstance(x, (int, float)):
                 raise self.err(f"{field}[{i}]", f"expected a number, got {type(x).__name__}")
+            x = self.to_float(x, f"{field}[{i}]")
             if not math.isfinite(x):
                 raise self.err(f"{field}[{i}]", f"must be finite, got {x}")
-            out.append(float(x))
+            if bound is not None and abs(x) > bound:
+                raise self.err(f"{field}[{i}]", f"out of range: |value| must be <= {bound:g}, got {x:g}")
+            out.append(x)
         return tuple(out)
 
 
@@ -72,27 +128,46 @@ def _kind_name(kind: type | tuple) -> str:
     return " or ".join(names.get(k, k.__name__) for k in kinds)
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Read and validate a scene file; raise :class:`SceneError` on bad input."""
-    path = Path(path)
-    if path.is_dir():
-        path = path / "scene.toml"
+def _read_text(path: Path, limit: int) -> str:
+    """The UTF-8 text of ``path``, at most ``limit`` bytes; OSError, or ValueError saying what is wrong."""
+    with open(path, "rb") as f:
+        data = f.read(limit + 1)
+    if len(data) > limit:
+        raise ValueError(f"larger than the {limit / 2**20:g} MiB limit")
     try:
-        text = path.read_text(encoding="utf-8")
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise ValueError(f"not UTF-8 text: byte 0x{data[e.start]:02x} at offset {e.start}") from None
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a scene file; raise :class:`SceneError` on bad input, and nothing else."""
+    path = Path(path)
+    try:
+        if path.is_dir():
+            path = path / "scene.toml"
+        text = _read_text(path, MAX_SCENE_FILE_BYTES)
     except FileNotFoundError:
-        raise SceneError(path, "(file)", "no such file") from None
+        raise _error(path, "(file)", "no such file") from None
     except OSError as e:
-        raise SceneError(path, "(file)", e.strerror or str(e)) from None
+        raise _error(path, "(file)", e.strerror or str(e)) from None
+    except ValueError as e:  # not UTF-8, too large, or a NUL in the path
+        raise _error(path, "(file)", str(e)) from None
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise SceneError(path, "(syntax)", f"invalid TOML: {e}") from None
+        raise _error(path, "(syntax)", f"invalid TOML: {e}") from None
+    except RecursionError:
+        raise _error(path, "(syntax)", "invalid TOML: arrays or tables nested too deeply") from None
+    except ValueError as e:  # e.g. an integer of more than 4300 digits
+        raise _error(path, "(syntax)", f"invalid TOML: {e}") from None
     return parse_scene(doc, path)
 
 
 def parse_scene(doc: dict, path: Path) -> Scene:
     """Validate a parsed scene document (see :func:`load_scene`)."""
     r = _Reader(path)
+    r.known(doc, "", _KEYS[""])
     fmt = r.get(doc, "format", "", int)
     if fmt != 1:
         raise r.err("format", f"unsupported scene format {fmt}; this harness reads format 1")
@@ -101,9 +176,12 @@ def parse_scene(doc: dict, path: Path) -> Scene:
 
     camera = _parse_camera(r, r.get(doc, "camera", "", dict))
     render = r.get(doc, "render", "", dict)
+    r.known(render, "render", _KEYS["render"])
     max_depth = r.get(render, "max_depth", "render", int)
     if max_depth == 0 or max_depth < -1:
         raise r.err("render.max_depth", f"must be -1 (unbounded) or >= 1, got {max_depth}")
+    if max_depth > MAX_DEPTH:
+        raise r.err("render.max_depth", f"out of range: at most {MAX_DEPTH} (or -1, unbounded), got {max_depth}")
     pixel_filter = r.get(render, "pixel_filter", "render", str)
     if pixel_filter not in PIXEL_FILTERS:
         raise r.err("render.pixel_filter", f"unknown filter {pixel_filter!r}; known: {', '.join(PIXEL_FILTERS)}")
@@ -155,12 +233,13 @@ def _features_used(meshes: tuple[Mesh, ...], pixel_filter: str) -> set[str]:
 
 def _parse_camera(r: _Reader, t: dict) -> Camera:
     w = "camera"
+    r.known(t, w, _KEYS["camera"])
     kind = r.get(t, "type", w, str)
     if kind != "pinhole":
         raise r.err("camera.type", f"unknown camera {kind!r}; known: pinhole")
-    position = r.vec(t, "position", w)
-    look_at = r.vec(t, "look_at", w)
-    up = r.vec(t, "up", w)
+    position = r.vec(t, "position", w, bound=MAX_COORDINATE)
+    look_at = r.vec(t, "look_at", w, bound=MAX_COORDINATE)
+    up = r.vec(t, "up", w, bound=MAX_COORDINATE)
     fov = r.get(t, "fov_deg", w, float)
     if not 0.0 < fov < 180.0:
         raise r.err("camera.fov_deg", f"must be in (0, 180), got {fov}")
@@ -172,6 +251,11 @@ def _parse_camera(r: _Reader, t: dict) -> Camera:
         raise r.err("camera.resolution", "expected [width, height] as two integers")
     if res[0] <= 0 or res[1] <= 0:
         raise r.err("camera.resolution", f"width and height must be positive, got {res}")
+    if (need := image_memory_bytes(res[0], res[1])) > MAX_IMAGE_BYTES:
+        raise r.err("camera.resolution",
+                    f"{_count(res[0])}x{_count(res[1])} is too large: its image buffers need an estimated "
+                    f"{_bytes(need)} (width x height x 3 channels x float64 x {IMAGE_BUFFERS} buffers), "
+                    f"over the {_bytes(MAX_IMAGE_BYTES)} limit")
     forward = np.subtract(look_at, position)
     if np.linalg.norm(forward) == 0.0:
         raise r.err("camera.look_at", "equals camera.position")
@@ -185,9 +269,10 @@ def _parse_materials(r: _Reader, t: dict) -> dict[str, Diffuse]:
         raise r.err("materials", "a scene needs at least one material")
     out = {}
     for name, m in t.items():
-        w = f"materials.{name}"
+        w = f"materials.{_key(name)}"
         if not isinstance(m, dict):
             raise r.err(w, f"expected a table, got {type(m).__name__}")
+        r.known(m, w, _KEYS["material"])
         kind = r.get(m, "type", w, str)
         if kind != "diffuse":
             raise r.err(f"{w}.type", f"unknown material type {kind!r}; known: diffuse")
@@ -203,8 +288,10 @@ def _parse_mesh(r: _Reader, t: Any, i: int, materials: dict, base: Path) -> Mesh
     w = f"meshes[{i}]"
     if not isinstance(t, dict):
         raise r.err(w, f"expected a table, got {type(t).__name__}")
+    if isinstance(t.get("name"), str):
+        w = f"meshes[{i}] ({_one_line(t['name'], 60)})"
+    r.known(t, w, _KEYS["mesh"])
     name = r.get(t, "name", w, str)
-    w = f"meshes[{i}] ({name})"
     material = r.get(t, "material", w, str)
     if material not in materials:
         known = ", ".join(sorted(materials))
@@ -216,7 +303,7 @@ def _parse_mesh(r: _Reader, t: Any, i: int, materials: dict, base: Path) -> Mesh
         vertices, faces = _read_obj(r, obj, f"{w}.obj")
     else:
         raw_v = r.get(t, "vertices", w, list)
-        vertices = [r.numbers(v, f"{w}.vertices[{j}]", 3) for j, v in enumerate(raw_v)]
+        vertices = [r.numbers(v, f"{w}.vertices[{j}]", 3, MAX_COORDINATE) for j, v in enumerate(raw_v)]
         raw_f = r.get(t, "faces", w, list)
         faces = []
         for j, f in enumerate(raw_f):
@@ -237,7 +324,8 @@ def _parse_mesh(r: _Reader, t: Any, i: int, materials: dict, base: Path) -> Mesh
     radiance = None
     if "emitter" in t:
         e = r.get(t, "emitter", w, dict)
-        radiance = r.vec(e, "radiance", f"{w}.emitter")
+        r.known(e, f"{w}.emitter", _KEYS["emitter"])
+        radiance = r.vec(e, "radiance", f"{w}.emitter", bound=MAX_RADIANCE)
         if min(radiance) < 0.0:
             raise r.err(f"{w}.emitter.radiance", f"must be non-negative, got {list(radiance)}")
     return Mesh(name, v, np.asarray(tris, dtype=np.int64), material, radiance)
@@ -246,11 +334,13 @@ def _parse_mesh(r: _Reader, t: Any, i: int, materials: dict, base: Path) -> Mesh
 def _read_obj(r: _Reader, path: Path, field: str) -> tuple[list, list]:
     """Vertices and polygon faces of a Wavefront OBJ (positions only)."""
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
+        lines = _read_text(path, MAX_OBJ_FILE_BYTES).splitlines()
     except FileNotFoundError:
         raise r.err(field, f"OBJ file {path} does not exist") from None
     except OSError as e:
         raise r.err(field, f"cannot read OBJ file {path}: {e.strerror or e}") from None
+    except ValueError as e:  # not UTF-8, too large, or a NUL in the path
+        raise r.err(field, f"OBJ file {path}: {e}") from None
     vertices: list = []
     faces: list = []
     for n, line in enumerate(lines, 1):
@@ -262,6 +352,9 @@ def _read_obj(r: _Reader, path: Path, field: str) -> tuple[list, list]:
                 xyz = [float(x) for x in parts[1:4]]
                 if len(xyz) != 3 or not all(math.isfinite(x) for x in xyz):
                     raise ValueError("needs 3 finite coordinates")
+                if any(abs(x) > MAX_COORDINATE for x in xyz):
+                    raise ValueError(f"coordinate out of range: |value| must be <= {MAX_COORDINATE:g}, got "
+                                     f"{max(xyz, key=abs):g}")
                 vertices.append(xyz)
             elif parts[0] == "f":
                 idx = [int(p.split("/")[0]) for p in parts[1:]]
@@ -270,15 +363,31 @@ def _read_obj(r: _Reader, path: Path, field: str) -> tuple[list, list]:
                     raise ValueError("a face needs at least 3 vertices")
                 faces.extend([idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1))
         except ValueError as e:
-            raise SceneError(path, f"line {n}", str(e)) from None
+            raise _error(path, f"line {n}", str(e)) from None
     return vertices, faces
 
 
+def _bytes(n: int) -> str:
+    for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20)):
+        if n >= size:
+            return f"{_count(n // size)} {unit}" if n // size >= 10**15 else f"{n / size:.3g} {unit}"
+    return f"{n} bytes"
+
+
+def _count(n: int) -> str:
+    """An integer for a message: as is, or as ``~1e400`` when it is huge (a float would overflow)."""
+    return str(n) if n < 10**15 else f"~1e{len(str(n)) - 1}"
+
+
 def _check_degenerate(r: _Reader, meshes: tuple[Mesh, ...]) -> None:
+    # Coordinates are bounded (MAX_COORDINATE), so nothing here overflows; they are also rescaled
+    # to the scene's size first, so a tiny but well-shaped scene's areas do not underflow to zero.
     v = np.concatenate([m.vertices for m in meshes])
-    size2 = float(np.sum((v.max(0) - v.min(0)) ** 2)) or 1.0
+    lo, span = v.min(0), v.max(0) - v.min(0)
+    scale = float(span.max()) or 1.0
+    size2 = float(np.sum((span / scale) ** 2)) or 1.0
     for i, m in enumerate(meshes):
-        a, b, c = (m.vertices[m.triangles[:, k]] for k in range(3))
+        a, b, c = ((m.vertices[m.triangles[:, k]] - lo) / scale for k in range(3))
         area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
         bad = np.flatnonzero(area <= _DEGENERATE_REL_AREA * size2)
         if bad.size:

@@ -27,6 +27,31 @@ Conventions
 - Quads ``[a, b, c, d]`` are split into triangles ``(a, b, c)`` and ``(a, c, d)``.
 - Pixel ``(row, col)`` = ``(0, 0)`` is the top-left of the image.
 
+Limits
+------
+The loader refuses, with a :class:`SceneError` naming the file and field:
+
+- **unknown keys**, at every level (``render.max_depht``): a misspelt
+  optional key would otherwise be ignored silently; the message suggests the
+  closest known key;
+- coordinates (vertices, ``camera.position``/``look_at``/``up``) with
+  ``|x| >`` :data:`MAX_COORDINATE` = 1e30 and emitter radiance above
+  :data:`MAX_RADIANCE` = 1e30: squared lengths, areas and powers
+  (``Le · A · π``) of such values overflow float64 (1e308 squared is inf);
+  at the bounds they stay below ~1e92;
+- ``render.max_depth`` above :data:`MAX_DEPTH` = 2³¹ - 1 (Mitsuba 3 takes
+  it as a 32-bit integer);
+- degenerate triangles: area at most 1e-12 of the scene's squared size,
+  computed on coordinates rescaled to the scene's size (so a tiny scene's
+  areas do not underflow to zero, and out-of-range values are reported as
+  such, not as degenerate);
+- a ``camera.resolution`` whose image buffers, estimated by
+  :func:`image_memory_bytes`, exceed :data:`MAX_IMAGE_BYTES` = 16 GiB
+  (about 9459 × 9459 pixels), before any renderer is called;
+- scene files over :data:`MAX_SCENE_FILE_BYTES` (64 MiB; large meshes belong
+  in OBJ files, up to :data:`MAX_OBJ_FILE_BYTES` = 1 GiB), files that are not
+  UTF-8 text, and TOML nested deeper than the parser's recursion limit.
+
 Features
 --------
 A scene declares, in ``features``, the set of :data:`FEATURES` it uses; the
@@ -58,6 +83,38 @@ PIXEL_FILTERS = ("box",)
 FOV_AXES = ("x", "y", "smaller", "larger")
 #: Below this area (relative to the scene's squared size) a triangle is degenerate.
 _DEGENERATE_REL_AREA = 1e-12
+
+#: Largest |coordinate| in scene units (vertices, camera position, look_at, up). The harness
+#: squares lengths and multiplies them (extent², edge cross products for areas, Le·A·π for
+#: power): at 1e30 these stay below ~1e92, far inside float64 (max ~1.8e308), whereas a 1e308
+#: coordinate overflows to inf the moment it is squared.
+MAX_COORDINATE = 1e30
+#: Largest emitted radiance per channel: with areas up to ~1e61 (from MAX_COORDINATE), the
+#: power Le·A·π stays finite; 1e308 is inf in float32 renderers and overflows any product.
+MAX_RADIANCE = 1e30
+#: Largest bounded render.max_depth: Mitsuba 3 takes max_depth as a 32-bit signed integer.
+MAX_DEPTH = 2**31 - 1
+#: Image-sized float64 RGB buffers a run holds at once, for :func:`image_memory_bytes`: the
+#: film's sums and sums of squares, the mean and variance images, checkpoints, the
+#: reference and its variance, and the metrics' intermediates (colour conversions, ΔE).
+IMAGE_BUFFERS = 8
+#: Largest estimated image memory (:func:`image_memory_bytes`) a scene's resolution may ask
+#: for: 16 GiB, about 9459 × 9459 pixels. The stress suite's largest render, 2048², is
+#: estimated at 768 MiB (measured peaks: 570-710 MB).
+MAX_IMAGE_BYTES = 16 * 2**30
+#: Largest scene (TOML) file read; meshes of that size belong in OBJ files.
+MAX_SCENE_FILE_BYTES = 64 * 2**20
+#: Largest OBJ file read.
+MAX_OBJ_FILE_BYTES = 2**30
+
+
+def image_memory_bytes(width: int, height: int) -> int:
+    """Estimated memory of a run's image buffers: width × height × 3 channels × 8 bytes × :data:`IMAGE_BUFFERS`.
+
+    Exact integer arithmetic, so an absurd resolution (2^70) gives an absurd
+    estimate, not an overflow.
+    """
+    return int(width) * int(height) * 3 * 8 * IMAGE_BUFFERS
 
 
 class SceneError(ValueError):

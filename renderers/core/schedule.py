@@ -39,6 +39,7 @@ import numpy as np
 
 from harness.adapters.registry import Checkpoint, RenderResult
 from harness.adapters.seeds import pass_key, spp_passes
+from harness.adapters.settings import SettingsError
 from harness.scenes.model import Scene
 from renderers.core.film import Film
 
@@ -56,10 +57,20 @@ R = TypeVar("R")
 
 
 def default_threads() -> int:
-    """Worker threads: ``$CBOX_THREADS`` or the machine's CPU count."""
+    """Worker threads: ``$CBOX_THREADS`` (a positive integer) or the machine's CPU count.
+
+    Raises :class:`~harness.adapters.settings.SettingsError` (one of the CLI's
+    user errors) naming ``CBOX_THREADS`` if it is set to anything else.
+    """
     env = os.environ.get("CBOX_THREADS")
     if env:
-        return max(1, int(env))
+        try:
+            threads = int(env)
+        except ValueError:
+            threads = 0
+        if threads < 1:
+            raise SettingsError(f"CBOX_THREADS: expected a positive integer (worker threads), got {env!r}")
+        return threads
     return os.cpu_count() or 1
 
 
