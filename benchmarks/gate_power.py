@@ -57,7 +57,8 @@ from harness.scenes.library import resolve_scene  # noqa: E402
 from renderers.core.schedule import default_threads  # noqa: E402
 
 POWER = 0.99
-STATISTICAL = {"agreement", "finite"}  # the checks with a stated false-alarm rate
+#: The checks with a stated false-alarm rate: agreement, variance and outliers share the expectation's alpha.
+STATISTICAL = {"agreement", "variance", "outliers", "finite"}
 HANG_TIMEOUT_S = 120  # ~10 gate runs: a mutant of mutants.ISOLATED that has not ended by then never will
 MULTIPLES = [2.0 ** k for k in range(-8, 17)]  # budget multiples searched for 99% power
 
@@ -194,7 +195,7 @@ def main(argv=None) -> int:
     base_exceed = [False] * args.seeds  # runs where some metric is worse than its baseline by more than the margin
     for off in range(args.seeds):
         t0 = time.perf_counter()
-        outcomes = run_gate(cfg, seed_offset=off)
+        outcomes = run_gate(cfg, seed_offset=off, sandbox=False)  # same images as the CLI's child process
         v = mutants.verdict(outcomes)
         wall.append(time.perf_counter() - t0)
         render.append(v.time_s)

@@ -88,3 +88,12 @@ def gate_section(outcomes, alpha: float) -> str:
         block.append("</div>")
         parts.append("".join(block))
     return "\n".join(parts)
+
+
+def gate_index_html(scenes: list[tuple[str, str, bool]]) -> str:
+    """A page linking each scene's gate report: (scene name, relative link, passed)."""
+    items = "\n".join(f'<li><a href="{escape(link)}">{escape(name)}</a> — '
+                       f'{"passed" if ok else "<strong>failed</strong>"}</li>' for name, link, ok in scenes)
+    verdict = "passed" if all(ok for _, _, ok in scenes) else "failed"
+    return (f'<!doctype html>\n<html lang="en"><head><meta charset="utf-8"><title>cbox gate: {verdict}</title>'
+            f'</head>\n<body><h1>cbox gate: {verdict}</h1>\n<ul>\n{items}\n</ul>\n</body></html>\n')

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import pytest
@@ -39,9 +40,42 @@ def test_unknown_name_is_a_usage_error():
         resolve(["povray"])
 
 
-def test_import_failure_makes_renderer_unavailable_not_a_crash():
-    (entry,) = resolve(["no_such_module_xyz:Thing"])
-    assert not entry.available and "cannot import" in entry.reason
+def test_unknown_name_suggests_the_closest():
+    with pytest.raises(RendererError, match=r"unknown renderer 'pathtracr' \(did you mean 'pathtracer'\?\)"):
+        resolve(["pathtracr"])
+
+
+@pytest.mark.parametrize("spec, words", [("no_such_module_xyz:Thing", "cannot import"),
+                                         ("user_renderers:Nope", "has no attribute 'Nope'")])
+def test_a_named_module_class_that_cannot_load_is_a_usage_error(spec, words):
+    """Never "unavailable": a CI running `compare` on a typo must not go green."""
+    with pytest.raises(RendererError, match=words):
+        resolve([spec])
+
+
+@pytest.mark.parametrize("command", [["compare", "--spp", "1"], ["converge", "--spp", "1", "--seeds", "1"],
+                                     ["render", "--spp", "1", "--out", "x.exr"]])
+def test_module_class_typo_exits_2_in_every_command(tmp_path, command):
+    cmd, *rest = command
+    out = ["--out", str(tmp_path / "o")] if "--out" not in rest else []
+    if "--out" in rest:
+        rest[rest.index("--out") + 1] = str(tmp_path / "x.exr")
+    proc = run_cbox(cmd, "--scene", "cornell-box", "-r", "user_renderers:Nope", *rest, *out, env_path=TESTS)
+    assert proc.returncode == 2 and "has no attribute 'Nope'" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_module_class_is_found_in_the_current_folder(tmp_path):
+    """As `python -m` does: the console script alone would not put the current folder on the path."""
+    (tmp_path / "here_renderer.py").write_text("from user_renderers import FlatGrey as Here\n")
+    import os
+    import subprocess
+    cbox = Path(sys.executable).with_name("cbox")
+    env = dict(os.environ, PYTHONPATH=str(TESTS))
+    proc = subprocess.run([str(cbox), "render", "--scene", "cornell-box", "-r", "here_renderer:Here", "--spp", "1",
+                           "--out", str(tmp_path / "x.exr")], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
 
 
 def test_runner_statuses_and_reasons():

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from harness.evaluate import convergence as cv
-from harness.workflows.compare import parse_duration
+from harness.workflows.budgets import parse_duration
 from harness.workflows.converge import parse_spp_list
 
 

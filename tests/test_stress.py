@@ -20,7 +20,8 @@ from conftest import CORNELL, run_cbox
 from harness.scenes import analytic, transforms
 from harness.scenes.loader import load_scene
 from harness.store.references import load_reference
-from harness.stress import expectations, judge, sandbox, suite, variants
+from harness.stress import expectations, judge, suite, variants
+from harness.workflows import sandbox
 
 pytest.importorskip("embreex")
 

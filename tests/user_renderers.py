@@ -173,3 +173,51 @@ class Tunable(SeededNoise):
         result.image = result.image - 0.25 + settings["level"]
         result.info["seen_settings"] = dict(settings)
         return result
+
+
+class LyingVariance(FlatGrey):
+    """The reference plus noise of its own model, times ``scale``, reporting ``variance_factor`` × its variance.
+
+    The defaults are issue 9's case: 1% too dark and claiming 100 times the
+    variance it has, which hides the bias from the agreement test (its z-scores
+    shrink tenfold); the variance check must catch it. ``variance_factor = 1``
+    is an honest renderer.
+    """
+
+    name = "lying-variance"
+    settings = (Setting("scale", float, 0.99, "factor on the image (1: unbiased)", low=0.0, high=10.0),
+                Setting("variance_factor", float, 100.0, "reported variance / true variance", low=1e-6, high=1e6))
+
+    def render(self, scene, spp, seed, checkpoints=(), settings=None):
+        from harness.store.references import load_reference
+
+        ref = load_reference(scene)
+        rng = np.random.default_rng(seed)
+        var = ref.variance.astype(np.float64) * ref.spp / spp
+        img = (ref.image + np.sqrt(var) * rng.standard_normal(ref.image.shape)) * settings["scale"]
+        reported = var * settings["scale"] ** 2 * settings["variance_factor"]
+        return RenderResult(img.astype(np.float32), 0.01, spp, seed, variance=reported.astype(np.float32))
+
+
+class HotPixel(FlatGrey):
+    """The reference plus noise of its own model, with pixel (``x``, ``y``) times ``factor`` in every channel.
+
+    A bug after the film's statistics (e.g. a pixel written twice in a
+    post-process): the reported variance is the noise's, unchanged at that
+    pixel. ``factor = 1`` is an honest renderer.
+    """
+
+    name = "hot-pixel"
+    settings = (Setting("x", int, 20, "column of the hot pixel", low=0),
+                Setting("y", int, 128, "row of the hot pixel", low=0),
+                Setting("factor", float, 2.0, "factor on that pixel", low=0.0, high=1e6))
+
+    def render(self, scene, spp, seed, checkpoints=(), settings=None):
+        from harness.store.references import load_reference
+
+        ref = load_reference(scene)
+        rng = np.random.default_rng(seed)
+        var = ref.variance.astype(np.float64) * ref.spp / spp
+        img = ref.image + np.sqrt(var) * rng.standard_normal(ref.image.shape)
+        img[settings["y"], settings["x"]] *= settings["factor"]
+        return RenderResult(img.astype(np.float32), 0.01, spp, seed, variance=var.astype(np.float32))

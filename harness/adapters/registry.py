@@ -18,8 +18,11 @@ given directly as ``package.module:ClassName``.
 
 from __future__ import annotations
 
+import difflib
 import importlib
 import importlib.metadata
+import os
+import sys
 from dataclasses import dataclass, field
 from typing import Protocol, Sequence, runtime_checkable
 
@@ -114,10 +117,18 @@ def missing_features(renderer: Renderer, scene: Scene) -> list[str]:
 
 
 def load_spec(spec: str) -> Renderer:
-    """Instantiate ``package.module:ClassName``; raise RendererError if impossible."""
+    """Instantiate ``package.module:ClassName``; raise RendererError if impossible.
+
+    The current folder is on the import path first, as ``python -m`` puts it
+    (the ``cbox`` console script alone would not), so a renderer in the
+    folder a user runs ``cbox`` from is found.
+    """
     module_name, _, attr = spec.partition(":")
     if not module_name or not attr:
         raise RendererError(f"renderer {spec!r}: expected a registered name or package.module:ClassName")
+    cwd = os.getcwd()
+    if cwd not in sys.path and "" not in sys.path:
+        sys.path.insert(0, cwd)
     try:
         module = importlib.import_module(module_name)
     except ImportError as e:
@@ -183,9 +194,10 @@ def resolve(specs: Sequence[str] | None) -> list[RendererEntry]:
 
     A spec may carry settings, ``pathtracer[rr_depth=3]``; they are validated
     against the renderer's declared settings (SettingsError, a usage error).
-    Only the renderers named are loaded and probed. An unknown name raises
-    RendererError (a usage error); a renderer that exists but cannot run here
-    comes back unavailable, with its reason.
+    Only the renderers named are loaded and probed. An unknown name, or a
+    ``module:Class`` that cannot be imported or found, raises RendererError (a
+    usage error); a renderer that loads but cannot run here (its
+    ``unavailable_reason()``) comes back unavailable, with its reason.
     """
     eps = _entry_points()
     if not specs:
@@ -196,10 +208,15 @@ def resolve(specs: Sequence[str] | None) -> list[RendererEntry]:
         if name in eps:
             entry = _load_entry_point(eps[name])
         elif ":" in name:
+            # Named explicitly: one that cannot be imported or found is a usage error, never "unavailable".
             entry = _entry(name, name, lambda name=name: load_spec(name))
+            if entry.renderer is None:
+                raise RendererError(entry.reason)
         else:
+            hint = difflib.get_close_matches(name, list(eps), n=1)
             known = ", ".join(eps) or "(none)"
-            raise RendererError(f"unknown renderer {name!r}; registered: {known}; or give package.module:ClassName")
+            raise RendererError(f"unknown renderer {name!r}" + (f" (did you mean {hint[0]!r}?)" if hint else "")
+                                + f"; registered: {known}; or give package.module:ClassName")
         out.append(entry.with_settings(given) if given else entry)
     return out
 

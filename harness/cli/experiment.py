@@ -10,11 +10,12 @@ import typer
 from tqdm import tqdm
 
 from harness.adapters.registry import missing_features, resolve
-from harness.cli.common import RenderersOpt, SceneOpt, _command_line, app
+from harness.cli.common import RenderersOpt, SceneOpt, _command_line, app, out_folder_option
 from harness.scenes.library import resolve_scene
 from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results
 from harness.store.references import load_reference
-from reports.experiment import write_experiment_report
+# Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
+# a misspelt config, or `cbox --help`, must answer in a second.
 
 
 @app.command()
@@ -25,7 +26,7 @@ def converge(
                                                          "(powers of two). Progressive renderers give them all "
                                                          "from one render."),
     seeds: int = typer.Option(4, "--seeds", min=1, help="Number of seeds (0 .. N-1); bias and variance need 2 or more."),
-    out: Path = typer.Option(Path("out/converge"), "--out", "-o", help="Experiment folder: results.parquet, "
+    out: Path = out_folder_option(Path("out/converge"), "Experiment folder: results.parquet, "
                                                                       "summary.csv, report.html, cells/, images/."),
     target: Optional[List[str]] = typer.Option(
         None, "--target", help="Target error for the time-to-target figure, METRIC=VALUE (repeatable); default: "
@@ -46,6 +47,7 @@ def converge(
     from harness.adapters.settings import parse_sweep
     from harness.evaluate.convergence import DEFAULT_TARGETS, parse_target
     from harness.workflows.converge import parse_spp_list, run_experiment
+    from reports.experiment import write_experiment_report
 
     try:
         spps = parse_spp_list(spp)
@@ -86,6 +88,8 @@ def report(
     folder: Path = typer.Argument(..., help="Folder written by cbox converge or cbox compare."),
 ) -> None:
     """Rebuild FOLDER/report.html (and summary.csv) from stored results, without rendering."""
+    from reports.experiment import write_experiment_report
+
     config, _ = load_results(folder)
     sc = resolve_scene(config["scene"])
     if sc.content_hash() != config["scene_hash"]:

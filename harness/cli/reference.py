@@ -12,7 +12,8 @@ from harness.adapters.registry import RendererError, resolve
 from harness.cli.common import REFERENCE_RENDERER, SceneOpt, reference_app
 from harness.scenes.library import resolve_scene
 from harness.store.references import load_reference
-from harness.workflows.reference_build import build_reference
+# Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
+# a misspelt config, or `cbox --help`, must answer in a second.
 
 
 @reference_app.command("build")
@@ -25,6 +26,8 @@ def reference_build(
     sc = resolve_scene(scene)
     if spp % batches:
         raise typer.BadParameter(f"--spp ({spp}) must be a multiple of --batches ({batches})")
+    from harness.workflows.reference_build import build_reference
+
     (entry,) = resolve([REFERENCE_RENDERER])
     if not entry.available:
         raise RendererError(f"renderer {entry.name!r} builds references but is unavailable: {entry.reason}")

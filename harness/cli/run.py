@@ -10,12 +10,13 @@ import typer
 
 from harness.adapters.registry import RendererError, missing_features, resolve
 from harness.adapters.settings import canonical
-from harness.cli.common import RenderersOpt, SceneOpt, SeedOpt, SppOpt, _command_line, _progress, app
+from harness.cli.common import (RenderersOpt, SceneOpt, SeedOpt, SppOpt, _command_line, _progress, app,
+                                check_output_file, out_folder_option)
 from harness.scenes.library import resolve_scene
 from harness.store.exr import write_exr
 from harness.store.references import load_reference
-from harness.workflows import runner
-from reports.experiment import write_experiment_report
+# Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
+# a misspelt config, or `cbox --help`, must answer in a second.
 
 
 @app.command()
@@ -25,16 +26,20 @@ def render(
                                                              "with settings as NAME\\[setting=value,...]."),
     spp: int = SppOpt,
     seed: int = SeedOpt,
-    out: Path = typer.Option(..., "--out", "-o", help="Output OpenEXR file (float32 linear sRGB)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Output OpenEXR file (float32 linear sRGB); its name must "
+                                                      "end in .exr (other formats are refused, not converted)."),
 ) -> None:
     """Render one scene with one renderer and write the HDR image."""
+    check_output_file(out)  # before any rendering: .exr, not a folder, writable
     sc = resolve_scene(scene)
     (entry,) = resolve([renderer])
     if not entry.available:
         raise RendererError(f"renderer {entry.name!r} is unavailable: {entry.reason}")
     if missing := missing_features(entry.renderer, sc):
         raise RendererError(f"renderer {entry.name!r} does not model {', '.join(missing)}, which {sc.name} uses")
-    result = runner.render_checked(entry, sc, spp, seed)
+    from harness.workflows.render import render_checked
+
+    result = render_checked(entry, sc, spp, seed)
     write_exr(out, result.image, {"cbox:renderer": entry.name, "cbox:settings": canonical(entry.settings), "cbox:spp": str(spp), "cbox:seed": str(seed),
                                   "cbox:scene_hash": sc.content_hash()})
     typer.echo(f"wrote {out} ({sc.camera.width}x{sc.camera.height}, {spp} spp, {result.time_s:.2f} s)", err=True)
@@ -43,6 +48,7 @@ def render(
 def _write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(), title=None) -> Path:
     """Store a comparison as an experiment folder (results, images, CSV/JSON) and build its report."""
     from harness.workflows.compare import store_comparison
+    from reports.experiment import write_experiment_report
 
     store_comparison(out, sc, records, command)
     return write_experiment_report(out, sc, ref, sections=sections, title=title)
@@ -52,9 +58,11 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
                  time_budget: Optional[str] = None, target_error: Optional[str] = None, max_spp: int = 4096) -> int:
     from harness.evaluate.convergence import parse_target
     from harness.workflows import compare as cmp
+    from harness.workflows import runner
+    from harness.workflows.budgets import parse_duration
 
     try:
-        budget = cmp.parse_duration(time_budget) if time_budget else None
+        budget = parse_duration(time_budget) if time_budget else None
         target = parse_target(target_error) if target_error else None
     except ValueError as e:
         raise typer.BadParameter(str(e)) from None
@@ -101,7 +109,7 @@ def compare(
     renderer: Optional[List[str]] = RenderersOpt,
     spp: int = SppOpt,
     seed: int = SeedOpt,
-    out: Path = typer.Option(Path("out"), "--out", "-o", help="Folder for report.html, metrics.csv, metrics.json, "
+    out: Path = out_folder_option(Path("out"), "Folder for report.html, metrics.csv, metrics.json, "
                                                                "results.parquet and the images."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON record per run on stdout."),
     time_budget: Optional[str] = typer.Option(
@@ -126,7 +134,7 @@ def compare(
 
 @app.command()
 def demo(
-    out: Path = typer.Option(Path("out"), "--out", "-o", help="Folder for report.html and metrics.csv."),
+    out: Path = out_folder_option(Path("out"), "Folder for report.html and metrics.csv."),
     spp: int = typer.Option(64, "--spp", min=1, help="Samples per pixel for every renderer."),
     seed: int = SeedOpt,
 ) -> None:

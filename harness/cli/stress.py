@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.common import _command_line, app
+from harness.cli.common import _command_line, app, out_folder_option
 
 
 @app.command()
@@ -16,7 +16,7 @@ def stress(
         None, "--renderer", "-r", help="Renderer to stress (repeatable); default: every registered renderer."),
     variant: Optional[List[str]] = typer.Option(
         None, "--variant", "-v", help="Variant to run (repeatable); default: all (see harness/stress/variants.py)."),
-    out: Path = typer.Option(Path("out/stress"), "--out", "-o", help="Folder for stress.csv and stress.html."),
+    out: Path = out_folder_option(Path("out/stress"), "Folder for stress.csv and stress.html."),
 ) -> None:
     """Numerical stability at the extremes: each scene variant with each renderer that models it.
 

@@ -1,4 +1,4 @@
-"""The checks of one expectation on its run: finite pixels, agreement, budgets, slope, baseline.
+"""The checks of one expectation on its run: finite pixels, agreement, variance, outliers, budgets, slope, baseline.
 
 Pure evaluation: nothing here renders. :mod:`harness.gate.run` renders and
 calls :func:`evaluate`.
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.evaluate import agreement, convergence, metrics, noise
+from harness.evaluate import agreement, convergence, metrics, noise, outliers, variance_check
 from harness.evaluate.registry import HIGHER_IS_BETTER
 from harness.gate.config import Expectation, GateConfig
 from harness.store.references import Reference
@@ -26,6 +26,7 @@ class Check:
     message: str
     value: float | None = None
     limit: float | None = None
+    error: bool = False  # the check could not be made (the renderer crashed): a JUnit <error>, not a <failure>
 
 
 @dataclass
@@ -95,11 +96,48 @@ def _slope_check(exp: Expectation, rec: runner.RunRecord, ref: Reference) -> Che
                  f"expected in [{lo:g}, {hi:g}]", slope, None)
 
 
+#: The statistical tests of an ``unbiased`` expectation; they share its family-wise ``alpha`` (Šidák).
+STATISTICAL_TESTS = ("agreement", "variance", "outliers")
+
+
+def statistical_alpha(alpha: float) -> float:
+    """Each statistical test's level, 1 − (1 − α)^(1/3): together they fail a correct renderer at rate ≤ α."""
+    return agreement.sidak_level(alpha, len(STATISTICAL_TESTS))
+
+
+def _alpha_note(alpha: float) -> str:
+    return (f" [α = {alpha:g} per expectation, Šidák-split over {', '.join(STATISTICAL_TESTS)}: "
+            f"{statistical_alpha(alpha):.3g} each]")
+
+
+def _variance_check(exp: Expectation, rec: runner.RunRecord, clean: np.ndarray, ref: Reference,
+                    alpha: float) -> Check:
+    """The renderer's own variance against its residuals (harness.evaluate.variance_check); skipped without one."""
+    if rec.variance is None:
+        return Check(exp.name, "variance", True, "skipped: the renderer reports no variance, so the agreement and "
+                     "outlier tests use the reference renderer's noise model, not a variance it could misstate"
+                     + _alpha_note(alpha))
+    v = variance_check.variance_check(clean, rec.variance, ref.image, ref.variance, rec.spp,
+                                      statistical_alpha(alpha))
+    return Check(exp.name, "variance", v.passed, v.message() + _alpha_note(alpha), v.scale, None)
+
+
+def _outlier_check(exp: Expectation, rec: runner.RunRecord, clean: np.ndarray, ref: Reference,
+                   alpha: float) -> Check:
+    """One z-test per pixel, threshold calibrated on the reference's noise batch (harness.evaluate.outliers)."""
+    o = outliers.outlier_test(clean, rec.variance, ref.image, ref.variance, ref.noise, ref.spp, ref.noise_spp,
+                              rec.spp, statistical_alpha(alpha))
+    return Check(exp.name, "outliers", o.passed, o.message() + _alpha_note(alpha), o.worst, o.threshold.value)
+
+
 def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateConfig,
              baseline: dict | None = None) -> Outcome:
     """All checks of one expectation on its run (no rendering)."""
     if rec.status != "ok":
-        return Outcome(exp, rec, [Check(exp.name, "run", False, f"{rec.status}: {rec.reason}")])
+        if rec.info.get("timed_out"):  # a failed check with its time, not a crash
+            return Outcome(exp, rec, [Check(exp.name, "time_limit", False, f"{rec.reason}", rec.time_s,
+                                            exp.time_limit_s)])
+        return Outcome(exp, rec, [Check(exp.name, "run", False, f"{rec.status}: {rec.reason}", error=True)])
     m = rec.metrics
     bad = int(m["nan_count"]) + int(m["inf_count"])
     checks = [Check(exp.name, "finite", bad == 0,
@@ -109,8 +147,12 @@ def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateC
     if exp.unbiased:
         var = rec.variance if rec.variance is not None else noise.render_variance(ref.variance, ref.spp, rec.spp)
         clean = metrics.zero_broken_pixels(rec.image)
-        agr = agreement.agreement_test(clean, var, ref.image, ref.variance, exp.tile, cfg.alpha)
-        checks.append(Check(exp.name, "agreement", agr.passed, agr.message(), agr.p_min, agr.level))
+        share = statistical_alpha(cfg.alpha)
+        agr = agreement.agreement_test(clean, var, ref.image, ref.variance, exp.tile, share)
+        checks.append(Check(exp.name, "agreement", agr.passed, agr.message() + _alpha_note(cfg.alpha),
+                            agr.p_min, agr.level))
+        checks.append(_variance_check(exp, rec, clean, ref, cfg.alpha))
+        checks.append(_outlier_check(exp, rec, clean, ref, cfg.alpha))
     checks += _budget_checks(exp, m)
     if exp.slope:
         checks.append(_slope_check(exp, rec, ref))

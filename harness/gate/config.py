@@ -2,23 +2,44 @@
 
 A gate config (TOML) lists expectations::
 
-    alpha = 0.01                      # family-wise false-alarm rate of each agreement test
+    alpha = 0.01                      # family-wise false-alarm rate per expectation (its statistical tests)
     baseline = "gate-baseline.json"   # optional, relative to this file
     regression_margin = 0.05          # relative; a metric worse than baseline by more fails
     regression_metrics = ["delta_e2000_mean", "rel_mse_trimmed", "ssim"]
+    time_limit = "30m"                # default per expectation: a render past it is killed and fails
 
     [[expect]]
     scene = "cornell-box"             # stored name or path
     renderer = "pathtracer"           # registered name or package.module:Class
     spp = 256                         # budget: spp, or time = "10s" (spp is then calibrated)
     seed = 0                          # fixed: the same commit gives the same verdict
-    unbiased = true                   # tiled z-test against the reference (harness.evaluate.agreement)
+    unbiased = true                   # agreement, variance and outlier tests against the reference (below)
     tile = 16
     slope = [-0.55, -0.45]            # optional: RMSE-vs-spp slope over checkpoints spp/64 .. spp
     max = { delta_e2000_mean = 3.0 }  # optional budgets on any harness metric
     min = { ssim = 0.7 }
     abs_max = { mean_radiance_rel_error = 0.3 }
     settings = { rr_depth = 3 }       # optional: the renderer's settings (`cbox renderers --settings`)
+    time_limit = "10m"                # optional: kill the render after this long (default: time_limit above)
+    finite_only = true                # only to allow an expectation with no accuracy check (see below)
+
+The config is strict: an unknown key at any level, or an unknown metric in a
+budget or in ``regression_metrics``, is a config error (exit 2) with a
+did-you-mean, before anything renders; a misspelt key must never turn a
+gate green. An expectation must check accuracy (``unbiased``, a budget or a
+slope) unless it says ``finite_only = true``.
+
+``unbiased = true`` runs three statistical tests against the reference:
+``agreement`` (tiled z-tests, :mod:`harness.evaluate.agreement`),
+``variance`` (the variance the renderer reports must match the spread of
+its residuals, :mod:`harness.evaluate.variance_check`; skipped, as a pass,
+when it reports none, since the other two then use the reference
+renderer's noise model) and ``outliers`` (one z-test per pixel,
+:mod:`harness.evaluate.outliers`). ``alpha`` is the family-wise
+false-alarm rate per expectation: the three share it by Šidák's
+correction, each at level 1 − (1 − alpha)^(1/3) (0.00334 for
+alpha = 0.01), so a correct renderer fails any of them with probability at
+most ``alpha``.
 
 Every expectation also checks that the image has no NaN and no Inf pixel.
 Baseline checks compare runs at the seed the baseline was recorded with
@@ -29,14 +50,21 @@ report say which expectation failed, by how much, and where in the image.
 
 from __future__ import annotations
 
+import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from harness.workflows.compare import parse_duration
+from harness.evaluate.registry import IMAGE_METRICS
+from harness.workflows.budgets import parse_duration
 
 DEFAULT_REGRESSION_METRICS = ("delta_e2000_mean", "rel_mse_trimmed", "ssim")
+#: Default wall-time limit of one expectation's render: generous, it only has to stop a hang.
+DEFAULT_TIME_LIMIT_S = 1800.0
+TOP_KEYS = ("alpha", "baseline", "regression_margin", "regression_metrics", "time_limit", "expect")
+EXPECT_KEYS = ("name", "scene", "renderer", "spp", "time", "seed", "unbiased", "tile", "slope", "max", "min",
+               "abs_max", "settings", "time_limit", "finite_only")
 
 
 class GateConfigError(ValueError):
@@ -61,6 +89,7 @@ class Expectation:
     min: dict = field(default_factory=dict)
     abs_max: dict = field(default_factory=dict)
     settings: dict = field(default_factory=dict)  # the renderer's settings (validated when the gate resolves it)
+    time_limit_s: float = DEFAULT_TIME_LIMIT_S
 
 
 @dataclass
@@ -71,6 +100,24 @@ class GateConfig:
     baseline: Path | None = None
     regression_margin: float = 0.05
     regression_metrics: tuple[str, ...] = DEFAULT_REGRESSION_METRICS
+
+
+def _check_keys(path: Path, table: dict, allowed, where: str, what: str = "key") -> None:
+    """Refuse any key not in ``allowed``, naming it and the closest allowed one."""
+    for key in table:
+        if key not in allowed:
+            hint = difflib.get_close_matches(str(key), list(allowed), n=1)
+            raise GateConfigError(path, f"{where}{key}", f"unknown {what}"
+                                  + (f" (did you mean {hint[0]!r}?)" if hint else f"; known: {', '.join(allowed)}"))
+
+
+def _duration(path: Path, table: dict, key: str, where: str, default: float) -> float:
+    if key not in table:
+        return default
+    try:
+        return parse_duration(str(table[key]))
+    except ValueError as e:
+        raise GateConfigError(path, f"{where}{key}", str(e)) from None
 
 
 def _number(path: Path, table: dict, key: str, where: str, default, kind=(int, float)):
@@ -89,6 +136,11 @@ def load_config(path: str | Path) -> GateConfig:
         raise GateConfigError(path, "(file)", "no such file") from None
     except tomllib.TOMLDecodeError as e:
         raise GateConfigError(path, "(syntax)", f"invalid TOML: {e}") from None
+    except (UnicodeDecodeError, RecursionError) as e:
+        raise GateConfigError(path, "(file)", f"not a TOML text file ({type(e).__name__})") from None
+    except OSError as e:
+        raise GateConfigError(path, "(file)", e.strerror or str(e)) from None
+    _check_keys(path, doc, TOP_KEYS, "")
     alpha = float(_number(path, doc, "alpha", "", 0.01))
     if not 0 < alpha < 1:
         raise GateConfigError(path, "alpha", f"must be in (0, 1), got {alpha}")
@@ -98,13 +150,15 @@ def load_config(path: str | Path) -> GateConfig:
     reg = doc.get("regression_metrics", list(DEFAULT_REGRESSION_METRICS))
     if not isinstance(reg, list) or not all(isinstance(m, str) for m in reg):
         raise GateConfigError(path, "regression_metrics", "expected a list of metric names")
+    _check_keys(path, dict.fromkeys(reg), IMAGE_METRICS, "regression_metrics: ", "metric")
+    time_limit = _duration(path, doc, "time_limit", "", DEFAULT_TIME_LIMIT_S)
     baseline = doc.get("baseline")
     if baseline is not None and not isinstance(baseline, str):
         raise GateConfigError(path, "baseline", "expected a file name")
     raw = doc.get("expect")
     if not isinstance(raw, list) or not raw:
         raise GateConfigError(path, "expect", "a gate needs at least one [[expect]] table")
-    exps = [_parse_expectation(path, i, t) for i, t in enumerate(raw)]
+    exps = [_parse_expectation(path, i, t, time_limit) for i, t in enumerate(raw)]
     names = [e.name for e in exps]
     for i, name in enumerate(names):
         if name in names[:i]:
@@ -112,10 +166,11 @@ def load_config(path: str | Path) -> GateConfig:
     return GateConfig(path, alpha, exps, path.parent / baseline if baseline else None, margin, tuple(reg))
 
 
-def _parse_expectation(path: Path, i: int, t: dict) -> Expectation:
+def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expectation:
     w = f"expect[{i}]."
     if not isinstance(t, dict):
         raise GateConfigError(path, f"expect[{i}]", "expected a table ([[expect]])")
+    _check_keys(path, t, EXPECT_KEYS, w)
     for key in ("scene", "renderer"):
         if not isinstance(t.get(key), str):
             raise GateConfigError(path, f"{w}{key}", "missing or not a string")
@@ -143,6 +198,7 @@ def _parse_expectation(path: Path, i: int, t: dict) -> Expectation:
         if not isinstance(b, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                               for v in b.values()):
             raise GateConfigError(path, f"{w}{key}", "expected a table of metric = number")
+        _check_keys(path, b, IMAGE_METRICS, f"{w}{key}.", "metric")
         budgets[key] = {k: float(v) for k, v in b.items()}
     unbiased = t.get("unbiased", False)
     if not isinstance(unbiased, bool):
@@ -150,6 +206,12 @@ def _parse_expectation(path: Path, i: int, t: dict) -> Expectation:
     settings = t.get("settings", {})
     if not isinstance(settings, dict):
         raise GateConfigError(path, f"{w}settings", "expected a table of setting = value")
+    finite_only = t.get("finite_only", False)
+    if not isinstance(finite_only, bool):
+        raise GateConfigError(path, f"{w}finite_only", "expected true or false")
+    if not (unbiased or slope or any(budgets.values()) or finite_only):
+        raise GateConfigError(path, f"expect[{i}]", "no accuracy check: give unbiased = true, a budget (max, min, "
+                              "abs_max) or a slope; or finite_only = true to check only for NaN and Inf")
     tile = _number(path, t, "tile", w, 16, int)
     if tile < 1:
         raise GateConfigError(path, f"{w}tile", "must be >= 1")
@@ -157,4 +219,5 @@ def _parse_expectation(path: Path, i: int, t: dict) -> Expectation:
     shown = f"[{','.join(f'{k}={v}' for k, v in sorted(settings.items()))}]" if settings else ""
     name = t.get("name") or f"{t['scene']}/{t['renderer']}{shown}@{budget}"
     return Expectation(name, t["scene"], t["renderer"], spp, time_s, _number(path, t, "seed", w, 0, int), unbiased,
-                       tile, slope, budgets["max"], budgets["min"], budgets["abs_max"], settings)
+                       tile, slope, budgets["max"], budgets["min"], budgets["abs_max"], settings,
+                       _duration(path, t, "time_limit", w, time_limit))

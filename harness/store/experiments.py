@@ -22,14 +22,16 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
-import pandas as pd
 
 from harness.scenes.model import Scene
 from harness.store.atomic import atomic_path, write_json_atomic
 from harness.store.exr import read_exr
+
+if TYPE_CHECKING:  # pandas is imported where it is used: the CLI must start fast
+    import pandas as pd
 
 CONFIG_FILE, RESULTS_FILE, SUMMARY_FILE = "experiment.json", "results.parquet", "summary.csv"
 
@@ -50,6 +52,8 @@ def write_parquet_atomic(frame: pd.DataFrame, path: Path) -> None:
 
 def cell_is_done(path: Path, scene: Scene, spps: Sequence[int]) -> pd.DataFrame | None:
     """The stored rows of a finished cell, if they match this scene and spp list."""
+    import pandas as pd
+
     if not path.exists():
         return None
     try:
@@ -76,6 +80,8 @@ def prepare_dir(out: Path, config: dict) -> None:
 
 def load_results(out: Path) -> tuple[dict, pd.DataFrame]:
     """The config and results table of an experiment folder."""
+    import pandas as pd
+
     out = Path(out)
     cfg_path, res_path = out / CONFIG_FILE, out / RESULTS_FILE
     for p in (cfg_path, res_path):

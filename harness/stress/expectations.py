@@ -56,7 +56,7 @@ import numpy as np
 from harness.evaluate.noise import render_variance
 from harness.scenes.analytic import furnace_radiance
 from harness.scenes.model import Scene
-from harness.stress.sandbox import SandboxOutcome
+from harness.workflows.sandbox import SandboxOutcome
 from harness.stress.variants import REFERENCE_BATCHES, REFERENCE_RENDERER, Variant
 
 #: Critical |z| of every statistical mean check: two-sided α = 6.8e-6 per check, about 2e-4

@@ -5,7 +5,7 @@ A row passes when every check passes:
 1. **finite**: no NaN, Inf or negative pixel anywhere in the image
    (:func:`harness.evaluate.metrics.invalid_pixel_counts`);
 2. **time**: the process's wall time is within the variant's bound (the
-   sandbox kills it at the bound: :mod:`harness.stress.sandbox`);
+   sandbox kills it at the bound: :mod:`harness.workflows.sandbox`);
 3. **memory**: the process's peak resident set (``VmHWM``) is within the
    variant's bound (it is killed when its resident set passes it);
 4. **mean radiance** (mean over pixels and channels, float64) within the
@@ -34,7 +34,7 @@ import numpy as np
 from harness.evaluate import metrics
 from harness.scenes.model import Scene
 from harness.stress.expectations import FLOAT_FLOOR, Z_CRIT, Expectation, pixel_var
-from harness.stress.sandbox import SandboxOutcome
+from harness.workflows.sandbox import SandboxOutcome
 from harness.stress.variants import LINEARITY_TOLERANCE, SEED, Variant
 
 #: Columns of the stress table, in order.

@@ -5,7 +5,7 @@ A suite of scene variants, each pushing one thing to an extreme
 and what the first full run found). Every renderer that is available and
 models the variant's features (:func:`harness.adapters.registry.missing_features`)
 renders it once, seed :data:`~harness.stress.variants.SEED`, **in a process
-of its own** (:mod:`harness.stress.sandbox`), so that the run can be timed,
+of its own** (:mod:`harness.workflows.sandbox`), so that the run can be timed,
 its memory measured, and the process killed at either bound. One row per
 (variant, renderer); a row passes when every check passes
 (:mod:`harness.stress.judge`): finite, non-negative pixels; wall time and
@@ -39,7 +39,7 @@ from typing import Callable, Sequence
 from harness.scenes.model import Scene
 from harness.stress.expectations import Z_CRIT, Expectation, expectation_for
 from harness.stress.judge import COLUMNS, STATUSES, fmt_value, judge_run, new_row
-from harness.stress.sandbox import SandboxOutcome, run_sandboxed
+from harness.workflows.sandbox import SandboxOutcome, run_sandboxed
 from harness.stress.variants import (REFERENCE_BATCHES, REFERENCE_RENDERER, REFERENCE_SEED, SEED, Variant,
                                      cornell_scene, select_variants)
 

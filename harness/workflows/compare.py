@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import datetime as _dt
-import re
 from pathlib import Path
 from typing import Sequence
 
@@ -17,6 +16,7 @@ from harness.store.experiments import (CONFIG_FILE, RESULTS_FILE, ExperimentErro
 from harness.store.exr import write_exr
 from harness.store.references import Reference
 from harness.workflows import runner
+from harness.workflows.render import render_checked
 
 
 def spp_for_time_budget(entry: RendererEntry, scene: Scene, budget_s: float, seed: int) -> int:
@@ -26,8 +26,8 @@ def spp_for_time_budget(entry: RendererEntry, scene: Scene, budget_s: float, see
     the two timings. The calibration renders are not counted in the budget;
     the final render's own time is what is reported.
     """
-    t1 = runner.render_checked(entry, scene, 1, seed).time_s
-    t4 = runner.render_checked(entry, scene, 4, seed).time_s
+    t1 = render_checked(entry, scene, 1, seed).time_s
+    t4 = render_checked(entry, scene, 4, seed).time_s
     per_spp = max((t4 - t1) / 3.0, 1e-9)
     overhead = max(t1 - per_spp, 0.0)
     return max(1, int((budget_s - overhead) / per_spp))
@@ -59,18 +59,6 @@ def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, m
         if value <= target or spp >= max_spp or stalls >= 2:
             return rec
         spp, previous = min(2 * spp, max_spp), value
-
-
-def parse_duration(text: str) -> float:
-    """``"10s"``, ``"2m"``, ``"500ms"``, ``"1.5"`` (seconds) → seconds."""
-    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*(ms|s|m|min|h)?\s*", text)
-    if not m:
-        raise ValueError(f"time budget {text!r}: expected e.g. 10s, 2m, 500ms")
-    scale = {"ms": 1e-3, "s": 1.0, None: 1.0, "m": 60.0, "min": 60.0, "h": 3600.0}[m.group(2)]
-    value = float(m.group(1)) * scale
-    if value <= 0:
-        raise ValueError(f"time budget {text!r}: must be positive")
-    return value
 
 
 def store_comparison(out: Path, scene: Scene, records: Sequence[runner.RunRecord], command: str) -> None:

@@ -21,7 +21,7 @@ from harness.store.atomic import write_json_atomic
 from harness.store.exr import write_exr
 from harness.store.references import (NOISE_FILE, PROVENANCE_FILE, REFERENCE_FILE, REFERENCE_SEED_BASE, VARIANCE_FILE,
                                       Reference)
-from harness.workflows.runner import render_checked
+from harness.workflows.render import render_checked
 
 
 def build_reference(

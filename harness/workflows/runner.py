@@ -1,8 +1,9 @@
-"""The runner: the one place that calls a renderer's ``render``, checks what it returned, and scores it.
+"""The runner: renders through the one render path, records the outcome, and scores it.
 
 Every command (compare, converge, gate, equal time, equal quality) renders
-through :func:`render_checked` and records through :func:`run_one` or
-:func:`run_checkpoints`. A renderer that is unavailable here, or does not
+through :func:`harness.workflows.render.render_checked` (here or, with a
+time limit, in a child process: :func:`render_sandboxed`) and records
+through :func:`run_one` or :func:`run_checkpoints`. A renderer that is unavailable here, or does not
 model a feature the scene uses, is never run; its record says why
 (``status`` "unavailable" or "skipped"). A renderer that raises, or returns
 an image of the wrong shape, is recorded as "failed" with the reason, and the
@@ -21,9 +22,11 @@ import numpy as np
 
 from harness.evaluate import metrics
 from harness.evaluate import noise as stats
-from harness.adapters.registry import RenderResult, RendererEntry, missing_features
-from harness.adapters.settings import canonical, declared
+from harness.adapters.registry import Checkpoint, RenderResult, RendererEntry, missing_features
+from harness.adapters.settings import canonical
 from harness.store.references import Reference
+from harness.workflows.render import RenderError, RenderTimeout, render_checked
+from harness.workflows.sandbox import run_sandboxed
 from harness.scenes.model import Scene
 
 STATUSES = ("ok", "skipped", "unavailable", "failed")
@@ -105,44 +108,43 @@ def json_safe(row: dict) -> dict:
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
 
 
-class RenderError(ValueError):
-    """A renderer returned something the harness cannot use (wrong shape, wrong spp)."""
+def render_sandboxed(entry: RendererEntry, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int],
+                     time_limit_s: float) -> RenderResult:
+    """:func:`render_checked` in a child process that is killed after ``time_limit_s`` (a hang cannot stall CI).
 
-
-def render_checked(entry: RendererEntry, scene: Scene, spp: int, seed: int,
-                   checkpoints: Sequence[int] = ()) -> RenderResult:
-    """``entry``'s render with its settings, its image, variance and checkpoints checked; may raise."""
-    kwargs = {}
-    if checkpoints:
-        kwargs["checkpoints"] = list(checkpoints)
-    if declared(entry.renderer):  # adapters without settings keep the plain signature
-        kwargs["settings"] = dict(entry.settings)
-    result = entry.renderer.render(scene, spp, seed, **kwargs)
-    expected = (scene.camera.height, scene.camera.width, 3)
-    result.image = _checked_image(result.image, expected, "an image")
-    if result.variance is not None:
-        result.variance = _checked_image(result.variance, expected, "a variance image")
-    for c in result.checkpoints:
-        c.image = _checked_image(c.image, expected, f"a checkpoint image at {c.spp} spp")
-    return result
-
-
-def _checked_image(image, expected: tuple[int, int, int], what: str) -> np.ndarray:
-    image = np.asarray(image, dtype=np.float32)
-    if image.shape != expected:
-        raise RenderError(f"returned {what} of shape {image.shape}, expected {expected}")
-    return image
+    Raises :class:`RenderTimeout` (carrying the time) when it is killed, RenderError for anything else
+    that went wrong there.
+    """
+    out = run_sandboxed(entry.spec, [(scene, spp, seed, list(checkpoints))], time_limit_s,
+                        settings=dict(entry.settings))
+    if out.ended == "timeout":
+        raise RenderTimeout(f"killed at its time limit of {time_limit_s:g} s (ran {out.time_s:.1f} s)", out.time_s)
+    if (why := out.problem()) is not None:
+        raise RenderError(why)
+    shots = [Checkpoint(s, image, t) for s, image, t in out.checkpoints[0]]
+    return RenderResult(out.images[0], out.render_times[0], spp, seed, shots, out.infos[0], out.variances[0])
 
 
 def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: Reference | None,
-            checkpoints: Sequence[int] = ()) -> RunRecord:
-    """Render and score one renderer; never raises for the renderer's own failures."""
+            checkpoints: Sequence[int] = (), time_limit_s: float | None = None) -> RunRecord:
+    """Render and score one renderer; never raises for the renderer's own failures.
+
+    With ``time_limit_s`` the render runs in a child process (:func:`render_sandboxed`); one that is
+    killed at the limit is recorded as failed with ``info["timed_out"]`` and the time it ran.
+    """
     rec = RunRecord.new(scene, entry, spp, seed)
     if rec.status != "ok":
         return rec
     try:
         rec.version = str(entry.renderer.version())
-        result = render_checked(entry, scene, spp, seed, checkpoints)
+        if time_limit_s is None:
+            result = render_checked(entry, scene, spp, seed, checkpoints)
+        else:
+            result = render_sandboxed(entry, scene, spp, seed, checkpoints, time_limit_s)
+    except RenderTimeout as e:
+        rec.status, rec.reason, rec.time_s = "failed", str(e), e.time_s
+        rec.info = {"timed_out": True}
+        return rec
     except Exception as e:  # any renderer bug must be reported, not crash the run
         return rec.failed(e)
     rec.time_s, rec.info, rec.image = float(result.time_s), dict(result.info), result.image

@@ -3,11 +3,11 @@
 A renderer can hang, leak, crash the interpreter or take the machine's memory;
 none of that may take the harness down or go unmeasured. :func:`run_sandboxed`
 renders a list of (scene, spp, seed) with one renderer in a fresh process
-(``python -m harness.stress.sandbox --worker FOLDER``) and returns a
+(``python -m harness.workflows.sandbox --worker FOLDER``) and returns a
 :class:`SandboxOutcome`: how it ended, its wall time, its peak resident
 memory, and the images (with variances and render times) it made::
 
-    from harness.stress.sandbox import run_sandboxed
+    from harness.workflows.sandbox import run_sandboxed
 
     out = run_sandboxed("pathtracer", [(scene, 64, 0), (scene, 64, 1)], time_bound_s=60, rss_bound_mb=4096)
     if out.problem() is None:          # ended "ok", every image of its scene's shape
@@ -53,12 +53,10 @@ import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from harness.scenes.model import Scene
 
 #: Seconds between two polls of the worker's wall time and resident memory.
 POLL_S = 0.02
@@ -77,6 +75,8 @@ class SandboxOutcome:
     variances: list = dataclasses.field(default_factory=list)  # None where the renderer returned none
     render_times: list = dataclasses.field(default_factory=list)  # each render's own time_s
     shapes: list = dataclasses.field(default_factory=list)  # (H, W, 3) each render was asked for
+    infos: list = dataclasses.field(default_factory=list)  # each render's RenderResult.info
+    checkpoints: list = dataclasses.field(default_factory=list)  # each render's [(spp, image, time_s), ...]
 
     def problem(self) -> str | None:
         """Why the images cannot be used (None: they can)."""
@@ -88,18 +88,21 @@ class SandboxOutcome:
         return None
 
 
-def run_sandboxed(spec: str, renders: Sequence[tuple[Scene, int, int]], time_bound_s: float,
-                  rss_bound_mb: float = math.inf) -> SandboxOutcome:
-    """Render ``renders`` ((scene, spp, seed), in order) with ``spec`` in a fresh process, within the bounds."""
+def run_sandboxed(spec: str, renders: Sequence[tuple], time_bound_s: float, rss_bound_mb: float = math.inf,
+                  settings: dict | None = None) -> SandboxOutcome:
+    """Render ``renders`` ((scene, spp, seed) or (scene, spp, seed, checkpoints), in order) with ``spec``
+    and its ``settings`` in a fresh process, within the bounds. Each render goes through
+    :func:`harness.workflows.render.render_checked`, the harness's one render path."""
     renders = list(renders)
     with tempfile.TemporaryDirectory(prefix="cbox-sandbox-") as tmp:
         folder = Path(tmp)
-        (folder / "job.json").write_text(json.dumps({"spec": spec, "sys_path": [p for p in sys.path if p]}))
+        (folder / "job.json").write_text(json.dumps({"spec": spec, "settings": settings or {},
+                                                     "sys_path": [p for p in sys.path if p]}))
         with open(folder / "renders.pkl", "wb") as f:
             pickle.dump(renders, f, protocol=pickle.HIGHEST_PROTOCOL)
         watched = _watch_worker(folder, time_bound_s, rss_bound_mb)
         outcome = _read_outcome(folder, watched, time_bound_s, rss_bound_mb)
-    outcome.shapes = [(scene.camera.height, scene.camera.width, 3) for scene, _, _ in renders]
+    outcome.shapes = [(r[0].camera.height, r[0].camera.width, 3) for r in renders]
     return outcome
 
 
@@ -140,7 +143,7 @@ def _watch_worker(folder: Path, time_bound_s: float, rss_bound_mb: float) -> _Wa
     """Start the worker on ``folder`` and wait for it, killing it at either bound."""
     with open(folder / "stdout.txt", "wb") as out, open(folder / "stderr.txt", "wb") as err:
         t0 = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, "-m", "harness.stress.sandbox", "--worker", str(folder)],
+        proc = subprocess.Popen([sys.executable, "-m", "harness.workflows.sandbox", "--worker", str(folder)],
                                 stdin=subprocess.DEVNULL, stdout=out, stderr=err, start_new_session=True)
         try:
             status, usage, killed, peak = _poll(proc.pid, t0, time_bound_s, rss_bound_mb)
@@ -194,7 +197,9 @@ def _read_outcome(folder: Path, watched: _Watched, time_bound_s: float, rss_boun
         with np.load(folder / f"render-{i}.npz") as z:
             outcome.images.append(z["image"])
             outcome.variances.append(z["variance"] if "variance" in z.files else None)
+            outcome.checkpoints.append([(spp, z[f"checkpoint-{spp}"], t) for spp, t in r.get("checkpoints", [])])
         outcome.render_times.append(float(r["time_s"]))
+        outcome.infos.append(r.get("info", {}))
     if result.get("error"):
         outcome.ended, outcome.message = "error", f"renderer raised {result['error']}"
     return outcome
@@ -205,11 +210,14 @@ def _read_outcome(folder: Path, watched: _Watched, time_bound_s: float, rss_boun
 # ----------------------------------------------------------------------------------------
 
 
-def _render_job(spec: str, folder: Path, result: dict) -> None:
-    """Render every (scene, spp, seed) of ``folder/renders.pkl`` with ``spec``, each to ``render-<i>.npz``."""
+def _render_job(spec: str, settings: dict, folder: Path, result: dict) -> None:
+    """Render every (scene, spp, seed[, checkpoints]) of ``folder/renders.pkl`` with ``spec``, each to
+    ``render-<i>.npz``."""
     from harness.adapters.registry import resolve
+    from harness.workflows.render import render_checked
 
     (entry,) = resolve([spec])
+    entry = entry.with_settings(settings) if settings else entry
     if not entry.available:
         raise RuntimeError(f"renderer {entry.name!r} is unavailable: {entry.reason}")
     renderer = entry.renderer
@@ -219,13 +227,16 @@ def _render_job(spec: str, folder: Path, result: dict) -> None:
         result["version"] = f"unknown ({type(e).__name__})"
     with open(folder / "renders.pkl", "rb") as f:
         renders = pickle.load(f)
-    for i, (scene, spp, seed) in enumerate(renders):
-        res = renderer.render(scene, spp, seed)
+    for i, (scene, spp, seed, *rest) in enumerate(renders):
+        res = render_checked(entry, scene, spp, seed, rest[0] if rest else ())
         arrays = {"image": np.asarray(res.image)}
-        if getattr(res, "variance", None) is not None:
+        if res.variance is not None:
             arrays["variance"] = np.asarray(res.variance)
+        arrays.update({f"checkpoint-{c.spp}": np.asarray(c.image) for c in res.checkpoints})
         np.savez(folder / f"render-{i}.npz", **arrays)
-        result["renders"].append({"time_s": float(res.time_s)})
+        info = json.loads(json.dumps(dict(res.info), default=str))  # what JSON cannot hold, as text
+        result["renders"].append({"time_s": float(res.time_s), "info": info,
+                                  "checkpoints": [(c.spp, float(c.time_s)) for c in res.checkpoints]})
 
 
 def _worker_main(folder: Path) -> int:
@@ -236,7 +247,7 @@ def _worker_main(folder: Path) -> int:
             sys.path.append(p)
     result: dict = {"version": None, "renders": [], "error": None}
     try:
-        _render_job(job["spec"], folder, result)
+        _render_job(job["spec"], job.get("settings", {}), folder, result)
     except Exception as e:  # the renderer's failure is the result
         result["error"] = f"{type(e).__name__}: {e}"
         result["traceback"] = traceback.format_exc()
@@ -248,5 +259,5 @@ def _worker_main(folder: Path) -> int:
 if __name__ == "__main__":
     if len(sys.argv) == 3 and sys.argv[1] == "--worker":
         sys.exit(_worker_main(Path(sys.argv[2])))
-    print("usage: python -m harness.stress.sandbox --worker FOLDER (internal; see run_sandboxed)", file=sys.stderr)
+    print("usage: python -m harness.workflows.sandbox --worker FOLDER (internal; see run_sandboxed)", file=sys.stderr)
     sys.exit(2)

@@ -1,0 +1,145 @@
+"""Is the variance a renderer reports consistent with its residuals? A sign test on the spread of z.
+
+The agreement test (:mod:`harness.evaluate.agreement`) measures distance in
+units of the variance the renderer reports, so a renderer that overstates
+its variance hides its bias: 1% too dark and reporting 100× its true
+variance, it passes at every seed. This check tests the reported variance
+against the renderer's own residuals.
+
+**Statistic.** Per pixel and channel, z = (img − ref) / √(var_img + var_ref).
+If ``var_img`` is right, z has unit spread, and a renderer that reports F
+times its true variance gives a spread of about 1/√F. The spread is
+estimated robustly, as the median absolute deviation of z about its known
+centre 0 scaled to the normal, ŝ = median|z| / Φ⁻¹(3/4) (Hampel 1974,
+J. Am. Stat. Assoc. 69, 383-393): Monte Carlo residuals are heavy-tailed
+at low spp, and a few fireflies, which dominate any mean of z², cannot
+move a median.
+
+**Tolerance.** A correct renderer does not give ŝ = 1 exactly. With the
+renderer's own estimate of its variance from n samples, z is a
+Student-type ratio, wider than normal because that estimate is noisy
+(relative sd √((κ−1)/n) for samples of kurtosis κ; Monte Carlo samples
+have large κ) and correlated with the mean where the samples are skewed.
+The estimate's noise widens z on average (1/√v̂ is convex: Jensen), so
+the tolerance is asymmetric: ŝ must lie in [1/(1+δ), 1 + δ + 1/√n] with
+δ = :data:`TOLERANCE` = 0.1. The 1/√n term is calibrated on our path
+tracer, whose ŝ is 1.24, 1.15, 1.09, 1.06 and 1.03 at 8, 16, 32, 64 and
+256 spp on the Cornell box (about 1 + 0.75 n^−0.6), and 0.93-1.06 on the
+furnace and the light panel at 256 spp, whose 1024 and 4096 pixels make
+ŝ vary more between seeds (see ``docs/gate-detection.md``):
+1/√n is 0.35, 0.25, 0.18, 0.125 and 0.06 there. A reported variance
+more than (1+δ)² ≈ 1.21 times too large fails at any spp, given enough
+pixels; one too small by more than about (1 + δ + 1/√n)² fails too (that
+is also what a bias looks like: the agreement test says which).
+
+**Test.** Two one-sided sign tests of a quantile. ŝ ≥ s_lo = 1/(1+δ)
+means that at most half the |z| lie below c_lo = Φ⁻¹(3/4)·s_lo;
+ŝ ≤ s_hi = 1 + δ + 1/√n, that at most half lie above
+c_hi = Φ⁻¹(3/4)·s_hi. The three channels of a pixel come from the same
+paths, so the units are pixels (independent): each contributes the
+fraction of its channels beyond the cut, a number in [0, 1], and f is the
+mean over the N pixels (E f ≤ 1/2 when ŝ is within the tolerance). Hoeffding's inequality
+(Hoeffding 1963, J. Am. Stat. Assoc. 58, 13-30) bounds
+P(f − E f ≥ ε) ≤ exp(−2Nε²) for any distribution of those fractions and
+any dependence between a pixel's channels; with
+ε = √(ln(2/α) / (2N)) each side rejects a renderer whose spread is within
+the tolerance with probability at most α/2, so the false-alarm rate is at
+most α. No assumption on the tails of z enters.
+
+A pixel-channel whose z is 0/0 (no variance and no difference, e.g. black
+background) says nothing and is left out; one with no variance but a
+difference (|z| = ∞) or a NaN counts as a large |z|.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import norm
+
+CHANNELS = "RGB"
+#: Tolerance δ on the spread of z: ŝ within [1/(1+δ), 1 + δ + 1/√spp] passes (see the module docstring).
+TOLERANCE = 0.1
+#: Φ⁻¹(3/4): median |z| of a standard normal z.
+Q3 = float(norm.ppf(0.75))
+
+
+@dataclass
+class VarianceCheck:
+    """Outcome of :func:`variance_check`."""
+
+    passed: bool
+    alpha: float
+    tolerance: float
+    spp: int
+    scale: float  # ŝ = median|z| / Φ⁻¹(3/4) over all pixel-channels used
+    scale_channels: tuple[float, float, float]  # the same per channel (nan where a channel has no data)
+    frac_low: float  # f_lo: mean over pixels of the fraction of channels with |z| < c_lo (at most 1/2 + eps)
+    frac_high: float  # f_hi: the same with |z| > c_hi
+    eps: float  # Hoeffding margin
+    pixels: int  # N, pixels with at least one usable channel
+
+    @property
+    def bounds(self) -> tuple[float, float]:
+        return spread_bounds(self.tolerance, self.spp)
+
+    @property
+    def variance_factor(self) -> float:
+        """How many times the true variance the renderer reports, about 1/ŝ² (inf when ŝ = 0)."""
+        return 1.0 / self.scale**2 if self.scale > 0 else math.inf
+
+    def message(self) -> str:
+        lo, hi = self.bounds
+        by_channel = ", ".join(f"{c} {s:.3f}" for c, s in zip(CHANNELS, self.scale_channels))
+        head = (f"robust spread of z = (render − reference)/√(reported variance + reference variance): "
+                f"ŝ = median|z|/{Q3:.4f} = {self.scale:.3f} over {self.pixels} pixels (by channel: {by_channel})")
+        rule = (f"tolerance [{lo:.3f}, {hi:.3f}] (1/(1+δ), 1 + δ + 1/√spp; δ = {self.tolerance:g}, "
+                f"{self.spp} spp), "
+                f"sign tests at α = {self.alpha:.3g} "
+                f"(Hoeffding margin ±{self.eps:.4f} on the fractions)")
+        if self.pixels == 0:
+            return "no pixel with a variance or a difference: nothing to test"
+        if self.passed:
+            return f"reported variance consistent with the residuals: {head}; {rule}"
+        if self.frac_low > 0.5 + self.eps:
+            return (f"the renderer reports more variance than its residuals show, about {self.variance_factor:.3g}× "
+                    f"too much over the whole image: {head}; {self.frac_low:.1%} of |z| < {Q3 * lo:.3f} where at most "
+                    f"{0.5 + self.eps:.1%} may be; {rule}")
+        return (f"the residuals are larger than the reported variance allows, about {1 / self.variance_factor:.3g}× "
+                f"(a bias, or an understated variance) over the whole image: {head}; {self.frac_high:.1%} of "
+                f"|z| > {Q3 * hi:.3f} where at most {0.5 + self.eps:.1%} may be; {rule}")
+
+
+def spread_bounds(tolerance: float, spp: int) -> tuple[float, float]:
+    """The interval [1/(1+δ), 1 + δ + 1/√spp] that the spread of z may lie in."""
+    return 1.0 / (1.0 + tolerance), 1.0 + tolerance + 1.0 / math.sqrt(max(spp, 1))
+
+
+def variance_check(img: np.ndarray, var_img: np.ndarray, ref: np.ndarray, var_ref: np.ndarray, spp: int,
+                   alpha: float = 0.01, tolerance: float = TOLERANCE) -> VarianceCheck:
+    """Test that ``var_img``, the renderer's own variance of ``img`` (``spp`` samples), matches its residuals."""
+    img, ref = np.asarray(img, np.float64), np.asarray(ref, np.float64)
+    var = np.asarray(var_img, np.float64) + np.asarray(var_ref, np.float64)
+    diff = img - ref
+    with np.errstate(divide="ignore", invalid="ignore"):
+        absz = np.abs(diff) / np.sqrt(var)
+    usable = ~((var == 0) & (diff == 0))  # 0/0: no information
+    absz = np.where(np.isnan(absz), np.inf, absz)  # a NaN counts as a large |z|
+    s_lo, s_hi = spread_bounds(tolerance, spp)
+    c_lo, c_hi = Q3 * s_lo, Q3 * s_hi
+    n_ch = usable.sum(axis=-1)
+    pix = n_ch > 0
+    n = int(pix.sum())
+    if n == 0:
+        return VarianceCheck(True, alpha, tolerance, spp, math.nan, (math.nan,) * 3, 0.0, 0.0, math.inf, 0)
+    low = ((absz < c_lo) & usable).sum(axis=-1)[pix] / n_ch[pix]
+    high = ((absz > c_hi) & usable).sum(axis=-1)[pix] / n_ch[pix]
+    f_lo, f_hi = float(low.mean()), float(high.mean())
+    eps = math.sqrt(math.log(2.0 / alpha) / (2.0 * n))
+    passed = f_lo <= 0.5 + eps and f_hi <= 0.5 + eps
+    scale = float(np.median(absz[usable])) / Q3
+    per = tuple(float(np.median(absz[..., c][usable[..., c]])) / Q3 if usable[..., c].any() else math.nan
+                for c in range(3))
+    return VarianceCheck(passed, alpha, tolerance, spp, scale, per, f_lo, f_hi, eps, n)

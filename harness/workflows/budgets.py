@@ -1,0 +1,21 @@
+"""Time budgets as users write them (``10s``, ``2m``, ``500ms``): parsed once, for every command and the gate.
+
+Kept apart from the workflows that use them so that reading a gate config
+imports nothing heavy (a typo must fail in a second, not after loading SciPy).
+"""
+
+from __future__ import annotations
+
+import re
+
+
+def parse_duration(text: str) -> float:
+    """``"10s"``, ``"2m"``, ``"500ms"``, ``"1.5"`` (seconds) → seconds."""
+    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*(ms|s|m|min|h)?\s*", text)
+    if not m:
+        raise ValueError(f"time budget {text!r}: expected e.g. 10s, 2m, 500ms")
+    scale = {"ms": 1e-3, "s": 1.0, None: 1.0, "m": 60.0, "min": 60.0, "h": 3600.0}[m.group(2)]
+    value = float(m.group(1)) * scale
+    if value <= 0:
+        raise ValueError(f"time budget {text!r}: must be positive")
+    return value
