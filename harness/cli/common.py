@@ -27,7 +27,7 @@ from tqdm import tqdm
 from harness.adapters.registry import RendererError
 from harness.adapters.settings import SettingsError
 from harness.gate.config import GateConfigError
-from harness.scenes.model import SceneError
+from harness.scenes.model import SceneError, one_line
 from harness.store.experiments import ExperimentError
 from harness.store.exr import ImageFileError
 from harness.store.references import ReferenceError
@@ -129,14 +129,9 @@ def _checked_folder(ctx: Any, value: Path | None) -> Path | None:
     return value
 
 
-def one_line(text: str) -> str:
-    """``text`` with control characters (newlines) escaped, so an error stays on one line."""
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
-
-
 def fail(message: str, code: int = 2) -> NoReturn:
     """Print ``cbox: error: MESSAGE`` (one line) on stderr and exit with ``code``."""
-    print(f"cbox: error: {one_line(message)}", file=sys.stderr)
+    print(f"cbox: error: {one_line(message, limit=None)}", file=sys.stderr)
     sys.exit(code)
 
 

@@ -20,7 +20,8 @@ import numpy as np
 
 from harness.scenes.model import (_DEGENERATE_REL_AREA, FEATURES, FOV_AXES, IMAGE_BUFFERS, MAX_COORDINATE,
                                   MAX_DEPTH, MAX_IMAGE_BYTES, MAX_OBJ_FILE_BYTES, MAX_RADIANCE, MAX_SCENE_FILE_BYTES,
-                                  PIXEL_FILTERS, Camera, Diffuse, Mesh, Scene, SceneError, image_memory_bytes)
+                                  PIXEL_FILTERS, Camera, Diffuse, Mesh, Scene, SceneError, image_memory_bytes,
+                                  one_line)
 
 #: The keys each table of a scene file may have; any other is an error (with a did-you-mean).
 _KEYS = {
@@ -31,16 +32,7 @@ _KEYS = {
     "mesh": ("name", "material", "obj", "vertices", "faces", "emitter"),
     "emitter": ("radiance",),
 }
-#: Longest text of a field or message in an error; longer user text (a 50 MB key) is cut.
-_MAX_TEXT = 300
 _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
-
-
-def _one_line(text: str, limit: int = _MAX_TEXT) -> str:
-    """``text`` with control characters escaped (so it stays one line) and cut to ``limit`` characters."""
-    if len(text) > limit:
-        text = text[: limit - 1] + "…"
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def _key(key: str) -> str:
@@ -50,7 +42,7 @@ def _key(key: str) -> str:
 
 
 def _error(file: Path | str, field: str, message: str) -> SceneError:
-    return SceneError(_one_line(str(file), 1000), _one_line(field), _one_line(message))
+    return SceneError(one_line(str(file), 1000), one_line(field), one_line(message))
 
 
 class _Reader:
@@ -289,7 +281,7 @@ def _parse_mesh(r: _Reader, t: Any, i: int, materials: dict, base: Path) -> Mesh
     if not isinstance(t, dict):
         raise r.err(w, f"expected a table, got {type(t).__name__}")
     if isinstance(t.get("name"), str):
-        w = f"meshes[{i}] ({_one_line(t['name'], 60)})"
+        w = f"meshes[{i}] ({one_line(t['name'], 60)})"
     r.known(t, w, _KEYS["mesh"])
     name = r.get(t, "name", w, str)
     material = r.get(t, "material", w, str)

@@ -117,6 +117,17 @@ def image_memory_bytes(width: int, height: int) -> int:
     return int(width) * int(height) * 3 * 8 * IMAGE_BUFFERS
 
 
+#: Longest text of a field or message in an error; longer user text (a 50 MB key) is cut.
+MAX_ERROR_TEXT = 300
+
+
+def one_line(text: str, limit: int | None = MAX_ERROR_TEXT) -> str:
+    """``text`` with control characters (newlines) escaped, so an error stays one line, cut to ``limit``."""
+    if limit is not None and len(text) > limit:
+        text = text[: limit - 1] + "…"
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 class SceneError(ValueError):
     """Bad scene input. ``str()`` is the one-line message the CLI prints."""
 
