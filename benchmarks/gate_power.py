@@ -187,7 +187,7 @@ def main(argv=None) -> int:
 
     # (1) false alarms; seed offset 0 is also the common-random-numbers baseline of (3)
     alarms, wall, render, clean_p, clean0, clean_z = [], [], [], [], {}, {e.name: [] for e in exps}
-    alarms_by_exp = {e.name: 0 for e in exps}  # statistical checks (agreement, finite)
+    alarms_by_exp = {e.name: 0 for e in exps}  # runs where a STATISTICAL check failed
     # The gate compares with its baseline at the recorded seed only; what a margin would say at other seeds
     # (a renderer change that alters its random numbers is a new seed to it) is computed here.
     base_change = {}  # (expectation, metric) -> relative changes against the baseline, one per seed
@@ -267,9 +267,10 @@ def main(argv=None) -> int:
                          f"mean {z.mean():+.3f}, sd {z.std():.3f}, {np.mean(np.abs(z) > 2.5758):.2%} beyond ±2.576")
     calib_text = "; ".join(calib) + " (N(0, 1) if the noise model holds: sd 1, 1% beyond ±2.576)"
     per_exp = ", ".join(f"{mutants.label(e)} {alarms_by_exp[e.name]}" for e in exps)
-    false_line = (f"false alarms of the statistical checks (agreement, finite): {k} of {n} seeds (gate runs; "
-                  f"expected {n * alpha_run:.2g}: α = {cfg.alpha:g} for "
-                  f"each of {len(levels)} agreement tests, {alpha_run:.3g} per run; P(≥ {k}) = {p_tail:.3g}); per "
+    false_line = (f"false alarms of the statistical checks ({', '.join(sorted(STATISTICAL))}): {k} of {n} seeds (gate "
+                  f"runs; expected {n * alpha_run:.2g}: α = {cfg.alpha:g} for each of {len(levels)} expectations, "
+                  f"shared by its agreement, variance and outlier tests, {alpha_run:.3g} per run; "
+                  f"P(≥ {k}) = {p_tail:.3g}); per "
                   f"expectation: {per_exp} of {n} (expected {n * cfg.alpha:.2g} each)")
     base_parts = []
     for (name_, metric), changes in base_change.items():
