@@ -111,7 +111,7 @@ def _check_keys(path: Path, table: dict, allowed, where: str, what: str = "key")
                                   + (f" (did you mean {hint[0]!r}?)" if hint else f"; known: {', '.join(allowed)}"))
 
 
-def _duration(path: Path, table: dict, key: str, where: str, default: float) -> float:
+def _duration(path: Path, table: dict, key: str, where: str, default: float | None) -> float | None:
     if key not in table:
         return default
     try:
@@ -176,16 +176,12 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
             raise GateConfigError(path, f"{w}{key}", "missing or not a string")
     if ("spp" in t) == ("time" in t):
         raise GateConfigError(path, f"{w}spp", "give exactly one budget: spp = N or time = \"10s\"")
-    spp = time_s = None
+    spp = None
+    time_s = _duration(path, t, "time", w, None)
     if "spp" in t:
         spp = _number(path, t, "spp", w, None, int)
         if spp < 1:
             raise GateConfigError(path, f"{w}spp", "must be >= 1")
-    else:
-        try:
-            time_s = parse_duration(str(t["time"]))
-        except ValueError as e:
-            raise GateConfigError(path, f"{w}time", str(e)) from None
     slope = t.get("slope")
     if slope is not None:
         if not (isinstance(slope, list) and len(slope) == 2 and all(isinstance(x, (int, float)) for x in slope)

@@ -28,15 +28,19 @@ def _checkpoints(exp: Expectation, spp: int) -> list[int]:
     return out + [spp]
 
 
-def _resolve(cfg: GateConfig, i: int, exp: Expectation, overrides: dict[str, RendererEntry] | None):
+def _resolve(cfg: GateConfig, i: int, exp: Expectation, overrides: dict[str, RendererEntry] | None,
+             stored: dict):
     """Scene, reference and renderer (with its settings) of an expectation; config errors name the field.
 
     Run for every expectation before anything renders, so a typo fails in
-    seconds, not after the expectations before it have rendered.
+    seconds, not after the expectations before it have rendered. ``stored``
+    keeps each scene and reference by name: several expectations share one.
     """
     try:
-        scene = resolve_scene(exp.scene)
-        ref = load_reference(scene)
+        if exp.scene not in stored:
+            scene = resolve_scene(exp.scene)
+            stored[exp.scene] = scene, load_reference(scene)
+        scene, ref = stored[exp.scene]
     except SceneError as e:
         # A stored name that does not exist is this field's error; a broken scene file is that file's.
         where = e.message if e.field == "--scene" else str(e)
@@ -67,7 +71,8 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
     """
     baseline = load_baseline(cfg)
     metrics, seeds = baseline.get("expectations", {}), baseline.get("seeds", {})
-    resolved = [_resolve(cfg, i, exp, overrides) for i, exp in enumerate(cfg.expectations)]
+    stored: dict = {}
+    resolved = [_resolve(cfg, i, exp, overrides, stored) for i, exp in enumerate(cfg.expectations)]
     outcomes = []
     for exp, (scene, ref, entry) in zip(cfg.expectations, resolved):
         if on_start:
