@@ -81,9 +81,3 @@ IMAGE_METRICS = tuple(k for k, m in METRICS.items() if m.per_image)
 #: Metrics the convergence and speed/accuracy charts offer, the default first.
 PLOT_METRICS = ("rmse", "delta_e2000_mean", "rel_mse", "rel_mse_trimmed", "mse", "delta_e2000_p95")
 assert all(METRICS[k].guide_slope is not None for k in PLOT_METRICS)
-
-
-def worse_by(key: str, value: float, baseline: float) -> float:
-    """How much worse ``value`` is than ``baseline``, relative (positive: worse), in the metric's direction."""
-    change = (value - baseline) / abs(baseline)
-    return -change if key in HIGHER_IS_BETTER else change
