@@ -46,7 +46,7 @@ from harness.scenes.loader import load_scene, parse_scene
 from harness.scenes.model import MAX_COORDINATE, MAX_IMAGE_BYTES, MAX_RADIANCE, Scene, SceneError, image_memory_bytes
 
 SEED = 9
-SCENE_NAMES = ("cornell-box", "furnace", "light-panel")
+SCENE_NAMES = ("cornell-box", "furnace", "light-panel", "cornell-box-caustics", "furnace-glass")
 SCENES = {name: (ROOT / "references" / name / "scene.toml").read_bytes() for name in SCENE_NAMES}
 TEXT_CASES = 30
 DOC_CASES = 150

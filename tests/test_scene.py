@@ -182,7 +182,7 @@ def test_tiny_scene_is_not_degenerate(write_scene):
     assert np.abs(s.meshes[0].vertices).max() == pytest.approx(1e-150)
 
 
-@pytest.mark.parametrize("scene", ["cornell-box", "furnace", "light-panel"])
+@pytest.mark.parametrize("scene", ["cornell-box", "cornell-box-caustics", "furnace", "light-panel"])
 def test_stored_scenes_have_no_unknown_keys(scene):
     load_scene(CORNELL.parent.parent / scene / "scene.toml")
 
@@ -200,3 +200,202 @@ def test_cli_bad_scene_one_line_exit_2(case, write_scene, tmp_path):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"cbox: error: {path}: {BAD_INPUTS[case][1]}: "), proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+# --- Specular materials, spheres and regions ------------------------------------------
+
+#: MINIMAL_SCENE with a mirror sphere and a glass sphere: every field the new tables have (ext_ior by default).
+SPECULAR_SCENE = MINIMAL_SCENE.replace(
+    '"box_filter"]', '"box_filter", "sphere", "mirror", "dielectric"]', 1) + """
+[materials.chrome]
+type = "mirror"
+reflectance = [0.9, 0.8, 0.7]
+
+[materials.glass]
+type = "dielectric"
+int_ior = 1.5
+
+[[spheres]]
+name = "ball"
+material = "chrome"
+center = [0.3, 0.2, 0.5]
+radius = 0.25
+
+[[spheres]]
+name = "marble"
+material = "glass"
+center = [-0.3, -0.2, 0.4]
+radius = 0.2
+"""
+_MARBLE = '[[spheres]]\nname = "marble"\nmaterial = "glass"\ncenter = [-0.3, -0.2, 0.4]\nradius = 0.2\n'
+
+
+def _sreplace(old: str, new: str, text: str = SPECULAR_SCENE) -> str:
+    assert text.count(old) == 1, old
+    return text.replace(old, new, 1)
+
+
+def test_specular_scene_parses(write_scene):
+    from harness.scenes.materials import Dielectric, Mirror
+    from harness.scenes.model import Sphere
+
+    s = load_scene(write_scene(SPECULAR_SCENE))
+    assert s.materials["chrome"] == Mirror("chrome", (0.9, 0.8, 0.7))
+    assert s.materials["glass"] == Dielectric("glass", 1.5, 1.0)  # ext_ior defaults to 1 (air)
+    assert s.materials["glass"].eta == 1.5
+    assert s.spheres == (Sphere("ball", (0.3, 0.2, 0.5), 0.25, "chrome"),
+                         Sphere("marble", (-0.3, -0.2, 0.4), 0.2, "glass"))
+    assert {"sphere", "mirror", "dielectric"} <= s.features
+    assert s.object_names() == ("floor", "light", "ball", "marble")
+    assert s.regions == {}
+    lo, hi = s.bounds()  # spheres count in the bounds: the ball reaches z = 0.75, the mesh corners x = ±1
+    assert lo.tolist() == [-1.0, -1.0, 0.0] and hi.tolist() == [1.0, 1.0, 1.0]
+    with_ext = load_scene(write_scene(_sreplace("int_ior = 1.5\n", "int_ior = 1.5\next_ior = 1.33\n"), "w.toml"))
+    assert with_ext.materials["glass"].ext_ior == 1.33 and with_ext.materials["glass"].eta == pytest.approx(1.5 / 1.33)
+
+
+def test_caustics_scene_loads():
+    s = load_scene(CORNELL.parent.parent / "cornell-box-caustics" / "scene.toml")
+    assert s.features == {"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
+                          "pinhole_camera", "box_filter"}
+    assert [(x.name, x.material) for x in s.spheres] == [("mirror-sphere", "mirror"), ("glass-sphere", "glass")]
+    assert s.materials["glass"].int_ior == 1.5 and s.materials["glass"].ext_ior == 1.0
+
+
+SPECULAR_BAD_INPUTS = {
+    "misspelt material type": (_sreplace('type = "mirror"', 'type = "mirorr"'), "materials.chrome.type",
+                               "unknown material type 'mirorr'; did you mean 'mirror'?"),
+    "unknown material type": (_sreplace('type = "mirror"', 'type = "plastic"'), "materials.chrome.type",
+                              "known: diffuse, mirror, dielectric"),
+    "int_ior missing": (_sreplace("int_ior = 1.5\n", ""), "materials.glass.int_ior", "missing required field"),
+    "int_ior zero": (_sreplace("int_ior = 1.5", "int_ior = 0"), "materials.glass.int_ior", "must be in (0, 10]"),
+    "int_ior negative": (_sreplace("int_ior = 1.5", "int_ior = -1.5"), "materials.glass.int_ior", "got -1.5"),
+    "int_ior too large": (_sreplace("int_ior = 1.5", "int_ior = 11"), "materials.glass.int_ior", "must be in (0, 10]"),
+    "ext_ior out of range": (_sreplace("int_ior = 1.5", "int_ior = 1.5\next_ior = 0.0"), "materials.glass.ext_ior",
+                             "must be in (0, 10]"),
+    "int_ior not a number": (_sreplace("int_ior = 1.5", 'int_ior = "glass"'), "materials.glass.int_ior",
+                             "expected a number"),
+    "int_ior infinite": (_sreplace("int_ior = 1.5", "int_ior = inf"), "materials.glass.int_ior", "finite"),
+    "mirror reflectance above 1": (_sreplace("[0.9, 0.8, 0.7]", "[0.9, 1.2, 0.7]"),
+                                   "materials.chrome.reflectance[1]", "must be in [0, 1]"),
+    "mirror reflectance below 0": (_sreplace("[0.9, 0.8, 0.7]", "[-0.1, 0.8, 0.7]"),
+                                   "materials.chrome.reflectance[0]", "must be in [0, 1]"),
+    "mirror reflectance missing": (_sreplace("reflectance = [0.9, 0.8, 0.7]\n", ""),
+                                   "materials.chrome.reflectance", "missing required field"),
+    "reflectance on a dielectric": (_sreplace("int_ior = 1.5", "int_ior = 1.5\nreflectance = [1, 1, 1]"),
+                                    "materials.glass.reflectance", "unknown key (known: type, int_ior, ext_ior)"),
+    "misspelt ior key": (_sreplace("int_ior = 1.5", "int_ior = 1.5\next_iro = 1.0"), "materials.glass.ext_iro",
+                         "unknown key (did you mean 'ext_ior'?)"),
+    "ior on a mirror": (_sreplace('type = "mirror"', 'type = "mirror"\nint_ior = 1.5'), "materials.chrome.int_ior",
+                        "unknown key"),
+    "sphere radius zero": (_sreplace("radius = 0.25", "radius = 0"), "spheres[0] (ball).radius", "must be in (0, "),
+    "sphere radius negative": (_sreplace("radius = 0.25", "radius = -0.25"), "spheres[0] (ball).radius", "got -0.25"),
+    "sphere radius missing": (_sreplace("radius = 0.25\n", ""), "spheres[0] (ball).radius", "missing required field"),
+    "sphere center missing": (_sreplace("center = [0.3, 0.2, 0.5]\n", ""), "spheres[0] (ball).center",
+                              "missing required field"),
+    "sphere center of 2": (_sreplace("center = [0.3, 0.2, 0.5]", "center = [0.3, 0.2]"), "spheres[0] (ball).center",
+                           "expected a list of 3 numbers"),
+    "sphere center 1e31": (_sreplace("center = [0.3, 0.2, 0.5]", "center = [0.3, 1e31, 0.5]"),
+                           "spheres[0] (ball).center[1]", "out of range"),
+    "sphere unknown material": (_sreplace('material = "chrome"', 'material = "chalk"'), "spheres[0] (ball).material",
+                                "unknown material 'chalk'; defined: chrome, glass, white"),
+    "sphere unknown key": (_sreplace("radius = 0.25", "radius = 0.25\ncentre = [0, 0, 0]"), "spheres[0] (ball).centre",
+                           "unknown key (did you mean 'center'?)"),
+    "sphere not a table": (_sreplace('"dielectric"]', '"dielectric"]\nspheres = [1]', MINIMAL_SCENE.replace(
+        '"box_filter"]', '"box_filter", "dielectric"]')), "spheres[0]", "expected a table"),
+    "sphere named like a mesh": (_sreplace('name = "ball"', 'name = "floor"'), "meshes",
+                                 "object name 'floor' is used more than once"),
+    "two spheres of one name": (_sreplace('name = "marble"', 'name = "ball"'), "spheres",
+                                "object name 'ball' is used more than once"),
+    # Features: declared exactly what the content uses.
+    "mirror used, not declared": (_sreplace('"sphere", "mirror", ', '"sphere", '), "features",
+                                  "uses mirror but does not declare it"),
+    "sphere used, not declared": (_sreplace('"sphere", "mirror", ', '"mirror", '), "features",
+                                  "uses sphere but does not declare it"),
+    "dielectric declared, not used": (_sreplace(_MARBLE, "").replace("[materials.glass]\ntype = \"dielectric\"\n"
+                                                                     "int_ior = 1.5\n", ""), "features",
+                                      "declares dielectric but does not use it"),
+    "dielectric material defined but unused": (_sreplace(_MARBLE, ""), "features",
+                                               "declares dielectric but does not use it"),
+    # Regions.
+    "region names an unknown object": (SPECULAR_SCENE + '[regions.shiny]\nobjects = ["bal"]\n',
+                                       "regions.shiny.objects[0]", "no object named 'bal'; did you mean 'ball'?"),
+    "region box min not below max": (SPECULAR_SCENE + "[regions.top]\nbox = { min = [0, 0, 0], max = [1, 0, 1] }\n",
+                                     "regions.top.box", "min must be below max on every axis"),
+    "region with neither objects nor box": (SPECULAR_SCENE + '[regions.empty]\ndescription = "nothing"\n',
+                                            "regions.empty", "a region needs objects, a box, or both"),
+    "region unknown key": (SPECULAR_SCENE + '[regions.shiny]\nobject = ["ball"]\n', "regions.shiny.object",
+                           "unknown key (did you mean 'objects'?)"),
+    "region object not a string": (SPECULAR_SCENE + '[regions.shiny]\nobjects = [1]\n', "regions.shiny.objects[0]",
+                                   "expected a string"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SPECULAR_BAD_INPUTS))
+def test_bad_specular_input_names_file_and_field(case, write_scene):
+    text, field, words = SPECULAR_BAD_INPUTS[case]
+    path = write_scene(text)
+    with pytest.raises(SceneError) as exc:
+        load_scene(path)
+    assert exc.value.file == str(path)
+    assert exc.value.field == field, exc.value
+    assert words in exc.value.message, exc.value
+    assert "\n" not in str(exc.value)
+
+
+def test_regions_parse_and_do_not_change_the_hash(write_scene):
+    text = SPECULAR_SCENE + """
+[regions.shiny]
+objects = ["ball", "marble"]
+description = "the spheres"
+
+[regions.floor-left]
+objects = ["floor"]
+box = { min = [-1, -1, -0.1], max = [0, 1, 0.1] }
+
+[regions.anything-high]
+box = { min = [-2, -2, 0.5], max = [2, 2, 2] }
+"""
+    from harness.scenes.model import Region
+
+    s = load_scene(write_scene(text))
+    assert s.regions == {
+        "shiny": Region("shiny", ("ball", "marble"), None, "the spheres"),
+        "floor-left": Region("floor-left", ("floor",), ((-1.0, -1.0, -0.1), (0.0, 1.0, 0.1)), ""),
+        "anything-high": Region("anything-high", (), ((-2.0, -2.0, 0.5), (2.0, 2.0, 2.0)), ""),
+    }
+    assert s.content_hash() == load_scene(write_scene(SPECULAR_SCENE, "plain.toml")).content_hash()
+
+
+def test_cornell_box_hash_is_its_stored_references():
+    """Adding spheres and material types to the format left a Lambertian scene's content hash unchanged."""
+    import json
+
+    stored = json.loads((CORNELL.parent / "provenance.json").read_text())["scene_hash"]
+    assert load_scene(CORNELL).content_hash() == stored
+
+
+@pytest.mark.parametrize("old, new", [
+    ("center = [0.3, 0.2, 0.5]", "center = [0.3, 0.2, 0.51]"),  # a sphere moved
+    ("radius = 0.25", "radius = 0.26"),
+    ("int_ior = 1.5", "int_ior = 1.52"),  # an IOR changed
+    ("int_ior = 1.5", "int_ior = 1.5\next_ior = 1.33"),
+    ("int_ior = 1.5", "int_ior = 1.5\next_ior = 1.0"),  # the default spelt out: the same content
+    ("[0.9, 0.8, 0.7]", "[0.9, 0.8, 0.6]"),  # a mirror's reflectance
+])
+def test_specular_content_changes_the_hash(write_scene, old, new):
+    h = load_scene(write_scene(SPECULAR_SCENE)).content_hash()
+    changed = load_scene(write_scene(_sreplace(old, new), "changed.toml")).content_hash()
+    if "ext_ior = 1.0" in new:
+        assert changed == h
+    else:
+        assert changed != h
+
+
+def test_mirror_and_diffuse_of_equal_reflectance_hash_differently(write_scene):
+    """The material type is part of a non-diffuse material's hash: a mirror is not a white wall."""
+    text = _sreplace('type = "mirror"', 'type = "diffuse"').replace('"mirror", ', "")
+    diffuse = load_scene(write_scene(text, "d.toml"))
+    mirror = load_scene(write_scene(SPECULAR_SCENE, "m.toml"))
+    assert diffuse.materials["chrome"].reflectance == mirror.materials["chrome"].reflectance
+    assert diffuse.content_hash() != mirror.content_hash()

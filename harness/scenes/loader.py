@@ -9,6 +9,7 @@ format itself (fields, units, conventions, limits) is documented in
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import math
 import re
@@ -18,20 +19,27 @@ from typing import Any
 
 import numpy as np
 
+from harness.scenes.materials import MATERIAL_TYPES, MAX_IOR, material_fields
 from harness.scenes.model import (_DEGENERATE_REL_AREA, FEATURES, FOV_AXES, IMAGE_BUFFERS, MAX_COORDINATE,
                                   MAX_DEPTH, MAX_IMAGE_BYTES, MAX_OBJ_FILE_BYTES, MAX_RADIANCE, MAX_SCENE_FILE_BYTES,
-                                  PIXEL_FILTERS, Camera, Diffuse, Mesh, Scene, SceneError, image_memory_bytes,
-                                  one_line)
+                                  PIXEL_FILTERS, Camera, Mesh, Region, Scene, SceneError, Sphere,
+                                  image_memory_bytes, one_line)
 
 #: The keys each table of a scene file may have; any other is an error (with a did-you-mean).
+#: A material's keys are its type's fields (harness.scenes.materials).
 _KEYS = {
-    "": ("format", "name", "description", "features", "camera", "render", "materials", "meshes"),
+    "": ("format", "name", "description", "features", "camera", "render", "materials", "meshes", "spheres",
+         "regions"),
     "camera": ("type", "position", "look_at", "up", "fov_deg", "fov_axis", "resolution"),
     "render": ("max_depth", "pixel_filter"),
-    "material": ("type", "reflectance"),
     "mesh": ("name", "material", "obj", "vertices", "faces", "emitter"),
+    "sphere": ("name", "material", "center", "radius"),
     "emitter": ("radiance",),
+    "region": ("objects", "box", "description"),
+    "box": ("min", "max"),
 }
+#: Every key some material type has: what an untyped material table is checked against.
+_ANY_MATERIAL_KEY = ("type",) + tuple(sorted({f.name for cls in MATERIAL_TYPES.values() for f in material_fields(cls)}))
 _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
 
 
@@ -183,11 +191,14 @@ def parse_scene(doc: dict, path: Path) -> Scene:
     if not raw_meshes:
         raise r.err("meshes", "a scene needs at least one mesh")
     meshes = tuple(_parse_mesh(r, m, i, materials, path.parent) for i, m in enumerate(raw_meshes))
-    names = [m.name for m in meshes]
+    spheres = tuple(_parse_sphere(r, t, i, materials) for i, t in enumerate(r.get(doc, "spheres", "", list, [])))
+    names = [m.name for m in meshes] + [s.name for s in spheres]
     for n in names:
         if names.count(n) > 1:
-            raise r.err("meshes", f"mesh name {n!r} is used more than once")
+            raise r.err("meshes" if n in [m.name for m in meshes] else "spheres",
+                        f"object name {n!r} is used more than once")
     _check_degenerate(r, meshes)
+    regions = _parse_regions(r, r.get(doc, "regions", "", dict, {}), names)
 
     declared = r.get(doc, "features", "", list)
     for i, f in enumerate(declared):
@@ -195,7 +206,7 @@ def parse_scene(doc: dict, path: Path) -> Scene:
             raise r.err(f"features[{i}]", f"expected a string, got {type(f).__name__}")
         if f not in FEATURES:
             raise r.err(f"features[{i}]", f"unknown feature {f!r}; known: {', '.join(FEATURES)}")
-    used = _features_used(meshes, pixel_filter)
+    used = _features_used(meshes, spheres, materials, pixel_filter)
     if missing := sorted(used - set(declared)):
         raise r.err("features", f"the scene uses {', '.join(missing)} but does not declare it")
     if unused := sorted(set(declared) - used):
@@ -211,11 +222,17 @@ def parse_scene(doc: dict, path: Path) -> Scene:
         max_depth=max_depth,
         pixel_filter=pixel_filter,
         description=description,
+        spheres=spheres,
+        regions=regions,
     )
 
 
-def _features_used(meshes: tuple[Mesh, ...], pixel_filter: str) -> set[str]:
-    used = {"triangle_mesh", "diffuse", "pinhole_camera"}
+def _features_used(meshes: tuple[Mesh, ...], spheres: tuple[Sphere, ...], materials: dict,
+                   pixel_filter: str) -> set[str]:
+    used = {"triangle_mesh", "pinhole_camera"}
+    used |= {materials[o.material].feature for o in meshes + spheres}
+    if spheres:
+        used.add("sphere")
     if any(m.is_emitter for m in meshes):
         used.add("area_light")
     if pixel_filter == "box":
@@ -256,7 +273,7 @@ def _parse_camera(r: _Reader, t: dict) -> Camera:
     return Camera(position, look_at, up, fov, axis, int(res[0]), int(res[1]))
 
 
-def _parse_materials(r: _Reader, t: dict) -> dict[str, Diffuse]:
+def _parse_materials(r: _Reader, t: dict) -> dict:
     if not t:
         raise r.err("materials", "a scene needs at least one material")
     out = {}
@@ -264,15 +281,83 @@ def _parse_materials(r: _Reader, t: dict) -> dict[str, Diffuse]:
         w = f"materials.{_key(name)}"
         if not isinstance(m, dict):
             raise r.err(w, f"expected a table, got {type(m).__name__}")
-        r.known(m, w, _KEYS["material"])
+        if "type" not in m:  # a misspelt "typ" gets its did-you-mean, not "type: missing"
+            r.known(m, w, _ANY_MATERIAL_KEY)
         kind = r.get(m, "type", w, str)
-        if kind != "diffuse":
-            raise r.err(f"{w}.type", f"unknown material type {kind!r}; known: diffuse")
-        rho = r.vec(m, "reflectance", w)
-        for i, x in enumerate(rho):
+        if kind not in MATERIAL_TYPES:
+            close = difflib.get_close_matches(kind[:100], MATERIAL_TYPES, n=1)
+            hint = f"did you mean {close[0]!r}?" if close else f"known: {', '.join(MATERIAL_TYPES)}"
+            raise r.err(f"{w}.type", f"unknown material type {one_line(kind, 60)!r}; {hint}")
+        cls = MATERIAL_TYPES[kind]
+        fields = material_fields(cls)
+        r.known(m, w, ("type",) + tuple(f.name for f in fields))
+        out[name] = cls(name, **{f.name: _material_field(r, m, w, f) for f in fields if f.name in m
+                                 or f.default is dataclasses.MISSING})
+    return out
+
+
+def _material_field(r: _Reader, m: dict, w: str, f: dataclasses.Field):
+    """One field of a material table, checked against its kind (harness.scenes.materials)."""
+    kind = f.metadata["kind"]
+    if kind == "rgb01":
+        rgb = r.vec(m, f.name, w)
+        for i, x in enumerate(rgb):
             if not 0.0 <= x <= 1.0:
-                raise r.err(f"{w}.reflectance[{i}]", f"must be in [0, 1], got {x}")
-        out[name] = Diffuse(name, rho)
+                raise r.err(f"{w}.{f.name}[{i}]", f"must be in [0, 1], got {x}")
+        return rgb
+    if kind == "ior":
+        x = r.get(m, f.name, w, float)
+        if not 0.0 < x <= MAX_IOR:
+            raise r.err(f"{w}.{f.name}", f"an index of refraction must be in (0, {MAX_IOR:g}], got {x}")
+        return x
+    raise AssertionError(f"material field kind {kind!r} has no parser")  # a programming error in materials.py
+
+
+def _parse_sphere(r: _Reader, t: Any, i: int, materials: dict) -> Sphere:
+    w = f"spheres[{i}]"
+    if not isinstance(t, dict):
+        raise r.err(w, f"expected a table, got {type(t).__name__}")
+    if isinstance(t.get("name"), str):
+        w = f"spheres[{i}] ({one_line(t['name'], 60)})"
+    r.known(t, w, _KEYS["sphere"])
+    name = r.get(t, "name", w, str)
+    material = r.get(t, "material", w, str)
+    if material not in materials:
+        raise r.err(f"{w}.material", f"unknown material {material!r}; defined: {', '.join(sorted(materials))}")
+    center = r.vec(t, "center", w, bound=MAX_COORDINATE)
+    radius = r.get(t, "radius", w, float)
+    if not 0.0 < radius <= MAX_COORDINATE:
+        raise r.err(f"{w}.radius", f"must be in (0, {MAX_COORDINATE:g}], got {radius}")
+    return Sphere(name, center, radius, material)
+
+
+def _parse_regions(r: _Reader, t: dict, objects: list[str]) -> dict[str, Region]:
+    out = {}
+    for name, g in t.items():
+        w = f"regions.{_key(name)}"
+        if not isinstance(g, dict):
+            raise r.err(w, f"expected a table, got {type(g).__name__}")
+        r.known(g, w, _KEYS["region"])
+        raw = r.get(g, "objects", w, list, [])
+        for i, o in enumerate(raw):
+            if not isinstance(o, str):
+                raise r.err(f"{w}.objects[{i}]", f"expected a string, got {type(o).__name__}")
+            if o not in objects:
+                close = difflib.get_close_matches(o[:100], objects, n=1)
+                hint = f"did you mean {close[0]!r}?" if close else f"objects: {', '.join(objects)}"
+                raise r.err(f"{w}.objects[{i}]", f"no object named {one_line(o, 60)!r}; {hint}")
+        box = None
+        if "box" in g:
+            b = r.get(g, "box", w, dict)
+            r.known(b, f"{w}.box", _KEYS["box"])
+            lo = r.vec(b, "min", f"{w}.box", bound=MAX_COORDINATE)
+            hi = r.vec(b, "max", f"{w}.box", bound=MAX_COORDINATE)
+            if not all(a < z for a, z in zip(lo, hi)):
+                raise r.err(f"{w}.box", f"min must be below max on every axis, got {list(lo)} and {list(hi)}")
+            box = (lo, hi)
+        if not raw and box is None:
+            raise r.err(w, "a region needs objects, a box, or both")
+        out[name] = Region(name, tuple(raw), box, r.get(g, "description", w, str, ""))
     return out
 
 

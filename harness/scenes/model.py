@@ -13,7 +13,11 @@ Units and colour space (named here once for the whole harness)
 - **Radiance** (``emitter.radiance`` and image pixels) is per linear-sRGB
   channel, in W·sr⁻¹·m⁻² relative to the scene unit; images are the
   box-filtered mean of the radiance arriving through each pixel.
-- **Reflectance** of a diffuse material is its albedo per channel, in [0, 1].
+- **Reflectance** of a diffuse material is its albedo per channel, in [0, 1];
+  of a mirror, its specular reflectance per channel. Materials and their
+  fields are :mod:`harness.scenes.materials`'.
+- **Indices of refraction** are absolute (vacuum 1); a dielectric's front
+  side faces its ``ext_ior`` medium.
 
 Conventions
 -----------
@@ -25,6 +29,9 @@ Conventions
   ``n = (v1 - v0) × (v2 - v0)``. Area emitters emit from the front side only;
   diffuse surfaces reflect on the front side only (Mitsuba 3's ``diffuse``).
 - Quads ``[a, b, c, d]`` are split into triangles ``(a, b, c)`` and ``(a, c, d)``.
+- A sphere's front side is its outside: its normal at ``x`` is
+  ``(x - center) / radius`` (Mitsuba 3's ``sphere`` without ``flip_normals``).
+  Spheres do not emit.
 - Pixel ``(row, col)`` = ``(0, 0)`` is the top-left of the image.
 
 Limits
@@ -70,10 +77,16 @@ from pathlib import Path
 
 import numpy as np
 
+# Diffuse is re-exported: scenes built in code (analytic.py, tests) import it from the model.
+from harness.scenes.materials import Diffuse, Material, hash_payload  # noqa: F401
+
 #: Every feature a scene may use, with what it means.
 FEATURES: dict[str, str] = {
     "triangle_mesh": "geometry given as triangle or quad meshes",
+    "sphere": "analytic spheres (center, radius)",
     "diffuse": "Lambertian reflection with a linear-sRGB reflectance",
+    "mirror": "smooth conductor: perfect specular reflection with a linear-sRGB reflectance",
+    "dielectric": "smooth glass: exact Fresnel reflection and refraction, total internal reflection",
     "area_light": "one-sided diffuse area emitters on meshes",
     "pinhole_camera": "a pinhole perspective camera",
     "box_filter": "each pixel is the unweighted mean over its own square",
@@ -184,14 +197,6 @@ class Camera:
 
 
 @dataclass(frozen=True)
-class Diffuse:
-    """Lambertian BRDF ρ/π, front side only."""
-
-    name: str
-    reflectance: tuple[float, float, float]
-
-
-@dataclass(frozen=True)
 class Mesh:
     """Triangles with one material, optionally a one-sided area emitter."""
 
@@ -207,6 +212,34 @@ class Mesh:
 
 
 @dataclass(frozen=True)
+class Sphere:
+    """An analytic sphere with one material; it does not emit."""
+
+    name: str
+    center: tuple[float, float, float]
+    radius: float
+    material: str
+
+
+@dataclass(frozen=True)
+class Region:
+    """A named part of the image, for per-region metrics.
+
+    A pixel belongs to the region when every camera ray through its
+    footprint first hits one of ``objects`` (mesh or sphere names) and, if
+    ``box`` is given, hits it inside that world-space box (lo, hi); pixels
+    that straddle a boundary are left out. Masks are
+    :mod:`harness.evaluate.regions`'. Regions do not change the image, so
+    they are not part of the scene's content hash.
+    """
+
+    name: str
+    objects: tuple[str, ...] = ()  # empty: any object
+    box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    description: str = ""
+
+
+@dataclass(frozen=True)
 class Scene:
     """A validated scene. Build it with :func:`harness.scenes.loader.load_scene`."""
 
@@ -214,11 +247,13 @@ class Scene:
     path: Path
     features: frozenset[str]
     camera: Camera
-    materials: dict[str, Diffuse]
+    materials: dict[str, Material]
     meshes: tuple[Mesh, ...]
     max_depth: int
     pixel_filter: str
     description: str = ""
+    spheres: tuple[Sphere, ...] = ()
+    regions: dict[str, Region] = dataclasses.field(default_factory=dict)
 
     @property
     def emitters(self) -> tuple[Mesh, ...]:
@@ -227,7 +262,15 @@ class Scene:
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned bounding box of all geometry (lo, hi), float64."""
         v = np.concatenate([m.vertices for m in self.meshes])
-        return v.min(axis=0), v.max(axis=0)
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        for s in self.spheres:
+            lo = np.minimum(lo, np.subtract(s.center, s.radius))
+            hi = np.maximum(hi, np.add(s.center, s.radius))
+        return lo, hi
+
+    def object_names(self) -> tuple[str, ...]:
+        """Meshes then spheres, in file order: the objects regions name."""
+        return tuple(m.name for m in self.meshes) + tuple(s.name for s in self.spheres)
 
     def extent(self) -> float:
         """Length of the bounding-box diagonal: the scene's size."""
@@ -237,12 +280,14 @@ class Scene:
     def content_hash(self) -> str:
         """SHA-256 of the parsed content (not the file's bytes).
 
-        Comments, formatting and OBJ-vs-inline choices do not change it; any
-        change to geometry, materials, camera or transport settings does.
+        Comments, formatting, OBJ-vs-inline choices and regions do not change
+        it; any change to geometry, materials, camera or transport settings
+        does. Keys that older scenes lack (spheres) enter only when present,
+        so the stored references of those scenes stay valid.
         """
         payload = {
             "camera": dataclasses.asdict(self.camera),
-            "materials": {k: dataclasses.asdict(v) for k, v in sorted(self.materials.items())},
+            "materials": {k: hash_payload(v) for k, v in sorted(self.materials.items())},
             "meshes": [
                 {
                     "name": m.name,
@@ -257,6 +302,8 @@ class Scene:
             "pixel_filter": self.pixel_filter,
             "features": sorted(self.features),
         }
+        if self.spheres:
+            payload["spheres"] = [dataclasses.asdict(s) for s in self.spheres]
         blob = json.dumps(payload, sort_keys=True, separators=(",", ":")).encode()
         return "sha256:" + hashlib.sha256(blob).hexdigest()
 
@@ -273,10 +320,10 @@ def triangle_arrays(scene: Scene) -> dict[str, np.ndarray]:
     """Flatten all meshes into shared arrays, the form ray tracers want.
 
     Returns float64 ``vertices`` (V,3), int64 ``triangles`` (T,3), and per
-    triangle: ``mesh`` index, ``reflectance`` (T,3), ``radiance`` (T,3, zero
-    for non-emitters).
+    triangle: ``mesh`` index and ``radiance`` (T,3, zero for non-emitters).
+    Materials are looked up through the mesh index.
     """
-    verts, tris, mesh_id, rho, le = [], [], [], [], []
+    verts, tris, mesh_id, le = [], [], [], []
     offset = 0
     for k, m in enumerate(scene.meshes):
         verts.append(m.vertices)
@@ -284,12 +331,10 @@ def triangle_arrays(scene: Scene) -> dict[str, np.ndarray]:
         offset += len(m.vertices)
         n = len(m.triangles)
         mesh_id.append(np.full(n, k))
-        rho.append(np.tile(scene.materials[m.material].reflectance, (n, 1)))
         le.append(np.tile(m.radiance or (0.0, 0.0, 0.0), (n, 1)))
     return {
         "vertices": np.concatenate(verts),
         "triangles": np.concatenate(tris),
         "mesh": np.concatenate(mesh_id),
-        "reflectance": np.concatenate(rho).astype(np.float64),
         "radiance": np.concatenate(le).astype(np.float64),
     }

@@ -63,11 +63,16 @@ def scale_radiance(scene: Scene, peak: float = 1e6) -> tuple[Scene, float]:
 
 
 def scale_geometry(scene: Scene, s: float) -> Scene:
-    """The scene with every vertex and the camera's position and target multiplied by ``s``."""
+    """The scene with every vertex, sphere, region box and the camera's position and target multiplied by ``s``."""
     meshes = tuple(dataclasses.replace(m, vertices=m.vertices * s) for m in scene.meshes)
+    spheres = tuple(dataclasses.replace(b, center=tuple(s * c for c in b.center), radius=b.radius * s)
+                    for b in scene.spheres)
+    regions = {k: dataclasses.replace(g, box=None if g.box is None else tuple(tuple(s * c for c in p) for p in g.box))
+               for k, g in scene.regions.items()}
     cam = dataclasses.replace(scene.camera, position=tuple(s * c for c in scene.camera.position),
                               look_at=tuple(s * c for c in scene.camera.look_at))
-    return dataclasses.replace(scene, name=f"{scene.name}-scaled-{s:g}", meshes=meshes, camera=cam)
+    return dataclasses.replace(scene, name=f"{scene.name}-scaled-{s:g}", meshes=meshes, spheres=spheres,
+                               regions=regions, camera=cam)
 
 
 #: Grazing camera: this far in front of the Cornell box's back wall (z = -1), looking along it.
