@@ -1,8 +1,9 @@
 """Unidirectional path tracing with next-event estimation and MIS, on Embree.
 
 The estimator is the standard one of Veach 1997 (thesis §9.2) as in
-pbrt-v4 §13.4 (``PathIntegrator``), for one-sided BSDFs (Lambertian today)
-and one-sided diffuse area emitters. This module is the integrator only:
+pbrt-v4 §13.4 (``PathIntegrator``), for the materials of
+:mod:`renderers.core.bsdf` (Lambert, smooth mirror, smooth glass), triangles
+and spheres, and one-sided diffuse area emitters. This module is the integrator only:
 cameras, rays, geometry, emitters, BSDFs, sample dimensions, threads and
 the film are the shared toolkit's (``renderers/core/``).
 
@@ -16,6 +17,12 @@ the film are the shared toolkit's (``renderers/core/``).
 - **MIS**: both strategies are weighted by the power heuristic (β = 2,
   Veach eq. 9.13). Emission found by a BSDF-sampled ray is weighted against
   the NEE pdf of that point; emission seen by the camera ray is not weighted.
+- **Delta BSDFs** (mirror, glass) are only sampled: no NEE at such a
+  vertex (light sampling cannot hit a delta lobe), and the emission the
+  sampled ray finds counts with weight 1 (the ray carries pdf 0, as camera
+  rays do). Caustics (light → glass → diffuse → camera) therefore come only
+  from BSDF-sampled rays that happen to reach the light: unbiased, slow, as
+  expected of path tracing; the photon mapper exists for them.
 - **Russian roulette** from the ``rr_depth``-th vertex on (setting, default
   :data:`RR_DEPTH`): a path goes on with probability
   ``q = min(max_c β_c, Q_MAX)`` and its throughput is divided by ``q``, so
@@ -30,8 +37,9 @@ the film are the shared toolkit's (``renderers/core/``).
 Random numbers: vertex k of a path uses the named dimensions of
 :mod:`renderers.core.sampler` (emitter pick and point, BSDF direction,
 roulette). Robustness: maths in float64; every pdf division is guarded (a
-zero pdf gives a zero contribution, never NaN or Inf); a surface hit from
-its back side reflects and emits nothing and ends the path.
+zero pdf gives a zero contribution, never NaN or Inf); a one-sided surface
+hit from its back side reflects and emits nothing and ends the path (glass
+is two-sided).
 """
 
 from __future__ import annotations
@@ -45,9 +53,9 @@ import numpy as np
 from harness.adapters.registry import RenderResult
 from harness.adapters.settings import Setting
 from harness.scenes.model import Scene
-from renderers.core.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta
+from renderers.core.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, two_sided
 from renderers.core.camera import camera_basis, camera_rays
-from renderers.core.geometry import SceneGeometry, hit_distance, offset_origin, triangle_normal
+from renderers.core.geometry import SceneGeometry, offset_origin, surface_point
 from renderers.core.lights import emits, emitter_cos, sample_emitter, solid_angle_pdf, solid_angle_pdf_along
 from renderers.core.rays import (add_unoccluded, head, ray_buffer, set_path, set_ray, set_shadow, shadow_buffer,
                                  shadow_segment)
@@ -60,9 +68,13 @@ Q_MAX = 0.99
 
 
 @jit
-def _emission_weight(depth, pdf_bsdf, pa, t, cos_o) -> float:
-    """MIS weight of emission found at distance ``t`` by a ray sampled with ``pdf_bsdf``; 1 for camera rays."""
-    return 1.0 if depth == 1 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))
+def _emission_weight(pdf_bsdf, pa, t, cos_o) -> float:
+    """MIS weight of emission found at distance ``t`` by a ray sampled with ``pdf_bsdf``.
+
+    A pdf of 0 marks a ray that light sampling could not have made (the
+    camera ray, a delta-BSDF sample): its emission counts with weight 1.
+    """
+    return 1.0 if pdf_bsdf == 0.0 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))
 
 
 @jit
@@ -89,12 +101,12 @@ def _light_sample(x, n, mat, y, ny, pe):
 
 
 @jit
-def _continue_path(mat, cos_w, f, beta, u_rr, roulette):
+def _continue_path(mat, valid, cos_w, f, beta, u_rr, roulette):
     """Throughput after a BSDF sample at cosine ``cos_w`` with weight ``f``: (alive, β', pdf of the sample).
 
     Russian roulette with the vertex's number ``u_rr`` when ``roulette``.
     """
-    if cos_w <= 0.0:
+    if not valid:
         return False, beta, 0.0  # zero-pdf direction
     b0, b1, b2 = beta[0] * f[0], beta[1] * f[1], beta[2] * f[2]
     bmax = max(b0, b1, b2)
@@ -114,9 +126,10 @@ def _continue_path(mat, cos_w, f, beta, u_rr, roulette):
 # reads/writes the buffers itself: helpers that take arrays and branch cost
 # reference counting and inlining (renderers/core/rays.py), so they stay here.
 @jit
-def _shade(prim, rays, key, first, depth, extend, roulette, geo, L, shadow, nxt):
-    """Shade one bounce of a wavefront: ray i of ``rays`` hit triangle ``prim[i]`` (-1: missed).
+def _shade(prim, t_sphere, rays, key, first, depth, extend, roulette, geo, L, shadow, nxt):
+    """Shade one bounce of a wavefront: ray i of ``rays`` hit primitive ``prim[i]`` (-1: missed).
 
+    ``t_sphere`` holds the distances of sphere hits (:meth:`SceneGeometry.closest_hits`).
     Adds the emission each ray found; then, if ``extend`` (max_depth allows
     another segment), writes one NEE shadow segment into ``shadow`` and one
     continuation ray into ``nxt`` per path, with Russian roulette if
@@ -131,24 +144,21 @@ def _shade(prim, rays, key, first, depth, extend, roulette, geo, L, shadow, nxt)
         if p < 0:
             continue
         d = (rays.d[i, 0], rays.d[i, 1], rays.d[i, 2])
-        n = triangle_normal(geo, p)
-        cos_o = -(d[0] * n[0] + d[1] * n[1] + d[2] * n[2])
-        if cos_o <= 0.0:
-            continue  # back side (or grazing): one-sided emitters and BSDFs give nothing, the path ends
         o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
-        t = hit_distance(geo, p, o, d, cos_o)
-        x = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
+        x, n, cos_o, t = surface_point(geo, p, o, d, t_sphere[i] if p >= geo.n_triangles else 0.0)
+        mat = geo.material[p]
+        if not (cos_o > 0.0 or (cos_o < 0.0 and two_sided(mat))):
+            continue  # back side (or grazing): one-sided emitters and BSDFs give nothing, the path ends
         q = rays.path[i]
         beta = (rays.beta[i, 0], rays.beta[i, 1], rays.beta[i, 2])
         pa = geo.light_pdf_area[p]
-        if pa > 0.0:
-            w = _emission_weight(depth, rays.pdf[i], pa, t, cos_o)
+        if pa > 0.0 and cos_o > 0.0:
+            w = _emission_weight(rays.pdf[i], pa, t, cos_o)
             for c in range(3):
                 L[q, c] += beta[c] * geo.radiance[p, c] * w
         if not extend:
             continue
         j = first + q
-        mat = geo.material[p]
         rho = (geo.reflectance[p, 0], geo.reflectance[p, 1], geo.reflectance[p, 2])
         if geo.emitter_ids.size > 0 and not is_delta(mat):
             u = vertex_2d(key, j, depth, EMITTER_U)
@@ -164,11 +174,12 @@ def _shade(prim, rays, key, first, depth, extend, roulette, geo, L, shadow, nxt)
                         shadow.c[ns, c] = bsdf_eval(mat, beta[c] * rho[c], cos_x) * geo.radiance[e, c] * g
                     ns += 1
         u = vertex_2d(key, j, depth, BSDF_U)
-        wi, cos_w, f = bsdf_sample(mat, n, rho, u[0], u[1])
-        alive, b, pdf = _continue_path(mat, cos_w, f, beta, vertex_1d(key, j, depth, ROULETTE) if roulette else 1.0,
-                                       roulette)
+        wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p], u[0], u[1])
+        alive, b, pdf = _continue_path(mat, valid, cos_w, f, beta,
+                                       vertex_1d(key, j, depth, ROULETTE) if roulette else 1.0, roulette)
         if alive:
-            set_ray(nxt, nn, offset_origin(x, n, geo.offset), wi)
+            side = n if cos_w > 0.0 else (-n[0], -n[1], -n[2])  # the new ray leaves on the side it travels to
+            set_ray(nxt, nn, offset_origin(x, side, geo.offset), wi)
             set_path(nxt, nn, q, b, pdf)
             nn += 1
     return ns, nn
@@ -188,9 +199,9 @@ def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels
     n, depth = m, 1  # live rays; segments so far, the current ray included
     while n:
         rays = head(cur, n)
-        prim = geom.intersect(rays.o32, rays.d32)
+        prim, t_sphere = geom.closest_hits(rays)
         extend = unbounded or depth + 1 <= scene.max_depth
-        ns, n = _shade(prim, rays, key, first, depth, extend, depth >= rr_depth, geo, L, shadow, nxt)
+        ns, n = _shade(prim, t_sphere, rays, key, first, depth, extend, depth >= rr_depth, geo, L, shadow, nxt)
         if ns:
             seg = head(shadow, ns)
             add_unoccluded(L, seg, geom.unoccluded(seg.o, seg.d, seg.t))
@@ -203,7 +214,8 @@ class PathTracer:
     """Our path tracer (embreex, vectorised wavefront, multithreaded)."""
 
     name = "pathtracer"
-    features = frozenset({"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"})
+    features = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
+                          "pinhole_camera", "box_filter"})
     approximations: tuple[str, ...] = ()
     settings = (Setting("rr_depth", int, RR_DEPTH, "path vertex from which Russian roulette may end a path",
                         low=1, high=1000),)

@@ -4,6 +4,11 @@
   cube, every face of albedo ρ emitting Le, the camera inside. Built directly
   from the dataclasses (no file); the stress suite (:mod:`harness.stress`)
   and the path tracer's tests use it.
+- **Specular furnace** (:func:`specular_furnace_scene`,
+  :func:`specular_furnace_camera_in_glass`): the furnace with lossless glass
+  (a sphere and a cube) and a mirror sphere inside. Lossless specular
+  objects leave the furnace's radiance unchanged, Le/(1-ρ) everywhere seen
+  from the air; a camera inside glass of index n sees n² times it.
 - **Rectangle light over a floor** (:func:`rectangle_light_scene`,
   :func:`rectangle_light_image`): one-bounce direct light with an exact
   box-filtered image from Lambert's polygon formula
@@ -13,13 +18,15 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
 import numpy as np
 
 from harness.scenes.loader import load_scene
-from harness.scenes.model import Camera, Diffuse, Mesh, Scene
+from harness.scenes.materials import Dielectric, Mirror
+from harness.scenes.model import Camera, Diffuse, Mesh, Scene, Sphere
 
 # ----------------------------------------------------------------------------------------
 # White furnace
@@ -65,6 +72,132 @@ def furnace_radiance(albedo: float, radiance: float, max_depth: int) -> float:
     if max_depth < 0:
         return math.inf if albedo >= 1.0 else radiance / (1.0 - albedo)
     return radiance * sum(albedo**k for k in range(max_depth))
+
+
+# ----------------------------------------------------------------------------------------
+# Specular furnace: glass and mirrors in the white furnace
+# ----------------------------------------------------------------------------------------
+
+#: Index of refraction of the specular furnace's glass (in air, 1.0).
+FURNACE_GLASS_IOR = 1.5
+#: The specular furnace's objects, all in view of the camera at the cube's centre (looking at -z,
+#: 100° field of view), none containing it: name -> (kind, centre, size). A sphere's size is its
+#: radius, the cube's its half-side.
+SPECULAR_FURNACE_OBJECTS = {
+    "glass-sphere": ("sphere", (-0.36, 0.22, -0.72), 0.24),
+    "mirror-sphere": ("sphere", (0.36, 0.22, -0.72), 0.24),
+    "glass-cube": ("cube", (0.0, -0.34, -0.72), 0.18),
+}
+_SPECULAR_FEATURES = _ALL_FEATURES | {"sphere", "mirror", "dielectric"}
+
+
+def specular_furnace_scene(albedo: float, radiance: float = 1.0, res: int = 16,
+                           objects: tuple[str, ...] = tuple(SPECULAR_FURNACE_OBJECTS),
+                           mirror_reflectance: tuple[float, float, float] = (1.0, 1.0, 1.0),
+                           max_depth: int = -1) -> Scene:
+    """:func:`furnace_scene` with ``objects`` of :data:`SPECULAR_FURNACE_OBJECTS` inside.
+
+    The glass (IOR :data:`FURNACE_GLASS_IOR` in air) is a sphere and an
+    axis-aligned cube (a triangle mesh, normals outward); the mirror is a
+    sphere of reflectance ``mirror_reflectance``.
+
+    Lossless specular objects (glass; a mirror of reflectance 1) change no
+    radiance in the furnace: a Fresnel interface reflects R and transmits
+    1 - R of the power (basic radiance L/n² is conserved across it, Veach
+    1997 §5.2), so in equilibrium the radiance seen from the air is still
+    :func:`furnace_radiance`, Le/(1-ρ), in every pixel, whether its ray meets
+    a wall, the mirror, or the glass. Light entering the cube keeps a
+    direction component >= cos θt >= cos θc along the normal of the face it
+    came in by, so its other components are <= sin θc: it meets the four
+    other faces past the critical angle (total internal reflection, on every
+    such path) and leaves by the face it entered or the opposite one, never
+    trapped; nor is a ray inside a sphere (entered at θt, it meets the
+    surface again at θt).
+
+    With walls of albedo 0 the walls show exactly Le, and so does the glass;
+    a mirror of reflectance r shows r·Le per channel (it reflects a wall).
+    """
+    base = furnace_scene(albedo, radiance, max_depth, res)
+    materials = dict(base.materials)
+    materials["glass"] = Dielectric("glass", FURNACE_GLASS_IOR, 1.0)
+    materials["mirror"] = Mirror("mirror", tuple(float(x) for x in mirror_reflectance))
+    meshes, spheres = list(base.meshes), []
+    for name in objects:
+        kind, centre, size = SPECULAR_FURNACE_OBJECTS[name]
+        material = "mirror" if name.startswith("mirror") else "glass"
+        if kind == "sphere":
+            spheres.append(Sphere(name, centre, size, material))
+        else:
+            outward = tuple((a, d, c, b) for a, b, c, d in _CUBE_INWARD)
+            verts = np.asarray(centre) + size * np.asarray(_CUBE_VERTS, dtype=np.float64)
+            meshes.append(Mesh(name, verts, _quads_to_triangles(outward), material))
+    used = {materials[o.material].feature for o in meshes + spheres} | ({"sphere"} if spheres else set())
+    name = f"specular-furnace-albedo-{albedo:g}"
+    return dataclasses.replace(
+        base, name=name, path=Path("stress") / f"{name}.toml", features=_ALL_FEATURES | used,
+        materials={k: v for k, v in materials.items() if k == "grey" or v.feature in used},
+        meshes=tuple(meshes), spheres=tuple(spheres),
+        description=f"white furnace (albedo {albedo:g}, emission {radiance:g}) with {', '.join(objects)}")
+
+
+def specular_furnace_coverage(scene: Scene, sub: int = 16) -> dict[str, np.ndarray]:
+    """Fraction of each pixel (height, width) whose camera ray first meets each specular furnace object.
+
+    Keyed by object name (those of :data:`SPECULAR_FURNACE_OBJECTS` in
+    ``scene``); measured on a sub×sub grid of points per pixel (the box
+    filter's footprint), with exact float64 ray-sphere and ray-box maths. A
+    fraction of 1 (0) means every grid point's ray meets (misses) the object.
+    """
+    cam = scene.camera
+    right, up, forward = cam.frame()
+    tx, ty = cam.tan_half_fov()
+    offs = (np.arange(sub) + 0.5) / sub
+    col = (np.arange(cam.width)[:, None] + offs[None, :]).ravel()
+    row = (np.arange(cam.height)[:, None] + offs[None, :]).ravel()
+    rr, cc = np.meshgrid(row, col, indexing="ij")
+    d = (forward + ((2 * cc / cam.width - 1) * tx)[..., None] * right
+         + ((1 - 2 * rr / cam.height) * ty)[..., None] * up)
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    o = np.asarray(cam.position, dtype=np.float64)
+    names = [s.name for s in scene.spheres] + [m.name for m in scene.meshes if m.name in SPECULAR_FURNACE_OBJECTS]
+    t = np.full((len(names),) + d.shape[:2], np.inf)
+    for k, name in enumerate(names):
+        kind, centre, size = SPECULAR_FURNACE_OBJECTS[name]
+        f = o - np.asarray(centre)
+        if kind == "sphere":
+            b = d @ f
+            disc = b * b - (f @ f - size * size)
+            root = np.sqrt(np.maximum(disc, 0.0))
+            near = np.where(-b - root > 0, -b - root, -b + root)
+            t[k] = np.where((disc >= 0) & (near > 0), near, np.inf)
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                lo, hi = (-size - f) / d, (size - f) / d
+            enter = np.minimum(lo, hi).max(axis=-1)
+            leave = np.maximum(lo, hi).min(axis=-1)
+            t[k] = np.where((enter <= leave) & (leave > 0), np.maximum(enter, 0.0), np.inf)
+    first = np.where(np.isfinite(t).any(axis=0), t.argmin(axis=0), -1)
+    shape = (cam.height, sub, cam.width, sub)
+    return {name: (first == k).reshape(shape).mean(axis=(1, 3)) for k, name in enumerate(names)}
+
+
+def specular_furnace_camera_in_glass(albedo: float, radiance: float = 1.0, res: int = 16) -> Scene:
+    """:func:`furnace_scene` with the camera inside a glass sphere (IOR :data:`FURNACE_GLASS_IOR` in air).
+
+    In equilibrium basic radiance L/n² is the same everywhere (Veach 1997
+    §5.2), so inside glass of index n the radiance is n²·:func:`furnace_radiance`
+    in every direction (2.25·Le/(1-ρ) for n = 1.5). The sphere (radius 0.5)
+    is centred 0.15 from the camera: rays from the camera meet it at
+    sin θ <= 0.3, far inside the critical angle (sin θc = 1/n), so none is
+    trapped by total internal reflection.
+    """
+    base = furnace_scene(albedo, radiance, -1, res)
+    name = f"furnace-camera-in-glass-albedo-{albedo:g}"
+    return dataclasses.replace(
+        base, name=name, path=Path("stress") / f"{name}.toml", features=_SPECULAR_FEATURES - {"mirror"},
+        materials={**base.materials, "glass": Dielectric("glass", FURNACE_GLASS_IOR, 1.0)},
+        spheres=(Sphere("glass-shell", (0.15, 0.0, 0.0), 0.5, "glass"),),
+        description=f"white furnace (albedo {albedo:g}, emission {radiance:g}), camera inside a glass sphere")
 
 
 # ----------------------------------------------------------------------------------------
