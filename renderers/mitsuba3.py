@@ -29,6 +29,7 @@ import numpy as np
 
 from harness.adapters.registry import Checkpoint, RenderResult
 from harness.adapters.seeds import pass_seed, spp_passes
+from harness.scenes.materials import Dielectric, Diffuse, Mirror
 from harness.scenes.model import Scene
 
 MIN_LLVM_MAJOR = 17
@@ -147,10 +148,10 @@ def scene_dict(scene: Scene, spp: int) -> dict:
             },
         },
     }
-    bsdfs = {
-        name: mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": list(m.reflectance)}})
-        for name, m in scene.materials.items()
-    }
+    bsdfs = {name: mi.load_dict(bsdf_dict(m)) for name, m in scene.materials.items()}
+    for i, s in enumerate(scene.spheres):
+        d[f"sphere_{i}"] = {"type": "sphere", "center": point(s.center), "radius": s.radius * k,
+                            "bsdf": bsdfs[s.material]}
     for i, m in enumerate(scene.meshes):
         props = mi.Properties()
         props["bsdf"] = bsdfs[m.material]
@@ -166,11 +167,25 @@ def scene_dict(scene: Scene, spp: int) -> dict:
     return d
 
 
+def bsdf_dict(material) -> dict:
+    """A scene material as a Mitsuba 3 BSDF dictionary (harness.scenes.materials names the match)."""
+    if isinstance(material, Diffuse):
+        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(material.reflectance)}}
+    if isinstance(material, Mirror):
+        # material "none": Fresnel factor 1, so the reflectance is exactly specular_reflectance.
+        return {"type": "conductor", "material": "none",
+                "specular_reflectance": {"type": "rgb", "value": list(material.reflectance)}}
+    if isinstance(material, Dielectric):
+        return {"type": "dielectric", "int_ior": material.int_ior, "ext_ior": material.ext_ior}
+    raise ValueError(f"material {material.name!r}: {type(material).__name__} has no Mitsuba translation")
+
+
 class Mitsuba3:
     """Mitsuba 3 path tracer (``path`` integrator)."""
 
     name = "mitsuba"
-    features = frozenset({"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"})
+    features = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
+                          "pinhole_camera", "box_filter"})
     approximations: tuple[str, ...] = ()
 
     def unavailable_reason(self) -> str | None:

@@ -116,3 +116,27 @@ def test_cli_renderers_lists_availability():
     assert proc.returncode == 0, proc.stderr
     assert "mitsuba" in proc.stdout and "pyrender" in proc.stdout
     assert "available" in proc.stdout
+
+
+def test_pyrender_is_skipped_on_the_caustics_scene_without_rendering():
+    """pyrender models no spheres, mirrors or glass: the runner skips it on cornell-box-caustics, naming them.
+
+    The entry is built as if pyrender were available (no GPU needed): the
+    skip comes from the features alone, before any render is attempted.
+    """
+    from harness.adapters.registry import RendererEntry, missing_features
+    from renderers.mitsuba3 import Mitsuba3
+    from renderers.pathtracer import PathTracer
+    from renderers.raster.pyrender_adapter import Pyrender
+
+    scene = load_scene(CORNELL.parent.parent / "cornell-box-caustics" / "scene.toml").with_resolution(8, 8)
+    renderer = Pyrender()
+    renderer.render = None  # a render attempt would fail the record, not skip it
+    entry = RendererEntry("pyrender", "pyrender", renderer, None)
+    assert entry.available
+    assert missing_features(renderer, scene) == ["dielectric", "mirror", "sphere"]
+    for rec in (runner.RunRecord.new(scene, entry, 1, 0), runner.run_one(entry, scene, 1, 0, None)):
+        assert rec.status == "skipped"
+        assert rec.reason == "does not model dielectric, mirror, sphere"
+        assert rec.image is None and rec.metrics == {}
+    assert missing_features(PathTracer(), scene) == [] and missing_features(Mitsuba3(), scene) == []

@@ -101,3 +101,108 @@ def test_low_spp_render_agrees_with_stored_reference():
     assert abs(z) < Z_CRIT, z
     rel = img.mean(dtype=np.float64) / ref.image.mean(dtype=np.float64) - 1
     assert abs(rel) < 0.01, rel
+
+
+CAUSTICS = CORNELL.parent.parent / "cornell-box-caustics" / "scene.toml"
+#: Mitsuba stores the converted scene in float32: ~1e-7 relative in the unit frame, ~1e-6 scene units back.
+F32_SCENE = 1e-5
+
+
+def _bsdf_kind(bsdf) -> str:
+    """Mitsuba's plugin class of a loaded BSDF, from its description (``SmoothDiffuse[...]``)."""
+    return str(bsdf).split("[", 1)[0]
+
+
+def test_caustics_scene_conversion():
+    """cornell-box-caustics in Mitsuba: each sphere's centre and radius, each shape's BSDF type and parameters.
+
+    Shapes are found by the ids ``scene_dict`` gives them (``mesh_i``,
+    ``sphere_i``); sphere geometry is mapped back from the unit frame
+    (:func:`renderers.mitsuba3.unit_frame`) to scene units.
+    """
+    from harness.scenes.materials import Dielectric, Diffuse, Mirror
+
+    scene = load_scene(CAUSTICS)
+    Mitsuba3().variant()
+    centre, k = mitsuba3.unit_frame(scene)
+    shapes = {sh.id(): sh for sh in mi.load_dict(mitsuba3.scene_dict(scene, 4)).shapes()}
+    objects = {f"mesh_{i}": m for i, m in enumerate(scene.meshes)}
+    objects |= {f"sphere_{i}": s for i, s in enumerate(scene.spheres)}
+    assert sorted(shapes) == sorted(objects)
+    for sid, obj in objects.items():
+        sh = shapes[sid]
+        material = scene.materials[obj.material]
+        if sid.startswith("sphere"):
+            assert not sh.is_mesh()
+            lo, hi = np.ravel(sh.bbox().min), np.ravel(sh.bbox().max)
+            np.testing.assert_allclose((lo + hi) / 2 / k + centre, obj.center, atol=F32_SCENE, err_msg=sid)
+            np.testing.assert_allclose((hi - lo) / 2 / k, [obj.radius] * 3, atol=F32_SCENE, err_msg=sid)
+        else:
+            assert sh.is_mesh()
+            verts = np.asarray(mi.traverse(sh)["vertex_positions"], dtype=np.float64).reshape(-1, 3)
+            np.testing.assert_allclose(verts / k + centre, obj.vertices, atol=F32_SCENE, err_msg=sid)
+        bsdf = sh.bsdf()
+        params = mi.traverse(bsdf)
+        if isinstance(material, Diffuse):
+            assert _bsdf_kind(bsdf) == "SmoothDiffuse", sid
+            np.testing.assert_allclose(np.ravel(params["reflectance.value"]), material.reflectance, rtol=1e-6)
+        elif isinstance(material, Mirror):
+            assert _bsdf_kind(bsdf) == "SmoothConductor", sid
+            np.testing.assert_allclose(np.ravel(params["specular_reflectance.value"]), material.reflectance, rtol=1e-6)
+        else:
+            assert isinstance(material, Dielectric)
+            assert _bsdf_kind(bsdf) == "SmoothDielectric", sid
+            assert params["eta"] == pytest.approx(material.int_ior / material.ext_ior, rel=1e-6)
+    kinds = {_bsdf_kind(shapes[sid].bsdf()) for sid in objects}
+    assert kinds == {"SmoothDiffuse", "SmoothConductor", "SmoothDielectric"}
+
+
+@pytest.mark.parametrize("cos", [0.95, 0.6, 0.2, -0.2, -0.6, -0.95])
+def test_mitsuba_specular_bsdfs_sample_as_ours(cos):
+    """Mitsuba's conductor (material "none") and dielectric, as ``bsdf_dict`` makes them, sample as ours do.
+
+    In Mitsuba's local frame (normal +z): the mirror's weight is its
+    reflectance at every angle (Fresnel factor 1) and nothing from behind; the
+    dielectric reflects with probability R (our Fresnel) with weight 1, and
+    refracts with weight η_ti² in the direction of our ``refract``, also from
+    inside and past the critical angle. float32 in Mitsuba: rtol 1e-5.
+    """
+    import math
+
+    from harness.scenes.materials import Dielectric, Mirror
+    from renderers.core.bsdf import dielectric_sample, fresnel_dielectric
+
+    Mitsuba3().variant()
+    import drjit as dr
+
+    wi = (math.sqrt(1 - cos * cos), 0.0, cos)  # Mitsuba's si.wi: towards the viewer, our ωo
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    si.wi = mi.Vector3f(*wi)
+    si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
+    ctx = mi.BSDFContext()
+
+    rho = (0.95, 0.5, 0.2)
+    mirror = mi.load_dict(mitsuba3.bsdf_dict(Mirror("m", rho)))
+    _, w = mirror.sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5))
+    np.testing.assert_allclose(np.ravel(w), rho if cos > 0 else (0.0, 0.0, 0.0), rtol=1e-5, atol=1e-7)
+
+    glass = mi.load_dict(mitsuba3.bsdf_dict(Dielectric("g", 1.5, 1.0)))
+    r = fresnel_dielectric(cos, 1.5)[0]
+    for u in (0.001, 0.999):
+        bs, w = glass.sample(ctx, si, u, mi.Point2f(0.5, 0.5))
+        ours, _, weight, ok = dielectric_sample(wi, (0.0, 0.0, 1.0), cos, 1.5, u)
+        assert ok
+        assert float(np.ravel(bs.pdf)[0]) == pytest.approx(r if u < r else 1.0 - r, rel=1e-5)
+        np.testing.assert_allclose(np.ravel(w), [weight] * 3, rtol=1e-5)
+        np.testing.assert_allclose(np.ravel(bs.wo), ours, atol=1e-6)
+
+
+def test_bsdf_dict_refuses_an_unknown_material():
+    from dataclasses import dataclass
+
+    @dataclass(frozen=True)
+    class Plastic:
+        name: str
+
+    with pytest.raises(ValueError, match="material 'shiny': Plastic has no Mitsuba translation"):
+        mitsuba3.bsdf_dict(Plastic("shiny"))
