@@ -12,6 +12,8 @@ It shows
    variance bars** (:mod:`reports.charts`).
 6. **Provenance**: versions, machine, seeds, date, scene hash, the
    reference's own provenance and the command line.
+7. **Regions** (:mod:`reports.regions`), for a scene with named regions:
+   their masks over the reference and each renderer's metrics inside each.
 
 This module assembles those parts into the Jinja template
 ``templates/report.html.j2``. Charts are inline SVG drawn by
@@ -36,6 +38,7 @@ from harness.store.atomic import write_text_atomic
 from reports import plots
 from reports.charts import SINGLE_SPP_NOTE, _bias_variance_chart, _charts
 from reports.images import JND
+from reports.regions import region_section
 from reports.tables import _OPS, _col, _renderer_info, _summary_rows, column_label, ok_runs, renderer_order
 from reports.viewer import _legends, _viewer
 
@@ -207,6 +210,9 @@ def render_html(
     viewer, viewer_notes = _viewer(ref_img, exposure, images, names, colors, runs, run_seeds)
     ref_prov = dict(reference.provenance or {})
     counts = {s: sum(i["status"] == s for i in info) for s in ("ok", *_NOT_RUN)}
+    sections = list(sections)
+    if (regions := region_section(scene, ref_img, exposure, runs, colors)) is not None:
+        sections.append(("regions", "Regions", regions))
 
     env = _environment()
     ctx = {

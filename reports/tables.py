@@ -95,7 +95,7 @@ def format_value(key: str, v: Any) -> str:
         return "NaN"
     if math.isinf(v):
         return "∞" if v > 0 else "−∞"
-    if key.endswith("_count") or key in ("spp", "seeds", "max_spp"):
+    if key.endswith("_count") or key in ("spp", "seeds", "max_spp", "pixels"):
         return str(int(v)) if v.is_integer() else _generic(v)
     if key == "time_s" or key.startswith("time_to_"):
         return _seconds(v)

@@ -246,6 +246,25 @@ def mean_radiance(img) -> np.ndarray:
     return finite.mean(axis=0)
 
 
+def mean_radiance_rel_error(img, ref) -> float:
+    """Relative error of the mean radiance: mean over channels of :func:`mean_radiance`, img over ref, minus 1."""
+    with np.errstate(divide="ignore", invalid="ignore"):  # a black reference: inf or NaN, not a warning
+        return float(np.mean(mean_radiance(img)) / np.mean(mean_radiance(ref)) - 1.0)
+
+
+def masked_pixels(img, mask) -> np.ndarray:
+    """The pixels of ``img`` where the (H, W) ``mask`` is true, as an (n, 1, 3) image.
+
+    Every per-pixel metric here (RMSE, relMSE, ΔE, mean radiance) then
+    applies to a region unchanged; pass the whole reference's exposure to ΔE.
+    """
+    img = _as_image(img)
+    mask = np.asarray(mask, dtype=bool)
+    if mask.shape != img.shape[:2]:
+        raise ValueError(f"mask shape {mask.shape} does not match image shape {img.shape[:2]}")
+    return img[mask][:, None, :]
+
+
 def image_metrics(img, ref, exposure: float | None = None) -> dict:
     """Every metric of ``img`` against ``ref`` as one flat, JSON-serialisable dict."""
     img, ref = _as_pair(img, ref)
@@ -255,7 +274,7 @@ def image_metrics(img, ref, exposure: float | None = None) -> dict:
     _, de_map = delta_e2000(clean, ref, exposure=exposure, full=True)
     # Mean radiance skips broken pixels rather than zeroing them: they are
     # counted separately and should not also read as missing energy.
-    mean_img, mean_ref = mean_radiance(img), mean_radiance(ref)
+    mean_img = mean_radiance(img)
     return {
         "rmse": rmse(clean, ref),
         "mse": float(np.mean((clean - ref) ** 2)),
@@ -268,5 +287,5 @@ def image_metrics(img, ref, exposure: float | None = None) -> dict:
         "mean_radiance_r": float(mean_img[0]),
         "mean_radiance_g": float(mean_img[1]),
         "mean_radiance_b": float(mean_img[2]),
-        "mean_radiance_rel_error": float(np.mean(mean_img) / np.mean(mean_ref) - 1.0),
+        "mean_radiance_rel_error": mean_radiance_rel_error(img, ref),
     }

@@ -30,11 +30,21 @@ def difference_variance(ref_var: np.ndarray, ref_spp: int, spp: int) -> np.ndarr
 def mean_radiance_z(image: np.ndarray, ref: np.ndarray, ref_var: np.ndarray, ref_spp: int, spp: int) -> float:
     """z-score of the image's mean radiance (mean over pixels and channels) against the reference.
 
+    The difference's variance is :func:`difference_variance`'s; see :func:`mean_difference_z`.
+    """
+    return mean_difference_z(image, ref, difference_variance(ref_var, ref_spp, spp))
+
+
+def mean_difference_z(image: np.ndarray, ref: np.ndarray, var: np.ndarray) -> float:
+    """z-score of mean(image) − mean(ref) (over pixels and channels), given the difference's per-pixel variance.
+
     Pixels are independent; a pixel's three channels come from the same paths,
     so their covariance is bounded by the perfectly correlated case
     (Cauchy-Schwarz), which makes this z conservative (|z| never overstated).
+    Any (H, W, 3) arrays work, e.g. a region's pixels as (n, 1, 3)
+    (:func:`harness.evaluate.metrics.masked_pixels`).
     """
-    var = difference_variance(ref_var, ref_spp, spp)
+    var = np.asarray(var, dtype=np.float64)
     n = image.shape[0] * image.shape[1]
     pixel_sd = np.sqrt(var).sum(axis=-1) / 3.0  # sd of the channel mean, correlated bound
     sd = np.sqrt(np.sum(pixel_sd**2)) / n

@@ -22,6 +22,7 @@ import numpy as np
 
 from harness.evaluate import metrics
 from harness.evaluate import noise as stats
+from harness.evaluate import regions as named_regions
 from harness.adapters.registry import Checkpoint, RenderResult, RendererEntry, missing_features
 from harness.adapters.settings import canonical
 from harness.store.references import Reference
@@ -57,6 +58,7 @@ class RunRecord:
     approximations: tuple[str, ...] = ()
     info: dict = field(default_factory=dict)
     metrics: dict = field(default_factory=dict)
+    regions: dict = field(default_factory=dict)  # region -> metric -> value, when the scene names regions
     image: np.ndarray | None = field(default=None, repr=False)
     variance: np.ndarray | None = field(default=None, repr=False)  # of the image, when the renderer gives it
     checkpoints: list = field(default_factory=list, repr=False)  # harness.adapters.registry.Checkpoint
@@ -80,7 +82,10 @@ class RunRecord:
         return self
 
     def row(self) -> dict:
-        """Flat, JSON-serialisable record (no image): one row of the results table."""
+        """Flat, JSON-serialisable record (no image): one row of the results table.
+
+        Region metrics become columns ``region.<name>.<metric>`` (:func:`harness.evaluate.regions.region_columns`).
+        """
         out = {
             "scene": self.scene,
             "scene_hash": self.scene_hash,
@@ -96,6 +101,7 @@ class RunRecord:
             "time_s": None if self.time_s is None else round(self.time_s, 4),
         }
         out.update(self.metrics)
+        out.update(named_regions.region_columns(self.regions))
         if "mse" in self.metrics and self.time_s:
             out["efficiency"] = 1.0 / (self.metrics["mse"] * self.time_s) if self.metrics["mse"] > 0 else math.inf
         for k, v in self.info.items():
@@ -104,8 +110,17 @@ class RunRecord:
 
 
 def json_safe(row: dict) -> dict:
-    """The row with non-finite floats (e.g. PSNR of identical images) as None: strict JSON."""
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
+    """The row with non-finite floats (e.g. PSNR of identical images) as None, nested dicts too: strict JSON."""
+    return {k: json_safe(v) if isinstance(v, dict) else
+            (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
+
+
+def json_record(rec: "RunRecord") -> dict:
+    """One run as strict JSON (``cbox compare --json``): the row, with region metrics nested under "regions"."""
+    row = {k: v for k, v in rec.row().items() if not k.startswith(named_regions.REGION_PREFIX)}
+    if rec.regions:
+        row["regions"] = rec.regions
+    return json_safe(row)
 
 
 def render_sandboxed(entry: RendererEntry, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int],
@@ -149,8 +164,11 @@ def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: 
         return rec.failed(e)
     rec.time_s, rec.info, rec.image = float(result.time_s), dict(result.info), result.image
     rec.variance, rec.checkpoints = result.variance, list(result.checkpoints)
-    rec.metrics = score(result.image, reference, spp) if reference is not None else \
-        metrics.invalid_pixel_counts(result.image)
+    if reference is None:
+        rec.metrics = metrics.invalid_pixel_counts(result.image)
+    else:
+        rec.metrics = score(result.image, reference, spp)
+        rec.regions = score_regions(scene, result.image, reference, spp, result.variance)
     return rec
 
 
@@ -180,6 +198,8 @@ def run_checkpoints(entry: RendererEntry, scene: Scene, spps: Sequence[int], see
         image, t = shots[spp]
         rec = RunRecord.new(scene, entry, spp, seed, version=top.version, time_s=float(t), info=dict(top.info))
         rec.image, rec.metrics = image, score(image, reference, spp)
+        # Only the highest-spp image comes with the renderer's own variance.
+        rec.regions = score_regions(scene, image, reference, spp, top.variance if spp == top.spp else None)
         out.append(rec)
     out[-1].variance = top.variance
     return out
@@ -190,3 +210,15 @@ def score(image: np.ndarray, reference: Reference, spp: int) -> dict:
     out = metrics.image_metrics(image, reference.image)
     out.update(stats.noise_yardsticks(image, reference, spp))
     return out
+
+
+def score_regions(scene: Scene, image: np.ndarray, reference: Reference, spp: int,
+                  variance: np.ndarray | None = None) -> dict:
+    """Per named region of the scene, its metrics ({} for a scene without regions).
+
+    ``variance`` is the image's own variance of its mean, when the renderer
+    gives it; otherwise the noise model at ``spp`` stands in for it
+    (:func:`harness.evaluate.regions.region_metrics`). Masks are cached per scene.
+    """
+    masks = named_regions.region_masks(scene)
+    return named_regions.region_metrics(image, reference, masks, spp=spp, variance=variance) if masks else {}
