@@ -82,7 +82,21 @@ def main() -> None:
         if "emitter" in shape:
             out.append(f"emitter = {{ radiance = {vec(shape['emitter']['radiance']['value'])} }}")
         out.append("")
+    out += REGIONS
     print("\n".join(out).rstrip())
+
+
+#: The named regions of the stored scene (not part of its content hash).
+REGIONS = [
+    "# Named image regions, for per-region metrics (harness/evaluate/regions.py): a pixel belongs to a",
+    "# region when every camera ray through it first hits one of the region's objects. Regions do not",
+    "# change the image, so they are not part of the scene's content hash (the reference stays valid).",
+    "[regions.walls]", 'objects = ["back", "red-wall", "green-wall"]',
+    'description = "the back wall and the two coloured side walls"', "",
+    "[regions.boxes]", 'objects = ["small-box", "large-box"]', 'description = "both boxes, every visible face"', "",
+    "[regions.floor]", 'objects = ["floor"]', 'description = "the floor, including the boxes\' shadows"', "",
+    "[regions.light]", 'objects = ["light"]', 'description = "the area light seen directly"',
+]
 
 
 if __name__ == "__main__":
