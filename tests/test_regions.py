@@ -389,3 +389,16 @@ def test_report_without_region_runs_still_shows_masks(tmp_path):
     html = path.read_text()
     assert '<section id="regions">' in html and "No region metrics in these runs." in html
     assert 'id="region-table"' not in html and '<a href="#regions">Regions</a>' in html
+
+
+def test_region_noise_reports_each_regions_relative_error():
+    """A region of value 2 and per-pixel variance 0.04 (std 0.2, 10%): pixel rel. SE 0.1, mean's 0.1/√(3n)."""
+    img = np.full((4, 5, 3), 2.0)
+    var = np.full_like(img, 0.04)
+    a = np.zeros((4, 5), bool)
+    a[:2, :] = True  # 10 pixels, 30 values
+    out = R.region_noise(img, var, {"a": a, "empty": np.zeros_like(a)})
+    assert out["a"]["pixels"] == 10 and out["a"]["mean"] == 2.0
+    assert out["a"]["pixel_rel_se_median"] == pytest.approx(0.1)
+    assert out["a"]["mean_rel_se"] == pytest.approx(0.1 / np.sqrt(30), rel=1e-3)
+    assert out["empty"] == {"pixels": 0}

@@ -1,5 +1,9 @@
 """Building a reference: independent batches → mean, variance of the mean, a noise batch, provenance.
 
+For a scene with named regions the provenance also says how noisy the
+reference is in each (:func:`harness.evaluate.regions.region_noise`): a
+caustic needs far more samples than a wall.
+
 The layout of what is written is documented in :mod:`harness.store.references`.
 """
 
@@ -16,6 +20,7 @@ from typing import Callable
 import numpy as np
 
 from harness.adapters.registry import RendererEntry
+from harness.evaluate.regions import region_masks, region_noise
 from harness.scenes.model import Scene
 from harness.store.atomic import write_json_atomic
 from harness.store.exr import write_exr
@@ -66,6 +71,8 @@ def build_reference(
         progress(batches + 1, batches + 1)
     variance_of_mean = m2 / (batches - 1) / batches
     prov = _provenance(scene, entry, info, spp, batches, seeds, noise_seed, wall)
+    if scene.regions:
+        prov["region_noise"] = region_noise(mean, variance_of_mean, region_masks(scene))
     meta = {"cbox:scene_hash": prov["scene_hash"], "cbox:spp": str(spp), "cbox:renderer": prov["renderer_version"]}
     write_exr(folder / REFERENCE_FILE, mean, meta)
     write_exr(folder / VARIANCE_FILE, variance_of_mean, meta)
