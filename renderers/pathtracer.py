@@ -25,11 +25,15 @@ the film are the shared toolkit's (``renderers/core/``).
   expected of path tracing; the photon mapper exists for them.
 - **Russian roulette** from the ``rr_depth``-th vertex on (setting, default
   :data:`RR_DEPTH`): a path goes on with probability
-  ``q = min(max_c β_c, Q_MAX)`` and its throughput is divided by ``q``, so
+  ``q = min(max_c β_c / s, Q_MAX)`` and its throughput is divided by ``q``, so
   the estimate stays unbiased (pbrt-v4 §13.1.5 uses the same rule; Mitsuba 3
   too, with 0.95). Capping ``q`` at ``Q_MAX < 1`` ends every path with
   probability 1 even when every albedo is 1: the expected length past
-  ``rr_depth`` is at most ``1 / (1 - Q_MAX)`` = 20 vertices.
+  ``rr_depth`` is at most ``1 / (1 - Q_MAX)`` = 20 vertices. ``s`` is the
+  radiance scaling (η_i/η_t)² of the path's refractions, which β contains
+  (:func:`renderers.core.bsdf.refraction_scale`): without it a path inside
+  glass (β/2.25) would be ended more often for no reason, as Mitsuba 3's
+  ``path`` also avoids (it uses β·η²).
 - ``max_depth`` is the harness's convention (segments from the camera;
   -1 unbounded): emission at vertex k counts if k ≤ max_depth, NEE at vertex
   k adds a segment and counts if k + 1 ≤ max_depth.
@@ -53,7 +57,7 @@ import numpy as np
 from harness.adapters.registry import RenderResult
 from harness.adapters.settings import Setting
 from harness.scenes.model import Scene
-from renderers.core.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, two_sided
+from renderers.core.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, refraction_scale, two_sided
 from renderers.core.camera import camera_basis, camera_rays
 from renderers.core.geometry import SceneGeometry, offset_origin, surface_point
 from renderers.core.lights import emits, emitter_cos, sample_emitter, solid_angle_pdf, solid_angle_pdf_along
@@ -101,10 +105,11 @@ def _light_sample(x, n, mat, y, ny, pe):
 
 
 @jit
-def _continue_path(mat, valid, cos_w, f, beta, u_rr, roulette):
+def _continue_path(mat, valid, cos_w, f, beta, scale, u_rr, roulette):
     """Throughput after a BSDF sample at cosine ``cos_w`` with weight ``f``: (alive, β', pdf of the sample).
 
-    Russian roulette with the vertex's number ``u_rr`` when ``roulette``.
+    Russian roulette with the vertex's number ``u_rr`` when ``roulette``, on
+    β without the refraction scaling ``scale`` it contains.
     """
     if not valid:
         return False, beta, 0.0  # zero-pdf direction
@@ -113,7 +118,7 @@ def _continue_path(mat, valid, cos_w, f, beta, u_rr, roulette):
     if bmax <= 0.0:
         return False, beta, 0.0
     if roulette:
-        survive = min(bmax, Q_MAX)
+        survive = min(bmax / scale, Q_MAX)
         # Written so a NaN throughput ends the path (NaN < x is false): its NaN
         # has already reached L, where the NaN count reports it.
         if not u_rr < survive:
@@ -175,12 +180,13 @@ def _shade(prim, t_sphere, rays, key, first, depth, extend, roulette, geo, L, sh
                     ns += 1
         u = vertex_2d(key, j, depth, BSDF_U)
         wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p], u[0], u[1])
-        alive, b, pdf = _continue_path(mat, valid, cos_w, f, beta,
+        scale = rays.scale[i] * refraction_scale(mat, cos_o, cos_w, geo.eta[p])
+        alive, b, pdf = _continue_path(mat, valid, cos_w, f, beta, scale,
                                        vertex_1d(key, j, depth, ROULETTE) if roulette else 1.0, roulette)
         if alive:
             side = n if cos_w > 0.0 else (-n[0], -n[1], -n[2])  # the new ray leaves on the side it travels to
             set_ray(nxt, nn, offset_origin(x, side, geo.offset), wi)
-            set_path(nxt, nn, q, b, pdf)
+            set_path(nxt, nn, q, b, pdf, scale)
             nn += 1
     return ns, nn
 

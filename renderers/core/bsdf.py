@@ -152,6 +152,21 @@ def dielectric_sample(wo, n, cos_o, eta, u):
     return refract(wo, n, cos_o, cos_t, eta_ti), cos_t, eta_ti * eta_ti, True
 
 
+@jit
+def refraction_scale(material, cos_o, cos_w, eta) -> float:
+    """The (η_ti)² radiance factor in the weight of a sample from ``cos_o`` to ``cos_w``: ≠ 1 only across glass.
+
+    Integrators keep the product of these along a path so that Russian
+    roulette can discount it (Mitsuba 3's ``path`` uses throughput·η²): a
+    path inside glass carries radiance scaled by 1/η², which says nothing
+    about how much it will still contribute once it leaves.
+    """
+    if material == DIELECTRIC and cos_o * cos_w < 0.0:
+        eta_ti = 1.0 / eta if cos_o > 0.0 else eta
+        return eta_ti * eta_ti
+    return 1.0
+
+
 # -- dispatch on the material id ------------------------------------------------------
 
 @jit

@@ -6,8 +6,10 @@ read one buffer and write the next, and Embree answers each buffer in one call.
 
 - :class:`RayBuffer`: float64 origin and direction (what shading reads),
   one float32 copy of both (``o32``, ``d32``: embreex takes float32 only),
-  the path's index in its work unit, its throughput β and the solid-angle
-  pdf of the sampling decision that made the ray (0 for camera rays).
+  the path's index in its work unit, its throughput β, the solid-angle
+  pdf of the sampling decision that made the ray (0 for camera rays and
+  delta-BSDF samples), and the part of β that refraction's radiance scaling
+  contributed (``scale``, 1 until the path crosses into another medium).
 - :class:`ShadowBuffer`: float32 segments for Embree's occlusion query,
   with the path they belong to and the contribution they carry if
   unoccluded.
@@ -46,7 +48,8 @@ class RayBuffer(NamedTuple):
     d32: np.ndarray  # (m, 3) float32 copy of d
     path: np.ndarray  # (m,) int64: the path's index in its unit
     beta: np.ndarray  # (m, 3) float64 throughput
-    pdf: np.ndarray  # (m,) float64 solid-angle pdf of the sample that made the ray (0: camera ray)
+    pdf: np.ndarray  # (m,) float64 solid-angle pdf of the sample that made the ray (0: camera ray, delta sample)
+    scale: np.ndarray  # (m,) float64 product of the (η_i/η_t)² factors of the path's refractions, in β
 
 
 class ShadowBuffer(NamedTuple):
@@ -59,7 +62,7 @@ class ShadowBuffer(NamedTuple):
 
 def ray_buffer(m: int) -> RayBuffer:
     return RayBuffer(np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3), np.float32),
-                     np.empty((m, 3), np.float32), np.empty(m, np.int64), np.empty((m, 3)), np.empty(m))
+                     np.empty((m, 3), np.float32), np.empty(m, np.int64), np.empty((m, 3)), np.empty(m), np.empty(m))
 
 
 def shadow_buffer(m: int) -> ShadowBuffer:
@@ -82,11 +85,13 @@ def set_ray(buf, i, o, d):
 
 
 @jit
-def set_path(buf, i, path, beta, pdf):
-    """The path state that ray ``i`` carries: path index, throughput (3-tuple), pdf of its direction."""
+def set_path(buf, i, path, beta, pdf, scale=1.0):
+    """The path state that ray ``i`` carries: path index, throughput (3-tuple), pdf of its direction, and the
+    refraction scaling in the throughput (see :class:`RayBuffer`)."""
     buf.path[i] = path
     buf.beta[i, 0], buf.beta[i, 1], buf.beta[i, 2] = beta
     buf.pdf[i] = pdf
+    buf.scale[i] = scale
 
 
 @jit
