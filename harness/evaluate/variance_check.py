@@ -1,4 +1,4 @@
-"""Is the variance a renderer reports consistent with its residuals? A sign test on the spread of z.
+"""Does a renderer overstate its variance? A sign test on the spread of its z-scores.
 
 The agreement test (:mod:`harness.evaluate.agreement`) measures distance in
 units of the variance the renderer reports, so a renderer that overstates
@@ -29,22 +29,32 @@ furnace and the light panel at 256 spp, whose 1024 and 4096 pixels make
 ŝ vary more between seeds (see ``docs/gate-detection.md``):
 1/√n is 0.35, 0.25, 0.18, 0.125 and 0.06 there. A reported variance
 more than (1+δ)² ≈ 1.21 times too large fails at any spp, given enough
-pixels; one too small by more than about (1 + δ + 1/√n)² fails too (that
-is also what a bias looks like: the agreement test says which).
+pixels.
 
-**Test.** Two one-sided sign tests of a quantile. ŝ ≥ s_lo = 1/(1+δ)
-means that at most half the |z| lie below c_lo = Φ⁻¹(3/4)·s_lo;
-ŝ ≤ s_hi = 1 + δ + 1/√n, that at most half lie above
-c_hi = Φ⁻¹(3/4)·s_hi. The three channels of a pixel come from the same
+**Only the overstated side fails.** ŝ above s_hi = 1 + δ + 1/√n (the
+residuals larger than the reported variance allows) is reported, not
+failed. It is what a bias looks like, but the agreement test already
+judges biases, more precisely; and it is also what a *correct* renderer
+gives where its per-pixel samples are strongly skewed: where rare paths
+carry much of the radiance (caustics, light through glass), most pixels of
+a 256-spp render have not yet drawn one, so they lie below the mean with a
+small estimated variance. Our path tracer on ``cornell-box-caustics`` at 256
+spp, unbiased (mean radiance within 0.015% of the reference), has median z
+= −1.76 and ŝ = 2.6 (1.36 at 1024 spp). An understated variance makes the
+agreement test stricter, never blind, so only overstatement is a hole.
+
+**Test.** One-sided sign tests of a quantile. ŝ ≥ s_lo = 1/(1+δ)
+means that at most half the |z| lie below c_lo = Φ⁻¹(3/4)·s_lo (the
+test); ŝ ≤ s_hi, that at most half lie above c_hi = Φ⁻¹(3/4)·s_hi (the
+note). The three channels of a pixel come from the same
 paths, so the units are pixels (independent): each contributes the
 fraction of its channels beyond the cut, a number in [0, 1], and f is the
 mean over the N pixels (E f ≤ 1/2 when ŝ is within the tolerance). Hoeffding's inequality
 (Hoeffding 1963, J. Am. Stat. Assoc. 58, 13-30) bounds
 P(f − E f ≥ ε) ≤ exp(−2Nε²) for any distribution of those fractions and
 any dependence between a pixel's channels; with
-ε = √(ln(2/α) / (2N)) each side rejects a renderer whose spread is within
-the tolerance with probability at most α/2, so the false-alarm rate is at
-most α. No assumption on the tails of z enters.
+ε = √(ln(2/α) / (2N)) the test rejects a renderer whose spread is within
+the tolerance with probability at most α/2 ≤ α. No assumption on the tails of z enters.
 
 A pixel-channel whose z is 0/0 (no variance and no difference, e.g. black
 background) says nothing and is left out; one with no variance but a
@@ -77,7 +87,7 @@ class VarianceCheck:
     scale: float  # ŝ = median|z| / Φ⁻¹(3/4) over all pixel-channels used
     scale_channels: tuple[float, float, float]  # the same per channel (nan where a channel has no data)
     frac_low: float  # f_lo: mean over pixels of the fraction of channels with |z| < c_lo (at most 1/2 + eps)
-    frac_high: float  # f_hi: the same with |z| > c_hi
+    frac_high: float  # f_hi: the same with |z| > c_hi (reported, not failed: see the module docstring)
     eps: float  # Hoeffding margin
     pixels: int  # N, pixels with at least one usable channel
 
@@ -101,15 +111,16 @@ class VarianceCheck:
                 f"(Hoeffding margin ±{self.eps:.4f} on the fractions)")
         if self.pixels == 0:
             return "no pixel with a variance or a difference: nothing to test"
-        if self.passed:
-            return f"reported variance consistent with the residuals: {head}; {rule}"
-        if self.frac_low > 0.5 + self.eps:
+        if not self.passed:
             return (f"the renderer reports more variance than its residuals show, about {self.variance_factor:.3g}× "
                     f"too much over the whole image: {head}; {self.frac_low:.1%} of |z| < {Q3 * lo:.3f} where at most "
                     f"{0.5 + self.eps:.1%} may be; {rule}")
-        return (f"the residuals are larger than the reported variance allows, about {1 / self.variance_factor:.3g}× "
-                f"(a bias, or an understated variance) over the whole image: {head}; {self.frac_high:.1%} of "
-                f"|z| > {Q3 * hi:.3f} where at most {0.5 + self.eps:.1%} may be; {rule}")
+        if self.frac_high > 0.5 + self.eps:
+            return (f"reported variance not overstated; the residuals are larger than it allows, about "
+                    f"{1 / self.variance_factor:.3g}× (a bias, which the agreement test judges; an understated "
+                    f"variance; or per-pixel samples skewed by rare bright paths, such as caustics at low spp): "
+                    f"{head}; {self.frac_high:.1%} of |z| > {Q3 * hi:.3f}; {rule}")
+        return f"reported variance consistent with the residuals: {head}; {rule}"
 
 
 def spread_bounds(tolerance: float, spp: int) -> tuple[float, float]:
@@ -138,7 +149,7 @@ def variance_check(img: np.ndarray, var_img: np.ndarray, ref: np.ndarray, var_re
     high = ((absz > c_hi) & usable).sum(axis=-1)[pix] / n_ch[pix]
     f_lo, f_hi = float(low.mean()), float(high.mean())
     eps = math.sqrt(math.log(2.0 / alpha) / (2.0 * n))
-    passed = f_lo <= 0.5 + eps and f_hi <= 0.5 + eps
+    passed = f_lo <= 0.5 + eps  # the overstated side only (module docstring)
     scale = float(np.median(absz[usable])) / Q3
     per = tuple(float(np.median(absz[..., c][usable[..., c]])) / Q3 if usable[..., c].any() else math.nan
                 for c in range(3))
