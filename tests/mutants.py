@@ -76,7 +76,7 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "mis_emitter_double",
         "emission found by BSDF-sampled rays weighted 1 instead of its MIS weight (emitter counted twice)",
-        (("return 1.0 if depth == 1 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))",
+        (("return 1.0 if pdf_bsdf == 0.0 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))",
           "return 1.0"),),
     ),
     Mutant(
@@ -137,8 +137,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "offset_minus_n",
         "continuation-ray origin offset along −n instead of +n: the ray starts behind the surface "
         "and hits it from the back (self-intersection ends every path)",
-        (("set_ray(nxt, nn, offset_origin(x, n, geo.offset), wi)",
-          "set_ray(nxt, nn, offset_origin(x, n, -geo.offset), wi)"),),
+        (("set_ray(nxt, nn, offset_origin(x, side, geo.offset), wi)",
+          "set_ray(nxt, nn, offset_origin(x, side, -geo.offset), wi)"),),
     ),
     Mutant(
         "cosine_pdf_mismatch",
@@ -150,14 +150,67 @@ MUTANTS: tuple[Mutant, ...] = (
         "two_sided_emitter",
         "the one-sided area light made two-sided: emission found on its back side counted (and |cos θ_y| in "
         "NEE)",
-        (("        if cos_o <= 0.0:\n            continue  # back side",
-          "        if cos_o <= 0.0:\n"
+        (("        if not (cos_o > 0.0 or (cos_o < 0.0 and two_sided(mat))):\n            continue  # back side",
+          "        if not (cos_o > 0.0 or (cos_o < 0.0 and two_sided(mat))):\n"
           "            if geo.light_pdf_area[p] > 0.0:  # area lights emit on both sides; NEE never samples the back\n"
           "                for c in range(3):\n"
           "                    L[rays.path[i], c] += rays.beta[i, c] * geo.radiance[p, c]\n"
           "            continue  # back side"),
          ("return -(ny[0] * w[0] + ny[1] * w[1] + ny[2] * w[2])",
           "return abs(ny[0] * w[0] + ny[1] * w[1] + ny[2] * w[2])", f"{CORE}/lights.py")),
+    ),
+    # -- specular materials (mirror, glass) ------------------------------------------
+    Mutant(
+        "fresnel_schlick",
+        "Schlick's approximation R0 + (1 - R0)(1 - cos θi)^5 in place of the exact Fresnel equations, with "
+        "cos θi taken on whichever side the ray arrives (exact inside the glass needs cos θt)",
+        (("        a_s = (eta_it * ct - ci) / (eta_it * ct + ci)\n"
+          "        a_p = (eta_it * ci - ct) / (eta_it * ci + ct)\n"
+          "        r = 0.5 * (a_s * a_s + a_p * a_p)\n",
+          "        r0 = ((eta - 1.0) / (eta + 1.0)) ** 2\n"
+          "        r = r0 + (1.0 - r0) * (1.0 - ci) ** 5 if cos_t_sqr > 0.0 else 1.0\n", f"{CORE}/bsdf.py"),),
+    ),
+    Mutant(
+        "ior2_missing",
+        "refracted radiance not scaled by (η_i/η_t)² (the weight of a transmission left at 1, as in "
+        "importance transport)",
+        (("return refract(wo, n, cos_o, cos_t, eta_ti), cos_t, eta_ti * eta_ti, True",
+          "return refract(wo, n, cos_o, cos_t, eta_ti), cos_t, 1.0, True", f"{CORE}/bsdf.py"),),
+    ),
+    Mutant(
+        "tir_absorbed",
+        "total internal reflection treated as absorption: no refracted direction exists, so the sample is "
+        "declared invalid and the path ends",
+        (("    r, cos_t, eta_it, eta_ti = fresnel_dielectric(cos_o, eta)\n",
+          "    r, cos_t, eta_it, eta_ti = fresnel_dielectric(cos_o, eta)\n"
+          "    if cos_t == 0.0:\n"
+          "        return (0.0, 0.0, 1.0), 0.0, 0.0, False  # no refracted ray\n", f"{CORE}/bsdf.py"),),
+    ),
+    Mutant(
+        "nee_at_delta_vertex",
+        "next-event estimation at every vertex, mirrors and glass included, with the BSDF evaluated as "
+        "Lambertian whatever the material (delta lobes get direct light twice over)",
+        (("if geo.emitter_ids.size > 0 and not is_delta(mat):", "if geo.emitter_ids.size > 0:"),
+         ("    if material == LAMBERT:\n        return lambert_eval(rho, cos)\n    return 0.0\n",
+          "    return lambert_eval(rho, cos)\n", f"{CORE}/bsdf.py"),
+         ("    if material == LAMBERT:\n        return lambert_pdf(cos)\n    return 0.0\n",
+          "    return lambert_pdf(cos)\n", f"{CORE}/bsdf.py")),
+    ),
+    Mutant(
+        "mirror_reflectance_ignored",
+        "the mirror's specular reflectance ignored: a perfect reflector (weight 1) whatever the scene says",
+        (("return reflect(wo, n, cos_o), cos_o, rho, cos_o > 0.0",
+          "return reflect(wo, n, cos_o), cos_o, (1.0, 1.0, 1.0), cos_o > 0.0", f"{CORE}/bsdf.py"),),
+    ),
+    Mutant(
+        "delta_emission_mis_weighted",
+        "emission found after a mirror or glass bounce MIS-weighted against light sampling that was never "
+        "done there (the weight is 1 only for camera rays): caustics and mirrored lights vanish",
+        (("return 1.0 if pdf_bsdf == 0.0 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))",
+          "return 1.0 if depth == 1 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))"),
+         ("def _emission_weight(pdf_bsdf, pa, t, cos_o) -> float:",
+          "def _emission_weight(pdf_bsdf, pa, t, cos_o, depth) -> float:"),
+         ("w = _emission_weight(rays.pdf[i], pa, t, cos_o)", "w = _emission_weight(rays.pdf[i], pa, t, cos_o, depth)")),
     ),
 )
 
