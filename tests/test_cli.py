@@ -67,6 +67,40 @@ def test_demo_writes_report(tmp_path):
     csv = pd.read_csv(tmp_path / "metrics.csv")
     assert {"mitsuba", "pyrender"} <= set(csv["renderer"])
     assert "report:" in proc.stderr and (tmp_path / "report.html").exists()
+    # The caustics scene: its own full report, and a section of the main one that links to it.
+    caustics = pd.read_csv(tmp_path / "cornell-box-caustics" / "metrics.csv")
+    status = dict(zip(caustics["renderer"], caustics["status"]))
+    assert status["mitsuba"] == "ok" and status["pyrender"] == "skipped"
+    html = (tmp_path / "report.html").read_text()
+    assert 'href="cornell-box-caustics/report.html"' in html and "ΔE caustic" in html
+    assert (tmp_path / "cornell-box-caustics" / "report.html").exists()
+
+
+def test_scenes_lists_features_regions_and_references():
+    proc = run_cbox("scenes")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    i = next(k for k, line in enumerate(lines) if line.startswith("cornell-box-caustics "))
+    assert "reference 32768 spp" in lines[i]
+    assert lines[i + 1].split("features: ")[1].split(", ") == sorted(
+        ["area_light", "box_filter", "dielectric", "diffuse", "mirror", "pinhole_camera", "sphere", "triangle_mesh"])
+    assert lines[i + 2].split("regions: ")[1].split(", ") == ["caustic", "glass-shadow", "mirror", "glass", "walls"]
+
+
+def test_compare_caustics_json_has_regions_and_skips_pyrender(tmp_path):
+    """The specular issue's acceptance run, at a CI budget: both renderers scored per region, pyrender skipped."""
+    proc = run_cbox("compare", "--scene", "cornell-box-caustics", "-r", "pathtracer", "-r", "mitsuba",
+                    "-r", "pyrender", "--spp", "4", "--json", "--out", str(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    recs = {r["renderer"]: r for r in map(json.loads, proc.stdout.strip().splitlines())}
+    assert recs["pyrender"]["status"] == "skipped"
+    assert recs["pyrender"]["reason"] == "does not model dielectric, mirror, sphere"
+    for name in ("pathtracer", "mitsuba"):
+        rec = recs[name]
+        assert rec["status"] == "ok" and rec["nan_count"] == 0
+        assert set(rec["regions"]) == {"caustic", "glass-shadow", "mirror", "glass", "walls"}
+        caustic = rec["regions"]["caustic"]
+        assert caustic["pixels"] > 100 and caustic["rmse"] > 0 and np.isfinite(caustic["mean_z"])
 
 
 def test_stale_reference_is_refused(tmp_path):

@@ -14,12 +14,14 @@ from harness.store.references import ReferenceError, load_reference
 
 @app.command()
 def scenes() -> None:
-    """List the stored scenes, with the features each uses and whether it has a reference."""
-    for name in scene_names():
+    """List the stored scenes, with the features each uses, its named regions and whether it has a reference."""
+    names = scene_names()
+    w = max((len(n) for n in names), default=0)
+    for name in names:
         try:
             scene = resolve_scene(name)
         except SceneError as e:
-            typer.echo(f"{name:16s} INVALID: {e}")
+            typer.echo(f"{name:{w}s} INVALID: {e}")
             continue
         try:
             ref = load_reference(scene)
@@ -27,8 +29,10 @@ def scenes() -> None:
         except ReferenceError as e:
             status = f"no usable reference ({str(e).split(';')[0].split(': ', 1)[-1]})"
         cam = scene.camera
-        typer.echo(f"{name:16s} {cam.width}x{cam.height}  max_depth={scene.max_depth}  {status}")
-        typer.echo(f"{'':16s} features: {', '.join(sorted(scene.features))}")
+        typer.echo(f"{name:{w}s} {cam.width}x{cam.height}  max_depth={scene.max_depth}  {status}")
+        typer.echo(f"{'':{w}s} features: {', '.join(sorted(scene.features))}")
+        if scene.regions:
+            typer.echo(f"{'':{w}s} regions: {', '.join(scene.regions)}")
 
 
 @app.command()

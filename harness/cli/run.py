@@ -55,7 +55,9 @@ def _write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(
 
 
 def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool,
-                 time_budget: Optional[str] = None, target_error: Optional[str] = None, max_spp: int = 4096) -> int:
+                 time_budget: Optional[str] = None, target_error: Optional[str] = None, max_spp: int = 4096,
+                 sections=()) -> tuple[int, list]:
+    """Compare renderers on one scene, write its folder and report; (exit code, run records)."""
     from harness.evaluate.convergence import parse_target
     from harness.workflows import compare as cmp
     from harness.workflows import runner
@@ -85,9 +87,9 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
         records.append(rec)
         bar.update(1)
         if as_json:
-            typer.echo(json.dumps(runner.json_safe(rec.row()), allow_nan=False))
+            typer.echo(json.dumps(runner.json_record(rec), allow_nan=False))
     bar.close()
-    report = _write_compare_outputs(out, sc, ref, records, _command_line())
+    report = _write_compare_outputs(out, sc, ref, records, _command_line(), sections=sections)
     if not as_json:
         import pandas as pd
 
@@ -100,7 +102,7 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
             if r.status != "ok":
                 typer.echo(f"{r.renderer}: {r.status}: {r.reason}")
     typer.echo(f"report: {report}", err=True)
-    return 1 if any(r.status == "failed" for r in records) else 0
+    return (1 if any(r.status == "failed" for r in records) else 0), records
 
 
 @app.command()
@@ -129,14 +131,32 @@ def compare(
     """
     if time_budget and target_error:
         raise typer.BadParameter("give --time-budget or --target-error, not both")
-    raise typer.Exit(_run_compare(scene, renderer, spp, seed, out, as_json, time_budget, target_error, max_spp))
+    raise typer.Exit(_run_compare(scene, renderer, spp, seed, out, as_json, time_budget, target_error, max_spp)[0])
+
+
+#: The scenes of ``cbox demo``: the report leads with the first; each other one is a section of it
+#: (with its own full report in a subfolder).
+DEMO_SCENES = ("cornell-box", "cornell-box-caustics")
 
 
 @app.command()
 def demo(
-    out: Path = out_folder_option(Path("out"), "Folder for report.html and metrics.csv."),
+    out: Path = out_folder_option(Path("out"), "Folder for report.html and metrics.csv (other scenes in "
+                                               "subfolders named after them)."),
     spp: int = typer.Option(64, "--spp", min=1, help="Samples per pixel for every renderer."),
     seed: int = SeedOpt,
 ) -> None:
-    """The main job: every available renderer on cornell-box against the stored reference → out/report.html."""
-    raise typer.Exit(_run_compare("cornell-box", None, spp, seed, out, False))
+    """The main job: every available renderer on cornell-box and cornell-box-caustics against the stored
+    references → out/report.html (cornell-box-caustics as a section, and in full in out/cornell-box-caustics/)."""
+    from reports.scenes import scene_section
+
+    sections, code = [], 0
+    for name in DEMO_SCENES[1:]:
+        sub_code, records = _run_compare(name, None, spp, seed, out / name, False)
+        code = max(code, sub_code)
+        sc = resolve_scene(name)
+        images = {r.renderer: r.image for r in records if r.status == "ok" and r.image is not None}
+        sections.append((name, sc.name, scene_section(sc, load_reference(sc).image, [r.row() for r in records],
+                                                      images, f"{name}/report.html")))
+    main_code, _ = _run_compare(DEMO_SCENES[0], None, spp, seed, out, False, sections=sections)
+    raise typer.Exit(max(code, main_code))
