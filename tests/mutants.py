@@ -8,12 +8,12 @@ real files (so numba's ``cache=True`` has a locator) as uniquely named
 modules, imports them, and returns a :class:`harness.adapters.registry.RendererEntry`
 named ``pathtracer`` that :func:`harness.gate.checks.run_gate` takes as an override.
 
-A mutant is a set of modules: the integrator is ``cbox_mutant_<name>``; each
-patched core module ``renderers/core/<stem>.py`` becomes
-``cbox_mutant_<name>__<stem>``, and so does every core module that imports one
-of those (so no part of the renderer still sees the unpatched code); their
-``from renderers.core.<stem> import`` lines are pointed at the copies.
-Unpatched core modules are shared with the real renderer.
+A mutant is a set of modules: the integrator is ``cbox_mutant_<name>``; a
+mutant that patches the toolkit gets a copy ``cbox_mutant_<name>__<stem>`` of
+each core module ``renderers/core/<stem>.py`` but the scalar helpers
+(:data:`SHARED_CORE`), patched or not, so no part of the renderer still sees
+the unpatched code and no shared module is compiled for the copies' types;
+their ``from renderers.core.<stem> import`` lines are pointed at the copies.
 
 Every patch must apply exactly once: if a refactor moves or rewrites a
 snippet, :func:`patched_sources` raises instead of silently testing an
@@ -231,6 +231,10 @@ ISOLATED = {"nan_throughput"}
 assert ISOLATED <= set(BY_NAME)
 
 
+#: Core modules every mutant shares with the real renderer: scalar helpers, no types of their own.
+SHARED_CORE = ("sampling", "rng")
+
+
 def original_source() -> str:
     """The integrator's source, ``renderers/pathtracer.py``."""
     return SOURCE.read_text(encoding="utf-8")
@@ -276,15 +280,16 @@ def patched_sources(mutant: Mutant | str, sources: dict[str, str] | None = None)
                             f"(expected exactly once); update tests/mutants.py to the refactored source")
         texts[p.file] = text.replace(p.old, p.new)
     assert any(texts[f] != read(f) for f in texts), f"mutant {m.name!r} does not change the source"
-    # Core modules that import a copied one are copied too, until nothing more does.
+    # A mutant of the toolkit gets its own copy of every core module that a kernel may call with the
+    # scene tables or ray buffers: a shared module's numba cache would otherwise record a signature
+    # naming the mutant's copy of a type (geometry.Tables), which a later process cannot import.
+    # sampling and rng take scalars only (and sampling keys the real tree's kernel caches), so they
+    # stay shared.
     core = sorted(str(f.relative_to(ROOT)) for f in (ROOT / CORE).glob("*.py"))
     copied = {f for f in texts if f != PATHTRACER}
-    while True:
-        more = {f for f in core if f not in copied and any(_imports(read(f), _core_module(c)) for c in copied)}
-        if not more:
-            break
-        copied |= more
-        texts.update({f: read(f) for f in more})
+    if copied:
+        copied |= {f for f in core if Path(f).stem not in SHARED_CORE and Path(f).stem != "__init__"}
+        texts.update({f: texts.get(f, read(f)) for f in copied})
     for f in texts:
         for c in copied:
             texts[f] = _redirect(texts[f], _core_module(c), module_name(m.name, c))
