@@ -28,7 +28,7 @@ every expectation, 20 seeds, effect sizes): see ``docs/gate-detection.md``.
 from __future__ import annotations
 
 import pytest
-from scipy.stats import binom
+from scipy.stats import binom, norm
 
 import mutants
 from harness.gate.run import run_gate
@@ -83,12 +83,19 @@ def test_load_mutant_imports_a_renderer_from_a_real_file(work):
 
 # -- power -----------------------------------------------------------------------------
 
+#: Mutants that only the caustics expectation shows: the gate detects them after rendering every cheaper
+#: expectation (~80 s each in the suite), so their gate test is slow; by default the unit tests that pin the
+#: same code catch them (tests/test_bsdf.py: Fresnel against the closed form; tests/test_specular.py: a
+#: coloured mirror).
+SLOW_MUTANTS = {"fresnel_schlick": "tests/test_bsdf.py", "mirror_reflectance_ignored": "tests/test_specular.py"}
+
+
 def _params() -> list:
     out = []
     for m in mutants.MUTANTS:
-        marks = []
+        marks = [pytest.mark.slow] if m.name in SLOW_MUTANTS else []
         if m.name in mutants.LOW_POWER:
-            marks = [pytest.mark.xfail(reason=f"below the gate's resolution: {mutants.LOW_POWER[m.name]}",
+            marks += [pytest.mark.xfail(reason=f"below the gate's resolution: {mutants.LOW_POWER[m.name]}",
                                        run=False)]
         out.append(pytest.param(m.name, marks=marks, id=m.name))
     return out
@@ -122,36 +129,44 @@ STATISTICAL = {"agreement", "variance", "outliers", "finite"}
 
 
 @pytest.fixture(scope="module")
-def clean_runs(cfg):
-    """The unmutated path tracer through the gate at seed offsets 0 .. SEEDS-1: {offset: outcomes}."""
+def clean_run(cfg):
+    """The unmutated path tracer through the gate at its own seeds (offset 0): its outcomes."""
     # In this process (no time limit): the same images as the sandboxed CLI gate (test_gate.py checks so).
-    return {off: run_gate(cfg, seed_offset=off, sandbox=False) for off in range(SEEDS)}
+    return run_gate(cfg, sandbox=False)
+
+
+@pytest.fixture(scope="module")
+def clean_runs(cfg, clean_run):
+    """The unmutated path tracer through the gate at seed offsets 0 .. SEEDS-1: {offset: outcomes}."""
+    return {0: clean_run} | {off: run_gate(cfg, seed_offset=off, sandbox=False) for off in range(1, SEEDS)}
 
 
 def _failing(outcomes, which) -> list[str]:
     return [f"{o.expectation.name}: {c.message}" for o in outcomes for c in o.checks if not c.passed and which(c.name)]
 
 
-def test_unmutated_path_tracer_passes_the_gate_at_its_seeds(clean_runs):
+def test_unmutated_path_tracer_passes_the_gate_at_its_seeds(clean_run):
     """At the CI seeds (offset 0) every check passes, the baseline checks included (what CI runs)."""
-    assert not _failing(clean_runs[0], lambda name: True)
+    assert not _failing(clean_run, lambda name: True)
 
 
+@pytest.mark.slow
 def test_unmutated_path_tracer_few_false_alarms_over_seeds(cfg, clean_runs):
     """At most one of SEEDS = 5 seed offsets fails a statistical check (agreement or finite).
 
-    Each expectation's agreement test has family-wise false-alarm rate
-    α = 0.01, so a gate run of E = 3 expectations fails with probability
-    at most 1 - 0.99^3 = 0.0297, and a correct gate fails this test with
-    probability P(Binomial(5, 0.0297) ≥ 2) = 8.3e-3. With these fixed seeds
-    it passes (the benchmark saw no false alarm in 20 seeds).
+    Each expectation's statistical checks share a family-wise false-alarm
+    rate α = 0.01, so a gate run of E = 5 expectations fails with
+    probability at most 1 - 0.99^5 = 0.049, and a correct gate fails this
+    test with probability P(Binomial(5, 0.049) ≥ 2) = 0.022. With these
+    fixed seeds it passes (see docs/gate-detection.md for 20 seeds).
     """
     alarms = {off: f for off, outcomes in clean_runs.items() if (f := _failing(outcomes, STATISTICAL.__contains__))}
     per_run = 1.0 - (1.0 - cfg.alpha) ** len(cfg.expectations)
-    assert binom.sf(1, SEEDS, per_run) < 8.5e-3, "gate.toml changed: update the rate this docstring states"
+    assert binom.sf(1, SEEDS, per_run) < 0.025, "gate.toml changed: update the rate this docstring states"
     assert len(alarms) <= 1, alarms
 
 
+@pytest.mark.slow
 def test_unmutated_path_tracer_no_baseline_alarms_at_other_seeds(clean_runs):
     """Baselines compare like with like: at seeds other than the baseline's, no baseline check runs.
 
@@ -161,3 +176,22 @@ def test_unmutated_path_tracer_no_baseline_alarms_at_other_seeds(clean_runs):
     for off, outcomes in clean_runs.items():
         names = [c.name for o in outcomes for c in o.checks if c.name.startswith("baseline.")]
         assert (off == 0) == bool(names), (off, names)
+
+
+def test_unmutated_path_tracer_region_means_within_noise_on_caustics(clean_run):
+    """On cornell-box-caustics at the gate's budget and seed, every named region's mean agrees with the reference.
+
+    Per region (caustic, glass-shadow, mirror, glass, walls), ``mean_z`` is the
+    z-score of the region's mean difference from the reference given both
+    variances (harness.evaluate.regions). Two-sided, α = 1e-3 family-wise
+    over the regions (Šidák), so a correct path tracer fails this with
+    probability 1e-3. Region means average 147 to 34406 pixels × 256
+    samples, so the central limit theorem holds for them even where single
+    pixels are skewed (the caustic).
+    """
+    rows = {0: next(o for o in clean_run if o.expectation.scene == "cornell-box-caustics").record.regions}
+    n = sum(len(r) for r in rows.values())
+    crit = norm.isf((1.0 - (1.0 - 1e-3) ** (1.0 / n)) / 2.0)
+    assert {"caustic", "glass-shadow", "mirror", "glass", "walls"} <= set(rows[0])
+    worst = max(((abs(m["mean_z"]), off, name) for off, r in rows.items() for name, m in r.items()))
+    assert worst[0] < crit, (worst, crit)

@@ -348,7 +348,7 @@ def test_compare_json_report_and_tables_carry_regions(tmp_path, capsys):
     from harness.cli.run import _run_compare
 
     folder, out = _small_scene_dir(tmp_path), tmp_path / "out"
-    assert _run_compare(str(folder), ["user_renderers:FlatGrey"], 2, 0, out, True) == 0
+    assert _run_compare(str(folder), ["user_renderers:FlatGrey"], 2, 0, out, True)[0] == 0
     (line,) = capsys.readouterr().out.strip().splitlines()
     rec = json.loads(line)
     assert list(rec["regions"]) == ["walls", "boxes", "floor", "light"]

@@ -100,7 +100,9 @@ def test_loads_without_errors_and_screenshot(page):
 
 def test_every_image_decodes(page):
     imgs = page.evaluate("Array.from(document.images).map(i => [i.getAttribute('data-mode'), i.complete, i.naturalWidth])")
-    assert len(imgs) == 3, f"expected the three colour bars, got {imgs} (screenshot: {SCREENSHOT})"
+    # The three colour bars, and the regions' overlay (the report's scene names regions).
+    assert sorted(str(m) for m, _, _ in imgs) == ["None", "de", "flip", "relmse"], \
+        f"expected the three colour bars and the regions overlay, got {imgs} (screenshot: {SCREENSHOT})"
     for mode, complete, width in imgs:
         assert complete and width > 0, f"image {mode} did not decode (screenshot: {SCREENSHOT})"
     _no_errors(page)
