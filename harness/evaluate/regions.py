@@ -83,14 +83,10 @@ def lattice_directions(scene: Scene, k: int = SUBPIXELS, rows: tuple[int, int] |
     if k < 2:
         raise ValueError(f"need at least 2 rays per pixel axis to cover its corners, got {k}")
     cam = scene.camera
-    right, up, forward = cam.frame()
-    tx, ty = cam.tan_half_fov()
     first, end = rows if rows is not None else (0, cam.height)
     x = np.arange(cam.width * (k - 1) + 1) / (k - 1)
     y = np.arange(first * (k - 1), end * (k - 1) + 1) / (k - 1)
-    sx = 2.0 * x / cam.width - 1.0
-    sy = 1.0 - 2.0 * y / cam.height
-    return forward + sx[None, :, None] * (tx * right) + sy[:, None, None] * (ty * up)
+    return cam.directions(x[None, :], y[:, None])
 
 
 def _triangle_coefficients(origin: np.ndarray, v0, v1, v2) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -39,6 +39,14 @@ _CUBE_VERTS = tuple((x, y, z) for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in
 _ALL_FEATURES = frozenset({"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"})
 
 
+def _subpixel_directions(cam: Camera, sub: int) -> np.ndarray:
+    """(H·sub, W·sub, 3) camera directions through a sub×sub grid of points centred in each pixel's cells."""
+    offs = (np.arange(sub) + 0.5) / sub
+    col = (np.arange(cam.width)[:, None] + offs[None, :]).ravel()
+    row = (np.arange(cam.height)[:, None] + offs[None, :]).ravel()
+    return cam.directions(col[None, :], row[:, None])
+
+
 def _quads_to_triangles(quads) -> np.ndarray:
     return np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))], dtype=np.int64)
 
@@ -149,14 +157,7 @@ def specular_furnace_coverage(scene: Scene, sub: int = 16) -> dict[str, np.ndarr
     fraction of 1 (0) means every grid point's ray meets (misses) the object.
     """
     cam = scene.camera
-    right, up, forward = cam.frame()
-    tx, ty = cam.tan_half_fov()
-    offs = (np.arange(sub) + 0.5) / sub
-    col = (np.arange(cam.width)[:, None] + offs[None, :]).ravel()
-    row = (np.arange(cam.height)[:, None] + offs[None, :]).ravel()
-    rr, cc = np.meshgrid(row, col, indexing="ij")
-    d = (forward + ((2 * cc / cam.width - 1) * tx)[..., None] * right
-         + ((1 - 2 * rr / cam.height) * ty)[..., None] * up)
+    d = _subpixel_directions(cam, sub)
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
     o = np.asarray(cam.position, dtype=np.float64)
     names = [s.name for s in scene.spheres] + [m.name for m in scene.meshes if m.name in SPECULAR_FURNACE_OBJECTS]
@@ -288,15 +289,7 @@ def rectangle_light_image(scene: Scene, sub: int = 16) -> np.ndarray:
     sub×sub grid.
     """
     cam = scene.camera
-    right, up, forward = cam.frame()
-    tx, ty = cam.tan_half_fov()
-    offs = (np.arange(sub) + 0.5) / sub
-    col = (np.arange(cam.width)[:, None] + offs[None, :]).ravel()
-    row = (np.arange(cam.height)[:, None] + offs[None, :]).ravel()
-    rr, cc = np.meshgrid(row, col, indexing="ij")
-    sx = (2 * cc / cam.width - 1) * tx
-    sy = (1 - 2 * rr / cam.height) * ty
-    d = forward + sx[..., None] * right + sy[..., None] * up
+    d = _subpixel_directions(cam, sub)
     o = np.asarray(cam.position)
     t = -o[2] / d[..., 2]
     pts = (o + t[..., None] * d).reshape(-1, 3)

@@ -313,17 +313,21 @@ def _material_field(r: _Reader, m: dict, w: str, f: dataclasses.Field):
     raise AssertionError(f"material field kind {kind!r} has no parser")  # a programming error in materials.py
 
 
-def _parse_sphere(r: _Reader, t: Any, i: int, materials: dict) -> Sphere:
-    w = f"spheres[{i}]"
+def _object_header(r: _Reader, t: Any, where: str, keys: tuple[str, ...], materials: dict) -> tuple[str, str, str]:
+    """A mesh's or sphere's table checked, its field path (``meshes[2] (floor)``), name and material."""
     if not isinstance(t, dict):
-        raise r.err(w, f"expected a table, got {type(t).__name__}")
-    if isinstance(t.get("name"), str):
-        w = f"spheres[{i}] ({one_line(t['name'], 60)})"
-    r.known(t, w, _KEYS["sphere"])
+        raise r.err(where, f"expected a table, got {type(t).__name__}")
+    w = f"{where} ({one_line(t['name'], 60)})" if isinstance(t.get("name"), str) else where
+    r.known(t, w, keys)
     name = r.get(t, "name", w, str)
     material = r.get(t, "material", w, str)
     if material not in materials:
         raise r.err(f"{w}.material", f"unknown material {material!r}; defined: {', '.join(sorted(materials))}")
+    return w, name, material
+
+
+def _parse_sphere(r: _Reader, t: Any, i: int, materials: dict) -> Sphere:
+    w, name, material = _object_header(r, t, f"spheres[{i}]", _KEYS["sphere"], materials)
     center = r.vec(t, "center", w, bound=MAX_COORDINATE)
     radius = r.get(t, "radius", w, float)
     if not 0.0 < radius <= MAX_COORDINATE:
@@ -362,17 +366,7 @@ def _parse_regions(r: _Reader, t: dict, objects: list[str]) -> dict[str, Region]
 
 
 def _parse_mesh(r: _Reader, t: Any, i: int, materials: dict, base: Path) -> Mesh:
-    w = f"meshes[{i}]"
-    if not isinstance(t, dict):
-        raise r.err(w, f"expected a table, got {type(t).__name__}")
-    if isinstance(t.get("name"), str):
-        w = f"meshes[{i}] ({one_line(t['name'], 60)})"
-    r.known(t, w, _KEYS["mesh"])
-    name = r.get(t, "name", w, str)
-    material = r.get(t, "material", w, str)
-    if material not in materials:
-        known = ", ".join(sorted(materials))
-        raise r.err(f"{w}.material", f"unknown material {material!r}; defined: {known}")
+    w, name, material = _object_header(r, t, f"meshes[{i}]", _KEYS["mesh"], materials)
     if "obj" in t and ("vertices" in t or "faces" in t):
         raise r.err(w, "give either obj or vertices/faces, not both")
     if "obj" in t:

@@ -185,6 +185,19 @@ class Camera:
             axis = "x" if self.width >= self.height else "y"
         return (t, t / aspect) if axis == "x" else (t * aspect, t)
 
+    def directions(self, col: np.ndarray, row: np.ndarray) -> np.ndarray:
+        """World directions (not normalised, float64, shape ``col.shape + (3,)``) through image points (col, row).
+
+        Continuous pixel units, (0, 0) the top-left corner: the inverse of
+        :meth:`project_to_pixels`, and the direction our renderers' camera
+        rays take (``renderers/core/camera.py``).
+        """
+        right, up, forward = self.frame()
+        tx, ty = self.tan_half_fov()
+        sx = (2.0 * np.asarray(col, dtype=np.float64) / self.width - 1.0) * tx
+        sy = (1.0 - 2.0 * np.asarray(row, dtype=np.float64) / self.height) * ty
+        return forward + sx[..., None] * right + sy[..., None] * up
+
     def project_to_pixels(self, points: np.ndarray) -> np.ndarray:
         """(col, row) image coordinates (continuous, pixel units) of world ``points`` (n, 3) in front of the camera."""
         right, up, forward = self.frame()
