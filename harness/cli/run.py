@@ -56,8 +56,8 @@ def _write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(
 
 def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool,
                  time_budget: Optional[str] = None, target_error: Optional[str] = None, max_spp: int = 4096,
-                 sections=()) -> tuple[int, list]:
-    """Compare renderers on one scene, write its folder and report; (exit code, run records)."""
+                 sections=()) -> tuple[int, list, object, object]:
+    """Compare renderers on one scene, write its folder and report; (exit code, run records, scene, reference)."""
     from harness.evaluate.convergence import parse_target
     from harness.workflows import compare as cmp
     from harness.workflows import runner
@@ -102,7 +102,7 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
             if r.status != "ok":
                 typer.echo(f"{r.renderer}: {r.status}: {r.reason}")
     typer.echo(f"report: {report}", err=True)
-    return (1 if any(r.status == "failed" for r in records) else 0), records
+    return (1 if any(r.status == "failed" for r in records) else 0), records, sc, ref
 
 
 @app.command()
@@ -152,11 +152,10 @@ def demo(
 
     sections, code = [], 0
     for name in DEMO_SCENES[1:]:
-        sub_code, records = _run_compare(name, None, spp, seed, out / name, False)
+        sub_code, records, sc, ref = _run_compare(name, None, spp, seed, out / name, False)
         code = max(code, sub_code)
-        sc = resolve_scene(name)
         images = {r.renderer: r.image for r in records if r.status == "ok" and r.image is not None}
-        sections.append((name, sc.name, scene_section(sc, load_reference(sc).image, [r.row() for r in records],
-                                                      images, f"{name}/report.html")))
-    main_code, _ = _run_compare(DEMO_SCENES[0], None, spp, seed, out, False, sections=sections)
+        sections.append((name, sc.name, scene_section(sc, ref.image, [r.row() for r in records], images,
+                                                      f"{name}/report.html")))
+    main_code = _run_compare(DEMO_SCENES[0], None, spp, seed, out, False, sections=sections)[0]
     raise typer.Exit(max(code, main_code))
