@@ -134,18 +134,6 @@ def _first_triangle_hits(origin, dirs, v0, v1, v2) -> tuple[np.ndarray, np.ndarr
     return idx, best
 
 
-def _sphere_hits(origin, dirs, center, radius) -> np.ndarray:
-    """Ray parameter t of the first hit of ``dirs`` from ``origin`` with one sphere (inf if none)."""
-    oc = origin - np.asarray(center, dtype=np.float64)
-    a = np.einsum("ij,ij->i", dirs, dirs)
-    b = dirs @ oc
-    disc = b * b - a * (oc @ oc - float(radius) ** 2)
-    root = np.sqrt(np.maximum(disc, 0.0))
-    near, far = (-b - root) / a, (-b + root) / a
-    t = np.where(near > 0.0, near, far)  # from inside the sphere the far root is the hit
-    return np.where((disc >= 0.0) & (t > 0.0), t, np.inf)
-
-
 def first_hits(scene: Scene, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For camera rays ``dirs`` (n, 3): the object each hits first and the hit point.
 
@@ -159,7 +147,7 @@ def first_hits(scene: Scene, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     tri, t = _first_triangle_hits(origin, dirs, v[:, 0], v[:, 1], v[:, 2])
     obj = np.where(tri >= 0, arrays["mesh"][np.maximum(tri, 0)], -1)
     for j, s in enumerate(scene.spheres):
-        ts = _sphere_hits(origin, dirs, s.center, s.radius)
+        ts = s.hit_distances(origin, dirs)
         closer = ts < t
         obj, t = np.where(closer, len(scene.meshes) + j, obj), np.where(closer, ts, t)
     with np.errstate(invalid="ignore"):  # inf · 0 for rays that hit nothing

@@ -166,11 +166,7 @@ def specular_furnace_coverage(scene: Scene, sub: int = 16) -> dict[str, np.ndarr
         kind, centre, size = SPECULAR_FURNACE_OBJECTS[name]
         f = o - np.asarray(centre)
         if kind == "sphere":
-            b = d @ f
-            disc = b * b - (f @ f - size * size)
-            root = np.sqrt(np.maximum(disc, 0.0))
-            near = np.where(-b - root > 0, -b - root, -b + root)
-            t[k] = np.where((disc >= 0) & (near > 0), near, np.inf)
+            t[k] = Sphere(name, centre, size, "").hit_distances(o, d)
         else:
             with np.errstate(divide="ignore", invalid="ignore"):
                 lo, hi = (-size - f) / d, (size - f) / d

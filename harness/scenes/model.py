@@ -233,6 +233,21 @@ class Sphere:
     radius: float
     material: str
 
+    def hit_distances(self, origin: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+        """Ray parameter t of the first hit of rays ``origin + t·dirs`` (dirs shape (..., 3)), inf if none.
+
+        For camera rays in NumPy (region masks, analytic images); our
+        renderers have their own, in numba.
+        """
+        oc = np.asarray(origin, dtype=np.float64) - np.asarray(self.center, dtype=np.float64)
+        a = np.einsum("...i,...i->...", dirs, dirs)
+        b = dirs @ oc
+        disc = b * b - a * (oc @ oc - float(self.radius) ** 2)
+        root = np.sqrt(np.maximum(disc, 0.0))
+        near, far = (-b - root) / a, (-b + root) / a
+        t = np.where(near > 0.0, near, far)  # from inside the sphere the far root is the hit
+        return np.where((disc >= 0.0) & (t > 0.0), t, np.inf)
+
 
 @dataclass(frozen=True)
 class Region:
