@@ -24,16 +24,9 @@ the film are the shared toolkit's (``renderers/core/``).
   from BSDF-sampled rays that happen to reach the light: unbiased, slow, as
   expected of path tracing; the photon mapper exists for them.
 - **Russian roulette** from the ``rr_depth``-th vertex on (setting, default
-  :data:`RR_DEPTH`): a path goes on with probability
-  ``q = min(max_c β_c / s, Q_MAX)`` and its throughput is divided by ``q``, so
-  the estimate stays unbiased (pbrt-v4 §13.1.5 uses the same rule; Mitsuba 3
-  too, with 0.95). Capping ``q`` at ``Q_MAX < 1`` ends every path with
-  probability 1 even when every albedo is 1: the expected length past
-  ``rr_depth`` is at most ``1 / (1 - Q_MAX)`` = 20 vertices. ``s`` is the
-  radiance scaling (η_i/η_t)² of the path's refractions, which β contains
-  (:func:`renderers.core.bsdf.refraction_scale`): without it a path inside
-  glass (β/2.25) would be ended more often for no reason, as Mitsuba 3's
-  ``path`` also avoids (it uses β·η²).
+  :data:`RR_DEPTH`), by the toolkit's rule
+  (:func:`renderers.core.roulette.continue_path`): unbiased, ends every path,
+  and discounts the refraction scaling that β contains.
 - ``max_depth`` is the harness's convention (segments from the camera;
   -1 unbounded): emission at vertex k counts if k ≤ max_depth, NEE at vertex
   k adds a segment and counts if k + 1 ≤ max_depth.
@@ -48,7 +41,6 @@ is two-sided).
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Sequence
 
@@ -60,15 +52,14 @@ from harness.scenes.model import Scene
 from renderers.core.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, refraction_scale, two_sided
 from renderers.core.camera import camera_basis, camera_rays
 from renderers.core.geometry import SceneGeometry, offset_origin, surface_point
-from renderers.core.lights import emits, emitter_cos, sample_emitter, solid_angle_pdf, solid_angle_pdf_along
+from renderers.core.lights import sample_emitter, solid_angle_pdf, solid_angle_pdf_along, towards_emitter
+from renderers.core.roulette import Q_MAX, RR_DEPTH, continue_path
 from renderers.core.rays import (add_unoccluded, head, ray_buffer, set_path, set_ray, set_shadow, shadow_buffer,
                                  shadow_segment)
 from renderers.core.sampler import BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, vertex_1d, vertex_2d
 from renderers.core.sampling import jit, power_heuristic
 from renderers.core.schedule import render_image
 
-RR_DEPTH = 5
-Q_MAX = 0.99
 
 
 @jit
@@ -89,42 +80,12 @@ def _light_sample(x, n, mat, y, ny, pe):
     factor that turns β·f·Le into the estimate; cos θ_x = 0 when the sample
     gives nothing (emitter seen from behind, receiver facing away).
     """
-    w0, w1, w2 = y[0] - x[0], y[1] - x[1], y[2] - x[2]
-    dist2 = w0 * w0 + w1 * w1 + w2 * w2
-    if not (dist2 > 0.0 and pe > 0.0):
-        return 0.0, 0.0
-    dist = math.sqrt(dist2)
-    wi = (w0 / dist, w1 / dist, w2 / dist)
-    cos_x = n[0] * wi[0] + n[1] * wi[1] + n[2] * wi[2]
-    cos_y = emitter_cos(ny, wi)
-    if not (cos_x > 0.0 and emits(cos_y)):
+    wi, dist2, cos_x, cos_y = towards_emitter(x, n, y, ny)
+    if not (cos_x > 0.0 and pe > 0.0):
         return 0.0, 0.0
     w = power_heuristic(solid_angle_pdf(pe, dist2, cos_y), bsdf_pdf(mat, cos_x))
     g = cos_x * cos_y / dist2 * w / pe
     return cos_x, g
-
-
-@jit
-def _continue_path(mat, valid, cos_w, f, beta, scale, u_rr, roulette):
-    """Throughput after a BSDF sample at cosine ``cos_w`` with weight ``f``: (alive, β', pdf of the sample).
-
-    Russian roulette with the vertex's number ``u_rr`` when ``roulette``, on
-    β without the refraction scaling ``scale`` it contains.
-    """
-    if not valid:
-        return False, beta, 0.0  # zero-pdf direction
-    b0, b1, b2 = beta[0] * f[0], beta[1] * f[1], beta[2] * f[2]
-    bmax = max(b0, b1, b2)
-    if bmax <= 0.0:
-        return False, beta, 0.0
-    if roulette:
-        survive = min(bmax / scale, Q_MAX)
-        # Written so a NaN throughput ends the path (NaN < x is false): its NaN
-        # has already reached L, where the NaN count reports it.
-        if not u_rr < survive:
-            return False, beta, 0.0
-        b0, b1, b2 = b0 / survive, b1 / survive, b2 / survive
-    return True, (b0, b1, b2), bsdf_pdf(mat, cos_w)
 
 
 # The kernel is the algorithm of one bounce (emission, NEE, continuation) and
@@ -181,7 +142,7 @@ def _shade(prim, t_sphere, rays, key, first, depth, extend, roulette, geo, L, sh
         u = vertex_2d(key, j, depth, BSDF_U)
         wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p], u[0], u[1])
         scale = rays.scale[i] * refraction_scale(mat, cos_o, cos_w, geo.eta[p])
-        alive, b, pdf = _continue_path(mat, valid, cos_w, f, beta, scale,
+        alive, b, pdf = continue_path(mat, valid, cos_w, f, beta, scale,
                                        vertex_1d(key, j, depth, ROULETTE) if roulette else 1.0, roulette)
         if alive:
             side = n if cos_w > 0.0 else (-n[0], -n[1], -n[2])  # the new ray leaves on the side it travels to

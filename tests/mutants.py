@@ -71,7 +71,7 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "rr_no_compensation",
         "Russian roulette kills paths but survivors are not divided by the survival probability",
-        (("        b0, b1, b2 = b0 / survive, b1 / survive, b2 / survive\n", ""),),
+        (("        b0, b1, b2 = b0 / survive, b1 / survive, b2 / survive\n", "", f"{CORE}/roulette.py"),),
     ),
     Mutant(
         "mis_emitter_double",
@@ -96,7 +96,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "an 'energy-conserving' fudge: the BSDF-sampled throughput multiplied by 0.99 at every bounce "
         "(indirect light only; the camera-visible direct light is untouched)",
         (("b0, b1, b2 = beta[0] * f[0], beta[1] * f[1], beta[2] * f[2]",
-          "b0, b1, b2 = 0.99 * beta[0] * f[0], 0.99 * beta[1] * f[1], 0.99 * beta[2] * f[2]"),),
+          "b0, b1, b2 = 0.99 * beta[0] * f[0], 0.99 * beta[1] * f[1], 0.99 * beta[2] * f[2]", f"{CORE}/roulette.py"),),
     ),
     Mutant(
         "nan_one_pixel",
@@ -144,7 +144,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "cosine_pdf_mismatch",
         "continuation ray's pdf recorded as uniform-hemisphere 1/(2π) though it is sampled cosine-weighted "
         "(MIS weights no longer sum to 1)",
-        (("return True, (b0, b1, b2), bsdf_pdf(mat, cos_w)", "return True, (b0, b1, b2), 0.5 / math.pi"),),
+        (("return True, (b0, b1, b2), bsdf_pdf(mat, cos_w)", "return True, (b0, b1, b2), 0.5 / 3.141592653589793",
+          f"{CORE}/roulette.py"),),
     ),
     Mutant(
         "two_sided_emitter",

@@ -16,11 +16,18 @@ from typing import Iterator, Sequence
 import numpy as np
 
 
-def pass_key(seed: int, index: int) -> np.uint64:
-    """64-bit key of pass ``index`` of a render seeded with ``seed``."""
-    if seed < 0 or index < 0:
-        raise ValueError(f"seed and pass index must be non-negative, got {seed}, {index}")
-    return np.random.SeedSequence([seed, index]).generate_state(1, dtype=np.uint64)[0]
+def pass_key(seed: int, index: int, stream: int = 0) -> np.uint64:
+    """64-bit key of pass ``index`` of a render seeded with ``seed``.
+
+    ``stream`` tells apart a renderer's kinds of pass that share an index
+    (SPPM's camera pass and photon pass of one iteration, a photon map's
+    photons): stream 0 is ``SeedSequence([seed, index])``, the camera passes
+    of every renderer; stream s > 0 is ``SeedSequence([seed, index, s])``.
+    """
+    if seed < 0 or index < 0 or stream < 0:
+        raise ValueError(f"seed, pass index and stream must be non-negative, got {seed}, {index}, {stream}")
+    entropy = [seed, index] if stream == 0 else [seed, index, stream]
+    return np.random.SeedSequence(entropy).generate_state(1, dtype=np.uint64)[0]
 
 
 def pass_seed(seed: int, index: int) -> int:

@@ -20,6 +20,7 @@ Integrators need it per unit solid angle at the receiver:
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -84,6 +85,28 @@ def emitter_cos(ny, w) -> float:
 def emits(cos_y) -> bool:
     """One-sided emitters: light leaves only the side the normal points to (grazing, cos 0, gives none)."""
     return cos_y > 0.0
+
+
+@jit
+def towards_emitter(x, n, y, ny):
+    """From a receiver at ``x`` (unit normal ``n``) to an emitter point ``y`` (normal ``ny``).
+
+    Returns (unit direction, distance², cos θ_x, cos θ_y). cos θ_x is 0 when
+    no light passes: coincident points, the emitter seen from its back side
+    (:func:`emits`), or the receiver facing away. Next-event estimation's
+    geometry term is ``cos θ_x cos θ_y / r²`` from these.
+    """
+    w0, w1, w2 = y[0] - x[0], y[1] - x[1], y[2] - x[2]
+    dist2 = w0 * w0 + w1 * w1 + w2 * w2
+    if not dist2 > 0.0:
+        return (0.0, 0.0, 1.0), 0.0, 0.0, 0.0
+    dist = math.sqrt(dist2)
+    wi = (w0 / dist, w1 / dist, w2 / dist)
+    cos_x = n[0] * wi[0] + n[1] * wi[1] + n[2] * wi[2]
+    cos_y = emitter_cos(ny, wi)
+    if not (cos_x > 0.0 and emits(cos_y)):
+        return wi, dist2, 0.0, cos_y
+    return wi, dist2, cos_x, cos_y
 
 
 @jit
