@@ -1,0 +1,170 @@
+"""Photon maps: stored photons indexed for nearest-neighbour search, and the density estimate over them.
+
+Jensen 2001 ("Realistic Image Synthesis Using Photon Mapping", §7.2): the
+irradiance at a point x of a surface with normal n is estimated from the k
+photons nearest to x, within a maximum radius, as
+
+    E(x) ≈ Σ_p Φ_p · K(‖x − x_p‖; r),
+
+r the distance to the k-th photon (or the maximum radius when fewer are
+found there), K a kernel on the disc of radius r normalised to ∫ K dA = 1
+(:data:`KERNELS`). A Lambertian surface of albedo ρ reflects L = ρ/π · E,
+so callers multiply by their throughput·ρ/π. The index is
+:class:`scipy.spatial.cKDTree` over the photon positions.
+
+- **Normal test** (Jensen §7.2.3): a photon counts only if its surface
+  normal is within :data:`NORMAL_COS_MIN` of the query's, so light on a wall
+  does not leak onto the floor at a corner, or through a thin object.
+- **Depth budget**: a query point reached by d camera segments may use a
+  photon of depth k only when d + k ≤ max_depth (``budget``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from renderers.core.photons import Photons
+from renderers.core.sampling import jit
+
+#: Kernels of the density estimate: Jensen's cone filter (§7.2.2, k = 1: weight 1 − d/r,
+#: normalised by 1/((1 − 2/3)·πr²)), Epanechnikov's (1 − d²/r², by 2/(πr²); Silverman 1986 §4.2,
+#: the kernel of least mean integrated squared error) and the uniform disc (1/(πr²), SPPM's).
+KERNELS = ("cone", "epanechnikov", "uniform")
+_CONE, _EPANECHNIKOV, _UNIFORM = 0, 1, 2
+#: cos of the largest angle between a photon's surface normal and the query's (60°): a corner (90°)
+#: is rejected, a curved diffuse surface within the lookup radius is not.
+NORMAL_COS_MIN = 0.5
+#: Depth budget meaning "unbounded" (max_depth = -1): deeper than any stored photon.
+UNBOUNDED = np.iinfo(np.int16).max
+
+
+def kernel_id(name: str) -> int:
+    return KERNELS.index(name)
+
+
+@jit
+def kernel_weight(kernel, d, r) -> float:
+    """K(d; r) of :data:`KERNELS` (by index), normalised over the disc of radius r; 0 outside it."""
+    if not (r > 0.0 and d <= r):
+        return 0.0
+    area = math.pi * r * r
+    if kernel == _CONE:
+        return (1.0 - d / r) * 3.0 / area
+    if kernel == _EPANECHNIKOV:
+        s = d / r
+        return (1.0 - s * s) * 2.0 / area
+    return 1.0 / area
+
+
+@jit
+def _estimate(dist, idx, normals, budget, r_max, kernel, p_normal, p_power, p_depth, out, radius):
+    """out[i] = Σ over the found photons of query i that pass the tests of Φ_p·K (see the module docstring)."""
+    n_ph = p_depth.size
+    m, k = dist.shape
+    for i in range(m):
+        r = dist[i, k - 1] if idx[i, k - 1] < n_ph else r_max
+        radius[i] = r
+        for c in range(3):
+            out[i, c] = 0.0
+        for a in range(k):
+            p = idx[i, a]
+            if p >= n_ph:
+                break  # cKDTree pads missing neighbours with n, after the found ones
+            if p_depth[p] > budget[i]:
+                continue
+            cos_n = normals[i, 0] * p_normal[p, 0] + normals[i, 1] * p_normal[p, 1] + normals[i, 2] * p_normal[p, 2]
+            if cos_n < NORMAL_COS_MIN:
+                continue
+            w = kernel_weight(kernel, dist[i, a], r)
+            for c in range(3):
+                out[i, c] += w * p_power[p, c]
+
+
+class PhotonMap:
+    """Photons and the kd-tree over their positions (state: built once, queried by many threads)."""
+
+    def __init__(self, photons: Photons, emitted: int):
+        self.photons = photons
+        self.emitted = emitted
+        # Positions are float32 to keep maps compact; the tree holds its own float64 copy.
+        self.tree = cKDTree(photons.position, balanced_tree=False, compact_nodes=False) if len(photons) else None
+
+    def __len__(self) -> int:
+        return len(self.photons)
+
+    def irradiance(self, points: np.ndarray, normals: np.ndarray, budget: np.ndarray, k: int, r_max: float,
+                   kernel: str) -> tuple[np.ndarray, np.ndarray]:
+        """Irradiance (m, 3) at ``points`` (m, 3) with ``normals``, and the radius each estimate used.
+
+        ``budget`` (m,) int: the deepest photon each point may use.
+        """
+        m = len(points)
+        out, radius = np.zeros((m, 3)), np.full(m, r_max)
+        if m == 0 or self.tree is None:
+            return out, radius
+        k = min(k, len(self))
+        dist, idx = self.tree.query(points, k=k, distance_upper_bound=r_max, workers=1)
+        dist, idx = dist.reshape(m, k), idx.reshape(m, k)
+        ph = self.photons
+        _estimate(dist, idx, np.ascontiguousarray(normals, np.float64), np.asarray(budget, np.int64), r_max,
+                  kernel_id(kernel), ph.normal, ph.power, ph.depth, out, radius)
+        return out, radius
+
+
+#: Neighbours :meth:`PrecomputedIrradiance.lookup` considers for the nearest one that passes the normal test.
+LOOKUP_CANDIDATES = 8
+
+
+@jit
+def _nearest_facing(idx, normals, p_normal, p_value, out):
+    """out[i] = the value of the first candidate of query i whose normal passes the test (0 if none)."""
+    n_pt = p_value.shape[0]
+    for i in range(idx.shape[0]):
+        for c in range(3):
+            out[i, c] = 0.0
+        for a in range(idx.shape[1]):
+            p = idx[i, a]
+            if p >= n_pt:
+                break
+            if normals[i, 0] * p_normal[p, 0] + normals[i, 1] * p_normal[p, 1] + normals[i, 2] * p_normal[p, 2] \
+                    >= NORMAL_COS_MIN:
+                for c in range(3):
+                    out[i, c] = p_value[p, c]
+                break
+
+
+class PrecomputedIrradiance:
+    """Irradiance estimated once at a subset of a map's photons, looked up by nearest neighbour.
+
+    Christensen 1999 ("Faster Photon Map Global Illumination", JGT 4(3)):
+    final gathering asks the global map for the radiance at many points,
+    each a k-nearest-neighbour estimate; estimating the irradiance at every
+    ``stride``-th photon's position beforehand turns each into one nearest
+    lookup (with the normal test), at the price of a piecewise-constant
+    irradiance between those points, which the gather's averaging hides.
+    """
+
+    def __init__(self, pmap: PhotonMap, stride: int, k: int, r_max: float, kernel: str, budget: int):
+        ph = pmap.photons
+        pick = np.arange(0, len(ph), stride)
+        self.position = ph.position[pick]
+        self.normal = ph.normal[pick].astype(np.float64)
+        self.irradiance, _ = pmap.irradiance(self.position.astype(np.float64), self.normal,
+                                             np.full(len(pick), budget), k, r_max, kernel)
+        self.r_max = r_max
+        self.tree = cKDTree(self.position, balanced_tree=False, compact_nodes=False) if len(pick) else None
+
+    def lookup(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """Irradiance (m, 3) at ``points``: that of the nearest precomputed point facing the same way."""
+        m = len(points)
+        out = np.zeros((m, 3))
+        if m == 0 or self.tree is None:
+            return out
+        k = min(LOOKUP_CANDIDATES, len(self.position))
+        _, idx = self.tree.query(points, k=k, distance_upper_bound=self.r_max, workers=1)
+        _nearest_facing(idx.reshape(m, k), np.ascontiguousarray(normals, np.float64), self.normal,
+                        self.irradiance, out)
+        return out

@@ -1,0 +1,244 @@
+"""Photon tracing: photons shot from the emitters, followed through the scene, stored where they land.
+
+The first pass of photon mapping (Jensen 2001, "Realistic Image Synthesis
+Using Photon Mapping", ch. 5) and the photon pass of each SPPM iteration
+(Hachisuka & Jensen 2009; pbrt-v4 §16.2.2):
+
+- **Emission**: an emitter triangle is picked by power and a point on it
+  uniformly by area (next-event estimation's sampling,
+  :func:`renderers.core.lights.sample_emitter`, area pdf p_A), a direction
+  cosine-weighted about its normal (pdf cos θ/π). The photon's flux is
+  Le·cos θ / (p_A · cos θ/π) = π·Le / p_A; :func:`shoot` divides it by the
+  number of photons emitted, since a density estimate sums over them.
+- **Scattering**: at a diffuse surface the photon is stored (below), then
+  Russian roulette on the albedo decides absorption: it goes on with
+  probability q = max_c ρ_c (capped at :data:`renderers.core.roulette.Q_MAX`)
+  and its flux is multiplied by ρ/q, in a cosine-weighted direction (Jensen
+  §5.2). At a mirror or glass the BSDF is sampled (Fresnel picks reflection
+  or refraction) with the same roulette on the sample's weight. Flux, unlike
+  radiance, is not scaled by (η_i/η_t)² when it refracts (Veach 1997 §5.2:
+  light and importance see the adjoint BSDFs of refraction), so a photon's
+  weight is the radiance weight divided by
+  :func:`renderers.core.bsdf.refraction_scale`.
+- **Storing** (``mode``): every diffuse hit (:data:`STORE_ALL`, Jensen's
+  global map); only photons that came from the light through one or more
+  specular bounces and nothing else (L S+ D, :data:`STORE_CAUSTIC`, Jensen's
+  caustic map; the path ends there); every diffuse hit but the first
+  (:data:`STORE_INDIRECT`: SPPM, whose direct light is next-event estimated
+  at the visible points, pbrt-v4 §16.2).
+- ``max_depth`` (segments from the camera to the light): a photon stored
+  after k segments from the light is only useful with at least one camera
+  segment, so photons are traced while k + 1 ≤ max_depth; the estimates
+  check the camera side (:class:`Photons.depth`).
+
+Photons are stored compactly (:class:`Photons`): float32 position, flux,
+incoming direction and normal, int16 depth, a caustic flag.
+
+Determinism: photon j of a map uses the counter-based numbers of (key, j,
+dimension) (:mod:`renderers.core.rng`) in the layout named below, so the
+photons do not depend on how batches are spread over threads, and batches
+are joined in order (:func:`shoot`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from harness.scenes.model import Scene
+from renderers.core.bsdf import bsdf_sample, is_delta, refraction_scale, two_sided
+from renderers.core.geometry import SceneGeometry, offset_origin, surface_point
+from renderers.core.lights import sample_emitter
+from renderers.core.rays import head, ray_buffer, set_path, set_ray
+from renderers.core.rng import uniform
+from renderers.core.roulette import Q_MAX
+from renderers.core.sampling import cosine_hemisphere, jit
+from renderers.core.schedule import run_units
+
+#: What a photon pass stores (see the module docstring).
+STORE_ALL, STORE_CAUSTIC, STORE_INDIRECT = 0, 1, 2
+
+#: Dimensions of photon j: the emitter (by power), the point on it (2), the emitted direction (2);
+#: then per bounce k = 1, 2, ... (the surface the k-th segment reaches) its BSDF direction (2) and roulette.
+EMIT_PICK, EMIT_U, EMIT_V, EMIT_DIR_U, EMIT_DIR_V = 0, 1, 2, 3, 4
+EMIT_DIMS = 5
+BOUNCE_U, BOUNCE_V, BOUNCE_ROULETTE = 0, 1, 2
+DIMS_PER_BOUNCE = 3
+
+#: Photons per batch (a work unit): fixed, so which photons a map holds never depends on the thread count.
+BATCH = 1 << 14
+#: :func:`shoot` with a stored target gives up after emitting this many times the target
+#: (a scene with no caustic path would otherwise shoot forever).
+MAX_EMITTED_PER_STORED = 1000
+
+
+class Photons(NamedTuple):
+    """Stored photons, one row each."""
+
+    position: np.ndarray  # (n, 3) float32
+    power: np.ndarray  # (n, 3) float32 flux (watts per channel), divided by the photons emitted
+    direction: np.ndarray  # (n, 3) float32 unit, towards where the photon came from
+    normal: np.ndarray  # (n, 3) float32 unit front-side normal of the surface it landed on
+    depth: np.ndarray  # (n,) int16 segments from the light to here (1: direct)
+    caustic: np.ndarray  # (n,) bool: came through specular bounces only (L S+ D)
+
+    def __len__(self) -> int:
+        return len(self.depth)
+
+
+def empty_photons(n: int = 0) -> Photons:
+    return Photons(np.zeros((n, 3), np.float32), np.zeros((n, 3), np.float32), np.zeros((n, 3), np.float32),
+                   np.zeros((n, 3), np.float32), np.zeros(n, np.int16), np.zeros(n, bool))
+
+
+def join(parts: list[Photons]) -> Photons:
+    """The photons of ``parts``, in order."""
+    if not parts:
+        return empty_photons()
+    return Photons(*(np.concatenate(cols) for cols in zip(*parts)))
+
+
+@jit
+def bounce_dim(depth, offset):
+    """Dimension of ``offset`` at the photon's ``depth``-th surface."""
+    return EMIT_DIMS + (depth - 1) * DIMS_PER_BOUNCE + offset
+
+
+@jit
+def _emit(key, first, geo, rays, spec):
+    """Photons first .. first + len(rays) - 1 leave the emitters: rays with their flux π·Le/p_A."""
+    for i in range(rays.path.size):
+        j = first + i
+        y, ny, e, pe = sample_emitter(uniform(key, j, EMIT_PICK), uniform(key, j, EMIT_U),
+                                      uniform(key, j, EMIT_V), geo)
+        dx, dy, dz, cos = cosine_hemisphere(ny[0], ny[1], ny[2], uniform(key, j, EMIT_DIR_U),
+                                            uniform(key, j, EMIT_DIR_V))
+        k = math.pi / pe if pe > 0.0 and cos > 0.0 else 0.0  # zero-pdf samples carry nothing
+        set_ray(rays, i, offset_origin(y, ny, geo.offset), (dx, dy, dz))
+        set_path(rays, i, i, (geo.radiance[e, 0] * k, geo.radiance[e, 1] * k, geo.radiance[e, 2] * k), 0.0)
+        spec[i] = True  # no bounce yet: "specular only" so far
+
+
+@jit
+def _store(out, k, x, power, d, n, depth, caustic):
+    """Photon ``k`` of ``out``: at ``x`` with ``power``, arrived along ``d``, on a surface of normal ``n``."""
+    out.position[k, 0], out.position[k, 1], out.position[k, 2] = x
+    out.power[k, 0], out.power[k, 1], out.power[k, 2] = power
+    out.direction[k, 0], out.direction[k, 1], out.direction[k, 2] = -d[0], -d[1], -d[2]
+    out.normal[k, 0], out.normal[k, 1], out.normal[k, 2] = n
+    out.depth[k] = depth
+    out.caustic[k] = caustic
+
+
+@jit
+def _scatter(prim, t_sphere, rays, spec, key, first, depth, mode, extend, geo, out, nxt, nxt_spec):
+    """One bounce of a photon wavefront: store where the mode says, then scatter or absorb.
+
+    Returns (photons stored into ``out``, photons going on into ``nxt``).
+    """
+    ns = 0
+    nn = 0
+    for i in range(prim.size):
+        p = prim[i]
+        if p < 0:
+            continue
+        d = (rays.d[i, 0], rays.d[i, 1], rays.d[i, 2])
+        o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
+        x, n, cos_o, t = surface_point(geo, p, o, d, t_sphere[i] if p >= geo.n_triangles else 0.0)
+        mat = geo.material[p]
+        if not (cos_o > 0.0 or (cos_o < 0.0 and two_sided(mat))):
+            continue  # a one-sided surface's back: absorbed
+        power = (rays.beta[i, 0], rays.beta[i, 1], rays.beta[i, 2])
+        diffuse = not is_delta(mat)
+        if diffuse:
+            caustic = spec[i] and depth >= 2
+            if mode == STORE_ALL or (mode == STORE_CAUSTIC and caustic) or (mode == STORE_INDIRECT and depth >= 2):
+                _store(out, ns, x, power, d, n, depth, caustic)
+                ns += 1
+            if mode == STORE_CAUSTIC:
+                continue  # past a diffuse bounce no photon is a caustic one
+        if not extend:
+            continue
+        j = first + rays.path[i]
+        rho = (geo.reflectance[p, 0], geo.reflectance[p, 1], geo.reflectance[p, 2])
+        wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p],
+                                          uniform(key, j, bounce_dim(depth, BOUNCE_U)),
+                                          uniform(key, j, bounce_dim(depth, BOUNCE_V)))
+        if not valid:
+            continue
+        s = refraction_scale(mat, cos_o, cos_w, geo.eta[p])  # flux has no (η_i/η_t)² (module docstring)
+        w = (f[0] / s, f[1] / s, f[2] / s)
+        q = min(max(w[0], w[1], w[2]), Q_MAX)
+        if not (q > 0.0 and uniform(key, j, bounce_dim(depth, BOUNCE_ROULETTE)) < q):
+            continue
+        side = n if cos_w > 0.0 else (-n[0], -n[1], -n[2])
+        set_ray(nxt, nn, offset_origin(x, side, geo.offset), wi)
+        set_path(nxt, nn, rays.path[i], (power[0] * w[0] / q, power[1] * w[1] / q, power[2] * w[2] / q), 0.0)
+        nxt_spec[nn] = spec[i] and not diffuse
+        nn += 1
+    return ns, nn
+
+
+def trace_photons(geom: SceneGeometry, scene: Scene, key: np.uint64, first: int, stop: int, mode: int) -> Photons:
+    """The photons ``first .. stop-1`` of the map keyed ``key``, traced and stored by ``mode`` (not normalised)."""
+    m = stop - first
+    geo = geom.tables()
+    if m <= 0 or not geom.has_emitters or not (scene.max_depth < 0 or scene.max_depth >= 2):
+        return empty_photons()
+    cur, nxt = ray_buffer(m), ray_buffer(m)
+    spec, nxt_spec = np.empty(m, bool), np.empty(m, bool)
+    out = empty_photons(m)
+    _emit(key, first, geo, cur, spec)
+    parts, n, depth = [], m, 1
+    while n:
+        rays = head(cur, n)
+        prim, t_sphere = geom.closest_hits(rays)
+        extend = scene.max_depth < 0 or depth + 2 <= scene.max_depth
+        ns, n = _scatter(prim, t_sphere, rays, spec[:n], key, first, depth, mode, extend, geo, out, nxt, nxt_spec)
+        if ns:
+            parts.append(Photons(*(a[:ns].copy() for a in out)))
+        cur, nxt = nxt, cur
+        spec, nxt_spec = nxt_spec, spec
+        depth += 1
+    return join(parts)
+
+
+def shoot(geom: SceneGeometry, scene: Scene, key: np.uint64, count: int, mode: int, threads: int,
+          stored: bool = False, first: int = 0) -> tuple[Photons, int]:
+    """A photon map's photons, their flux divided by the photons emitted: (photons, emitted).
+
+    ``count`` photons are emitted (numbered ``first`` on), or, with
+    ``stored``, batches of :data:`BATCH` are emitted until ``count`` photons
+    are stored (Mitsuba 0.6's ``globalPhotons``/``causticPhotons`` count stored
+    photons), up to :data:`MAX_EMITTED_PER_STORED` times ``count`` emitted.
+    Batches are traced on ``threads`` threads and joined in order.
+    """
+    parts: list[Photons] = []
+    state = {"stored": 0, "emitted": 0, "done": False}
+
+    def batches():
+        b = first
+        limit = first + (count * MAX_EMITTED_PER_STORED if stored else count)
+        while b < limit and not state["done"]:
+            yield b, min(b + BATCH, limit)
+            b += BATCH
+
+    def work(batch):
+        return trace_photons(geom, scene, key, batch[0], batch[1], mode)
+
+    def reduce(batch, photons):
+        if state["done"]:
+            return  # traced ahead by another thread after the target was reached: not part of the map
+        parts.append(photons)
+        state["stored"] += len(photons)
+        state["emitted"] = batch[1] - first
+        state["done"] = stored and state["stored"] >= count
+
+    run_units(batches(), work, reduce, threads)
+    photons = join(parts)
+    emitted = state["emitted"]
+    if emitted:
+        photons.power[:] = photons.power / np.float32(emitted)
+    return photons, emitted

@@ -1,0 +1,228 @@
+"""Stochastic progressive photon mapping (Hachisuka & Jensen 2009), radii shrinking as Knaus & Zwicker 2011.
+
+Each iteration, on the shared toolkit:
+
+1. **Camera pass** (:mod:`renderers.core.visible_points`): one jittered
+   camera path per pixel through mirrors and glass to its first diffuse
+   point, the pixel's visible point of this iteration; emission on the way
+   and direct light at the point (next-event estimation) go into the
+   pixel's sum Ld, as pbrt-v4's ``SPPMIntegrator`` does (§16.2), so photons
+   carry indirect light only.
+2. **Photon pass** (:mod:`renderers.core.photons`, ``STORE_INDIRECT``):
+   ``photons_per_iteration`` photons (default: one per pixel, as pbrt-v4);
+   each one stored at a diffuse surface is gathered by every visible point
+   within that pixel's radius r_i (a cKDTree over the visible points,
+   :meth:`scipy.spatial.cKDTree.sparse_distance_matrix`), passing the photon
+   maps' normal test and depth budget (:mod:`renderers.core.photon_map`):
+   Φ_i += β·ρ/π · Φ_p, M_i += 1.
+3. **Update** (Hachisuka & Jensen 2009 eqs. 5-7; pbrt-v4 §16.2.3): with
+   α (``alpha``) the fraction of new photons kept,
+   N' = N + α·M, r' = r·sqrt(N'/(N + M)), τ' = (τ + Φ)·r'²/r².
+
+After n iterations a pixel's radiance is Ld/n + τ/(n·π·r²) (the photons of
+each pass carry the scene's flux divided by that pass's count). With
+α < 1 the radius shrinks to 0 while N grows without bound, so bias and
+variance both vanish: the estimator is consistent, and Knaus & Zwicker 2011
+(§4) show its MSE falls as n^(-2/3) at best, for α = 2/3 (against n^(-1) for an
+unbiased one); α = 1 keeps the first radius forever and converges to a blurred image.
+
+The initial radius is ``initial_radius`` pixel footprints: the width of one
+pixel at the distance from the camera to the centre of the scene's bounds.
+
+spp is iterations. The render is progressive: the checkpoints 1, 2, 4, ...
+come from one run. Every pass is keyed from the seed
+(:func:`harness.adapters.seeds.pass_key`: iteration i's camera pass is
+stream 0, its photons :data:`PHOTON_STREAM`), and work is reduced in order,
+so an image is bit-identical for any thread count.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Sequence
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from harness.adapters.registry import Checkpoint, RenderResult
+from harness.adapters.seeds import pass_key
+from harness.adapters.settings import Setting
+from harness.scenes.model import Scene
+from renderers.core.geometry import SceneGeometry
+from renderers.core.photon_map import NORMAL_COS_MIN, UNBOUNDED
+from renderers.core.photons import BATCH, STORE_INDIRECT, trace_photons
+from renderers.core.schedule import default_threads, pass_units, run_units
+from renderers.core.visible_points import camera_visible_points
+
+PHOTON_STREAM = 1
+
+
+class SPPM:
+    """Our SPPM renderer (progressive: one checkpoint per power-of-two iteration count, from one run)."""
+
+    name = "sppm"
+    estimator = "consistent"
+    features = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
+                          "pinhole_camera", "box_filter"})
+    approximations = ("indirect light and caustics are density estimates over shrinking radii: biased at any "
+                      "finite iteration count, consistent",)
+    settings = (
+        Setting("photons_per_iteration", int, 0, "photons shot per iteration; 0: one per pixel (pbrt-v4's default)",
+                low=0, high=100_000_000),
+        Setting("alpha", float, 2 / 3, "fraction of each iteration's photons kept; the radius shrinks with it "
+                "(Hachisuka & Jensen 2009; 2/3 is Knaus & Zwicker 2011's optimum, 1 never shrinks)",
+                low=0.01, high=1.0),
+        Setting("initial_radius", float, 4.0, "starting gather radius, in pixel footprints at the scene's centre",
+                low=1e-3, high=1000.0),
+    )
+
+    def __init__(self, threads: int | None = None):
+        self.threads = threads
+
+    def unavailable_reason(self) -> str | None:
+        try:
+            import embreex  # noqa: F401
+        except ImportError as e:
+            return f"embreex is not installed ({e}); pip install embreex"
+        return None
+
+    def version(self) -> str:
+        from importlib.metadata import version
+
+        return f"cornell-harness {version('cornell-harness')} (embreex {version('embreex')})"
+
+    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
+               settings: dict | None = None) -> RenderResult:
+        if spp < 1:
+            raise ValueError(f"spp must be >= 1, got {spp}")
+        s = {st.name: st.default for st in self.settings} | dict(settings or {})
+        threads = self.threads or default_threads()
+        t0 = time.perf_counter()
+        geom = SceneGeometry(scene)
+        state = Progress(geom, scene, s)
+        state.iterate(np.uint64(0), np.uint64(0), 1, photons=1)  # compile the kernels before the clock starts
+        setup_s = time.perf_counter() - t0
+        state = Progress(geom, scene, s)
+        geom.rays = 0
+        photons = s["photons_per_iteration"] or state.pixels
+        shots, t0 = [], time.perf_counter()
+        for i in range(spp):
+            state.iterate(pass_key(seed, i), pass_key(seed, i, PHOTON_STREAM), threads, photons)
+            if i + 1 in checkpoints and i + 1 < spp:
+                shots.append(Checkpoint(i + 1, state.image(i + 1), time.perf_counter() - t0))
+        elapsed = time.perf_counter() - t0
+        image = state.image(spp)
+        if spp in checkpoints:
+            shots.append(Checkpoint(spp, image, elapsed))
+        info = dict(s, threads=threads, setup_s=round(setup_s, 3), rays=geom.rays, photons_per_iteration=photons,
+                    initial_radius_world=state.r0, final_radius_median=float(np.median(state.radius)))
+        return RenderResult(image, elapsed, spp, seed, shots, info, None)
+
+
+def pixel_footprint(scene: Scene) -> float:
+    """Width of one pixel, in scene units, at the distance from the camera to the centre of the scene's bounds."""
+    lo, hi = scene.bounds()
+    cam = scene.camera
+    dist = float(np.linalg.norm(0.5 * (lo + hi) - np.asarray(cam.position, np.float64)))
+    tx, _ = cam.tan_half_fov()
+    return 2.0 * dist * tx / cam.width
+
+
+class Progress:
+    """Per-pixel SPPM statistics (Ld, N, r, τ) after the iterations so far."""
+
+    def __init__(self, geom: SceneGeometry, scene: Scene, settings: dict):
+        self.geom, self.scene, self.s = geom, scene, settings
+        cam = scene.camera
+        self.pixels = cam.width * cam.height
+        self.r0 = settings["initial_radius"] * pixel_footprint(scene)
+        self.ld = np.zeros((self.pixels, 3))
+        self.n = np.zeros(self.pixels)
+        self.radius = np.full(self.pixels, self.r0)
+        self.tau = np.zeros((self.pixels, 3))
+
+    def image(self, iterations: int) -> np.ndarray:
+        """The estimate after ``iterations``: Ld/n + τ/(n·π·r²), float32 (height, width, 3)."""
+        cam = self.scene.camera
+        L = self.ld / iterations + self.tau / (iterations * math.pi * self.radius ** 2)[:, None]
+        return L.reshape(cam.height, cam.width, 3).astype(np.float32)
+
+    def iterate(self, camera_key: np.uint64, photon_key: np.uint64, threads: int, photons: int) -> None:
+        vp = self._camera_pass(camera_key, threads)
+        found = np.flatnonzero(vp["found"])
+        phi, m = np.zeros((self.pixels, 3)), np.zeros(self.pixels)
+        if found.size:
+            gather = _Gather(self, vp, found)
+
+            def work(batch):
+                return gather.photons(photon_key, batch[0], batch[1])
+
+            def reduce(batch, result):
+                phi[:] += result[0]
+                m[:] += result[1]
+
+            run_units(((b, min(b + BATCH, photons)) for b in range(0, photons, BATCH)), work, reduce, threads)
+            # Each photon pass carries the scene's whole flux: divide by its photon count.
+            phi /= photons
+        self._update(phi, m)
+
+    def _camera_pass(self, key: np.uint64, threads: int) -> dict:
+        vp = {"position": np.zeros((self.pixels, 3)), "normal": np.zeros((self.pixels, 3)),
+              "weight": np.zeros((self.pixels, 3)), "depth": np.zeros(self.pixels, np.int64),
+              "found": np.zeros(self.pixels, bool)}
+
+        def work(unit):
+            return camera_visible_points(self.geom, self.scene, unit.first, unit.stop, self.pixels, key)
+
+        def reduce(unit, result):
+            L, points = result
+            self.ld[unit.first:unit.stop] += L
+            for name in vp:
+                vp[name][unit.first:unit.stop] = getattr(points, name)
+
+        run_units(pass_units([1], self.pixels, threads), work, reduce, threads)
+        return vp
+
+    def _update(self, phi: np.ndarray, m: np.ndarray) -> None:
+        """Hachisuka & Jensen 2009 eqs. 5-7 for every pixel that gathered a photon this iteration."""
+        hit = m > 0
+        alpha = self.s["alpha"]
+        n_new = self.n[hit] + alpha * m[hit]
+        r_new = self.radius[hit] * np.sqrt(n_new / (self.n[hit] + m[hit]))
+        self.tau[hit] = (self.tau[hit] + phi[hit]) * (r_new ** 2 / self.radius[hit] ** 2)[:, None]
+        self.n[hit], self.radius[hit] = n_new, r_new
+
+
+class _Gather:
+    """The visible points of one iteration, indexed, gathering one batch of photons at a time."""
+
+    def __init__(self, progress: Progress, vp: dict, found: np.ndarray):
+        self.p = progress
+        self.found = found
+        self.position = vp["position"][found]
+        self.normal = vp["normal"][found]
+        self.weight = vp["weight"][found]
+        max_depth = progress.scene.max_depth
+        self.budget = np.full(found.size, UNBOUNDED) if max_depth < 0 else max_depth - vp["depth"][found]
+        self.radius = progress.radius[found]
+        self.tree = cKDTree(self.position, balanced_tree=False, compact_nodes=False)
+
+    def photons(self, key: np.uint64, first: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """(Φ (pixels, 3), M (pixels,)) gathered from photons first .. stop-1 of this iteration."""
+        ph = trace_photons(self.p.geom, self.p.scene, key, first, stop, STORE_INDIRECT)
+        phi, m = np.zeros((self.p.pixels, 3)), np.zeros(self.p.pixels)
+        if len(ph) == 0:
+            return phi, m
+        pairs = self.tree.sparse_distance_matrix(cKDTree(ph.position), float(self.radius.max()),
+                                                 output_type="ndarray")
+        i, j, d = pairs["i"], pairs["j"], pairs["v"]
+        cos_n = np.einsum("ij,ij->i", self.normal[i], ph.normal[j])
+        ok = (d < self.radius[i]) & (cos_n >= NORMAL_COS_MIN) & (ph.depth[j] <= self.budget[i])
+        i, j = i[ok], j[ok]
+        pixel = self.found[i]
+        contribution = self.weight[i] / math.pi * ph.power[j]
+        for c in range(3):
+            phi[:, c] = np.bincount(pixel, contribution[:, c], self.p.pixels)
+        m[:] = np.bincount(pixel, minlength=self.p.pixels)
+        return phi, m
