@@ -27,7 +27,8 @@ variance both vanish: the estimator is consistent, and Knaus & Zwicker 2011
 unbiased one); α = 1 keeps the first radius forever and converges to a blurred image.
 
 The initial radius is ``initial_radius`` pixel footprints: the width of one
-pixel at the distance from the camera to the centre of the scene's bounds.
+pixel at the distance from the camera to the centre of the scene's bounds
+(:func:`pixel_footprint`).
 
 spp is iterations. The render is progressive: the checkpoints 1, 2, 4, ...
 come from one run. Every pass is keyed from the seed
@@ -121,10 +122,14 @@ class SPPM:
 
 
 def pixel_footprint(scene: Scene) -> float:
-    """Width of one pixel, in scene units, at the distance from the camera to the centre of the scene's bounds."""
+    """Width of one pixel, in scene units, at the distance from the camera to the centre of the scene's bounds.
+
+    At least at the bounding sphere's radius: a camera at the centre (a furnace) still sees walls.
+    """
     lo, hi = scene.bounds()
     cam = scene.camera
-    dist = float(np.linalg.norm(0.5 * (lo + hi) - np.asarray(cam.position, np.float64)))
+    dist = max(float(np.linalg.norm(0.5 * (lo + hi) - np.asarray(cam.position, np.float64))),
+               0.5 * float(np.linalg.norm(hi - lo)))
     tx, _ = cam.tan_half_fov()
     return 2.0 * dist * tx / cam.width
 
