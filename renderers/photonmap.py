@@ -59,6 +59,7 @@ from harness.adapters.registry import RenderResult
 from harness.adapters.seeds import pass_key
 from harness.adapters.settings import Setting
 from harness.scenes.model import Scene
+from renderers.core.bsdf import LAMBERT
 from renderers.core.geometry import SceneGeometry
 from renderers.core.photon_map import KERNELS, UNBOUNDED, PhotonMap, PrecomputedIrradiance
 from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, Photons, empty_photons, shoot
@@ -213,7 +214,7 @@ def build_pass2(geom: SceneGeometry, scene: Scene, seed: int, settings: dict, th
         global_ph, global_n = shoot(geom, scene, pass_key(seed, 0, GLOBAL_STREAM), settings["global_photons"],
                                     STORE_ALL, threads, stored=True)
     caustic_ph, caustic_n = empty_photons(), 0
-    if settings["caustic_photons"]:
+    if settings["caustic_photons"] and (geom.material != LAMBERT).any():  # no mirror or glass: no caustic
         caustic_ph, caustic_n = shoot(geom, scene, pass_key(seed, 0, CAUSTIC_STREAM), settings["caustic_photons"],
                                       STORE_CAUSTIC, threads, stored=True)
     p2 = Pass2(geom, scene, settings, PhotonMap(global_ph, global_n), PhotonMap(caustic_ph, caustic_n))

@@ -69,9 +69,9 @@ DIMS_PER_BOUNCE = 3
 
 #: Photons per batch (a work unit): fixed, so which photons a map holds never depends on the thread count.
 BATCH = 1 << 14
-#: :func:`shoot` with a stored target gives up after emitting this many times the target
-#: (a scene with no caustic path would otherwise shoot forever).
-MAX_EMITTED_PER_STORED = 1000
+#: :func:`shoot` with a stored target gives up after emitting this many times the target: a scene
+#: whose caustic paths are rare would otherwise shoot for minutes (cornell-box-caustics needs 12).
+MAX_EMITTED_PER_STORED = 100
 
 
 class Photons(NamedTuple):
