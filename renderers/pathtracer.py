@@ -51,6 +51,7 @@ from harness.adapters.settings import Setting
 from harness.scenes.model import Scene
 from renderers.core.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, refraction_scale, two_sided
 from renderers.core.camera import camera_basis, camera_rays
+from renderers.core.adapter import ToolkitRenderer
 from renderers.core.geometry import SceneGeometry, offset_origin, surface_point
 from renderers.core.lights import sample_emitter, solid_angle_pdf, solid_angle_pdf_along, towards_emitter
 from renderers.core.roulette import Q_MAX, RR_DEPTH, continue_path
@@ -177,30 +178,12 @@ def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels
     return L
 
 
-class PathTracer:
+class PathTracer(ToolkitRenderer):
     """Our path tracer (embreex, vectorised wavefront, multithreaded)."""
 
     name = "pathtracer"
-    features = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
-                          "pinhole_camera", "box_filter"})
-    approximations: tuple[str, ...] = ()
     settings = (Setting("rr_depth", int, RR_DEPTH, "path vertex from which Russian roulette may end a path",
                         low=1, high=1000),)
-
-    def __init__(self, threads: int | None = None):
-        self.threads = threads
-
-    def unavailable_reason(self) -> str | None:
-        try:
-            import embreex  # noqa: F401
-        except ImportError as e:
-            return f"embreex is not installed ({e}); pip install embreex"
-        return None
-
-    def version(self) -> str:
-        from importlib.metadata import version
-
-        return f"cornell-harness {version('cornell-harness')} (embreex {version('embreex')})"
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:

@@ -60,6 +60,7 @@ from harness.adapters.seeds import pass_key
 from harness.adapters.settings import Setting
 from harness.scenes.model import Scene
 from renderers.core.bsdf import LAMBERT
+from renderers.core.adapter import ToolkitRenderer
 from renderers.core.geometry import SceneGeometry
 from renderers.core.photon_map import KERNELS, UNBOUNDED, PhotonMap, PrecomputedIrradiance
 from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, Photons, empty_photons, shoot
@@ -79,13 +80,11 @@ GATHER_WALK_DIM = 1 << 21
 GATHER_WALK_STRIDE = 1 << 12
 
 
-class PhotonMapper:
+class PhotonMapper(ToolkitRenderer):
     """Our photon mapper (Jensen's two passes on Embree and cKDTree, multithreaded)."""
 
     name = "photonmap"
     estimator = "consistent"
-    features = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
-                          "pinhole_camera", "box_filter"})
     approximations = ("caustics and indirect light are photon density estimates: blurred over the lookup "
                       "radius (biased), consistent as photons grow",)
     settings = (
@@ -102,21 +101,6 @@ class PhotonMapper:
         Setting("gather_rays", int, 1, "final-gathering rays per camera sample; 0 shows the global map directly",
                 low=0, high=1024),
     )
-
-    def __init__(self, threads: int | None = None):
-        self.threads = threads
-
-    def unavailable_reason(self) -> str | None:
-        try:
-            import embreex  # noqa: F401
-        except ImportError as e:
-            return f"embreex is not installed ({e}); pip install embreex"
-        return None
-
-    def version(self) -> str:
-        from importlib.metadata import version
-
-        return f"cornell-harness {version('cornell-harness')} (embreex {version('embreex')})"
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:

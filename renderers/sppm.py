@@ -50,6 +50,7 @@ from harness.adapters.registry import Checkpoint, RenderResult
 from harness.adapters.seeds import pass_key
 from harness.adapters.settings import Setting
 from harness.scenes.model import Scene
+from renderers.core.adapter import ToolkitRenderer
 from renderers.core.geometry import SceneGeometry
 from renderers.core.photon_map import NORMAL_COS_MIN, UNBOUNDED
 from renderers.core.photons import BATCH, STORE_INDIRECT, trace_photons
@@ -59,13 +60,11 @@ from renderers.core.visible_points import camera_visible_points
 PHOTON_STREAM = 1
 
 
-class SPPM:
+class SPPM(ToolkitRenderer):
     """Our SPPM renderer (progressive: one checkpoint per power-of-two iteration count, from one run)."""
 
     name = "sppm"
     estimator = "consistent"
-    features = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
-                          "pinhole_camera", "box_filter"})
     approximations = ("indirect light and caustics are density estimates over shrinking radii: biased at any "
                       "finite iteration count, consistent",)
     settings = (
@@ -77,21 +76,6 @@ class SPPM:
         Setting("initial_radius", float, 4.0, "starting gather radius, in pixel footprints at the scene's centre",
                 low=1e-3, high=1000.0),
     )
-
-    def __init__(self, threads: int | None = None):
-        self.threads = threads
-
-    def unavailable_reason(self) -> str | None:
-        try:
-            import embreex  # noqa: F401
-        except ImportError as e:
-            return f"embreex is not installed ({e}); pip install embreex"
-        return None
-
-    def version(self) -> str:
-        from importlib.metadata import version
-
-        return f"cornell-harness {version('cornell-harness')} (embreex {version('embreex')})"
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
@@ -222,8 +206,10 @@ class _Gather:
         pairs = self.tree.sparse_distance_matrix(cKDTree(ph.position), float(self.radius.max()),
                                                  output_type="ndarray")
         i, j, d = pairs["i"], pairs["j"], pairs["v"]
+        # The photon maps' tests (renderers.core.photon_map): same-facing surface, arrived from the front.
         cos_n = np.einsum("ij,ij->i", self.normal[i], ph.normal[j])
-        ok = (d < self.radius[i]) & (cos_n >= NORMAL_COS_MIN) & (ph.depth[j] <= self.budget[i])
+        cos_in = np.einsum("ij,ij->i", self.normal[i], ph.direction[j])
+        ok = (d < self.radius[i]) & (cos_n >= NORMAL_COS_MIN) & (cos_in > 0) & (ph.depth[j] <= self.budget[i])
         i, j = i[ok], j[ok]
         pixel = self.found[i]
         contribution = self.weight[i] / math.pi * ph.power[j]

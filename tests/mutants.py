@@ -1,12 +1,14 @@
-"""Deliberately broken copies of our path tracer, for measuring the CI gate's power.
+"""Deliberately broken copies of our renderers, for measuring the CI gate's power.
 
-Each :class:`Mutant` is a realistic bug, written as exact source patches: an
-``old`` snippet replaced by ``new`` in ``renderers/pathtracer.py`` (the
-integrator) or in a module of the toolkit it is built on (``renderers/core/``),
-wherever the line now lives. :func:`load_mutant` writes the patched sources to
-real files (so numba's ``cache=True`` has a locator) as uniquely named
-modules, imports them, and returns a :class:`harness.adapters.registry.RendererEntry`
-named ``pathtracer`` that :func:`harness.gate.checks.run_gate` takes as an override.
+Each :class:`Mutant` is a realistic bug in one of our renderers
+(:data:`INTEGRATORS`: the path tracer, the photon mapper, SPPM), written as
+exact source patches: an ``old`` snippet replaced by ``new`` in the
+renderer's module (the integrator, e.g. ``renderers/pathtracer.py``) or in a
+module of the toolkit it is built on (``renderers/core/``), wherever the
+line now lives. :func:`load_mutant` writes the patched sources to real files
+(so numba's ``cache=True`` has a locator) as uniquely named modules, imports
+them, and returns a :class:`harness.adapters.registry.RendererEntry` named
+after the renderer, which :func:`harness.gate.checks.run_gate` takes as an override.
 
 A mutant is a set of modules: the integrator is ``cbox_mutant_<name>``; a
 mutant that patches the toolkit gets a copy ``cbox_mutant_<name>__<stem>`` of
@@ -35,8 +37,13 @@ from harness.adapters.registry import RendererEntry
 
 ROOT = Path(__file__).resolve().parent.parent
 PATHTRACER = "renderers/pathtracer.py"
+PHOTONMAP = "renderers/photonmap.py"
+SPPM = "renderers/sppm.py"
 SOURCE = ROOT / PATHTRACER
 CORE = "renderers/core"
+#: The renderers mutants are made of: registered name -> (integrator module, adapter class).
+INTEGRATORS = {"pathtracer": (PATHTRACER, "PathTracer"), "photonmap": (PHOTONMAP, "PhotonMapper"),
+               "sppm": (SPPM, "SPPM")}
 
 
 class Patch(NamedTuple):
@@ -49,7 +56,8 @@ class Patch(NamedTuple):
 class Mutant:
     name: str
     description: str  # the bug, as a developer would make it
-    patches: tuple[Patch, ...]
+    patches: tuple[Patch, ...]  # a patch without a file patches renderers/pathtracer.py
+    renderer: str = "pathtracer"  # the registered renderer it is a copy of (INTEGRATORS)
 
     def __post_init__(self):
         object.__setattr__(self, "patches", tuple(Patch(*p) for p in self.patches))
@@ -213,6 +221,49 @@ MUTANTS: tuple[Mutant, ...] = (
           "def _emission_weight(pdf_bsdf, pa, t, cos_o, depth) -> float:"),
          ("w = _emission_weight(rays.pdf[i], pa, t, cos_o)", "w = _emission_weight(rays.pdf[i], pa, t, cos_o, depth)")),
     ),
+    # -- photon mapping (photonmap, sppm) ------------------------------------------------
+    Mutant(
+        "photon_power_not_divided",
+        "photon flux not divided by the number of photons emitted (each photon carries the light's whole "
+        "power)",
+        (("    photons.power[:] /= max(emitted, 1)\n", "", f"{CORE}/photons.py"),),
+        "photonmap",
+    ),
+    Mutant(
+        "double_cosine",
+        "density estimate weighted by the cosine of each photon's incidence, which its flux already counts",
+        (("            w = kernel_weight(kernel, dist[i, a], r)\n",
+          "            w = kernel_weight(kernel, dist[i, a], r) * cos_in\n", f"{CORE}/photon_map.py"),),
+        "photonmap",
+    ),
+    Mutant(
+        "caustic_photon_on_specular_surface",
+        "caustic photons stored where they leave the last specular surface (the ray's origin) instead of "
+        "where they land",
+        (("                _store(out, ns, x, power, d, n, depth, caustic)\n",
+          "                _store(out, ns, o if mode == STORE_CAUSTIC else x, power, d, n, depth, caustic)\n",
+          f"{CORE}/photons.py"),),
+        "photonmap",
+    ),
+    Mutant(
+        "no_normal_test",
+        "no normal test in the density estimate: photons on a wall count on the floor at their corner",
+        (("            if cos_n < NORMAL_COS_MIN:\n                continue\n", "", f"{CORE}/photon_map.py"),),
+        "photonmap",
+    ),
+    Mutant(
+        "no_radius_shrinking",
+        "SPPM's α left out of the photon-count update (N' = N + M): the radius never shrinks, and the image "
+        "converges to a blurred one",
+        (("        n_new = self.n[hit] + alpha * m[hit]\n", "        n_new = self.n[hit] + m[hit]\n", SPPM),),
+        "sppm",
+    ),
+    Mutant(
+        "sppm_power_not_divided",
+        "SPPM's gathered flux not divided by the iteration's photon count",
+        (("            phi /= photons\n", "", SPPM),),
+        "sppm",
+    ),
 )
 
 BY_NAME = {m.name: m for m in MUTANTS}
@@ -236,14 +287,20 @@ assert ISOLATED <= set(BY_NAME)
 SHARED_CORE = ("sampling", "rng")
 
 
-def original_source() -> str:
-    """The integrator's source, ``renderers/pathtracer.py``."""
-    return SOURCE.read_text(encoding="utf-8")
+def integrator(mutant: Mutant | str) -> str:
+    """The file of the renderer module a mutant is a copy of (``renderers/pathtracer.py``, ...)."""
+    m = BY_NAME[mutant] if isinstance(mutant, str) else mutant
+    return INTEGRATORS[m.renderer][0]
+
+
+def original_source(renderer: str = "pathtracer") -> str:
+    """The source of a renderer's integrator module (default ``renderers/pathtracer.py``)."""
+    return (ROOT / INTEGRATORS[renderer][0]).read_text(encoding="utf-8")
 
 
 def module_name(name: str, file: str = PATHTRACER) -> str:
-    """The mutant's module for ``file``: ``cbox_mutant_<name>`` for the integrator, ``..__<stem>`` for core."""
-    return f"cbox_mutant_{name}" if file == PATHTRACER else f"cbox_mutant_{name}__{Path(file).stem}"
+    """The mutant's module for ``file``: ``cbox_mutant_<name>`` for its integrator, ``..__<stem>`` for core."""
+    return f"cbox_mutant_{name}__{Path(file).stem}" if file.startswith(f"{CORE}/") else f"cbox_mutant_{name}"
 
 
 def _core_module(file: str) -> str:
@@ -273,7 +330,8 @@ def patched_sources(mutant: Mutant | str, sources: dict[str, str] | None = None)
             sources[file] = (ROOT / file).read_text(encoding="utf-8")
         return sources[file]
 
-    texts = {PATHTRACER: read(PATHTRACER)}
+    top = integrator(m)
+    texts = {top: read(top)}
     for p in m.patches:
         text = texts.get(p.file, read(p.file))
         count = text.count(p.old)
@@ -287,7 +345,7 @@ def patched_sources(mutant: Mutant | str, sources: dict[str, str] | None = None)
     # sampling and rng take scalars only (and sampling keys the real tree's kernel caches), so they
     # stay shared.
     core = sorted(str(f.relative_to(ROOT)) for f in (ROOT / CORE).glob("*.py"))
-    copied = {f for f in texts if f != PATHTRACER}
+    copied = {f for f in texts if f != top}
     if copied:
         copied |= {f for f in core if Path(f).stem not in SHARED_CORE and Path(f).stem != "__init__"}
         texts.update({f: texts.get(f, read(f)) for f in copied})
@@ -299,7 +357,8 @@ def patched_sources(mutant: Mutant | str, sources: dict[str, str] | None = None)
 
 def patched_source(mutant: Mutant | str, source: str | None = None) -> str:
     """The integrator's source for ``mutant`` (``source``: the integrator's text to patch instead of the file's)."""
-    return patched_sources(mutant, None if source is None else {PATHTRACER: source})[PATHTRACER]
+    top = integrator(mutant)
+    return patched_sources(mutant, None if source is None else {top: source})[top]
 
 
 def load_module(name: str, tmp_dir: str | Path):
@@ -312,7 +371,7 @@ def load_module(name: str, tmp_dir: str | Path):
     files = {module_name(name, f): (Path(tmp_dir) / f"{module_name(name, f)}.py", text)
              for f, text in patched_sources(name).items()}
     current = all(path.exists() and path.read_text(encoding="utf-8") == text for path, text in files.values())
-    top = module_name(name)
+    top = module_name(name, integrator(name))
     loaded = sys.modules.get(top)
     if current and loaded is not None and getattr(loaded, "__file__", None) == str(files[top][0]):
         return loaded
@@ -341,9 +400,10 @@ def load_module(name: str, tmp_dir: str | Path):
 
 
 def load_mutant(name: str, tmp_dir: str | Path) -> RendererEntry:
-    """A gate override: ``{"pathtracer": load_mutant(name, tmp_dir)}`` runs the mutant in place of ours."""
+    """A gate override: ``{m.renderer: load_mutant(name, tmp_dir)}`` runs the mutant in place of ours."""
     module = load_module(name, tmp_dir)
-    return RendererEntry("pathtracer", f"mutant:{name}", module.PathTracer(), None)
+    renderer = BY_NAME[name].renderer
+    return RendererEntry(renderer, f"mutant:{name}", getattr(module, INTEGRATORS[renderer][1])(), None)
 
 
 # -- running the gate on a mutant ----------------------------------------------------
@@ -351,16 +411,21 @@ def load_mutant(name: str, tmp_dir: str | Path) -> RendererEntry:
 GATE_TOML = SOURCE.parent.parent / "gate.toml"
 
 
-def pathtracer_gate_config(path: str | Path = GATE_TOML):
-    """The project's gate config (alpha, baseline, margins) with only its ``pathtracer`` expectations."""
+def gate_config(renderer: str, path: str | Path = GATE_TOML):
+    """The project's gate config (alpha, baseline, margins) with only ``renderer``'s expectations."""
     import dataclasses
 
     from harness.gate.config import load_config
 
     cfg = load_config(path)
-    keep = [e for e in cfg.expectations if e.renderer == "pathtracer"]
-    assert keep, f"{path}: no pathtracer expectation"
+    keep = [e for e in cfg.expectations if e.renderer == renderer]
+    assert keep, f"{path}: no {renderer} expectation"
     return dataclasses.replace(cfg, expectations=keep)
+
+
+def pathtracer_gate_config(path: str | Path = GATE_TOML):
+    """:func:`gate_config` of the path tracer."""
+    return gate_config("pathtracer", path)
 
 
 def label(exp) -> str:
@@ -453,8 +518,9 @@ sys.path.insert(0, sys.argv[1])
 import mutants
 from harness.gate.run import run_gate
 name, gate, work, until = sys.argv[2:6]
-cfg = mutants.pathtracer_gate_config(gate)
-entry = {"pathtracer": mutants.load_mutant(name, work)}
+renderer = mutants.BY_NAME[name].renderer
+cfg = mutants.gate_config(renderer, gate)
+entry = {renderer: mutants.load_mutant(name, work)}
 outcomes = mutants.run_until_failure(cfg, entry) if until == "1" else run_gate(cfg, entry)
 v = mutants.verdict(outcomes)
 print(json.dumps({**dataclasses.asdict(v), "checks": sorted(v.checks)}))

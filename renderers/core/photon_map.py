@@ -14,7 +14,11 @@ so callers multiply by their throughput·ρ/π. The index is
 
 - **Normal test** (Jensen §7.2.3): a photon counts only if its surface
   normal is within :data:`NORMAL_COS_MIN` of the query's, so light on a wall
-  does not leak onto the floor at a corner, or through a thin object.
+  does not leak onto the floor at a corner, and only if it arrived from the
+  query's side (its incoming direction above the query's surface), so light
+  does not leak through a thin object.
+- Φ_p is the flux that crossed the surface: the cosine of its incidence is
+  already in it (the photon density is per unit area), so no cos θ factor.
 - **Depth budget**: a query point reached by d camera segments may use a
   photon of depth k only when d + k ≤ max_depth (``budget``).
 """
@@ -65,7 +69,8 @@ def kernel_weight(kernel, d, r) -> float:
 
 
 @jit
-def _estimate(dist, idx, skip, normals, budget, r_max, kernel, p_normal, p_power, p_depth, out, radius):
+def _estimate(dist, idx, skip, normals, budget, r_max, kernel, p_normal, p_direction, p_power, p_depth, out,
+              radius):
     """out[i] = Σ over the found photons of query i that pass the tests of Φ_p·K (see the module docstring).
 
     Photon ``skip[i]`` (-1: none) is left out: a query at a photon's own position.
@@ -87,6 +92,10 @@ def _estimate(dist, idx, skip, normals, budget, r_max, kernel, p_normal, p_power
                 continue
             cos_n = normals[i, 0] * p_normal[p, 0] + normals[i, 1] * p_normal[p, 1] + normals[i, 2] * p_normal[p, 2]
             if cos_n < NORMAL_COS_MIN:
+                continue
+            cos_in = (normals[i, 0] * p_direction[p, 0] + normals[i, 1] * p_direction[p, 1]
+                      + normals[i, 2] * p_direction[p, 2])
+            if not cos_in > 0.0:
                 continue
             w = kernel_weight(kernel, dist[i, a], r)
             for c in range(3):
@@ -124,7 +133,7 @@ class PhotonMap:
         skip = np.full(m, -1, np.int64) if skip is None else np.asarray(skip, np.int64)
         ph = self.photons
         _estimate(dist, idx, skip, np.ascontiguousarray(normals, np.float64), np.asarray(budget, np.int64), r_max,
-                  kernel_id(kernel), ph.normal, ph.power, ph.depth, out, radius)
+                  kernel_id(kernel), ph.normal, ph.direction, ph.power, ph.depth, out, radius)
         return out, radius
 
 

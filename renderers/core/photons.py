@@ -239,6 +239,5 @@ def shoot(geom: SceneGeometry, scene: Scene, key: np.uint64, count: int, mode: i
     run_units(batches(), work, reduce, threads)
     photons = join(parts)
     emitted = state["emitted"]
-    if emitted:
-        photons.power[:] = photons.power / np.float32(emitted)
+    photons.power[:] /= max(emitted, 1)
     return photons, emitted

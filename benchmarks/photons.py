@@ -1,0 +1,139 @@
+"""Photon mapping's speed: photon throughput, the kd-tree, and time to error against the path tracer.
+
+Three measurements on ``cornell-box-caustics``, each a median over
+``--repeats`` runs in one process (the machine is noisy: ratios and medians,
+not single times):
+
+1. **Throughput**: photons traced per second (global-map photons, every
+   diffuse hit stored), against our path tracer's camera paths and rays per
+   second on the same scene.
+2. **kd-tree**: cKDTree build time over 1 M stored photons and the time of
+   a k = 30 nearest-neighbour query (the photon mapper's default) per
+   point; and the issue's target, 1 M photons traced and indexed in ≤ 2 s.
+3. **Time to error**: ``pathtracer``, ``photonmap`` and ``sppm`` through the
+   harness's convergence workflow (:func:`harness.workflows.converge.run_experiment`,
+   what ``cbox converge`` runs; resumable in ``--out``), and the median
+   time over seeds at which each reaches a caustic-region relMSE of 0.05 and
+   0.01 and an image-wide ΔE mean of 2 (:func:`harness.evaluate.convergence.time_to_target`).
+   photonmap's budget is its photon counts, not spp (its error stops
+   falling with spp at its bias): it runs at spp 1..16 for 250k, 1M and 4M
+   stored photons per map.
+
+Run: ``.venv/bin/python benchmarks/photons.py --seeds 3`` (about 25 minutes on 2 cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from harness.adapters.registry import resolve
+from harness.adapters.seeds import pass_key
+from harness.evaluate.convergence import time_to_target
+from harness.scenes.library import resolve_scene
+from harness.store.references import load_reference
+from harness.workflows.converge import parse_spp_list, run_experiment
+from renderers.core.geometry import SceneGeometry
+from renderers.core.photons import STORE_ALL, shoot
+from renderers.core.schedule import default_threads
+from renderers.pathtracer import PathTracer
+
+TARGETS = (("region.caustic.rel_mse", 0.05), ("region.caustic.rel_mse", 0.01), ("delta_e2000_mean", 2.0))
+
+
+def throughput(scene, repeats: int, threads: int) -> None:
+    geom = SceneGeometry(scene)
+    shoot(geom, scene, pass_key(0, 0, 1), 1 << 14, STORE_ALL, threads)  # compile
+    rates, ray_rates, stored = [], [], 0
+    for r in range(repeats):
+        geom.rays = 0
+        t = time.perf_counter()
+        ph, emitted = shoot(geom, scene, pass_key(r, 0, 1), 1_000_000, STORE_ALL, threads)
+        dt = time.perf_counter() - t
+        rates.append(emitted / dt)
+        ray_rates.append(geom.rays / dt)
+        stored = len(ph)
+    pt = [PathTracer(threads).render(scene, 16, r) for r in range(repeats)]
+    pixels = scene.camera.width * scene.camera.height
+    paths = statistics.median(16 * pixels / p.time_s for p in pt)
+    pt_rays = statistics.median(p.info["rays"] / p.time_s for p in pt)
+    print(f"## Throughput ({threads} threads, median of {repeats})\n")
+    print("| | per second | ratio to the path tracer |\n|---|---|---|")
+    print(f"| photons emitted (1 M; {stored / 1e6:.2f} M stored) | {statistics.median(rates) / 1e6:.2f} M | "
+          f"{statistics.median(rates) / paths:.2f} (per camera path) |")
+    print(f"| photon rays (Embree queries) | {statistics.median(ray_rates) / 1e6:.2f} M | "
+          f"{statistics.median(ray_rates) / pt_rays:.2f} |")
+    print(f"| path tracer camera paths (16 spp) | {paths / 1e6:.2f} M | 1 |")
+    print(f"| path tracer rays | {pt_rays / 1e6:.2f} M | 1 |\n")
+
+
+def kd_tree(scene, repeats: int, threads: int) -> None:
+    geom = SceneGeometry(scene)
+    builds, queries, traced = [], [], []
+    for r in range(repeats):
+        t = time.perf_counter()
+        ph, emitted = shoot(geom, scene, pass_key(r, 0, 1), 1_000_000, STORE_ALL, threads, stored=True)
+        t_trace = time.perf_counter() - t
+        t = time.perf_counter()
+        tree = cKDTree(ph.position, balanced_tree=False, compact_nodes=False)
+        builds.append(time.perf_counter() - t)
+        traced.append(t_trace + builds[-1])
+        pts = ph.position[:: max(1, len(ph) // 100_000)].astype(np.float64)
+        t = time.perf_counter()
+        tree.query(pts, k=30, distance_upper_bound=0.1, workers=threads)
+        queries.append((time.perf_counter() - t) / len(pts))
+    print(f"## kd-tree over 1 M stored photons ({threads} threads, median of {repeats})\n")
+    print("| | time |\n|---|---|")
+    print(f"| trace until 1 M stored, then build the tree | {statistics.median(traced):.2f} s (target ≤ 2 s) |")
+    print(f"| cKDTree build | {statistics.median(builds):.3f} s |")
+    print(f"| k = 30 query, per point ({threads} workers) | {statistics.median(queries) * 1e6:.1f} µs |\n")
+
+
+def time_to_error(scene, seeds: int, out: Path) -> None:
+    reference = load_reference(scene)
+    runs = [(["pathtracer"], "1,2,4,...,1024"), (["sppm"], "1,2,4,...,256"),
+            (["photonmap", "photonmap[global_photons=1000000,caustic_photons=1000000]",
+              "photonmap[global_photons=4000000,caustic_photons=4000000]"], "1,2,4,8,16")]
+    print(f"## Time to error on cornell-box-caustics (median over seeds 0-{seeds - 1})\n")
+    print("| renderer | " + " | ".join(f"{m} ≤ {v:g}" for m, v in TARGETS) + " | best caustic relMSE |")
+    print("|---|" + "---|" * (len(TARGETS) + 1))
+    times = {}
+    for specs, spp in runs:
+        entries = resolve(specs)
+        spps = parse_spp_list(spp)
+        table = run_experiment(out / specs[0], scene, reference, entries, spps, list(range(seeds)))
+        for name, g in table[table["status"] == "ok"].groupby("renderer", sort=False):
+            t = [time_to_target(g, m, v) for m, v in TARGETS]
+            times[name] = t
+            best = g.groupby("spp")["region.caustic.rel_mse"].median().min()
+            print(f"| {name} | " + " | ".join(f"{x:.1f} s" if np.isfinite(x) else "not reached" for x in t)
+                  + f" | {best:.4f} |")
+    if "pathtracer" in times and "sppm" in times:
+        ratios = [a / b if np.isfinite(a) and np.isfinite(b) else float("nan")
+                  for a, b in zip(times["pathtracer"], times["sppm"])]
+        print("| **pathtracer / sppm** | " + " | ".join(f"**{r:.1f}×**" for r in ratios) + " | |")
+    print()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeats", type=int, default=3, help="repeats of the throughput and kd-tree figures")
+    ap.add_argument("--seeds", type=int, default=3, help="seeds of the time-to-error runs")
+    ap.add_argument("--out", type=Path, default=Path("out/bench-photons"), help="experiment folders (resumable)")
+    ap.add_argument("--skip-time-to-error", action="store_true", help="only the throughput and kd-tree figures")
+    args = ap.parse_args()
+    scene = resolve_scene("cornell-box-caustics")
+    threads = default_threads()
+    throughput(scene, args.repeats, threads)
+    kd_tree(scene, args.repeats, threads)
+    if not args.skip_time_to_error:
+        time_to_error(scene, args.seeds, args.out)
+
+
+if __name__ == "__main__":
+    main()

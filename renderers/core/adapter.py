@@ -1,0 +1,34 @@
+"""What every renderer of ours shares as a harness adapter: threads, availability, version, features.
+
+The adapter interface is :mod:`harness.adapters.registry`'s; our renderers
+(path tracer, photon mapper, SPPM) differ only in their integrator and
+settings, so the rest is written once here.
+"""
+
+from __future__ import annotations
+
+#: Scene features the shared toolkit models (renderers/core): every renderer of ours inherits them.
+TOOLKIT_FEATURES = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
+                              "pinhole_camera", "box_filter"})
+
+
+class ToolkitRenderer:
+    """Base of our adapters: ``threads`` worker threads (None: :func:`renderers.core.schedule.default_threads`)."""
+
+    features = TOOLKIT_FEATURES
+    approximations: tuple[str, ...] = ()
+
+    def __init__(self, threads: int | None = None):
+        self.threads = threads
+
+    def unavailable_reason(self) -> str | None:
+        try:
+            import embreex  # noqa: F401
+        except ImportError as e:
+            return f"embreex is not installed ({e}); pip install embreex"
+        return None
+
+    def version(self) -> str:
+        from importlib.metadata import version
+
+        return f"cornell-harness {version('cornell-harness')} (embreex {version('embreex')})"
