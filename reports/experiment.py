@@ -20,7 +20,7 @@ def write_experiment_report(out: Path, scene: Scene, reference: Reference, thres
     config, runs = load_results(out)
     images = final_images(out, runs)
     targets = [tuple(t) for t in config.get("targets", convergence.DEFAULT_TARGETS)]
-    summary = summary_table(runs, images, reference, targets, config.get("deterministic", ()))
+    summary = summary_table(runs, images, reference, scene, targets, config.get("deterministic", ()))
     if not summary.empty:
         with atomic_path(Path(out) / SUMMARY_FILE) as tmp:
             summary.to_csv(tmp, index=False)

@@ -9,7 +9,8 @@ It shows
 2. **Image viewer** (:mod:`reports.viewer`) on a canvas, with the HDR images
    and false-colour maps of :mod:`reports.images`.
 3. **Convergence plots**, 4. **speed/accuracy chart** and 5. **bias² and
-   variance bars** (:mod:`reports.charts`).
+   variance bars** (:mod:`reports.charts`), with the split per named region
+   as a table (:mod:`reports.regions`) when the summary has it.
 6. **Provenance**: versions, machine, seeds, date, scene hash, the
    reference's own provenance and the command line.
 7. **Regions** (:mod:`reports.regions`), for a scene with named regions:
@@ -38,7 +39,7 @@ from harness.store.atomic import write_text_atomic
 from reports import plots
 from reports.charts import SINGLE_SPP_NOTE, _bias_variance_chart, _charts
 from reports.images import JND
-from reports.regions import region_section
+from reports.regions import bias_variance_table, region_section
 from reports.tables import _OPS, _col, _renderer_info, _summary_rows, column_label, ok_runs, renderer_order
 from reports.viewer import _legends, _viewer
 
@@ -238,6 +239,7 @@ def render_html(
         "charts": charts,
         "single_spp_note": SINGLE_SPP_NOTE,
         "bias_variance": _bias_variance_chart(summary, names, colors),
+        "region_bias_variance": Markup(bias_variance_table(summary, scene, colors) or ""),
         "viewer": viewer,
         "viewer_json": _json_for_script(viewer),
         "viewer_notes": viewer_notes,

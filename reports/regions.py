@@ -8,7 +8,11 @@ For a scene with ``[regions.*]`` (masks from :mod:`harness.evaluate.regions`):
   are drawn last, so one inside another stays visible;
 - a table with one row per (renderer, region): the region metrics
   (``region.<name>.<metric>`` columns of the runs, median over seeds at the
-  renderer's highest spp, as in the summary table), |mean z| > 3 flagged.
+  renderer's highest spp, as in the summary table), |mean z| > 3 flagged;
+- for the bias/variance section, a table with one row per (renderer,
+  region) of bias², variance and bias share (the summary's
+  ``region.<name>.bias2`` … columns, :func:`harness.workflows.converge.region_split`),
+  next to the image-wide bars (:func:`bias_variance_table`).
 
 Region colours are the Okabe-Ito palette (Okabe & Ito 2008, "Color
 Universal Design"), distinguishable with the common colour-vision
@@ -26,6 +30,7 @@ import pandas as pd
 
 from harness.evaluate import metrics
 from harness.evaluate.regions import REGION_METRICS, nested_regions, region_masks
+from harness.workflows.converge import REGION_SPLIT, region_split
 from reports.images import png_data_uri, to_uint8
 from reports.tables import at_max_spp, column_label, format_value
 
@@ -75,21 +80,23 @@ def _header(key: str) -> tuple[str, str]:
     if key in _HEADERS:
         return _HEADERS[key]
     label, definition = column_label(key)
-    return (label, f"{definition}, on the region's pixels") if key in REGION_METRICS else (label, definition)
+    per_region = key in REGION_METRICS or key in REGION_SPLIT
+    return (label, f"{definition}, on the region's pixels") if per_region else (label, definition)
 
 
-def _table(rows, colors: Mapping[str, str], renderer_colors: Mapping[str, str]) -> str:
+def _table(rows, colors: Mapping[str, str], renderer_colors: Mapping[str, str], keys=REGION_METRICS,
+           table_id: str = "region-table") -> str:
     num = ' class="num"'
     head = "".join(f'<th data-key="{k}" title="{escape(k)}: {escape(_header(k)[1])}"'
                    f'{num if i > 1 else ""}>{escape(_header(k)[0])}<span class="arrow"></span></th>'
-                   for i, k in enumerate(("renderer", "region", *REGION_METRICS)))
+                   for i, k in enumerate(("renderer", "region", *keys)))
     body = []
     for renderer, region, values in rows:
         cells = [f'<td data-key="renderer" data-sort="{escape(renderer)}"><span class="swatch" style="background: '
                  f'{escape(renderer_colors.get(renderer, "#9aa1ad"))}"></span>{escape(renderer)}</td>',
                  f'<td data-key="region" data-sort="{escape(region)}"><span class="swatch" style="background: '
                  f'{escape(colors.get(region, "#9aa1ad"))}"></span>{escape(region)}</td>']
-        for key in REGION_METRICS:
+        for key in keys:
             v = values.get(key)
             finite = v is not None and not pd.isna(v)
             flag = key == "mean_z" and finite and math.isfinite(v) and abs(v) > Z_FLAG
@@ -98,8 +105,19 @@ def _table(rows, colors: Mapping[str, str], renderer_colors: Mapping[str, str]) 
                          f'class="num{" fail" if flag else ""}"{title}>'
                          f'{escape(format_value(key, v) if finite else "—")}</td>')
         body.append(f'<tr class="record ok">{"".join(cells)}</tr>')
-    return (f'<div class="table-wrap"><table class="summary sortable" id="region-table"><thead><tr class="cols">'
+    return (f'<div class="table-wrap"><table class="summary sortable" id="{table_id}"><thead><tr class="cols">'
             f'{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>')
+
+
+def bias_variance_table(summary: pd.DataFrame | None, scene, renderer_colors: Mapping[str, str]) -> str | None:
+    """HTML table (escaped) of bias², variance and bias share per (renderer, region); None without them."""
+    split = region_split(summary) if summary is not None and len(summary) else None
+    if split is None or split.empty:
+        return None
+    colors = {name: region_color(i) for i, name in enumerate(scene.regions)}
+    rows = [(str(r["renderer"]), str(r["region"]), {k: r[k] for k in REGION_SPLIT})
+            for r in split.to_dict("records")]
+    return _table(rows, colors, renderer_colors, REGION_SPLIT, "region-bias-variance-table")
 
 
 def region_section(scene, reference: np.ndarray, exposure: float, runs: pd.DataFrame,

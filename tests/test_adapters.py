@@ -29,10 +29,27 @@ def test_load_spec_module_class():
     ("user_renderers:Nope", "has no attribute 'Nope'"),
     ("no_such_module_xyz:Thing", "cannot import no_such_module_xyz"),
     ("user_renderers", "expected a registered name or package.module:ClassName"),
+    ("user_renderers:BadEstimator", "estimator = 'unbaised' is not one of unbiased, consistent, biased "
+                                    r"\(did you mean 'unbiased'\?\)"),
 ])
 def test_load_spec_errors(spec, words):
     with pytest.raises(RendererError, match=words):
         load_spec(spec)
+
+
+def test_estimator_is_declared_checked_and_recorded():
+    """No ``estimator``: unbiased; a declared one is recorded in every row; a bad one is refused by the accessor too."""
+    from harness.adapters.registry import ESTIMATORS, estimator_of
+    from user_renderers import BadEstimator, FlatGrey
+
+    assert ESTIMATORS == ("unbiased", "consistent", "biased")
+    assert estimator_of(FlatGrey()) == "unbiased"
+    (entry,) = resolve(["user_renderers:ShrinkingBias"])
+    assert estimator_of(entry.renderer) == "consistent"
+    scene = load_scene(CORNELL)
+    assert runner.RunRecord.new(scene, entry, 1, 0).row()["estimator"] == "consistent"
+    with pytest.raises(RendererError, match="'bad-estimator': estimator = 'unbaised'"):
+        estimator_of(BadEstimator())
 
 
 def test_unknown_name_is_a_usage_error():

@@ -76,6 +76,31 @@ def test_bias_variance_separates_bias_from_noise():
     assert math.isnan(cv.bias_variance([ref], ref, ref_var)["bias2"])
 
 
+def test_region_bias_variance_finds_the_biased_region():
+    """Bias 0.05 on the left half only, noise 0.1 everywhere: the left has bias² 0.0025, the right none; the
+    image-wide bias² is their mean, diluted to half. An empty region is NaN; a stacked array works as a list."""
+    rng = np.random.default_rng(4)
+    ref = np.full((64, 64, 3), 0.5)
+    ref_var = np.zeros_like(ref)
+    left = np.zeros((64, 64), bool)
+    left[:, :32] = True
+    bias = np.where(left[..., None], 0.05, 0.0)
+    images = np.stack([ref + bias + 0.1 * rng.standard_normal(ref.shape) for _ in range(8)])
+    masks = {"left": left, "right": ~left, "none": np.zeros_like(left)}
+    out = cv.region_bias_variance(images, ref, ref_var, masks)
+    assert list(out) == ["left", "right", "none"]
+    assert out["left"]["bias2"] == pytest.approx(0.0025, rel=0.15) and out["left"]["bias2_fraction"] > 0.15
+    assert abs(out["right"]["bias2"]) < 2e-4 and out["right"]["bias2_fraction"] < 0.03
+    for name in ("left", "right"):
+        assert out[name]["variance"] == pytest.approx(0.01, rel=0.05)
+    assert all(math.isnan(v) for v in out["none"].values())
+    whole = cv.bias_variance(list(images), ref, ref_var)
+    assert whole["bias2"] == pytest.approx((out["left"]["bias2"] + out["right"]["bias2"]) / 2)
+    det = cv.region_bias_variance(images[:1], ref, ref_var, masks, deterministic=True)
+    assert det["left"]["variance"] == 0 and det["right"]["bias2"] == pytest.approx(0.01, rel=0.05)
+    assert math.isnan(cv.region_bias_variance(images[:1], ref, ref_var, masks)["left"]["bias2"])
+
+
 @pytest.mark.parametrize("text, expected", [
     ("1,2,4,...,256", [1, 2, 4, 8, 16, 32, 64, 128, 256]), ("1-16", [1, 2, 4, 8, 16]),
     ("4,1,16", [1, 4, 16]), ("10,20,...,50", [10, 20, 30, 40, 50]), ("1, 2, 4, …, 8", [1, 2, 4, 8])])

@@ -78,6 +78,14 @@ def test_results_table_is_tidy_and_report_rebuilds(tmp_path):
     assert json.loads(runs["settings"].iloc[0]) == {}  # the renderer declares no settings
     config = json.loads((out / "experiment.json").read_text())
     assert config["spp"] == [1, 2] and config["seeds"] == [0, 1] and "converge" in config["command"]
+    assert set(runs["estimator"]) == {"unbiased"}  # the adapter declares none
+    # cornell-box names regions: the summary splits bias and variance per region too, and the console shows it.
+    summary = pd.read_csv(out / "summary.csv")
+    for region in ("walls", "boxes", "floor", "light"):
+        for key in ("bias2", "variance", "bias2_fraction"):
+            assert f"region.{region}.{key}" in summary, (region, key)
+    assert "bias² and variance per region:" in proc.stdout and "region.walls" not in proc.stdout
+    assert 'id="region-bias-variance-table"' in (out / "report.html").read_text()
     # A second run renders nothing, and `cbox report` rebuilds the report without rendering.
     n_renders = len(log.read_text().splitlines())
     (out / "report.html").unlink()

@@ -492,6 +492,39 @@ def test_bias_variance_bars(report, case):
     assert ">bias²<" in svg and ">variance<" in svg  # legend
 
 
+def test_region_bias_variance_table(tmp_path, case):
+    """An experiment's summary on a scene with regions (cornell-box's four): a bias²/variance table per (renderer,
+    region) in the bias/variance section, with the numbers of convergence.region_bias_variance."""
+    from harness.evaluate.convergence import region_bias_variance
+    from harness.evaluate.regions import region_masks
+    from harness.workflows.converge import summary_table
+
+    ref, sc = case["reference"], case["scene"]
+    images = {n: [case["raw"][n, s, 64] for s in (0, 1, 2)] for n in OK_NAMES}
+    summary = summary_table(case["runs"], images, ref, sc)
+    masks = region_masks(sc)
+    assert list(masks) == ["walls", "boxes", "floor", "light"]
+    text = rf.write_case(tmp_path / "r.html", case, summary=summary).read_text(encoding="utf-8")
+    i = text.index('<section id="bias-variance-section">')
+    section = text[i:text.index("</section>", i)]
+    assert 'id="bias-variance"' in section  # the image-wide bars stay
+    rows = re.findall(r'<tr class="record ok">(.*?)</tr>', section[section.index('id="region-bias-variance-table"'):])
+    assert len(rows) == len(OK_NAMES) * len(masks)
+    expected = [(n, region, values) for n in OK_NAMES
+                for region, values in region_bias_variance(images[n], ref.image, ref.variance, masks).items()]
+    for row, (name, region, values) in zip(rows, expected):
+        assert f'data-sort="{name}"' in row and f'data-sort="{region}"' in row
+        for key, v in values.items():
+            assert summary.set_index("renderer").loc[name, f"region.{region}.{key}"] == pytest.approx(v, nan_ok=True)
+            sort = re.search(rf'data-key="{key}" data-sort="([^"]*)"', row).group(1)
+            assert sort == (repr(float(v)) if math.isfinite(v) else "")
+    # The noise-free raster's variance is 0: all of its error is bias.
+    assert summary.set_index("renderer").loc["gamma-raster", "region.walls.bias2_fraction"] == 1.0
+    # Without region columns (a summary from before them): no table, the bars alone.
+    plain = rf.write_case(tmp_path / "p.html", case).read_text(encoding="utf-8")
+    assert 'id="region-bias-variance-table"' not in plain and 'id="bias-variance"' in plain
+
+
 def test_single_spp_compare_omits_convergence_gracefully(tmp_path):
     case = rf.make_case(W, H, names=OK_NAMES, spps=(16,), seeds=(0,), with_summary=False)
     path = rf.write_case(tmp_path / "compare.html", case, thresholds={"mse": ("<", 1.0)})

@@ -221,3 +221,28 @@ class HotPixel(FlatGrey):
         img = ref.image + np.sqrt(var) * rng.standard_normal(ref.image.shape)
         img[settings["y"], settings["x"]] *= settings["factor"]
         return RenderResult(img.astype(np.float32), 0.01, spp, seed, variance=var.astype(np.float32))
+
+
+class ShrinkingBias(FlatGrey):
+    """The stored reference times 1 + 1/√``photons``: consistent, its error falls with its photon count only.
+
+    As photon mapping's: more spp at a fixed photon count leaves the bias
+    where it is (MSE ∝ 1/photons, independent of spp).
+    """
+
+    name = "shrinking-bias"
+    estimator = "consistent"
+    settings = (Setting("photons", int, 100, "photons: the relative bias is 1/√photons", low=1),)
+
+    def render(self, scene, spp, seed, checkpoints=(), settings=None):
+        from harness.store.references import load_reference
+
+        img = load_reference(scene).image * (1.0 + 1.0 / np.sqrt(settings["photons"]))
+        return RenderResult(img.astype(np.float32), 0.01, spp, seed)
+
+
+class BadEstimator(FlatGrey):
+    """Declares an estimator that is not one of the three: refused when loaded."""
+
+    name = "bad-estimator"
+    estimator = "unbaised"

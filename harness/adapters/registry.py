@@ -9,7 +9,17 @@ An adapter is a small class (state: the renderer's own handles) with
 - ``version()``: the renderer's version string (only called when available);
 - ``render(scene, spp, seed, checkpoints=())``: a :class:`RenderResult`;
 - optionally ``deterministic = True`` for a renderer whose image does not
-  depend on the seed (a rasteriser): experiments then run it for one seed only.
+  depend on the seed (a rasteriser): experiments then run it for one seed only;
+- optionally ``estimator``, what kind of estimate its image is (:data:`ESTIMATORS`,
+  read with :func:`estimator_of`): ``"unbiased"`` (the default when absent:
+  path tracers; the expected image is the reference at any spp),
+  ``"consistent"`` (biased, but the error goes to 0 as the budget grows:
+  photon mapping, SPPM; Hachisuka et al. 2008, Jensen 2001) or ``"biased"``
+  (does not converge to the reference: rasterisers, approximations). The gate
+  refuses its z-tests (``unbiased = true``) for the last two, which assume an
+  unbiased estimator, and offers a consistency check instead
+  (:mod:`harness.gate.config`); results record it in the ``estimator`` column.
+  Any other value is a :class:`RendererError` when the adapter is loaded.
 
 Adapters are found through the entry-point group ``cbox.renderers`` (ours are
 registered in ``pyproject.toml`` the same way a third party's would be), or
@@ -32,6 +42,8 @@ from harness.adapters.settings import declared, label, resolve_settings, split_s
 from harness.scenes.model import Scene
 
 ENTRY_POINT_GROUP = "cbox.renderers"
+#: What an adapter's ``estimator`` may say; the first is the default of an adapter that says nothing.
+ESTIMATORS = ("unbiased", "consistent", "biased")
 
 
 @dataclass
@@ -111,6 +123,27 @@ class RendererEntry:
         return RendererEntry(label(base, values, defaults), self.spec, self.renderer, self.reason, values)
 
 
+def _estimator_problem(value) -> str | None:
+    """What is wrong with an ``estimator`` value, or None when it is one of :data:`ESTIMATORS`."""
+    if isinstance(value, str) and value in ESTIMATORS:
+        return None
+    hint = difflib.get_close_matches(str(value), ESTIMATORS, n=1)
+    return (f"estimator = {value!r} is not one of {', '.join(ESTIMATORS)}"
+            + (f" (did you mean {hint[0]!r}?)" if hint else ""))
+
+
+def estimator_of(renderer) -> str:
+    """The renderer's declared ``estimator`` (:data:`ESTIMATORS`), "unbiased" when it declares none.
+
+    Raises RendererError for a value that is not one of them: a typo must not
+    let a biased renderer be tested as an unbiased one, or the reverse.
+    """
+    value = getattr(renderer, "estimator", ESTIMATORS[0])
+    if (why := _estimator_problem(value)) is not None:
+        raise RendererError(f"renderer {getattr(renderer, 'name', type(renderer).__name__)!r}: {why}")
+    return value
+
+
 def missing_features(renderer: Renderer, scene: Scene) -> list[str]:
     """Scene features the renderer does not model (empty: it can run)."""
     return sorted(scene.features - set(renderer.features))
@@ -148,6 +181,8 @@ def _instantiate(cls, spec: str) -> Renderer:
     for attr in ("name", "features", "render", "unavailable_reason", "version"):
         if not hasattr(obj, attr):
             raise RendererError(f"renderer {spec!r}: does not implement the adapter interface (no {attr!r})")
+    if (why := _estimator_problem(getattr(obj, "estimator", ESTIMATORS[0]))) is not None:
+        raise RendererError(f"renderer {spec!r}: {why}")
     return obj
 
 

@@ -73,14 +73,25 @@ def converge(
     bar.close()
     report = write_experiment_report(out, sc, ref)
     if (out / SUMMARY_FILE).exists():
-        import pandas as pd
-
-        summary = pd.read_csv(out / SUMMARY_FILE)
-        typer.echo(summary.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+        _print_summary(out / SUMMARY_FILE)
     for _, r in runs[runs["status"] != "ok"].iterrows():
         typer.echo(f"{r['renderer']}: {r['status']}: {r['reason']}")
     typer.echo(f"report: {report}", err=True)
     raise typer.Exit(1 if (runs["status"] == "failed").any() else 0)
+
+
+def _print_summary(path: Path) -> None:
+    """The summary, image-wide; then, for a scene with regions, bias² and variance per (renderer, region)."""
+    import pandas as pd
+
+    from harness.evaluate.regions import REGION_PREFIX
+    from harness.workflows.converge import region_split
+
+    summary = pd.read_csv(path)
+    fmt = {"float_format": lambda v: f"{v:.4g}", "index": False}
+    typer.echo(summary[[c for c in summary.columns if not c.startswith(REGION_PREFIX)]].to_string(**fmt))
+    if not (split := region_split(summary)).empty:
+        typer.echo("\nbias² and variance per region:\n" + split.to_string(**fmt))
 
 
 @app.command()

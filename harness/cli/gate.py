@@ -46,7 +46,9 @@ def gate(
     (tiled z-tests), for a reported variance that matches their residuals, and
     for single outlier pixels (family-wise false-alarm rate alpha over the
     three); others against metric
-    budgets; all must have zero NaN/Inf pixels; optionally, convergence slopes
+    budgets (image-wide or per named region) and, for consistent renderers
+    (photon mapping, SPPM), a check that their error falls as the budget grows;
+    all must have zero NaN/Inf pixels; optionally, convergence slopes
     and regressions against a recorded baseline. Each render runs in a child
     process killed at its time limit. JUnit and Markdown are written for every
     run, a config error included.

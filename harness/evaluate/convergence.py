@@ -20,7 +20,10 @@ spp; see :mod:`harness.workflows.converge`) and on images.
   noise) and minus the reference's variance, estimates the squared bias.
   Both are averaged over pixels and channels. A consistent-but-biased method
   (photon mapping, probes) shows bias² that no spp removes; a noisy unbiased
-  one shows bias² ≈ 0.
+  one shows bias² ≈ 0. :func:`region_bias_variance` gives the same split
+  inside each named region (:mod:`harness.evaluate.regions`): a photon
+  map's bias sits in its caustics and shadow edges, where an image-wide
+  mean dilutes it.
 """
 
 from __future__ import annotations
@@ -100,23 +103,53 @@ def bias_variance(images: list[np.ndarray], ref: np.ndarray, ref_var: np.ndarray
 
     Needs K ≥ 2, or one image of a ``deterministic`` renderer (variance 0).
     """
-    nan = {"bias2": math.nan, "variance": math.nan, "bias2_fraction": math.nan}
-    if not images:
-        return nan
+    maps = _bias_variance_maps(images, ref, ref_var, deterministic)
+    return _NAN_SPLIT.copy() if maps is None else _split(*maps)
+
+
+_NAN_SPLIT = {"bias2": math.nan, "variance": math.nan, "bias2_fraction": math.nan}
+
+
+def _bias_variance_maps(images, ref, ref_var, deterministic: bool) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per pixel and channel: the bias² estimate and the between-seed variance s²; None with too few images."""
+    if images is None or len(images) == 0:
+        return None
     stack = np.stack([np.asarray(i, np.float64) for i in images])
     k = stack.shape[0]
     if deterministic:
         s2 = np.zeros_like(stack[0])
     elif k < 2:
-        return nan
+        return None
     else:
         s2 = stack.var(axis=0, ddof=1)
     err2 = (stack.mean(axis=0) - np.asarray(ref, np.float64)) ** 2
-    bias2 = float(np.mean(err2 - s2 / k - np.asarray(ref_var, np.float64)))
-    variance = float(np.mean(s2))
+    return err2 - s2 / k - np.asarray(ref_var, np.float64), s2
+
+
+def _split(bias2_map: np.ndarray, s2_map: np.ndarray) -> dict:
+    """Means of the per-pixel maps (over the pixels given) as bias², variance and bias²'s share."""
+    if bias2_map.size == 0:
+        return _NAN_SPLIT.copy()
+    bias2, variance = float(np.mean(bias2_map)), float(np.mean(s2_map))
     denom = max(bias2, 0.0) + variance
     return {"bias2": bias2, "variance": variance,
             "bias2_fraction": max(bias2, 0.0) / denom if denom > 0 else math.nan}
+
+
+def region_bias_variance(images, ref: np.ndarray, ref_var: np.ndarray, masks: dict[str, np.ndarray],
+                         deterministic: bool = False) -> dict[str, dict]:
+    """:func:`bias_variance` inside each region: {region: {bias2, variance, bias2_fraction}}.
+
+    ``images`` are K seeds' final images (a list, or stacked (K, H, W, 3));
+    ``masks`` are (H, W) booleans, e.g. :func:`harness.evaluate.regions.region_masks`.
+    The estimators are the image-wide ones, averaged over the region's pixels
+    and channels; an empty region, or too few images, gives NaN.
+    """
+    maps = _bias_variance_maps(images, ref, ref_var, deterministic)
+    if maps is None:
+        return {name: _NAN_SPLIT.copy() for name in masks}
+    bias2_map, s2_map = maps
+    return {name: _split(bias2_map[np.asarray(m, bool)], s2_map[np.asarray(m, bool)]) for name, m in masks.items()}
 
 
 def summarize(runs: pd.DataFrame, targets=DEFAULT_TARGETS) -> pd.DataFrame:

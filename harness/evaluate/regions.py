@@ -47,6 +47,7 @@ import numpy as np
 
 from harness.evaluate import metrics
 from harness.evaluate import noise
+from harness.evaluate.registry import REGION_METRICS, REGION_PREFIX, region_metric
 from harness.scenes.model import Scene, triangle_arrays
 
 #: Rays per pixel along each axis (see the module docstring for why 4).
@@ -60,10 +61,9 @@ BAND_RAYS = 1 << 20
 #: A hit this far (relative to the scene's size) outside a region's box still counts as inside it,
 #: so a box face laid exactly on a surface (min y = the floor's y) keeps that surface despite rounding.
 BOX_TOLERANCE = 1e-6
-#: The metrics of each region, in table order.
-REGION_METRICS = ("pixels", "mean_radiance_rel_error", "mean_z", "rmse", "rel_mse", "delta_e2000_mean")
-#: In a flat row (the results table), region metrics are columns ``region.<name>.<metric>``.
-REGION_PREFIX = "region."
+# REGION_METRICS (the metrics of each region, in table order) and REGION_PREFIX (their columns are
+# ``region.<name>.<metric>``) live in the light metric registry, so the gate's config can check names
+# without this module's imports; they are imported above and stay importable from here.
 
 
 # --------------------------------------------------------------------------
@@ -242,9 +242,8 @@ def nested_regions(row: Mapping) -> dict[str, dict]:
     """
     out: dict[str, dict] = {}
     for key, v in row.items():
-        if isinstance(key, str) and key.startswith(REGION_PREFIX):
-            name, _, metric = key[len(REGION_PREFIX):].rpartition(".")
-            out.setdefault(name, {})[metric] = v
+        if isinstance(key, str) and (parts := region_metric(key)) is not None:
+            out.setdefault(parts[0], {})[parts[1]] = v
     return out
 
 

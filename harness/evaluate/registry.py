@@ -6,6 +6,10 @@ refuses names that are not here; the report takes its labels, tooltips and
 chart axes from it; the CLI prints its table columns from it. A metric that
 :func:`harness.evaluate.metrics.image_metrics` or
 :func:`harness.evaluate.noise.noise_yardsticks` computes must be listed here.
+
+Region metrics (:mod:`harness.evaluate.regions`) are named here too, by their
+column form ``region.<region>.<metric>`` (:func:`region_metric`): the gate
+validates them without importing the mask code, which pulls in SciPy.
 """
 
 from __future__ import annotations
@@ -35,6 +39,8 @@ _TABLE = (
     _m("renderer", "renderer", "renderer name, with settings that differ from its defaults", per_image=False),
     _m("status", "status", "ok, skipped, unavailable or failed", per_image=False),
     _m("version", "version", "renderer version", per_image=False),
+    _m("estimator", "estimator", "what the renderer's image estimates: unbiased, consistent (biased, error → 0 "
+       "as the budget grows) or biased (does not converge to the reference)", per_image=False),
     _m("spp", "spp", "samples per pixel of the row (the highest reached)", per_image=False),
     _m("seeds", "seeds", "number of seeds (independent runs) the medians are over", per_image=False),
     _m("time_s", "time (s)", "wall time to reach this spp (median over seeds)", "low", per_image=False),
@@ -81,3 +87,21 @@ IMAGE_METRICS = tuple(k for k, m in METRICS.items() if m.per_image)
 #: Metrics the convergence and speed/accuracy charts offer, the default first.
 PLOT_METRICS = ("rmse", "delta_e2000_mean", "rel_mse", "rel_mse_trimmed", "mse", "delta_e2000_p95")
 assert all(METRICS[k].guide_slope is not None for k in PLOT_METRICS)
+
+#: The metrics of each named region, in table order (computed by :func:`harness.evaluate.regions.region_metrics`).
+REGION_METRICS = ("pixels", "mean_radiance_rel_error", "mean_z", "rmse", "rel_mse", "delta_e2000_mean")
+#: In a flat row (the results table), region metrics are columns ``region.<name>.<metric>``.
+REGION_PREFIX = "region."
+
+
+def region_metric(key: str) -> tuple[str, str] | None:
+    """``"region.caustic.rel_mse"`` → ("caustic", "rel_mse"); None for a key without the prefix.
+
+    The metric is after the last dot (metric keys have none, region names
+    may). The parts are not checked against anything: "" or an unknown
+    metric come back as they are, for the caller to refuse in its own words.
+    """
+    if not key.startswith(REGION_PREFIX):
+        return None
+    region, _, metric = key[len(REGION_PREFIX):].rpartition(".")
+    return region, metric

@@ -1,19 +1,24 @@
-"""The checks of one expectation on its run: finite pixels, agreement, variance, outliers, budgets, slope, baseline.
+"""The checks of one expectation on its run: finite pixels, agreement, variance, outliers, budgets, slope,
+consistency, baseline.
 
-Pure evaluation: nothing here renders. :mod:`harness.gate.run` renders and
-calls :func:`evaluate`.
+Pure evaluation: nothing here renders. :mod:`harness.gate.run` renders (the
+expectation's run, and the smaller-budget run of a ``max_ratio``
+consistency check) and calls :func:`evaluate`.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
+from typing import Mapping
 
 import numpy as np
 
 from harness.evaluate import agreement, convergence, metrics, noise, outliers, variance_check
-from harness.evaluate.registry import HIGHER_IS_BETTER
-from harness.gate.config import Expectation, GateConfig
+from harness.evaluate import regions as named_regions
+from harness.evaluate.registry import HIGHER_IS_BETTER, region_metric
+from harness.gate.config import Consistency, Expectation, GateConfig
 from harness.store.references import Reference
 from harness.workflows import runner
 
@@ -43,14 +48,21 @@ class Outcome:
         return all(c.passed for c in self.checks)
 
 
-def _budget_checks(exp: Expectation, m: dict) -> list[Check]:
+def recorded_metric(rec: runner.RunRecord, key: str) -> float | None:
+    """A metric of the run: image-wide from ``rec.metrics``, ``region.<region>.<metric>`` from ``rec.regions``."""
+    parts = region_metric(key)
+    v = rec.metrics.get(key) if parts is None else rec.regions.get(parts[0], {}).get(parts[1])
+    return None if v is None else float(v)
+
+
+def _budget_checks(exp: Expectation, rec: runner.RunRecord) -> list[Check]:
     out = []
     for kind, table in (("max", exp.max), ("min", exp.min), ("abs_max", exp.abs_max)):
         for metric, limit in table.items():
-            if metric not in m:
+            v = recorded_metric(rec, metric)
+            if v is None:
                 out.append(Check(exp.name, f"{kind}.{metric}", False, f"unknown metric {metric!r}"))
                 continue
-            v = float(m[metric])
             shown = abs(v) if kind == "abs_max" else v
             ok = shown >= limit if kind == "min" else shown <= limit
             if not math.isfinite(v):
@@ -83,17 +95,87 @@ def _regression_checks(exp: Expectation, m: dict, base: dict | None, cfg: GateCo
     return out
 
 
-def _slope_check(exp: Expectation, rec: runner.RunRecord, ref: Reference) -> Check:
-    spp = rec.spp
+def doubling(first: int, last: int) -> list[int]:
+    """``first``, 2·``first``, 4·``first``, … below ``last``, then ``last``: the checkpoints of a slope."""
+    out, s = [], max(1, first)
+    while s < last:
+        out.append(s)
+        s *= 2
+    return out + [last]
+
+
+def _shots(rec: runner.RunRecord, first: int) -> tuple[list[int], dict]:
+    """The doubling spps from ``first`` to the run's spp that the run has an image of, and the images by spp."""
     shots = {c.spp: c.image for c in rec.checkpoints}
-    shots[spp] = rec.image
-    xs = sorted(s for s in shots if s >= max(1, spp // 64))
+    shots[rec.spp] = rec.image
+    return [s for s in doubling(first, rec.spp) if s in shots], shots
+
+
+def _slope_check(exp: Expectation, rec: runner.RunRecord, ref: Reference) -> Check:
+    xs, shots = _shots(rec, max(1, rec.spp // 64))
     rmse = [metrics.rmse(metrics.zero_broken_pixels(np.asarray(shots[s], np.float64)), ref.image) for s in xs]
     slope = convergence.loglog_slope(xs, rmse)
     lo, hi = exp.slope
     ok = lo <= slope <= hi
     return Check(exp.name, "slope.rmse_spp", ok, f"RMSE-vs-spp slope {slope:.3f} over spp {xs[0]}..{xs[-1]}, "
                  f"expected in [{lo:g}, {hi:g}]", slope, None)
+
+
+def metric_at(image: np.ndarray, ref: Reference, spp: int, metric: str,
+              masks: Mapping[str, np.ndarray] | None = None) -> float:
+    """``metric`` (image-wide, or ``region.<region>.<metric>`` with its mask in ``masks``) of one image at ``spp``."""
+    if (parts := region_metric(metric)) is not None:
+        region, key = parts
+        if not masks or region not in masks:
+            raise KeyError(f"no mask for region {region!r}")
+        return float(named_regions.region_metrics(image, ref, {region: masks[region]}, spp=spp)[region][key])
+    clean = metrics.zero_broken_pixels(np.asarray(image, np.float64))
+    # These need no ΔE or SSIM, which cost most of a full scoring: a slope scores every checkpoint.
+    if metric in ("rmse", "mse"):
+        r = metrics.rmse(clean, ref.image)
+        return r if metric == "rmse" else r * r
+    if metric == "rel_mse":
+        return metrics.rel_mse(clean, ref.image)
+    return float(runner.score(image, ref, spp)[metric])
+
+
+def _budget_text(spp: int, settings: str, keys) -> str:
+    """``spp 16, global_photons=50000``: a run's spp and the settings a smaller render replaced."""
+    values = json.loads(settings or "{}")
+    return ", ".join([f"spp {spp}"] + [f"{k}={values.get(k)}" for k in keys])
+
+
+def _consistency_slope(exp: Expectation, c: Consistency, rec: runner.RunRecord, ref: Reference,
+                       masks: Mapping[str, np.ndarray] | None) -> Check:
+    """The log-log slope of the metric (by magnitude) against spp over the render's own checkpoints."""
+    name, (lo, hi) = f"consistency.{c.metric}", c.slope
+    xs, shots = _shots(rec, c.first_spp(rec.spp))
+    if len(xs) < 2:
+        return Check(exp.name, name, False, f"no checkpoints from spp {c.first_spp(rec.spp)} below {rec.spp}: "
+                     "the slope form needs a progressive renderer (or use max_ratio with smaller)")
+    ys = [abs(metric_at(shots[s], ref, s, c.metric, masks)) for s in xs]
+    slope = convergence.loglog_slope(xs, ys)
+    ok = lo <= slope <= hi  # False for NaN (an error of 0 or not finite)
+    return Check(exp.name, name, ok, f"{c.metric}-vs-spp slope {slope:.3f} over spp {xs[0]}..{xs[-1]} "
+                 f"({c.metric} {ys[0]:.4g} → {ys[-1]:.4g}), expected in [{lo:g}, {hi:g}]", slope, None)
+
+
+def _consistency_ratio(exp: Expectation, c: Consistency, rec: runner.RunRecord,
+                       smaller: runner.RunRecord | None) -> Check:
+    """metric(full) ≤ max_ratio · metric(smaller), by magnitude."""
+    name, keys = f"consistency.{c.metric}", sorted(c.smaller_settings)
+    if smaller is None or smaller.status != "ok":
+        why = "was not rendered" if smaller is None else f"{smaller.status}: {smaller.reason}"
+        return Check(exp.name, name, False, f"the smaller-budget render {why}", error=True)
+    full, small = recorded_metric(rec, c.metric), recorded_metric(smaller, c.metric)
+    if full is None or small is None:
+        return Check(exp.name, name, False, f"unknown metric {c.metric!r}")
+    full, small = abs(full), abs(small)
+    ratio = 0.0 if full == 0 else full / small if small > 0 else math.inf
+    ok = math.isfinite(ratio) and ratio <= c.max_ratio
+    return Check(exp.name, name, ok, f"{c.metric} {full:.4g} at {_budget_text(rec.spp, rec.settings, keys)} "
+                 f"against {small:.4g} at {_budget_text(smaller.spp, smaller.settings, keys)}: ratio {ratio:.3f}, "
+                 f"limit ≤ {c.max_ratio:g}", ratio, c.max_ratio)
 
 
 #: The statistical tests of an ``unbiased`` expectation; they share its family-wise ``alpha`` (Šidák).
@@ -131,8 +213,14 @@ def _outlier_check(exp: Expectation, rec: runner.RunRecord, clean: np.ndarray, r
 
 
 def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateConfig,
-             baseline: dict | None = None) -> Outcome:
-    """All checks of one expectation on its run (no rendering)."""
+             baseline: dict | None = None, smaller: runner.RunRecord | None = None,
+             masks: Mapping[str, np.ndarray] | None = None) -> Outcome:
+    """All checks of one expectation on its run (no rendering).
+
+    ``smaller`` is the smaller-budget run of a ``max_ratio`` consistency check;
+    ``masks`` the scene's region masks (:func:`harness.evaluate.regions.region_masks`), needed by a consistency
+    slope on a region metric.
+    """
     if rec.status != "ok":
         if rec.info.get("timed_out"):  # a failed check with its time, not a crash
             return Outcome(exp, rec, [Check(exp.name, "time_limit", False, f"{rec.reason}", rec.time_s,
@@ -153,9 +241,12 @@ def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateC
                             agr.p_min, agr.level))
         checks.append(_variance_check(exp, rec, clean, ref, cfg.alpha))
         checks.append(_outlier_check(exp, rec, clean, ref, cfg.alpha))
-    checks += _budget_checks(exp, m)
+    checks += _budget_checks(exp, rec)
     if exp.slope:
         checks.append(_slope_check(exp, rec, ref))
+    if (c := exp.consistency) is not None:
+        checks.append(_consistency_slope(exp, c, rec, ref, masks) if c.slope else
+                      _consistency_ratio(exp, c, rec, smaller))
     checks += _regression_checks(exp, m, baseline, cfg)
     return Outcome(exp, rec, checks, agr)
 

@@ -16,9 +16,10 @@ A gate config (TOML) lists expectations::
     unbiased = true                   # agreement, variance and outlier tests against the reference (below)
     tile = 16
     slope = [-0.55, -0.45]            # optional: RMSE-vs-spp slope over checkpoints spp/64 .. spp
-    max = { delta_e2000_mean = 3.0 }  # optional budgets on any harness metric
+    max = { delta_e2000_mean = 3.0 }  # optional budgets on any harness metric ...
     min = { ssim = 0.7 }
-    abs_max = { mean_radiance_rel_error = 0.3 }
+    abs_max = { mean_radiance_rel_error = 0.3, "region.caustic.mean_radiance_rel_error" = 0.05 }  # ... or region's
+    consistency = { metric = "mse", slope = [-0.9, -0.4] }  # optional, for a consistent renderer (below)
     settings = { rr_depth = 3 }       # optional: the renderer's settings (`cbox renderers --settings`)
     time_limit = "10m"                # optional: kill the render after this long (default: time_limit above)
     finite_only = true                # only to allow an expectation with no accuracy check (see below)
@@ -26,8 +27,15 @@ A gate config (TOML) lists expectations::
 The config is strict: an unknown key at any level, or an unknown metric in a
 budget or in ``regression_metrics``, is a config error (exit 2) with a
 did-you-mean, before anything renders; a misspelt key must never turn a
-gate green. An expectation must check accuracy (``unbiased``, a budget or a
-slope) unless it says ``finite_only = true``.
+gate green. An expectation must check accuracy (``unbiased``, a budget, a
+slope or ``consistency``) unless it says ``finite_only = true``.
+
+A budget may name a region's metric as a quoted key,
+``"region.<region>.<metric>"`` with ``<metric>`` one of
+:data:`REGION_CHECK_METRICS` (:mod:`harness.evaluate.regions`); the metric
+part is checked here, the region against the scene's ``[regions.*]`` when
+the gate resolves the scene (:mod:`harness.gate.run`), before anything
+renders. Baseline regression checks stay image-wide.
 
 ``unbiased = true`` runs three statistical tests against the reference:
 ``agreement`` (tiled z-tests, :mod:`harness.evaluate.agreement`),
@@ -39,7 +47,41 @@ renderer's noise model) and ``outliers`` (one z-test per pixel,
 false-alarm rate per expectation: the three share it by Šidák's
 correction, each at level 1 − (1 − alpha)^(1/3) (0.00334 for
 alpha = 0.01), so a correct renderer fails any of them with probability at
-most ``alpha``.
+most ``alpha``. The three assume an unbiased estimator: ``unbiased = true``
+for a renderer that declares ``estimator = "consistent"`` or ``"biased"``
+(:func:`harness.adapters.registry.estimator_of`) is a config error.
+
+``consistency`` is what a consistent renderer (photon mapping, SPPM: biased,
+with an error that goes to 0 as its budget grows) is checked with instead:
+its error must fall with its budget. One of two forms::
+
+    consistency = { metric = "mse", slope = [-0.9, -0.4], from_spp = 16 }
+    consistency = { metric = "region.caustic.rel_mse", max_ratio = 0.6,
+                    smaller = { spp = 16, global_photons = 50000 } }
+
+- ``slope = [lo, hi]``: the log-log least-squares slope of ``metric``
+  against spp over the render's own checkpoints, from ``from_spp``
+  (default spp // 16, at least 1) doubling up to spp, must lie in the band:
+  for a progressive renderer that returns every checkpoint from one render
+  (SPPM, where spp counts iterations).
+- ``max_ratio = r`` with ``smaller = { spp = N, <setting> = value, ... }``:
+  a second render of the same renderer and seed at a smaller budget (its
+  spp and/or settings replaced; settings are validated like ``settings``)
+  must have an error at least 1/r times the full render's:
+  metric(full) ≤ r · metric(smaller). For photon mapping, whose error at
+  fixed photon counts does not fall with spp, the budget is its photon
+  counts.
+
+``metric`` (default ``mse``) is an image metric where lower is better
+(:data:`CONSISTENCY_METRICS`) or a region's, ``region.<region>.<metric>``;
+a signed one (``mean_radiance_rel_error``, ``mean_z``) is taken by
+magnitude. The band or ratio is the renderer's to choose from its
+convergence rate, widened for one seed's noise: e.g. SPPM with radius
+reduction α = 2/3 has an asymptotic MSE rate of iterations^(-2/3)
+(Knaus & Zwicker 2011, "Progressive photon mapping: a probabilistic
+approach"; Kaplanyan & Dachsbacher 2013, "Adaptive progressive photon
+mapping"), so its MSE slope settles near -2/3 once the checkpoints are
+past the start, where bias and variance still trade.
 
 Every expectation also checks that the image has no NaN and no Inf pixel.
 Baseline checks compare runs at the seed the baseline was recorded with
@@ -56,7 +98,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from harness.evaluate.registry import IMAGE_METRICS
+from harness.evaluate.registry import HIGHER_IS_BETTER, IMAGE_METRICS, REGION_METRICS, region_metric
 from harness.workflows.budgets import parse_duration
 
 DEFAULT_REGRESSION_METRICS = ("delta_e2000_mean", "rel_mse_trimmed", "ssim")
@@ -64,7 +106,12 @@ DEFAULT_REGRESSION_METRICS = ("delta_e2000_mean", "rel_mse_trimmed", "ssim")
 DEFAULT_TIME_LIMIT_S = 1800.0
 TOP_KEYS = ("alpha", "baseline", "regression_margin", "regression_metrics", "time_limit", "expect")
 EXPECT_KEYS = ("name", "scene", "renderer", "spp", "time", "seed", "unbiased", "tile", "slope", "max", "min",
-               "abs_max", "settings", "time_limit", "finite_only")
+               "abs_max", "settings", "time_limit", "finite_only", "consistency")
+CONSISTENCY_KEYS = ("metric", "slope", "from_spp", "max_ratio", "smaller")
+#: Region metrics a budget or a consistency check may name: ``pixels`` is a count, not an error.
+REGION_CHECK_METRICS = tuple(m for m in REGION_METRICS if m != "pixels")
+#: Image metrics a consistency check may follow: errors, which fall towards 0 (not PSNR or SSIM).
+CONSISTENCY_METRICS = tuple(m for m in IMAGE_METRICS if m not in HIGHER_IS_BETTER)
 
 
 class GateConfigError(ValueError):
@@ -72,6 +119,22 @@ class GateConfigError(ValueError):
 
     def __init__(self, file, field: str, message: str):
         super().__init__(f"{file}: {field}: {message}")
+
+
+@dataclass
+class Consistency:
+    """A consistent renderer's error must fall with its budget: a slope band, or a ratio to a smaller budget."""
+
+    metric: str = "mse"
+    slope: tuple[float, float] | None = None
+    from_spp: int | None = None  # first checkpoint of the slope; None: spp // 16, at least 1
+    max_ratio: float | None = None
+    smaller_spp: int | None = None  # the smaller render's spp; None: the expectation's
+    smaller_settings: dict = field(default_factory=dict)  # replace the expectation's (validated at resolve)
+
+    def first_spp(self, spp: int) -> int:
+        """The slope's first checkpoint for a render of ``spp``."""
+        return self.from_spp if self.from_spp is not None else max(1, spp // 16)
 
 
 @dataclass
@@ -90,6 +153,15 @@ class Expectation:
     abs_max: dict = field(default_factory=dict)
     settings: dict = field(default_factory=dict)  # the renderer's settings (validated when the gate resolves it)
     time_limit_s: float = DEFAULT_TIME_LIMIT_S
+    consistency: Consistency | None = None
+
+    def region_metrics(self) -> list[tuple[str, str]]:
+        """(field, ``region.<region>.<metric>``) of every region metric it names: the gate checks the regions."""
+        out = [(f"{kind}.{key}", key) for kind in ("max", "min", "abs_max") for key in getattr(self, kind)
+               if region_metric(key)]
+        if self.consistency and region_metric(self.consistency.metric):
+            out.append(("consistency.metric", self.consistency.metric))
+        return out
 
 
 @dataclass
@@ -109,6 +181,29 @@ def _check_keys(path: Path, table: dict, allowed, where: str, what: str = "key")
             hint = difflib.get_close_matches(str(key), list(allowed), n=1)
             raise GateConfigError(path, f"{where}{key}", f"unknown {what}"
                                   + (f" (did you mean {hint[0]!r}?)" if hint else f"; known: {', '.join(allowed)}"))
+
+
+def _check_metrics(path: Path, names, allowed, where: str) -> None:
+    """Refuse a metric name that is neither in ``allowed`` nor a region metric ``region.<region>.<metric>``."""
+    for key in names:
+        parts = region_metric(key)
+        if parts is None:
+            _check_keys(path, {key: None}, allowed, where, "metric")
+            continue
+        region, metric = parts
+        if not region or metric not in REGION_CHECK_METRICS:
+            hint = difflib.get_close_matches(metric, REGION_CHECK_METRICS, n=1) if region else []
+            raise GateConfigError(path, f"{where}{key}", "unknown region metric: expected region.<region>.<metric> "
+                                  "with <metric> one of " + ", ".join(REGION_CHECK_METRICS)
+                                  + (f" (did you mean 'region.{region}.{hint[0]}'?)" if hint else ""))
+
+
+def _band(path: Path, value, field: str) -> tuple[float, float]:
+    if not (isinstance(value, list) and len(value) == 2
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in value)
+            and value[0] < value[1]):
+        raise GateConfigError(path, field, "expected [low, high] with low < high")
+    return float(value[0]), float(value[1])
 
 
 def _duration(path: Path, table: dict, key: str, where: str, default: float | None) -> float | None:
@@ -184,17 +279,14 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
             raise GateConfigError(path, f"{w}spp", "must be >= 1")
     slope = t.get("slope")
     if slope is not None:
-        if not (isinstance(slope, list) and len(slope) == 2 and all(isinstance(x, (int, float)) for x in slope)
-                and slope[0] < slope[1]):
-            raise GateConfigError(path, f"{w}slope", "expected [low, high] with low < high")
-        slope = (float(slope[0]), float(slope[1]))
+        slope = _band(path, slope, f"{w}slope")
     budgets = {}
     for key in ("max", "min", "abs_max"):
         b = t.get(key, {})
         if not isinstance(b, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                               for v in b.values()):
             raise GateConfigError(path, f"{w}{key}", "expected a table of metric = number")
-        _check_keys(path, b, IMAGE_METRICS, f"{w}{key}.", "metric")
+        _check_metrics(path, b, IMAGE_METRICS, f"{w}{key}.")
         budgets[key] = {k: float(v) for k, v in b.items()}
     unbiased = t.get("unbiased", False)
     if not isinstance(unbiased, bool):
@@ -205,9 +297,11 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
     finite_only = t.get("finite_only", False)
     if not isinstance(finite_only, bool):
         raise GateConfigError(path, f"{w}finite_only", "expected true or false")
-    if not (unbiased or slope or any(budgets.values()) or finite_only):
+    consistency = _consistency(path, t, w, spp)
+    if not (unbiased or slope or any(budgets.values()) or consistency or finite_only):
         raise GateConfigError(path, f"expect[{i}]", "no accuracy check: give unbiased = true, a budget (max, min, "
-                              "abs_max) or a slope; or finite_only = true to check only for NaN and Inf")
+                              "abs_max), a slope or a consistency check; or finite_only = true to check only for "
+                              "NaN and Inf")
     tile = _number(path, t, "tile", w, 16, int)
     if tile < 1:
         raise GateConfigError(path, f"{w}tile", "must be >= 1")
@@ -216,4 +310,61 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
     name = t.get("name") or f"{t['scene']}/{t['renderer']}{shown}@{budget}"
     return Expectation(name, t["scene"], t["renderer"], spp, time_s, _number(path, t, "seed", w, 0, int), unbiased,
                        tile, slope, budgets["max"], budgets["min"], budgets["abs_max"], settings,
-                       _duration(path, t, "time_limit", w, time_limit))
+                       _duration(path, t, "time_limit", w, time_limit), consistency)
+
+
+def _consistency(path: Path, t: dict, w: str, spp: int | None) -> Consistency | None:
+    """The ``consistency`` table of an expectation (None without one); see the module docstring."""
+    if "consistency" not in t:
+        return None
+    c, where = t["consistency"], f"{w}consistency."
+    if not isinstance(c, dict):
+        raise GateConfigError(path, f"{w}consistency", 'expected a table, e.g. { metric = "mse", '
+                              "slope = [-0.9, -0.4] }")
+    _check_keys(path, c, CONSISTENCY_KEYS, where)
+    metric = c.get("metric", "mse")
+    if not isinstance(metric, str):
+        raise GateConfigError(path, f"{where}metric", "expected a metric name")
+    if metric in HIGHER_IS_BETTER:
+        raise GateConfigError(path, f"{where}metric", f"{metric!r} is higher-is-better; a consistency check "
+                              "follows an error that falls towards 0 (e.g. mse, rel_mse)")
+    _check_metrics(path, [metric], CONSISTENCY_METRICS, f"{where}metric: ")
+    if ("slope" in c) == ("max_ratio" in c):
+        raise GateConfigError(path, f"{w}consistency", "give exactly one of slope = [low, high] (over the "
+                              "render's checkpoints) or max_ratio = r with smaller = { spp = N, ... }")
+    out = Consistency(metric)
+    if "slope" in c:
+        out.slope = _band(path, c["slope"], f"{where}slope")
+        if "smaller" in c:
+            raise GateConfigError(path, f"{where}smaller", "goes with max_ratio, not with slope")
+        if "from_spp" in c:
+            out.from_spp = _number(path, c, "from_spp", where, None, int)
+            if out.from_spp < 1 or (spp is not None and out.from_spp >= spp):
+                raise GateConfigError(path, f"{where}from_spp", f"must be >= 1 and below spp ({spp}): the slope "
+                                      "needs two checkpoints")
+        return out
+    if "from_spp" in c:
+        raise GateConfigError(path, f"{where}from_spp", "goes with slope, not with max_ratio")
+    out.max_ratio = float(_number(path, c, "max_ratio", where, None))
+    if not 0 < out.max_ratio <= 1:
+        raise GateConfigError(path, f"{where}max_ratio", f"must be in (0, 1], got {out.max_ratio:g}")
+    out.smaller_spp, out.smaller_settings = _smaller(path, c, where, spp)
+    return out
+
+
+def _smaller(path: Path, c: dict, where: str, spp: int | None) -> tuple[int | None, dict]:
+    """``smaller = { spp = N, <setting> = value, ... }``: its spp (None: the expectation's) and its settings."""
+    small = c.get("smaller")
+    if not isinstance(small, dict):
+        raise GateConfigError(path, f"{where}smaller", "max_ratio needs smaller = { spp = N, <setting> = value, "
+                              "... }: the budget the full render's error is compared with")
+    small_spp = None
+    if "spp" in small:
+        small_spp = _number(path, small, "spp", f"{where}smaller.", None, int)
+        if small_spp < 1 or (spp is not None and small_spp > spp):
+            raise GateConfigError(path, f"{where}smaller.spp", f"must be >= 1 and at most spp ({spp})")
+    settings = {k: v for k, v in small.items() if k != "spp"}
+    if not settings and (small_spp is None or small_spp == spp):
+        raise GateConfigError(path, f"{where}smaller", "must lower the budget: a smaller spp and/or settings "
+                              "(e.g. fewer photons)")
+    return small_spp, settings

@@ -1,4 +1,11 @@
-"""Running a gate: render every expectation, check it, and keep or compare the baseline."""
+"""Running a gate: render every expectation, check it, and keep or compare the baseline.
+
+Everything an expectation names is resolved first, for every expectation,
+before anything renders (:func:`_resolve`): its scene and reference, the
+regions its region metrics name, its renderer with its settings, the
+renderer's estimator against ``unbiased = true``, and the settings of a
+consistency check's smaller budget.
+"""
 
 from __future__ import annotations
 
@@ -6,9 +13,11 @@ import json
 from pathlib import Path
 from typing import Callable, Sequence
 
-from harness.adapters.registry import RendererEntry, RendererError, resolve
+from harness.adapters.registry import ESTIMATORS, RendererEntry, RendererError, estimator_of, resolve
 from harness.adapters.settings import SettingsError
-from harness.gate.checks import Outcome, evaluate
+from harness.evaluate.regions import region_masks
+from harness.evaluate.registry import region_metric
+from harness.gate.checks import Outcome, doubling, evaluate
 from harness.gate.config import Expectation, GateConfig, GateConfigError
 from harness.scenes.library import resolve_scene
 from harness.scenes.model import SceneError
@@ -19,18 +28,55 @@ from harness.workflows.compare import spp_for_time_budget
 
 
 def _checkpoints(exp: Expectation, spp: int) -> list[int]:
-    if not exp.slope:
-        return []
-    out, s = [], max(1, spp // 64)
-    while s < spp:
-        out.append(s)
-        s *= 2
-    return out + [spp]
+    """The spps a render of ``spp`` must return images at: the RMSE slope's (spp/64 ..) and a consistency slope's."""
+    starts = [max(1, spp // 64)] if exp.slope else []
+    if exp.consistency is not None and exp.consistency.slope is not None:
+        starts.append(exp.consistency.first_spp(spp))
+    return sorted({s for first in starts for s in doubling(first, spp)})
+
+
+def _check_regions(cfg: GateConfig, i: int, exp: Expectation, scene) -> None:
+    """Every region a budget or consistency metric names must be one of the scene's."""
+    for field, key in exp.region_metrics():
+        region = region_metric(key)[0]
+        if region not in scene.regions:
+            raise GateConfigError(cfg.path, f"expect[{i}].{field}", f"scene {scene.name!r} has no region "
+                                  f"{region!r}; its regions: {', '.join(scene.regions) or '(none)'}")
+
+
+def _check_estimator(cfg: GateConfig, i: int, exp: Expectation, entry: RendererEntry) -> None:
+    """``unbiased = true`` only for a renderer whose estimator is unbiased (the z-tests assume it)."""
+    if entry.renderer is None:  # did not load: it will not run, and says why
+        return
+    try:
+        estimator = estimator_of(entry.renderer)
+    except RendererError as e:
+        raise GateConfigError(cfg.path, f"expect[{i}].renderer", str(e)) from None
+    if exp.unbiased and estimator != ESTIMATORS[0]:
+        raise GateConfigError(cfg.path, f"expect[{i}].unbiased", f"renderer {entry.name!r} declares estimator = "
+                              f"{estimator!r}: the agreement, variance and outlier tests assume an unbiased "
+                              "estimator and would fail it for its bias; check it with a budget (max, min, abs_max) "
+                              "or a consistency check")
+
+
+def _smaller_entry(cfg: GateConfig, i: int, exp: Expectation, entry: RendererEntry) -> RendererEntry | None:
+    """The renderer of a ``max_ratio`` consistency check's smaller budget (None without one), its settings checked."""
+    c = exp.consistency
+    if c is None or c.max_ratio is None:
+        return None
+    small = entry
+    for key, value in c.smaller_settings.items():  # one at a time, so an error names its key
+        try:
+            small = small.with_settings({key: value})
+        except SettingsError as e:
+            raise GateConfigError(cfg.path, f"expect[{i}].consistency.smaller.{key}", str(e)) from None
+    return small
 
 
 def _resolve(cfg: GateConfig, i: int, exp: Expectation, overrides: dict[str, RendererEntry] | None,
              stored: dict):
-    """Scene, reference and renderer (with its settings) of an expectation; config errors name the field.
+    """Scene, reference, renderer (with its settings) and a consistency check's smaller-budget renderer (or None)
+    of an expectation; config errors name the field.
 
     Run for every expectation before anything renders, so a typo fails in
     seconds, not after the expectations before it have rendered. ``stored``
@@ -54,7 +100,9 @@ def _resolve(cfg: GateConfig, i: int, exp: Expectation, overrides: dict[str, Ren
     except (RendererError, SettingsError) as e:
         field = "settings" if isinstance(e, SettingsError) else "renderer"
         raise GateConfigError(cfg.path, f"expect[{i}].{field}", str(e)) from None
-    return scene, ref, entry
+    _check_regions(cfg, i, exp, scene)
+    _check_estimator(cfg, i, exp, entry)
+    return scene, ref, entry, _smaller_entry(cfg, i, exp, entry)
 
 
 def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None, seed_offset: int = 0,
@@ -74,7 +122,7 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
     stored: dict = {}
     resolved = [_resolve(cfg, i, exp, overrides, stored) for i, exp in enumerate(cfg.expectations)]
     outcomes = []
-    for exp, (scene, ref, entry) in zip(cfg.expectations, resolved):
+    for exp, (scene, ref, entry, small) in zip(cfg.expectations, resolved):
         if on_start:
             on_start(exp)
         seed = exp.seed + seed_offset
@@ -83,10 +131,14 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
             spp = spp_for_time_budget(entry, scene, exp.time_s, seed) if entry.available else 1
         limit = exp.time_limit_s if sandbox and exp.renderer not in (overrides or {}) else None
         rec = runner.run_one(entry, scene, spp, seed, ref, checkpoints=_checkpoints(exp, spp), time_limit_s=limit)
+        smaller = None
+        if small is not None and rec.status == "ok":  # the same renderer and seed at the smaller budget
+            smaller = runner.run_one(small, scene, exp.consistency.smaller_spp or spp, seed, ref, time_limit_s=limit)
+        masks = region_masks(scene) if exp.region_metrics() else None
         # A baseline compares like with like: the same seed, so the same noise. Runs at other seeds
         # (false-alarm measurements) are not compared: a metric's spread between seeds can exceed the margin.
         same_seed = seeds.get(exp.name, seed) == seed
-        outcomes.append(evaluate(exp, rec, ref, cfg, metrics.get(exp.name) if same_seed else None))
+        outcomes.append(evaluate(exp, rec, ref, cfg, metrics.get(exp.name) if same_seed else None, smaller, masks))
         if on_done:
             on_done(outcomes[-1])
     return outcomes

@@ -18,6 +18,7 @@ import pandas as pd
 
 from harness.adapters.registry import RendererEntry
 from harness.evaluate import convergence
+from harness.evaluate.regions import nested_regions, region_columns, region_masks
 from harness.scenes.model import Scene
 from harness.store.experiments import (RESULTS_FILE, cell_is_done, cell_name, prepare_dir, write_parquet_atomic)
 from harness.store.exr import write_exr
@@ -94,15 +95,43 @@ def run_experiment(
     return results
 
 
-def summary_table(runs: pd.DataFrame, images: dict[str, list[np.ndarray]], reference: Reference,
+def summary_table(runs: pd.DataFrame, images: dict[str, list[np.ndarray]], reference: Reference, scene: Scene,
                   targets=convergence.DEFAULT_TARGETS, deterministic: Sequence[str] = ()) -> pd.DataFrame:
-    """Derived figures per renderer, with the bias/variance split from the stored images."""
+    """Derived figures per renderer, with the bias/variance split from the stored images.
+
+    For a scene with named regions the split is also given per region, as
+    columns ``region.<name>.bias2``, ``.variance`` and ``.bias2_fraction``
+    (:func:`harness.evaluate.convergence.region_bias_variance`).
+    """
     summary = convergence.summarize(runs, targets)
     if summary.empty:
         return summary
-    bv = [convergence.bias_variance(images.get(r, []), reference.image, reference.variance, r in deterministic)
-          for r in summary["renderer"]]
-    return pd.concat([summary, pd.DataFrame(bv)], axis=1)
+    masks = region_masks(scene)
+    rows = []
+    for r in summary["renderer"]:
+        finals, det = images.get(r, []), r in deterministic
+        row = convergence.bias_variance(finals, reference.image, reference.variance, det)
+        if masks:
+            row.update(region_columns(convergence.region_bias_variance(finals, reference.image, reference.variance,
+                                                                       masks, det)))
+        rows.append(row)
+    return pd.concat([summary, pd.DataFrame(rows)], axis=1)
+
+
+#: The per-region columns :func:`summary_table` adds, in table order.
+REGION_SPLIT = ("bias2", "variance", "bias2_fraction")
+
+
+def region_split(summary: pd.DataFrame) -> pd.DataFrame:
+    """The per-region bias/variance columns of a summary as long rows: renderer, region, bias2, variance,
+    bias2_fraction (empty without them); in summary order, regions in column order."""
+    rows = []
+    for rec in summary.to_dict("records") if summary is not None else []:
+        for region, values in nested_regions(rec).items():
+            if any(k in values for k in REGION_SPLIT):
+                rows.append({"renderer": rec["renderer"], "region": region,
+                             **{k: values.get(k, math.nan) for k in REGION_SPLIT}})
+    return pd.DataFrame(rows, columns=["renderer", "region", *REGION_SPLIT])
 
 
 def _continue(head: list[int], last: int) -> list[int]:

@@ -23,7 +23,8 @@ import numpy as np
 from harness.evaluate import metrics
 from harness.evaluate import noise as stats
 from harness.evaluate import regions as named_regions
-from harness.adapters.registry import Checkpoint, RenderResult, RendererEntry, missing_features
+from harness.adapters.registry import (ESTIMATORS, Checkpoint, RenderResult, RendererEntry, estimator_of,
+                                      missing_features)
 from harness.adapters.settings import canonical
 from harness.store.references import Reference
 from harness.workflows.render import RenderError, RenderTimeout, render_checked
@@ -52,6 +53,7 @@ class RunRecord:
     scene_hash: str = ""
     scene_settings: str = "{}"
     settings: str = "{}"  # the renderer's settings, every declared one (canonical JSON)
+    estimator: str = ESTIMATORS[0]  # the adapter's declaration (harness.adapters.registry.estimator_of)
     reason: str | None = None
     version: str | None = None
     time_s: float | None = None
@@ -67,6 +69,8 @@ class RunRecord:
     def new(cls, scene: Scene, entry: RendererEntry, spp: int, seed: int, **fields) -> "RunRecord":
         rec = cls(scene.name, entry.name, "ok", spp, seed, scene.content_hash(), scene_settings(scene),
                   canonical(entry.settings), **fields)
+        if entry.renderer is not None:
+            rec.estimator = estimator_of(entry.renderer)
         if not entry.available:
             rec.status, rec.reason = "unavailable", entry.reason
         elif missing := missing_features(entry.renderer, scene):
@@ -94,6 +98,7 @@ class RunRecord:
             "reason": self.reason,
             "version": self.version,
             "settings": self.settings,
+            "estimator": self.estimator,
             "scene_settings": self.scene_settings,
             "approximations": json.dumps(list(self.approximations)),
             "spp": self.spp,

@@ -268,6 +268,7 @@ class Pyrender:
 
     name = "pyrender"
     deterministic = True  # no sampling: the seed changes nothing
+    estimator = "biased"  # direct light only, shadow maps: it does not converge to the reference
     features = frozenset({"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"})
     approximations: tuple[str, ...] = (
         f"area lights replaced by ~{DEFAULT_LIGHTS} one-sided point lights (pyrender SpotLights, cosine "
