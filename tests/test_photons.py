@@ -108,7 +108,7 @@ def test_photonmap_in_the_white_furnace():
     bias is where the density estimate's disc leaves a face: at the cube's edges and corners the disc
     is partly empty (photons of the other faces fail the normal test), so edge pixels read low.
 
-    Measured (seed 0, 16 spp, 100k photons): interior mean +0.6%, border -5.4% (gather 1); with the
+    Measured (seed 0, 16 spp, 100k photons): interior mean +1.8%, border -4.4% (gather 1); with the
     global map seen directly (gather 0): interior +2.2%, border -5.0%.
     """
     scene = furnace_scene(0.5, 1.0, res=16)

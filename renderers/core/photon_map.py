@@ -69,12 +69,8 @@ def kernel_weight(kernel, d, r) -> float:
 
 
 @jit
-def _estimate(dist, idx, skip, normals, budget, r_max, kernel, p_normal, p_direction, p_power, p_depth, out,
-              radius):
-    """out[i] = Σ over the found photons of query i that pass the tests of Φ_p·K (see the module docstring).
-
-    Photon ``skip[i]`` (-1: none) is left out: a query at a photon's own position.
-    """
+def _estimate(dist, idx, normals, budget, r_max, kernel, p_normal, p_direction, p_power, p_depth, out, radius):
+    """out[i] = Σ over the found photons of query i that pass the tests of Φ_p·K (see the module docstring)."""
     n_ph = p_depth.size
     m, k = dist.shape
     for i in range(m):
@@ -86,8 +82,6 @@ def _estimate(dist, idx, skip, normals, budget, r_max, kernel, p_normal, p_direc
             p = idx[i, a]
             if p >= n_ph:
                 break  # cKDTree pads missing neighbours with n, after the found ones
-            if p == skip[i]:
-                continue
             if p_depth[p] > budget[i]:
                 continue
             cos_n = normals[i, 0] * p_normal[p, 0] + normals[i, 1] * p_normal[p, 1] + normals[i, 2] * p_normal[p, 2]
@@ -115,24 +109,23 @@ class PhotonMap:
         return len(self.photons)
 
     def irradiance(self, points: np.ndarray, normals: np.ndarray, budget: np.ndarray, k: int, r_max: float,
-                   kernel: str, skip: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   kernel: str) -> tuple[np.ndarray, np.ndarray]:
         """Irradiance (m, 3) at ``points`` (m, 3) with ``normals``, and the radius each estimate used.
 
-        ``budget`` (m,) int: the deepest photon each point may use. ``skip``
-        (m,): the photon at each point, for estimates at photons' own
-        positions; it is not one of the k (it would be counted with the
-        kernel's peak weight, not its mean: +2/(k − 1) for the cone).
+        ``budget`` (m,) int: the deepest photon each point may use. The points
+        must not be positions of this map's photons: a photon at the query
+        point would count with the kernel's peak weight, not its mean
+        (+2/(k − 1) for the cone; see :class:`PrecomputedIrradiance`).
         """
         m = len(points)
         out, radius = np.zeros((m, 3)), np.full(m, r_max)
         if m == 0 or self.tree is None:
             return out, radius
-        k = min(k + (skip is not None), len(self))
+        k = min(k, len(self))
         dist, idx = self.tree.query(points, k=k, distance_upper_bound=r_max, workers=1)
         dist, idx = dist.reshape(m, k), idx.reshape(m, k)
-        skip = np.full(m, -1, np.int64) if skip is None else np.asarray(skip, np.int64)
         ph = self.photons
-        _estimate(dist, idx, skip, np.ascontiguousarray(normals, np.float64), np.asarray(budget, np.int64), r_max,
+        _estimate(dist, idx, np.ascontiguousarray(normals, np.float64), np.asarray(budget, np.int64), r_max,
                   kernel_id(kernel), ph.normal, ph.direction, ph.power, ph.depth, out, radius)
         return out, radius
 
@@ -165,20 +158,35 @@ class PrecomputedIrradiance:
     Christensen 1999 ("Faster Photon Map Global Illumination", JGT 4(3)):
     final gathering asks the global map for the radiance at many points,
     each a k-nearest-neighbour estimate; estimating the irradiance at every
-    ``stride``-th photon's position beforehand turns each into one nearest
-    lookup (with the normal test), at the price of a piecewise-constant
-    irradiance between those points, which the gather's averaging hides.
+    ``stride``-th photon's position (the sites) beforehand turns each into
+    one nearest lookup (with the normal test), at the price of a
+    piecewise-constant irradiance between sites, which the gather's
+    averaging hides.
+
+    The sites are taken out of the map their irradiance is estimated from
+    (and the estimate scaled by stride/(stride − 1) for the photons taken
+    out: a thinning by emission order, independent of position). Estimated
+    from the whole map, a site's k nearest photons would be the same photons
+    whose absence made it the nearest site to a lookup point: conditioned on
+    that empty disc, its k-th neighbour is farther and its irradiance reads
+    low, by a fraction that does not shrink with more photons (measured on
+    the Cornell box at k = 30, 16 spp: -1.5% image-wide at 250k and -1.4% at
+    1M photons, -2.2% with every photon a site, -1.1% at k = 100). With the
+    sites taken out: -0.5%, -0.3%, -0.2% at 62.5k, 250k, 1M photons.
     """
 
     def __init__(self, pmap: PhotonMap, stride: int, k: int, r_max: float, kernel: str, budget: int):
         ph = pmap.photons
-        pick = np.arange(0, len(ph), stride)
-        self.position = ph.position[pick]
-        self.normal = ph.normal[pick].astype(np.float64)
-        self.irradiance, _ = pmap.irradiance(self.position.astype(np.float64), self.normal,
-                                             np.full(len(pick), budget), k, r_max, kernel, skip=pick)
+        site = np.zeros(len(ph), bool)
+        site[::stride] = True
+        rest = PhotonMap(Photons(*(a[~site] for a in ph)), pmap.emitted)
+        self.position = ph.position[site]
+        self.normal = ph.normal[site].astype(np.float64)
+        irradiance, _ = rest.irradiance(self.position.astype(np.float64), self.normal,
+                                        np.full(len(self.position), budget), k, r_max, kernel)
+        self.irradiance = irradiance * (stride / (stride - 1))
         self.r_max = r_max
-        self.tree = cKDTree(self.position, balanced_tree=False, compact_nodes=False) if len(pick) else None
+        self.tree = cKDTree(self.position, balanced_tree=False, compact_nodes=False) if len(self.position) else None
 
     def lookup(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Irradiance (m, 3) at ``points``: that of the nearest precomputed point facing the same way."""
