@@ -10,9 +10,10 @@ false-alarm rate at α with Šidák's correction: each of the m tests uses
 level 1 − (1 − α)^(1/m) (Šidák 1967, J. Am. Stat. Assoc. 62, 626-633).
 
 ``var_img`` is the render's own per-pixel variance of its mean when the
-renderer reports it; otherwise the reference renderer's noise model
-(``var_ref · ref_spp / spp``: same per-sample variance as the reference), which
-is exact for the reference renderer itself.
+renderer reports it, floored at the reference renderer's noise model
+(``var_ref · ref_spp / spp``: same per-sample variance as the reference; the
+gate passes the floored image, :func:`harness.gate.checks.evaluate`); without
+one, the noise model alone, which is exact for the reference renderer itself.
 """
 
 from __future__ import annotations
