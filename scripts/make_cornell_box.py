@@ -95,7 +95,10 @@ REGIONS = [
     'description = "the back wall and the two coloured side walls"', "",
     "[regions.boxes]", 'objects = ["small-box", "large-box"]', 'description = "both boxes, every visible face"', "",
     "[regions.floor]", 'objects = ["floor"]', 'description = "the floor, including the boxes\' shadows"', "",
-    "[regions.light]", 'objects = ["light"]', 'description = "the area light seen directly"',
+    "[regions.light]", 'objects = ["light"]', 'description = "the area light seen directly"', "",
+    "[regions.back-edge]", 'objects = ["floor", "back"]', "box = { min = [-1.01, -1.01, -1.01], max = [1.01, -0.9, -0.9] }",
+    'description = "where the floor meets the back wall (within 0.1): a density estimate\'s disc leaves the '
+    'surface here"',
 ]
 
 

@@ -271,9 +271,14 @@ assert len(BY_NAME) == len(MUTANTS), "mutant names must be unique"
 
 #: Mutants whose bias is too small for the gate at its CI budget (power < 99% over seeds), as measured by
 #: ``benchmarks/gate_power.py`` (docs/gate-detection.md): name -> why, and what catches them instead.
-#: Empty since gate.toml has the furnace and light-panel expectations; before them, the Cornell box alone
-#: missed cosine_pdf_mismatch (0.85 sd) and had power 0.2 on mis_pdf_area_measure.
-LOW_POWER: dict[str, str] = {}
+#: None of the path tracer's since gate.toml has the furnace and light-panel expectations; before them, the
+#: Cornell box alone missed cosine_pdf_mismatch (0.85 sd) and had power 0.2 on mis_pdf_area_measure.
+LOW_POWER: dict[str, str] = {
+    "no_normal_test": "photons of a wall counted on the floor at their corner add light where the normal test's "
+                      "half-empty disc loses it: the two edge biases nearly cancel in every region of the stored "
+                      "scenes (cornell-box back-edge: -0.5% to -8.6% clean, +3.4% and -4.4% mutated, seeds 0-4); "
+                      "caught by tests/test_photons.py::test_normal_test_keeps_wall_photons_off_the_floor",
+}
 assert set(LOW_POWER) <= set(BY_NAME)
 
 #: Mutants that once made a gate run never end (a NaN throughput survived Russian roulette, so in the

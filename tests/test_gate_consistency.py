@@ -139,7 +139,7 @@ def test_region_budgets_read_the_run_regions(tmp_path):
 
 @pytest.mark.parametrize("extra, renderer, field, words", [
     ('max = { "region.caustic.rmse" = 0.1 }\n', "user_renderers:ShrinkingBias", "expect[0].max.region.caustic.rmse",
-     "scene 'cornell-box' has no region 'caustic'; its regions: walls, boxes, floor, light"),
+     "scene 'cornell-box' has no region 'caustic'; its regions: walls, boxes, floor, light, back-edge"),
     ('consistency = { metric = "region.caustic.rmse", slope = [-1.0, -0.5] }\n', "user_renderers:ShrinkingBias",
      "expect[0].consistency.metric", "has no region 'caustic'"),
     ("consistency = { max_ratio = 0.5, smaller = { photns = 10 } }\n", "user_renderers:ShrinkingBias",

@@ -10,7 +10,6 @@ here is reproducible bit for bit.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -26,14 +25,9 @@ pytest.importorskip("embreex")
 
 from renderers.core.geometry import SceneGeometry  # noqa: E402
 from renderers.core.photon_map import KERNELS, PhotonMap, kernel_weight  # noqa: E402
-from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, shoot  # noqa: E402
+from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, Photons, shoot  # noqa: E402
 from renderers.photonmap import PhotonMapper  # noqa: E402
 from renderers.sppm import SPPM  # noqa: E402
-
-
-def small(scene, res: int):
-    """``scene`` at res × res pixels (same camera otherwise)."""
-    return dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, width=res, height=res))
 
 
 # -- kernels and photons ----------------------------------------------------------------
@@ -60,7 +54,7 @@ def test_direct_photons_carry_the_emitted_flux():
 
 
 def test_caustic_map_holds_only_photons_that_came_through_specular_surfaces():
-    scene = small(resolve_scene("cornell-box-caustics"), 8)
+    scene = resolve_scene("cornell-box-caustics").with_resolution(8, 8)
     geom = SceneGeometry(scene)
     ph, emitted = shoot(geom, scene, pass_key(0, 0, 2), 2000, STORE_CAUSTIC, threads=2, stored=True)
     assert len(ph) >= 2000 and emitted > len(ph)
@@ -69,6 +63,29 @@ def test_caustic_map_holds_only_photons_that_came_through_specular_surfaces():
     for s in scene.spheres:
         gap = np.linalg.norm(ph.position - np.asarray(s.center), axis=1) - s.radius
         assert np.abs(gap).min() > 1e-4
+
+
+def test_normal_test_keeps_wall_photons_off_the_floor():
+    """At a corner, photons on the wall (normal +x) within the lookup radius of a floor point (normal +y)
+    must not count there: the floor's irradiance from wall photons alone is 0 (Jensen §7.2.3). Photons
+    on the floor itself count, and a floor photon that arrived from below the floor does not."""
+    rng = np.random.default_rng(1)
+    n = 2000
+    wall = np.column_stack([np.zeros(n), rng.uniform(0, 0.2, n), rng.uniform(-0.2, 0.2, n)])
+    floor = np.column_stack([rng.uniform(0, 0.2, n), np.zeros(n), rng.uniform(-0.2, 0.2, n)])
+    up, right = np.tile([0.0, 1.0, 0.0], (n, 1)), np.tile([1.0, 0.0, 0.0], (n, 1))
+    incoming = np.tile(np.array([1.0, 1.0, 0.0]) / math.sqrt(2.0), (n, 1))  # above both surfaces
+
+    def photon_map(pos, normal, direction):
+        return PhotonMap(Photons(pos.astype(np.float32), np.full((n, 3), 1e-3, np.float32),
+                                 direction.astype(np.float32), normal.astype(np.float32),
+                                 np.ones(n, np.int16), np.zeros(n, bool)), n)
+
+    query = np.array([[0.01, 0.0, 0.0]])
+    args = (np.tile([0.0, 1.0, 0.0], (1, 1)), np.array([5]), 30, 0.1, "cone")
+    assert photon_map(wall, right, incoming).irradiance(query, *args)[0].max() == 0.0
+    assert photon_map(floor, up, incoming).irradiance(query, *args)[0].min() > 0.0
+    assert photon_map(floor, up, -incoming).irradiance(query, *args)[0].max() == 0.0
 
 
 # -- the analytic case: direct irradiance from a rectangle light ---------------------------
@@ -143,6 +160,8 @@ def test_sppm_in_the_white_furnace():
     border = [abs(img[n][~inner].mean()) for n in (4, 16, 64)]
     assert border[0] > border[1] > border[2], border
     assert abs(img[64][inner].mean()) < 0.01 and abs(img[64].mean()) < 0.03
+    # α = 2/3: the radius shrinks (N' = N + αM); with α left out it would stay at its start.
+    assert res.info["final_radius_median"] < 0.8 * res.info["initial_radius_world"], res.info
 
 
 # -- determinism -------------------------------------------------------------------------------
@@ -150,7 +169,7 @@ def test_sppm_in_the_white_furnace():
 @pytest.mark.parametrize("renderer, settings", [(PhotonMapper, {"global_photons": 20_000, "caustic_photons": 5_000}),
                                                 (SPPM, {})])
 def test_bit_identical_whatever_the_thread_count(renderer, settings):
-    scene = small(resolve_scene("cornell-box-caustics"), 24)
+    scene = resolve_scene("cornell-box-caustics").with_resolution(24, 24)
     images = [renderer(threads=t).render(scene, 4, seed=3, settings=settings).image for t in (1, 2, 3)]
     assert all(np.array_equal(images[0], im) for im in images[1:])
     other = renderer(threads=2).render(scene, 4, seed=4, settings=settings).image

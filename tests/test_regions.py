@@ -154,7 +154,7 @@ def test_sphere_masks():
 
 def test_masks_are_cached_read_only_and_fast():
     sc = load_scene(CORNELL)
-    assert set(sc.regions) == {"walls", "boxes", "floor", "light"}
+    assert set(sc.regions) == {"walls", "boxes", "floor", "light", "back-edge"}
     R._cached_masks.cache_clear()
     t0 = time.perf_counter()
     first = R.region_masks(sc)
@@ -311,7 +311,7 @@ def test_runner_records_regions_and_flattens_them(tmp_path):
     ref = load_reference(sc)
     (entry,) = resolve(["user_renderers:FlatGrey"])
     rec = runner.run_one(entry, sc, 1, 0, ref)
-    assert rec.status == "ok" and list(rec.regions) == ["walls", "boxes", "floor", "light"]
+    assert rec.status == "ok" and list(rec.regions) == ["walls", "boxes", "floor", "light", "back-edge"]
     masks = R.region_masks(sc)
     assert rec.regions == R.region_metrics(rec.image, ref, masks, spp=1)
     assert rec.regions["light"]["mean_radiance_rel_error"] < -0.9  # grey 0.25 against the light's ~14
@@ -351,7 +351,7 @@ def test_compare_json_report_and_tables_carry_regions(tmp_path, capsys):
     assert _run_compare(str(folder), ["user_renderers:FlatGrey"], 2, 0, out, True)[0] == 0
     (line,) = capsys.readouterr().out.strip().splitlines()
     rec = json.loads(line)
-    assert list(rec["regions"]) == ["walls", "boxes", "floor", "light"]
+    assert list(rec["regions"]) == ["walls", "boxes", "floor", "light", "back-edge"]
     assert set(rec["regions"]["floor"]) == set(R.REGION_METRICS) and rec["regions"]["floor"]["pixels"] > 20
     for table in (pd.read_parquet(out / "results.parquet"), pd.read_csv(out / "metrics.csv")):
         assert table["region.floor.rmse"].iloc[0] == pytest.approx(rec["regions"]["floor"]["rmse"])
@@ -365,8 +365,8 @@ def test_compare_json_report_and_tables_carry_regions(tmp_path, capsys):
     section = html[i:html.index("</section>", i)]
     table = section[section.index('id="region-table"'):]
     rows = re.findall(r'<tr class="record ok">(.*?)</tr>', table)
-    assert len(rows) == 4 and all("flat-grey" in r for r in rows)
-    for name, r in zip(("walls", "boxes", "floor", "light"), rows):
+    assert len(rows) == 5 and all("flat-grey" in r for r in rows)
+    for name, r in zip(("walls", "boxes", "floor", "light", "back-edge"), rows):
         assert f'data-sort="{name}"' in r
         pixels = re.search(r'data-key="pixels"[^>]*>(\d+)<', r).group(1)
         assert int(pixels) == rec["regions"][name]["pixels"]

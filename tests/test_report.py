@@ -503,7 +503,7 @@ def test_region_bias_variance_table(tmp_path, case):
     images = {n: [case["raw"][n, s, 64] for s in (0, 1, 2)] for n in OK_NAMES}
     summary = summary_table(case["runs"], images, ref, sc)
     masks = region_masks(sc)
-    assert list(masks) == ["walls", "boxes", "floor", "light"]
+    assert list(masks) == ["walls", "boxes", "floor", "light", "back-edge"]
     text = rf.write_case(tmp_path / "r.html", case, summary=summary).read_text(encoding="utf-8")
     i = text.index('<section id="bias-variance-section">')
     section = text[i:text.index("</section>", i)]
