@@ -71,6 +71,11 @@ def test_demo_writes_report(tmp_path):
     caustics = pd.read_csv(tmp_path / "cornell-box-caustics" / "metrics.csv")
     status = dict(zip(caustics["renderer"], caustics["status"]))
     assert status["mitsuba"] == "ok" and status["pyrender"] == "skipped"
+    # Every renderer of ours runs on it, the photon mappers recorded as consistent, with region metrics.
+    rows = caustics.set_index("renderer")
+    for name, estimator in (("pathtracer", "unbiased"), ("photonmap", "consistent"), ("sppm", "consistent")):
+        assert (status[name], rows.loc[name, "estimator"]) == ("ok", estimator)
+        assert rows.loc[name, "region.caustic.rel_mse"] > 0
     html = (tmp_path / "report.html").read_text()
     assert 'href="cornell-box-caustics/report.html"' in html and "ΔE caustic" in html
     assert (tmp_path / "cornell-box-caustics" / "report.html").exists()
