@@ -118,6 +118,12 @@ def test_parse_target_and_duration():
     assert cv.parse_target("rel_mse=1e-3") == ("rel_mse", 1e-3)
     assert cv.parse_target("delta_e2000_mean<=1") == ("delta_e2000_mean", 1.0)
     assert cv.parse_target("2") == ("delta_e2000_mean", 2.0)
+    assert cv.parse_target("region.glass-shadow.rel_mse=0.05") == ("region.glass-shadow.rel_mse", 0.05)
+    for bad in ("rel_msee=1", "region.caustic.pixels=10", "region..rel_mse=1"):
+        with pytest.raises(ValueError, match="unknown metric"):
+            cv.parse_target(bad)
+    targets = [("rel_mse", 0.1), ("region.caustic.rel_mse", 0.05), ("region.floor.rmse", 1.0)]
+    assert cv.unknown_target_regions(targets, {"floor": None}) == ["caustic"]
     with pytest.raises(ValueError):
         cv.parse_target("ssim>=0.9")
     assert [parse_duration(t) for t in ("10s", "2m", "500ms", "1.5")] == [10, 120, 0.5, 1.5]

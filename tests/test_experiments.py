@@ -129,3 +129,12 @@ def test_equal_quality_mode_reports_time_to_target(tmp_path):
 def test_bad_mode_options(tmp_path, args, words):
     proc = run_cbox("compare", "--scene", "cornell-box", "--renderer", "mitsuba", *args, "--out", str(tmp_path))
     assert proc.returncode == 2 and words in proc.stderr
+
+
+def test_converge_region_target_must_name_a_region_of_the_scene(tmp_path):
+    """``--target region.<name>.<metric>=v`` is checked against the scene before anything renders."""
+    proc = run_cbox("converge", "--scene", "light-panel", "-r", "pathtracer", "--spp", "1", "--seeds", "1",
+                    "--target", "region.caustic.rel_mse=0.05", "--out", str(tmp_path / "x"))
+    assert proc.returncode == 2
+    assert "scene 'light-panel' has no region 'caustic'; its regions: (none)" in proc.stderr
+    assert not (tmp_path / "x").exists()

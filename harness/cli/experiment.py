@@ -29,8 +29,9 @@ def converge(
     out: Path = out_folder_option(Path("out/converge"), "Experiment folder: results.parquet, "
                                                                       "summary.csv, report.html, cells/, images/."),
     target: Optional[List[str]] = typer.Option(
-        None, "--target", help="Target error for the time-to-target figure, METRIC=VALUE (repeatable); default: "
-                               "delta_e2000_mean=2, delta_e2000_mean=1, rel_mse=0.01, rel_mse=0.001."),
+        None, "--target", help="Target error for the time-to-target figure, METRIC=VALUE (repeatable), the "
+                               "metric image-wide or in a region of the scene (region.caustic.rel_mse=0.01); "
+                               "default: delta_e2000_mean=2, delta_e2000_mean=1, rel_mse=0.01, rel_mse=0.001."),
     sweep: Optional[str] = typer.Option(
         None, "--sweep", help="Sweep one renderer setting, RENDERER.SETTING=V1,V2,... (e.g. "
                               "pathtracer.rr_depth=3,5,8): each value is its own series in the table and report. "
@@ -45,7 +46,7 @@ def converge(
     """
     from harness.adapters.registry import sweep as sweep_entries
     from harness.adapters.settings import parse_sweep
-    from harness.evaluate.convergence import DEFAULT_TARGETS, parse_target
+    from harness.evaluate.convergence import DEFAULT_TARGETS, parse_target, unknown_target_regions
     from harness.workflows.converge import parse_spp_list, run_experiment
     from reports.experiment import write_experiment_report
 
@@ -55,6 +56,9 @@ def converge(
     except ValueError as e:
         raise typer.BadParameter(str(e)) from None
     sc = resolve_scene(scene)
+    if unknown := unknown_target_regions(targets, sc.regions):
+        raise typer.BadParameter(f"--target: scene {sc.name!r} has no region {', '.join(map(repr, unknown))}; "
+                                 f"its regions: {', '.join(sc.regions) or '(none)'}")
     ref = load_reference(sc)
     entries = resolve(renderer)
     if sweep:

@@ -35,6 +35,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats as _st
 
+from harness.evaluate.registry import IMAGE_METRICS, REGION_METRICS, region_metric
+
 #: Targets of ``time_to_*`` columns by default: (metric, value).
 DEFAULT_TARGETS = (("delta_e2000_mean", 2.0), ("delta_e2000_mean", 1.0), ("rel_mse", 1e-2), ("rel_mse", 1e-3))
 
@@ -90,11 +92,33 @@ def target_column(metric: str, target: float) -> str:
 
 
 def parse_target(text: str) -> tuple[str, float]:
-    """``"delta_e2000_mean=1"`` or ``"rel_mse<=1e-3"`` or ``"1"`` (ΔE mean) → (metric, value)."""
-    m = re.fullmatch(r"\s*(?:([a-z0-9_]+)\s*(?:<=|=)\s*)?([-+0-9.eE]+)\s*", text)
+    """``"delta_e2000_mean=1"``, ``"rel_mse<=1e-3"``, ``"region.caustic.rel_mse=0.01"`` or ``"1"`` (ΔE mean)
+    → (metric, value).
+
+    The metric must be an error of one image (:data:`harness.evaluate.registry.IMAGE_METRICS`) or
+    a region's (``region.<region>.<metric>``, ``<metric>`` in ``REGION_METRICS``); whether the
+    scene names that region is the caller's to check (:func:`unknown_target_regions`).
+    """
+    m = re.fullmatch(r"\s*(?:([A-Za-z0-9_.\-]+)\s*(?:<=|=)\s*)?([-+0-9.eE]+)\s*", text)
     if not m:
-        raise ValueError(f"target error {text!r}: expected METRIC=VALUE (e.g. delta_e2000_mean=1) or a number")
-    return (m.group(1) or "delta_e2000_mean"), float(m.group(2))
+        raise ValueError(f"target error {text!r}: expected METRIC=VALUE (e.g. delta_e2000_mean=1 or "
+                         "region.caustic.rel_mse=0.01) or a number")
+    metric = m.group(1) or "delta_e2000_mean"
+    parts = region_metric(metric)
+    known = IMAGE_METRICS if parts is None else tuple(k for k in REGION_METRICS if k != "pixels")
+    if (parts[1] if parts else metric) not in known or (parts is not None and not parts[0]):
+        raise ValueError(f"target error {text!r}: unknown metric {metric!r}; use one of {', '.join(known)}"
+                         + ("" if parts else ", or region.<region>.<metric>"))
+    try:
+        value = float(m.group(2))
+    except ValueError:
+        raise ValueError(f"target error {text!r}: {m.group(2)!r} is not a number") from None
+    return metric, value
+
+
+def unknown_target_regions(targets, regions) -> list[str]:
+    """The regions that ``targets`` name and a scene with ``regions`` does not declare."""
+    return sorted({p[0] for metric, _ in targets if (p := region_metric(metric)) and p[0] not in regions})
 
 
 def bias_variance(images: list[np.ndarray], ref: np.ndarray, ref_var: np.ndarray,
