@@ -15,9 +15,10 @@ not single times):
    what ``cbox converge`` runs; resumable in ``--out``), and the median
    time over seeds at which each reaches a caustic-region relMSE of 0.05 and
    0.01 and an image-wide ΔE mean of 2 (:func:`harness.evaluate.convergence.time_to_target`).
-   photonmap's budget is its photon counts, not spp (its error stops
-   falling with spp at its bias): it runs at spp 1..16 for 250k, 1M and 4M
-   stored photons per map.
+   photonmap's budget is its photon counts as well as spp (its error stops
+   falling with spp at its bias): it runs at spp 1..64 for 250k and 1M
+   stored photons per map; SPPM also from a larger initial radius, with 1
+   and 4 photons per pixel per iteration.
 
 Run: ``.venv/bin/python benchmarks/photons.py --seeds 3`` (about 25 minutes on 2 cores).
 """
@@ -97,8 +98,9 @@ def kd_tree(scene, repeats: int, threads: int) -> None:
 def time_to_error(scene, seeds: int, out: Path) -> None:
     reference = load_reference(scene)
     runs = [(["pathtracer"], "1,2,4,...,1024"), (["sppm"], "1,2,4,...,256"),
-            (["photonmap", "photonmap[global_photons=1000000,caustic_photons=1000000]",
-              "photonmap[global_photons=4000000,caustic_photons=4000000]"], "1,2,4,8,16")]
+            (["sppm[initial_radius=4]"], "1,2,4,...,256"),
+            (["sppm[initial_radius=4,photons_per_iteration=262144]"], "1,2,4,...,64"),
+            (["photonmap", "photonmap[global_photons=1000000,caustic_photons=1000000]"], "1,2,4,...,64")]
     print(f"## Time to error on cornell-box-caustics (median over seeds 0-{seeds - 1})\n")
     print("| renderer | " + " | ".join(f"{m} ≤ {v:g}" for m, v in TARGETS) + " | best caustic relMSE |")
     print("|---|" + "---|" * (len(TARGETS) + 1))
@@ -106,7 +108,8 @@ def time_to_error(scene, seeds: int, out: Path) -> None:
     for specs, spp in runs:
         entries = resolve(specs)
         spps = parse_spp_list(spp)
-        table = run_experiment(out / specs[0], scene, reference, entries, spps, list(range(seeds)))
+        folder = out / specs[0].replace("[", "_").replace("]", "").replace("=", "_").replace(",", "_")
+        table = run_experiment(folder, scene, reference, entries, spps, list(range(seeds)))
         for name, g in table[table["status"] == "ok"].groupby("renderer", sort=False):
             t = [time_to_target(g, m, v) for m, v in TARGETS]
             times[name] = t
