@@ -18,7 +18,8 @@ import pytest
 from harness.adapters.seeds import pass_key
 from harness.evaluate.convergence import loglog_slope
 from harness.scenes.analytic import (LIGHT_A, LIGHT_B, LIGHT_H, LIGHT_LE, furnace_radiance, furnace_scene,
-                                     polygon_irradiance, rectangle_light_scene)
+                                     mirrored_light_image, mirrored_light_scene, polygon_irradiance,
+                                     rectangle_light_scene)
 from harness.scenes.library import resolve_scene
 
 pytest.importorskip("embreex")
@@ -116,6 +117,34 @@ def test_photon_map_irradiance_tends_to_the_polygon_formula(tmp_path):
         errors.append(float(np.sqrt(np.mean((E[:, 0] / exact - 1) ** 2))))
     assert errors[0] > errors[1] > errors[2], errors
     assert -0.6 <= loglog_slope(counts, errors) <= -0.15, errors
+
+
+def test_sppm_and_photonmap_converge_to_the_mirrored_lights_polygon_formula():
+    """A floor lit only through a mirror (its light is all a caustic, which NEE cannot sample): SPPM's
+    image converges to the polygon formula for the light's mirror image, and the photon mapper's
+    caustic map gets closer with more photons. Pixels within 0.15 of the floor's edge or of the panel's
+    shadow boundary are left out (a density estimate blurs across both).
+
+    Measured (seed 0, 24², 130 pixels): SPPM's RMS relative error 5.2%, 3.4%, 1.9% after 4, 16, 64
+    iterations of 20 000 photons, mean -0.04% at 64; photonmap at 16 spp: 13.0% with 62 500 caustic
+    photons, 8.3% with 250 000.
+    """
+    scene = mirrored_light_scene(24)
+    exact, mask = mirrored_light_image(scene, margin=0.15)
+    assert mask.sum() > 100
+    y = exact[mask][:, 0]
+
+    def error(image):
+        x = image.astype(np.float64)[mask][:, 0]
+        return float(np.sqrt(np.mean((x / y - 1) ** 2))), float(x.mean() / y.mean() - 1)
+
+    res = SPPM(threads=2).render(scene, 64, 0, checkpoints=(4, 16, 64), settings={"photons_per_iteration": 20000})
+    rms = [error(c.image)[0] for c in res.checkpoints]
+    assert rms[0] > rms[1] > rms[2] and rms[2] < 0.03, rms
+    assert abs(error(res.image)[1]) < 0.01
+    pm = [error(PhotonMapper(threads=2).render(scene, 16, 0, settings={"caustic_photons": n, "global_photons": 0})
+                .image)[0] for n in (62_500, 250_000)]
+    assert pm[1] < 0.8 * pm[0] and pm[1] < 0.12, pm
 
 
 # -- the white furnace ---------------------------------------------------------------------

@@ -14,6 +14,10 @@
   box-filtered image from Lambert's polygon formula
   (:func:`polygon_irradiance`). Written as a scene file, so the loader is
   exercised too.
+- **The same light seen only in a mirror** (:func:`mirrored_light_scene`,
+  :func:`mirrored_light_image`): the floor's light is all a caustic, exact
+  from the polygon formula for the light's mirror image; photon mappers
+  must estimate it from photons.
 """
 
 from __future__ import annotations
@@ -299,3 +303,75 @@ def rectangle_light_image(scene: Scene, sub: int = 16) -> np.ndarray:
     inside &= ~((np.abs(pl[:, 0]) <= a) & (np.abs(pl[:, 1]) <= b))
     radiance = np.where(inside, FLOOR_RHO / np.pi * e, 0.0).reshape(cam.height, sub, cam.width, sub)
     return np.repeat(radiance.mean(axis=(1, 3))[..., None], 3, axis=2)
+
+
+# ----------------------------------------------------------------------------------------
+# A rectangle light seen by the floor only through a mirror
+# ----------------------------------------------------------------------------------------
+
+#: The mirrored light: the panel (half-sizes LIGHT_A, LIGHT_B, radiance LIGHT_LE) faces up at height
+#: MIRROR_LIGHT_H under a mirror of reflectance 1 facing down at MIRROR_H; the floor is at z = 0.
+MIRROR_LIGHT_H, MIRROR_H = 1.0, 1.5
+
+
+def mirrored_light_scene(res: int = 24) -> Scene:
+    """A floor lit only by a rectangle light's image in a mirror: all of its light is a caustic (L S D).
+
+    The panel faces up at z = 1 (its black back faces the floor), a perfect
+    mirror faces down at z = 1.5, and max_depth = 3 keeps the single bounce
+    camera → floor → mirror → light (light that goes on to the mirror again
+    is cut). The floor's exact radiance is :func:`mirrored_light_image`. A
+    photon mapper estimates it from photons alone (the floor cannot sample
+    a light it sees only in a mirror), which makes it the analytic case of
+    photon density estimation.
+    """
+    a, b, h, top = LIGHT_A, LIGHT_B, MIRROR_LIGHT_H, MIRROR_H
+    camera = Camera(position=(0.0, -2.4, 0.9), look_at=(0.0, 0.3, 0.0), up=(0.0, 0.0, 1.0), fov_deg=60.0,
+                    fov_axis="smaller", width=int(res), height=int(res))
+    quad = np.array([[0, 1, 2, 3]])
+    meshes = (
+        Mesh("floor", np.array([[-1.6, -1.6, 0], [1.6, -1.6, 0], [1.6, 1.6, 0], [-1.6, 1.6, 0]], float),
+             _quads_to_triangles(quad), "white", (0.0, 0.0, 0.0)),
+        Mesh("panel", np.array([[-a, -b, h], [a, -b, h], [a, b, h], [-a, b, h]], float),
+             _quads_to_triangles(quad), "black", (LIGHT_LE,) * 3),
+        Mesh("mirror", np.array([[-1.0, -1.0, top], [-1.0, 1.0, top], [1.0, 1.0, top], [1.0, -1.0, top]], float),
+             _quads_to_triangles(quad), "mirror", (0.0, 0.0, 0.0)),
+    )
+    materials = {"white": Diffuse("white", (FLOOR_RHO,) * 3), "black": Diffuse("black", (0.0,) * 3),
+                 "mirror": Mirror("mirror", (1.0, 1.0, 1.0))}
+    return Scene(name="mirrored-light", path=Path("analytic") / "mirrored-light.toml",
+                 features=_ALL_FEATURES | {"mirror"}, camera=camera, materials=materials, meshes=meshes,
+                 max_depth=3, pixel_filter="box", description="a floor lit by a light's image in a mirror")
+
+
+def mirrored_light_image(scene: Scene, sub: int = 8, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Exact box-filtered image of :func:`mirrored_light_scene`, and the mask of the pixels it holds for.
+
+    A floor point p sees the light's mirror image, the panel reflected to
+    z' = 2·1.5 − 1 = 2, facing down: E(p) from the polygon formula for that
+    polygon, radiance ρ/π · E. A ray from p to a point q of the image crosses
+    the panel's plane halfway ((p + q)/2), so the panel's black back hides
+    none of it when |p_x| > 3a or |p_y| > 3b; the mask keeps the pixels whose
+    every sub-sample lands on the floor there (and sees nothing else first),
+    at least ``margin`` inside the floor's edge and that boundary (a density
+    estimate blurs across both).
+    """
+    cam = scene.camera
+    d = _subpixel_directions(cam, sub)
+    o = np.asarray(cam.position)
+    t = -o[2] / d[..., 2]
+    pts = (o + t[..., None] * d).reshape(-1, 3)
+    a, b = LIGHT_A, LIGHT_B
+    z_image = 2 * MIRROR_H - MIRROR_LIGHT_H
+    poly = np.array([[-a, -b, z_image], [a, -b, z_image], [a, b, z_image], [-a, b, z_image]], float)
+    e = polygon_irradiance(pts, np.array([0, 0, 1.0]), poly, LIGHT_LE)
+    edge = 1.6 - margin
+    ok = (t.reshape(-1) > 0) & (np.abs(pts[:, 0]) <= edge) & (np.abs(pts[:, 1]) <= edge)
+    ok &= (np.abs(pts[:, 0]) > 3 * a + margin) | (np.abs(pts[:, 1]) > 3 * b + margin)
+    # The camera (below the panel) must not see the panel in front of the floor point.
+    tl = (MIRROR_LIGHT_H - o[2]) / d[..., 2]
+    pl = (o + tl[..., None] * d).reshape(-1, 3)
+    ok &= ~((tl.reshape(-1) > 0) & (tl.reshape(-1) < t.reshape(-1)) & (np.abs(pl[:, 0]) <= a) & (np.abs(pl[:, 1]) <= b))
+    radiance = np.where(ok, FLOOR_RHO / np.pi * e, 0.0).reshape(cam.height, sub, cam.width, sub).mean(axis=(1, 3))
+    mask = ok.reshape(cam.height, sub, cam.width, sub).all(axis=(1, 3))
+    return np.repeat(radiance[..., None], 3, axis=2), mask
