@@ -57,13 +57,13 @@ import numpy as np
 
 from harness.adapters.registry import RenderResult
 from harness.adapters.seeds import pass_key
-from harness.adapters.settings import Setting
+from harness.adapters.settings import Setting, resolve_settings
 from harness.scenes.model import Scene
 from renderers.core.bsdf import LAMBERT
 from renderers.core.adapter import ToolkitRenderer
 from renderers.core.geometry import SceneGeometry
-from renderers.core.photon_map import KERNELS, UNBOUNDED, PhotonMap, PrecomputedIrradiance
-from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, Photons, empty_photons, shoot
+from renderers.core.photon_map import KERNELS, UNBOUNDED, PhotonMap, PrecomputedIrradiance, depth_budget
+from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, empty_photons, shoot, subset
 from renderers.core.rays import head, ray_buffer
 from renderers.core.schedule import default_threads, render_image
 from renderers.core.visible_points import camera_visible_points, gather_rays, walk_to_diffuse
@@ -104,7 +104,7 @@ class PhotonMapper(ToolkitRenderer):
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
-        s = {st.name: st.default for st in self.settings} | dict(settings or {})
+        s = resolve_settings(self, settings or {})
         threads = self.threads or default_threads()
         t0 = time.perf_counter()
         geom = SceneGeometry(scene)
@@ -128,10 +128,6 @@ def lookup_radius(geom: SceneGeometry, relative: float) -> float:
     return relative * 0.5 * geom.extent
 
 
-def _subset(ph: Photons, keep: np.ndarray) -> Photons:
-    return Photons(*(a[keep] for a in ph))
-
-
 class Pass2:
     """The photon maps of one render and the radiance estimate of a unit of camera paths from them."""
 
@@ -143,7 +139,7 @@ class Pass2:
         self.r_global = GLOBAL_RADIUS_FACTOR * self.r_caustic
         ph = global_map.photons
         # Seen directly (no gathering), the global map must not repeat what NEE and the caustic map give.
-        self.indirect_map = PhotonMap(_subset(ph, (ph.depth >= 2) & ~ph.caustic), global_map.emitted)
+        self.indirect_map = PhotonMap(subset(ph, (ph.depth >= 2) & ~ph.caustic), global_map.emitted)
         self._precomputed: dict[int, PrecomputedIrradiance] = {}
         self._lock = threading.Lock()
 
@@ -155,18 +151,12 @@ class Pass2:
                     self.global_map, PRECOMPUTE_STRIDE, self.s["k"], self.r_global, self.s["kernel"], budget)
             return self._precomputed[budget]
 
-    def budget(self, depth: np.ndarray) -> np.ndarray:
-        """Deepest photon a point reached by ``depth`` camera segments may use (max_depth)."""
-        if self.scene.max_depth < 0:
-            return np.full(len(depth), UNBOUNDED)
-        return self.scene.max_depth - depth
-
     def shade(self, first: int, stop: int, pixels: int, key: np.uint64) -> np.ndarray:
         """Radiance estimates (m, 3) of camera paths first .. stop-1 (render_image's trace function)."""
         s, geom = self.s, self.geom
         L, vp = camera_visible_points(geom, self.scene, first, stop, pixels, key)
         f = np.flatnonzero(vp.found)
-        x, n, w, budget = vp.position[f], vp.normal[f], vp.weight[f], self.budget(vp.depth[f])
+        x, n, w, budget = vp.position[f], vp.normal[f], vp.weight[f], depth_budget(self.scene.max_depth, vp.depth[f])
         E, _ = self.caustic_map.irradiance(x, n, budget, s["k"], self.r_caustic, s["kernel"])
         L[f] += w / math.pi * E
         if s["gather_rays"] == 0:
@@ -181,7 +171,7 @@ class Pass2:
                                      paths=len(L))
             h = np.flatnonzero(hit.found)
             depth = vp.depth[h] + hit.depth[h]
-            hb = self.budget(depth)
+            hb = depth_budget(self.scene.max_depth, depth)
             E = np.zeros((len(h), 3))
             for b in np.unique(hb):
                 if b >= 1:
@@ -209,7 +199,7 @@ def build_pass2(geom: SceneGeometry, scene: Scene, seed: int, settings: dict, th
 
 def _warm_up(geom: SceneGeometry, scene: Scene) -> None:
     """Compile (or load from numba's cache) every kernel before the clock starts."""
-    settings = {st.name: st.default for st in PhotonMapper.settings} | {"global_photons": 64, "caustic_photons": 0}
+    settings = resolve_settings(PhotonMapper, {"global_photons": 64, "caustic_photons": 0})
     p2 = build_pass2(geom, scene, 0, settings, 1)
     p2.shade(0, 1, 1, np.uint64(0))
     p2.s = dict(settings, gather_rays=0)

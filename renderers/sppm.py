@@ -55,14 +55,14 @@ from scipy.spatial import cKDTree
 
 from harness.adapters.registry import Checkpoint, RenderResult
 from harness.adapters.seeds import pass_key
-from harness.adapters.settings import Setting
+from harness.adapters.settings import Setting, resolve_settings
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer
 from renderers.core.geometry import SceneGeometry
-from renderers.core.photon_map import NORMAL_COS_MIN, UNBOUNDED
+from renderers.core.photon_map import depth_budget, pairs_that_count
 from renderers.core.photons import BATCH, STORE_INDIRECT, trace_photons
 from renderers.core.schedule import default_threads, pass_units, run_units
-from renderers.core.visible_points import camera_visible_points
+from renderers.core.visible_points import VisiblePoints, camera_visible_points, visible_buffer
 
 PHOTON_STREAM = 1
 
@@ -89,7 +89,7 @@ class SPPM(ToolkitRenderer):
                settings: dict | None = None) -> RenderResult:
         if spp < 1:
             raise ValueError(f"spp must be >= 1, got {spp}")
-        s = {st.name: st.default for st in self.settings} | dict(settings or {})
+        s = resolve_settings(self, settings or {})
         threads = self.threads or default_threads()
         t0 = time.perf_counter()
         geom = SceneGeometry(scene)
@@ -147,7 +147,7 @@ class Progress:
 
     def iterate(self, camera_key: np.uint64, photon_key: np.uint64, threads: int, photons: int) -> None:
         vp = self._camera_pass(camera_key, threads)
-        found = np.flatnonzero(vp["found"])
+        found = np.flatnonzero(vp.found)
         phi, m = np.zeros((self.pixels, 3)), np.zeros(self.pixels)
         if found.size:
             gather = _Gather(self, vp, found)
@@ -164,10 +164,8 @@ class Progress:
             phi /= photons
         self._update(phi, m)
 
-    def _camera_pass(self, key: np.uint64, threads: int) -> dict:
-        vp = {"position": np.zeros((self.pixels, 3)), "normal": np.zeros((self.pixels, 3)),
-              "weight": np.zeros((self.pixels, 3)), "depth": np.zeros(self.pixels, np.int64),
-              "found": np.zeros(self.pixels, bool)}
+    def _camera_pass(self, key: np.uint64, threads: int) -> VisiblePoints:
+        vp = visible_buffer(self.pixels)
 
         def work(unit):
             return camera_visible_points(self.geom, self.scene, unit.first, unit.stop, self.pixels, key)
@@ -175,8 +173,8 @@ class Progress:
         def reduce(unit, result):
             L, points = result
             self.ld[unit.first:unit.stop] += L
-            for name in vp:
-                vp[name][unit.first:unit.stop] = getattr(points, name)
+            for whole, part in zip(vp, points):
+                whole[unit.first:unit.stop] = part
 
         run_units(pass_units([1], self.pixels, threads), work, reduce, threads)
         return vp
@@ -194,14 +192,13 @@ class Progress:
 class _Gather:
     """The visible points of one iteration, indexed, gathering one batch of photons at a time."""
 
-    def __init__(self, progress: Progress, vp: dict, found: np.ndarray):
+    def __init__(self, progress: Progress, vp: VisiblePoints, found: np.ndarray):
         self.p = progress
         self.found = found
-        self.position = vp["position"][found]
-        self.normal = vp["normal"][found]
-        self.weight = vp["weight"][found]
-        max_depth = progress.scene.max_depth
-        self.budget = np.full(found.size, UNBOUNDED) if max_depth < 0 else max_depth - vp["depth"][found]
+        self.position = vp.position[found]
+        self.normal = vp.normal[found]
+        self.weight = vp.weight[found]
+        self.budget = depth_budget(progress.scene.max_depth, vp.depth[found])
         self.radius = progress.radius[found]
         self.tree = cKDTree(self.position, balanced_tree=False, compact_nodes=False)
 
@@ -214,10 +211,9 @@ class _Gather:
         pairs = self.tree.sparse_distance_matrix(cKDTree(ph.position), float(self.radius.max()),
                                                  output_type="ndarray")
         i, j, d = pairs["i"], pairs["j"], pairs["v"]
-        # The photon maps' tests (renderers.core.photon_map): same-facing surface, arrived from the front.
-        cos_n = np.einsum("ij,ij->i", self.normal[i], ph.normal[j])
-        cos_in = np.einsum("ij,ij->i", self.normal[i], ph.direction[j])
-        ok = (d < self.radius[i]) & (cos_n >= NORMAL_COS_MIN) & (cos_in > 0) & (ph.depth[j] <= self.budget[i])
+        faces = np.empty(i.size, bool)
+        pairs_that_count(self.normal, i, ph.normal, ph.direction, j, faces)  # the photon maps' tests
+        ok = (d < self.radius[i]) & faces & (ph.depth[j] <= self.budget[i])
         i, j = i[ok], j[ok]
         pixel = self.found[i]
         contribution = self.weight[i] / math.pi * ph.power[j]

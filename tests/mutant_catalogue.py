@@ -228,7 +228,7 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "no_normal_test",
         "no normal test in the density estimate: photons on a wall count on the floor at their corner",
-        (("            if cos_n < NORMAL_COS_MIN:\n                continue\n", "", f"{CORE}/photon_map.py"),),
+        (("    if cos_n < NORMAL_COS_MIN:\n        return 0.0\n", "", f"{CORE}/photon_map.py"),),
         "photonmap",
     ),
     Mutant(

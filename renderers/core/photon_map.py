@@ -30,7 +30,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from renderers.core.photons import Photons
+from renderers.core.photons import Photons, subset
 from renderers.core.sampling import jit
 
 #: Kernels of the density estimate: Jensen's cone filter (§7.2.2, k = 1: weight 1 − d/r,
@@ -47,6 +47,34 @@ UNBOUNDED = np.iinfo(np.int16).max
 
 def kernel_id(name: str) -> int:
     return KERNELS.index(name)
+
+
+def depth_budget(max_depth: int, depth: np.ndarray) -> np.ndarray:
+    """Deepest photon a point reached by ``depth`` camera segments may use: max_depth − depth, or unbounded."""
+    return np.full(len(depth), UNBOUNDED) if max_depth < 0 else max_depth - np.asarray(depth)
+
+
+@jit
+def photon_faces(n, p_normal, p_direction, p) -> float:
+    """cos θ of photon ``p``'s incidence at a query of unit normal ``n``, or 0 where it must not count.
+
+    It counts when its surface faces the query's way (the normal test) and it
+    arrived from the query's side (the incoming-side test): the module
+    docstring's rules, the same for every estimate of ours.
+    """
+    cos_n = n[0] * p_normal[p, 0] + n[1] * p_normal[p, 1] + n[2] * p_normal[p, 2]
+    if cos_n < NORMAL_COS_MIN:
+        return 0.0
+    cos_in = n[0] * p_direction[p, 0] + n[1] * p_direction[p, 1] + n[2] * p_direction[p, 2]
+    return cos_in if cos_in > 0.0 else 0.0
+
+
+@jit
+def pairs_that_count(normals, query, p_normal, p_direction, photon, out):
+    """out[k] = whether photon ``photon[k]`` counts at query ``query[k]`` (:func:`photon_faces`)."""
+    for k in range(query.size):
+        i = query[k]
+        out[k] = photon_faces((normals[i, 0], normals[i, 1], normals[i, 2]), p_normal, p_direction, photon[k]) > 0.0
 
 
 @jit
@@ -84,11 +112,7 @@ def _estimate(dist, idx, normals, budget, r_max, kernel, p_normal, p_direction, 
                 break  # cKDTree pads missing neighbours with n, after the found ones
             if p_depth[p] > budget[i]:
                 continue
-            cos_n = normals[i, 0] * p_normal[p, 0] + normals[i, 1] * p_normal[p, 1] + normals[i, 2] * p_normal[p, 2]
-            if cos_n < NORMAL_COS_MIN:
-                continue
-            cos_in = (normals[i, 0] * p_direction[p, 0] + normals[i, 1] * p_direction[p, 1]
-                      + normals[i, 2] * p_direction[p, 2])
+            cos_in = photon_faces((normals[i, 0], normals[i, 1], normals[i, 2]), p_normal, p_direction, p)
             if not cos_in > 0.0:
                 continue
             w = kernel_weight(kernel, dist[i, a], r)
@@ -179,7 +203,7 @@ class PrecomputedIrradiance:
         ph = pmap.photons
         site = np.zeros(len(ph), bool)
         site[::stride] = True
-        rest = PhotonMap(Photons(*(a[~site] for a in ph)), pmap.emitted)
+        rest = PhotonMap(subset(ph, ~site), pmap.emitted)
         self.position = ph.position[site]
         self.normal = ph.normal[site].astype(np.float64)
         irradiance, _ = rest.irradiance(self.position.astype(np.float64), self.normal,

@@ -93,6 +93,11 @@ def empty_photons(n: int = 0) -> Photons:
                    np.zeros((n, 3), np.float32), np.zeros(n, np.int16), np.zeros(n, bool))
 
 
+def subset(photons: Photons, keep: np.ndarray) -> Photons:
+    """The photons where ``keep`` (a mask or indices) says, in order."""
+    return Photons(*(a[keep] for a in photons))
+
+
 def join(parts: list[Photons]) -> Photons:
     """The photons of ``parts``, in order."""
     if not parts:
