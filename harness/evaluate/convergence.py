@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats as _st
 
-from harness.evaluate.registry import IMAGE_METRICS, REGION_METRICS, region_metric
+from harness.evaluate.registry import IMAGE_METRICS, REGION_CHECK_METRICS, region_metric
 
 #: Targets of ``time_to_*`` columns by default: (metric, value).
 DEFAULT_TARGETS = (("delta_e2000_mean", 2.0), ("delta_e2000_mean", 1.0), ("rel_mse", 1e-2), ("rel_mse", 1e-3))
@@ -96,7 +96,7 @@ def parse_target(text: str) -> tuple[str, float]:
     → (metric, value).
 
     The metric must be an error of one image (:data:`harness.evaluate.registry.IMAGE_METRICS`) or
-    a region's (``region.<region>.<metric>``, ``<metric>`` in ``REGION_METRICS``); whether the
+    a region's (``region.<region>.<metric>``, ``<metric>`` in ``REGION_CHECK_METRICS``); whether the
     scene names that region is the caller's to check (:func:`unknown_target_regions`).
     """
     m = re.fullmatch(r"\s*(?:([A-Za-z0-9_.\-]+)\s*(?:<=|=)\s*)?([-+0-9.eE]+)\s*", text)
@@ -105,7 +105,7 @@ def parse_target(text: str) -> tuple[str, float]:
                          "region.caustic.rel_mse=0.01) or a number")
     metric = m.group(1) or "delta_e2000_mean"
     parts = region_metric(metric)
-    known = IMAGE_METRICS if parts is None else tuple(k for k in REGION_METRICS if k != "pixels")
+    known = IMAGE_METRICS if parts is None else REGION_CHECK_METRICS
     if (parts[1] if parts else metric) not in known or (parts is not None and not parts[0]):
         raise ValueError(f"target error {text!r}: unknown metric {metric!r}; use one of {', '.join(known)}"
                          + ("" if parts else ", or region.<region>.<metric>"))

@@ -90,6 +90,9 @@ assert all(METRICS[k].guide_slope is not None for k in PLOT_METRICS)
 
 #: The metrics of each named region, in table order (computed by :func:`harness.evaluate.regions.region_metrics`).
 REGION_METRICS = ("pixels", "mean_radiance_rel_error", "mean_z", "rmse", "rel_mse", "delta_e2000_mean")
+#: Region metrics a gate budget, a consistency check or a time-to-target may name: ``pixels`` is a count,
+#: not an error.
+REGION_CHECK_METRICS = tuple(m for m in REGION_METRICS if m != "pixels")
 #: In a flat row (the results table), region metrics are columns ``region.<name>.<metric>``.
 REGION_PREFIX = "region."
 

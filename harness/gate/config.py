@@ -32,7 +32,7 @@ slope or ``consistency``) unless it says ``finite_only = true``.
 
 A budget may name a region's metric as a quoted key,
 ``"region.<region>.<metric>"`` with ``<metric>`` one of
-:data:`REGION_CHECK_METRICS` (:mod:`harness.evaluate.regions`); the metric
+:data:`harness.evaluate.registry.REGION_CHECK_METRICS`; the metric
 part is checked here, the region against the scene's ``[regions.*]`` when
 the gate resolves the scene (:mod:`harness.gate.run`), before anything
 renders. Baseline regression checks stay image-wide.
@@ -98,7 +98,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from harness.evaluate.registry import HIGHER_IS_BETTER, IMAGE_METRICS, REGION_METRICS, region_metric
+from harness.evaluate.registry import HIGHER_IS_BETTER, IMAGE_METRICS, REGION_CHECK_METRICS, region_metric
 from harness.workflows.budgets import parse_duration
 
 DEFAULT_REGRESSION_METRICS = ("delta_e2000_mean", "rel_mse_trimmed", "ssim")
@@ -108,8 +108,6 @@ TOP_KEYS = ("alpha", "baseline", "regression_margin", "regression_metrics", "tim
 EXPECT_KEYS = ("name", "scene", "renderer", "spp", "time", "seed", "unbiased", "tile", "slope", "max", "min",
                "abs_max", "settings", "time_limit", "finite_only", "consistency")
 CONSISTENCY_KEYS = ("metric", "slope", "from_spp", "max_ratio", "smaller")
-#: Region metrics a budget or a consistency check may name: ``pixels`` is a count, not an error.
-REGION_CHECK_METRICS = tuple(m for m in REGION_METRICS if m != "pixels")
 #: Image metrics a consistency check may follow: errors, which fall towards 0 (not PSNR or SSIM).
 CONSISTENCY_METRICS = tuple(m for m in IMAGE_METRICS if m not in HIGHER_IS_BETTER)
 
