@@ -12,8 +12,8 @@ expectations are left out) through :func:`harness.gate.run.run_gate`.
   expectations run cheapest first and stop at the first failure
   (:func:`mutants.run_until_failure`). A mutant that once hung the gate
   (``mutants.ISOLATED``) runs in a child process with a time limit;
-  mutants below the gate's resolution (``mutants.LOW_POWER``, empty today)
-  would be listed as expected failures with the reason, not run.
+  mutants the gate cannot fail (``mutants.LOW_POWER``: ``no_normal_test``)
+  are listed as expected failures with the reason, not run.
 - **False alarms**: the unmutated path tracer passes the whole gate at the
   CI seeds, and its statistical checks at :data:`SEEDS` seed offsets, at
   most one false alarm; baseline checks run only at the baseline's seeds.
@@ -104,7 +104,7 @@ def _params() -> list:
     for m in mutants.MUTANTS:
         marks = [pytest.mark.slow] if m.name in SLOW_MUTANTS else []
         if m.name in mutants.LOW_POWER:
-            marks += [pytest.mark.xfail(reason=f"below the gate's resolution: {mutants.LOW_POWER[m.name]}",
+            marks += [pytest.mark.xfail(reason=f"the gate cannot fail it: {mutants.LOW_POWER[m.name]}",
                                        run=False)]
         out.append(pytest.param(m.name, marks=marks, id=m.name))
     return out
