@@ -4,6 +4,8 @@ An adapter is a small class (state: the renderer's own handles) with
 
 - ``name``: short id used on the command line (``mitsuba``, ``pyrender``);
 - ``features``: the scene features (:data:`harness.scenes.model.FEATURES`) it models;
+- optionally ``quantities``: what its images can mean (:data:`harness.scenes.quantities.QUANTITIES`),
+  ``("radiance",)`` when absent; it never runs on a scene of another quantity;
 - ``approximations``: one line per thing it only approximates (shown in reports);
 - ``unavailable_reason()``: ``None`` if it can run here, else why not;
 - ``version()``: the renderer's version string (only called when available);
@@ -40,6 +42,7 @@ import numpy as np
 
 from harness.adapters.settings import declared, label, resolve_settings, split_spec
 from harness.scenes.model import Scene
+from harness.scenes.quantities import DEFAULT_QUANTITY
 
 ENTRY_POINT_GROUP = "cbox.renderers"
 #: What an adapter's ``estimator`` may say; the first is the default of an adapter that says nothing.
@@ -144,9 +147,17 @@ def estimator_of(renderer) -> str:
     return value
 
 
+def quantities_of(renderer) -> tuple[str, ...]:
+    """The quantities (:data:`harness.scenes.quantities.QUANTITIES`) a renderer computes; radiance if it says none."""
+    return tuple(getattr(renderer, "quantities", (DEFAULT_QUANTITY,)))
+
+
 def missing_features(renderer: Renderer, scene: Scene) -> list[str]:
-    """Scene features the renderer does not model (empty: it can run)."""
-    return sorted(scene.features - set(renderer.features))
+    """What of the scene the renderer does not model: features, and its quantity (empty: it can run)."""
+    missing = sorted(scene.features - set(renderer.features))
+    if scene.quantity not in quantities_of(renderer):
+        missing.append(f"the quantity {scene.quantity}")
+    return missing
 
 
 def load_spec(spec: str) -> Renderer:

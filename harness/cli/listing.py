@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from harness.adapters.registry import resolve
+from harness.adapters.registry import quantities_of, resolve
 from harness.adapters.settings import declared, describe
 from harness.cli.common import app
 from harness.scenes.library import resolve_scene, scene_names
@@ -29,7 +29,12 @@ def scenes() -> None:
         except ReferenceError as e:
             status = f"no usable reference ({str(e).split(';')[0].split(': ', 1)[-1]})"
         cam = scene.camera
-        typer.echo(f"{name:{w}s} {cam.width}x{cam.height}  max_depth={scene.max_depth}  {status}")
+        ao = scene.ambient_occlusion
+        # max_depth means nothing to an AO image; its definition does.
+        what = (f"max_depth={scene.max_depth}" if ao is None else
+                f"ambient_occlusion ({ao.weighting}, max_distance={ao.max_distance:g}, {ao.normal} normal, "
+                f"miss={ao.miss_value:g})")
+        typer.echo(f"{name:{w}s} {cam.width}x{cam.height}  {what}  {status}")
         typer.echo(f"{'':{w}s} features: {', '.join(sorted(scene.features))}")
         if scene.regions:
             typer.echo(f"{'':{w}s} regions: {', '.join(scene.regions)}")
@@ -53,6 +58,7 @@ def renderers(
             typer.echo(f"{entry.name:12s} unavailable  {entry.reason}")
         if r is not None:
             typer.echo(f"{'':12s} models: {', '.join(sorted(r.features))}")
+            typer.echo(f"{'':12s} computes: {', '.join(quantities_of(r))}")
             for a in getattr(r, "approximations", ()):
                 typer.echo(f"{'':12s} approximates: {a}")
             if settings:

@@ -22,14 +22,15 @@ import numpy as np
 from harness.scenes.materials import MATERIAL_TYPES, MAX_IOR, material_fields
 from harness.scenes.model import (_DEGENERATE_REL_AREA, FEATURES, FOV_AXES, IMAGE_BUFFERS, MAX_COORDINATE,
                                   MAX_DEPTH, MAX_IMAGE_BYTES, MAX_OBJ_FILE_BYTES, MAX_RADIANCE, MAX_SCENE_FILE_BYTES,
-                                  PIXEL_FILTERS, Camera, Mesh, Region, Scene, SceneError, Sphere,
-                                  image_memory_bytes, one_line)
+                                  PIXEL_FILTERS, Camera, Mesh, Region, Scene, SceneError, Sphere, extent,
+                                  image_memory_bytes, object_bounds, one_line)
+from harness.scenes.quantities import DEFAULT_QUANTITY, QUANTITIES, AmbientOcclusion, parse_ambient_occlusion
 
 #: The keys each table of a scene file may have; any other is an error (with a did-you-mean).
 #: A material's keys are its type's fields (harness.scenes.materials).
 _KEYS = {
-    "": ("format", "name", "description", "features", "camera", "render", "materials", "meshes", "spheres",
-         "regions"),
+    "": ("format", "name", "description", "quantity", "features", "camera", "render", "materials", "meshes",
+         "spheres", "regions", "ambient_occlusion"),
     "camera": ("type", "position", "look_at", "up", "fov_deg", "fov_axis", "resolution"),
     "render": ("max_depth", "pixel_filter"),
     "mesh": ("name", "material", "obj", "vertices", "faces", "emitter"),
@@ -199,6 +200,7 @@ def parse_scene(doc: dict, path: Path) -> Scene:
                         f"object name {n!r} is used more than once")
     _check_degenerate(r, meshes)
     regions = _parse_regions(r, r.get(doc, "regions", "", dict, {}), names)
+    quantity, ao = _parse_quantity(r, doc, meshes, spheres)
 
     declared = r.get(doc, "features", "", list)
     for i, f in enumerate(declared):
@@ -224,7 +226,26 @@ def parse_scene(doc: dict, path: Path) -> Scene:
         description=description,
         spheres=spheres,
         regions=regions,
+        quantity=quantity,
+        ambient_occlusion=ao,
     )
+
+
+def _parse_quantity(r: _Reader, doc: dict, meshes, spheres) -> tuple[str, AmbientOcclusion | None]:
+    """The scene's quantity and, for ambient occlusion, the definition it pins (:mod:`.quantities`)."""
+    quantity = r.get(doc, "quantity", "", str, DEFAULT_QUANTITY)
+    if quantity not in QUANTITIES:
+        raise r.err("quantity", f"unknown quantity {quantity!r}; known: {', '.join(QUANTITIES)}")
+    table = r.get(doc, "ambient_occlusion", "", dict, None)
+    if quantity != "ambient_occlusion":
+        if table is not None:
+            raise r.err("ambient_occlusion", f"only a scene of quantity = \"ambient_occlusion\" has this table; "
+                                             f"this one's quantity is {quantity!r}")
+        return quantity, None
+    if table is None:
+        raise r.err("ambient_occlusion", "missing required table: an ambient-occlusion scene pins max_distance "
+                                         "(or max_distance_relative), weighting, normal and miss_value")
+    return quantity, parse_ambient_occlusion(r, table, extent(*object_bounds(meshes, spheres)))
 
 
 def _features_used(meshes: tuple[Mesh, ...], spheres: tuple[Sphere, ...], materials: dict,

@@ -79,6 +79,7 @@ import numpy as np
 
 # Diffuse is re-exported: scenes built in code (analytic.py, tests) import it from the model.
 from harness.scenes.materials import Diffuse, Material, hash_payload  # noqa: F401
+from harness.scenes.quantities import DEFAULT_QUANTITY, AmbientOcclusion
 
 #: Every feature a scene may use, with what it means.
 FEATURES: dict[str, str] = {
@@ -267,6 +268,21 @@ class Region:
     description: str = ""
 
 
+def object_bounds(meshes: tuple[Mesh, ...], spheres: tuple[Sphere, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned bounding box (lo, hi) of meshes and spheres, float64."""
+    v = np.concatenate([m.vertices for m in meshes])
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    for s in spheres:
+        lo = np.minimum(lo, np.subtract(s.center, s.radius))
+        hi = np.maximum(hi, np.add(s.center, s.radius))
+    return lo, hi
+
+
+def extent(lo: np.ndarray, hi: np.ndarray) -> float:
+    """The scene's size: the length of its bounding box's diagonal."""
+    return float(np.linalg.norm(np.asarray(hi) - np.asarray(lo)))
+
+
 @dataclass(frozen=True)
 class Scene:
     """A validated scene. Build it with :func:`harness.scenes.loader.load_scene`."""
@@ -282,6 +298,8 @@ class Scene:
     description: str = ""
     spheres: tuple[Sphere, ...] = ()
     regions: dict[str, Region] = dataclasses.field(default_factory=dict)
+    quantity: str = DEFAULT_QUANTITY  # what the image means (harness.scenes.quantities)
+    ambient_occlusion: AmbientOcclusion | None = None  # the AO definition, for quantity ambient_occlusion
 
     @property
     def emitters(self) -> tuple[Mesh, ...]:
@@ -289,12 +307,7 @@ class Scene:
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned bounding box of all geometry (lo, hi), float64."""
-        v = np.concatenate([m.vertices for m in self.meshes])
-        lo, hi = v.min(axis=0), v.max(axis=0)
-        for s in self.spheres:
-            lo = np.minimum(lo, np.subtract(s.center, s.radius))
-            hi = np.maximum(hi, np.add(s.center, s.radius))
-        return lo, hi
+        return object_bounds(self.meshes, self.spheres)
 
     def object_names(self) -> tuple[str, ...]:
         """Meshes then spheres, in file order: the objects regions name."""
@@ -302,15 +315,15 @@ class Scene:
 
     def extent(self) -> float:
         """Length of the bounding-box diagonal: the scene's size."""
-        lo, hi = self.bounds()
-        return float(np.linalg.norm(hi - lo))
+        return extent(*self.bounds())
 
     def content_hash(self) -> str:
         """SHA-256 of the parsed content (not the file's bytes).
 
         Comments, formatting, OBJ-vs-inline choices and regions do not change
-        it; any change to geometry, materials, camera or transport settings
-        does. Keys that older scenes lack (spheres) enter only when present,
+        it; any change to geometry, materials, camera, transport settings or
+        quantity does. Keys that older scenes lack (spheres, a quantity other
+        than radiance, the AO definition) enter only when present,
         so the stored references of those scenes stay valid.
         """
         payload = {
@@ -332,6 +345,10 @@ class Scene:
         }
         if self.spheres:
             payload["spheres"] = [dataclasses.asdict(s) for s in self.spheres]
+        if self.quantity != DEFAULT_QUANTITY:
+            payload["quantity"] = self.quantity
+        if self.ambient_occlusion is not None:
+            payload["ambient_occlusion"] = self.ambient_occlusion.hash_payload()
         blob = json.dumps(payload, sort_keys=True, separators=(",", ":")).encode()
         return "sha256:" + hashlib.sha256(blob).hexdigest()
 
