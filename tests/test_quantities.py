@@ -4,13 +4,18 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from conftest import MINIMAL_SCENE
 from harness.adapters.registry import missing_features
+from harness.evaluate import metrics, regions
+from harness.evaluate.registry import COLOUR_METRICS
 from harness.scenes.library import resolve_scene
 from harness.scenes.loader import load_scene
 from harness.scenes.model import SceneError
+from harness.store.references import Reference
+from harness.workflows.runner import score
 
 AO_TABLE = """
 [ambient_occlusion]
@@ -103,3 +108,29 @@ def test_stored_ao_scene():
     assert scene.camera == cornell.camera
     assert [m.name for m in scene.meshes] == [m.name for m in cornell.meshes]
     assert not scene.emitters
+
+
+# -- scoring an AO image: no colour differences, shown at exposure 1 ---------------------------
+
+def _ao_reference(quantity: str) -> Reference:
+    rng = np.random.default_rng(3)
+    img = np.repeat(rng.uniform(0.2, 1.0, (16, 16, 1)), 3, axis=2).astype(np.float32)
+    return Reference(img, np.full_like(img, 1e-4), img.copy(), {"spp": 4096, "noise_spp": 64}, None, quantity)
+
+
+def test_an_ao_image_is_scored_without_colour_differences():
+    ao, radiance = _ao_reference("ambient_occlusion"), _ao_reference("radiance")
+    img = ao.image * 0.9
+    assert COLOUR_METRICS == {"delta_e2000_mean", "delta_e2000_p95", "delta_e2000_max", "delta_e2000_frac_gt_2_3",
+                              "noise_delta_e2000_mean"}
+    ao_row, radiance_row = score(img, ao, 64), score(img, radiance, 64)
+    assert not COLOUR_METRICS & set(ao_row) and COLOUR_METRICS <= set(radiance_row)
+    assert ao_row["rmse"] == radiance_row["rmse"] and 0 < ao_row["ssim"] < 1
+    # AO is shown as it is: a key-value exposure would rescale a darker AO image to mid-grey.
+    assert metrics.display_exposure(ao.image, "ambient_occlusion") == 1.0
+    assert metrics.display_exposure(ao.image) == metrics.exposure_scale(ao.image) != 1.0
+    mask = {"all": np.ones((16, 16), bool), "none": np.zeros((16, 16), bool)}
+    ao_regions, radiance_regions = regions.region_metrics(img, ao, mask), regions.region_metrics(img, radiance, mask)
+    for name in mask:
+        assert "delta_e2000_mean" not in ao_regions[name] and "delta_e2000_mean" in radiance_regions[name]
+    assert ao_regions["all"]["rmse"] == radiance_regions["all"]["rmse"]

@@ -55,6 +55,8 @@ import warnings
 import numpy as np
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
+from harness.scenes.quantities import DEFAULT_QUANTITY
+
 with warnings.catch_warnings():
     # colour-science warns at import when matplotlib is missing; we never plot.
     warnings.filterwarnings("ignore", message=".*Matplotlib.*")
@@ -130,6 +132,16 @@ def exposure_scale(ref, key: float = REINHARD_KEY, delta: float = REINHARD_DELTA
     # luminance; log(delta + Y) would then be NaN.
     y = np.maximum(y, 0.0)
     return float(key / np.exp(np.mean(np.log(delta + y))))
+
+
+def display_exposure(ref, quantity: str = DEFAULT_QUANTITY) -> float:
+    """The exposure of ``ref``'s display and display-referred metrics: :func:`exposure_scale` for radiance.
+
+    An ambient-occlusion image is already a fraction in [0, 1], so it is
+    shown as it is (exposure 1: A = 1 is white); a key-value exposure would
+    brighten a darker AO image and hide the difference.
+    """
+    return exposure_scale(ref) if quantity == DEFAULT_QUANTITY else 1.0
 
 
 def display_encode(img, exposure: float) -> np.ndarray:
@@ -265,13 +277,21 @@ def masked_pixels(img, mask) -> np.ndarray:
     return img[mask][:, None, :]
 
 
-def image_metrics(img, ref, exposure: float | None = None) -> dict:
-    """Every metric of ``img`` against ``ref`` as one flat, JSON-serialisable dict."""
+def image_metrics(img, ref, exposure: float | None = None, quantity: str = DEFAULT_QUANTITY) -> dict:
+    """Every metric of ``img`` against ``ref`` as one flat, JSON-serialisable dict.
+
+    Of an image of another quantity than radiance (ambient occlusion: one
+    scalar per pixel, written as grey), the colour differences
+    (:data:`harness.evaluate.registry.COLOUR_METRICS`) are left out.
+    """
     img, ref = _as_pair(img, ref)
     if exposure is None:
-        exposure = exposure_scale(ref)
+        exposure = display_exposure(ref, quantity)
     clean = zero_broken_pixels(img)
-    _, de_map = delta_e2000(clean, ref, exposure=exposure, full=True)
+    colour_stats = {}
+    if quantity == DEFAULT_QUANTITY:
+        _, de_map = delta_e2000(clean, ref, exposure=exposure, full=True)
+        colour_stats = delta_e2000_stats(de_map)
     # Mean radiance skips broken pixels rather than zeroing them: they are
     # counted separately and should not also read as missing energy.
     mean_img = mean_radiance(img)
@@ -282,7 +302,7 @@ def image_metrics(img, ref, exposure: float | None = None) -> dict:
         "rel_mse_trimmed": rel_mse(clean, ref, trim=REL_MSE_TRIM),
         "psnr": psnr(clean, ref, exposure=exposure),
         "ssim": ssim(clean, ref, exposure=exposure),
-        **delta_e2000_stats(de_map),
+        **colour_stats,
         **invalid_pixel_counts(img),
         "mean_radiance_r": float(mean_img[0]),
         "mean_radiance_g": float(mean_img[1]),

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from harness.evaluate import metrics
+from harness.scenes.quantities import DEFAULT_QUANTITY
 
 
 def render_variance(ref_var: np.ndarray, ref_spp: int, spp: int) -> np.ndarray:
@@ -79,9 +80,11 @@ def noise_yardsticks(image: np.ndarray, reference, spp: int) -> dict:
     """
     ref, ref_var, ref_spp = reference.image, reference.variance, reference.spp
     var = difference_variance(ref_var, ref_spp, spp)
-    noisy = noise_image(ref, reference.noise, reference.noise_spp, ref_spp, spp)
-    return {
+    out = {
         "noise_rmse": float(np.sqrt(np.mean(var))),
-        "noise_delta_e2000_mean": float(metrics.delta_e2000(noisy, ref)),
         "noise_mean_radiance_z": float(mean_radiance_z(image, ref, ref_var, ref_spp, spp)),
     }
+    if reference.quantity == DEFAULT_QUANTITY:  # ΔE of an AO image means nothing
+        noisy = noise_image(ref, reference.noise, reference.noise_spp, ref_spp, spp)
+        out["noise_delta_e2000_mean"] = float(metrics.delta_e2000(noisy, ref))
+    return out

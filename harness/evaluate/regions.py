@@ -47,8 +47,9 @@ import numpy as np
 
 from harness.evaluate import metrics
 from harness.evaluate import noise
-from harness.evaluate.registry import REGION_METRICS, REGION_PREFIX, region_metric
+from harness.evaluate.registry import COLOUR_METRICS, REGION_METRICS, REGION_PREFIX, region_metric
 from harness.scenes.model import Scene, triangle_arrays
+from harness.scenes.quantities import DEFAULT_QUANTITY
 
 #: Rays per pixel along each axis (see the module docstring for why 4).
 SUBPIXELS = 4
@@ -279,7 +280,8 @@ def region_metrics(image, reference, masks: dict[str, np.ndarray], spp: int | No
     else:
         img_var = 0.0
     diff_var = ref_var + img_var
-    exposure = metrics.exposure_scale(ref)
+    exposure = metrics.display_exposure(ref, reference.quantity)
+    colour = reference.quantity == DEFAULT_QUANTITY  # ΔE of an AO image means nothing
     clean = metrics.zero_broken_pixels(img)
     out = {}
     for name, mask in masks.items():
@@ -288,7 +290,8 @@ def region_metrics(image, reference, masks: dict[str, np.ndarray], spp: int | No
             raise ValueError(f"region {name!r}: mask shape {mask.shape} does not match image shape {img.shape[:2]}")
         n = int(np.count_nonzero(mask))
         if n == 0:
-            out[name] = {"pixels": 0, **{k: float("nan") for k in REGION_METRICS[1:]}}
+            out[name] = {"pixels": 0,
+                         **{k: float("nan") for k in REGION_METRICS[1:] if colour or k not in COLOUR_METRICS}}
             continue
         im, rf = metrics.masked_pixels(clean, mask), metrics.masked_pixels(ref, mask)
         out[name] = {
@@ -298,8 +301,9 @@ def region_metrics(image, reference, masks: dict[str, np.ndarray], spp: int | No
                                               metrics.masked_pixels(diff_var, mask)),
             "rmse": metrics.rmse(im, rf),
             "rel_mse": metrics.rel_mse(im, rf),
-            "delta_e2000_mean": metrics.delta_e2000(im, rf, exposure=exposure),
         }
+        if colour:
+            out[name]["delta_e2000_mean"] = metrics.delta_e2000(im, rf, exposure=exposure)
     return out
 
 

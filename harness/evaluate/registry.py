@@ -29,10 +29,11 @@ class Metric:
     axis_label: str | None = None
     guide_slope: float | None = None
     per_image: bool = False  # computed from one image against the reference (a gate may budget it)
+    colour: bool = False  # a colour difference: only for radiance images (an AO image is one scalar)
 
 
-def _m(key, label, definition, better=None, axis=None, slope=None, per_image=True) -> Metric:
-    return Metric(key, label, definition, better, axis, slope, per_image)
+def _m(key, label, definition, better=None, axis=None, slope=None, per_image=True, colour=False) -> Metric:
+    return Metric(key, label, definition, better, axis, slope, per_image, colour)
 
 
 _TABLE = (
@@ -51,10 +52,12 @@ _TABLE = (
        "relMSE (trimmed)", -1.0),
     _m("psnr", "PSNR (dB)", "PSNR of the display-encoded images", "high"),
     _m("ssim", "SSIM", "mean SSIM of the display-encoded images", "high"),
-    _m("delta_e2000_mean", "ΔE mean", "mean CIEDE2000", "low", "mean ΔE₀₀", -0.5),
-    _m("delta_e2000_p95", "ΔE p95", "95th percentile of CIEDE2000", "low", "ΔE₀₀ 95th percentile", -0.5),
-    _m("delta_e2000_max", "ΔE max", "maximum CIEDE2000", "low"),
-    _m("delta_e2000_frac_gt_2_3", "ΔE > 2.3", "fraction of pixels above the just-noticeable difference", "low"),
+    _m("delta_e2000_mean", "ΔE mean", "mean CIEDE2000", "low", "mean ΔE₀₀", -0.5, colour=True),
+    _m("delta_e2000_p95", "ΔE p95", "95th percentile of CIEDE2000", "low", "ΔE₀₀ 95th percentile", -0.5,
+       colour=True),
+    _m("delta_e2000_max", "ΔE max", "maximum CIEDE2000", "low", colour=True),
+    _m("delta_e2000_frac_gt_2_3", "ΔE > 2.3", "fraction of pixels above the just-noticeable difference", "low",
+       colour=True),
     _m("mean_radiance_r", "mean R", "mean radiance of the red channel (broken pixels skipped)"),
     _m("mean_radiance_g", "mean G", "mean radiance of the green channel (broken pixels skipped)"),
     _m("mean_radiance_b", "mean B", "mean radiance of the blue channel (broken pixels skipped)"),
@@ -63,7 +66,8 @@ _TABLE = (
     _m("inf_count", "Inf px", "pixels with an infinite channel", "low"),
     _m("negative_count", "neg px", "pixels with a negative channel", "low"),
     _m("noise_rmse", "RMSE (noise)", "expected RMSE from sampling noise alone at this spp"),
-    _m("noise_delta_e2000_mean", "ΔE mean (noise)", "ΔE mean of a simulated noise-only image at this spp"),
+    _m("noise_delta_e2000_mean", "ΔE mean (noise)", "ΔE mean of a simulated noise-only image at this spp",
+       colour=True),
     _m("noise_mean_radiance_z", "mean rad. z",
        "z-score of the mean-radiance difference given the noise; |z| > 3 points at bias"),
     _m("efficiency", "efficiency", "1/(MSE·time) at the highest spp: higher is better; unchanged by more time "
@@ -80,6 +84,9 @@ _TABLE = (
 
 #: Every known column, by key.
 METRICS: dict[str, Metric] = {m.key: m for m in _TABLE}
+#: Colour differences (CIEDE2000): computed for radiance images only; an ambient-occlusion image has one
+#: value per pixel, so its rows leave them out (RMSE, relMSE, SSIM, PSNR and the means stay).
+COLOUR_METRICS = frozenset(k for k, m in METRICS.items() if m.colour)
 #: Metrics where larger is better; every other scored metric is an error (smaller is better).
 HIGHER_IS_BETTER = frozenset(k for k, m in METRICS.items() if m.better == "high")
 #: Metrics of one image against the reference: what a gate budget or baseline may name.

@@ -29,6 +29,7 @@ import numpy as np
 
 from harness.store.exr import ImageFileError, read_exr
 from harness.scenes.model import Scene
+from harness.scenes.quantities import DEFAULT_QUANTITY
 
 REFERENCE_SEED_BASE = 1_000_000_000
 REFERENCE_FILE, VARIANCE_FILE, NOISE_FILE = "reference.exr", "variance.exr", "noise.exr"
@@ -46,6 +47,7 @@ class Reference:
     noise: np.ndarray  # one independent batch of noise_spp samples, (H, W, 3) float32
     provenance: dict
     folder: Path
+    quantity: str = DEFAULT_QUANTITY  # the scene's: what the images mean (harness.scenes.quantities)
 
     @property
     def spp(self) -> int:
@@ -86,4 +88,4 @@ def load_reference(scene: Scene, folder: Path | None = None) -> Reference:
             f"{folder}: reference images are {image.shape[1]}x{image.shape[0]}, scene is {shape[1]}x{shape[0]}; "
             f"rebuild with: {rebuild_command(scene, spp)}"
         )
-    return Reference(image, variance, noise, prov, folder)
+    return Reference(image, variance, noise, prov, folder, scene.quantity)

@@ -212,7 +212,7 @@ def run_checkpoints(entry: RendererEntry, scene: Scene, spps: Sequence[int], see
 
 def score(image: np.ndarray, reference: Reference, spp: int) -> dict:
     """Every metric of ``image`` against the reference, plus its noise yardsticks."""
-    out = metrics.image_metrics(image, reference.image)
+    out = metrics.image_metrics(image, reference.image, quantity=reference.quantity)
     out.update(stats.noise_yardsticks(image, reference, spp))
     return out
 
