@@ -13,6 +13,10 @@ variant used is reported in ``RenderResult.info`` and in ``version()``.
 Renders are split into passes of at most :data:`MAX_SAMPLES_PER_PASS` samples
 so memory stays bounded at any spp (the LLVM variant keeps a whole wavefront
 in memory); each pass has its own seed, derived from the user's seed.
+
+Scenes of quantity ``ambient_occlusion`` are rendered by a Python AO
+integrator on the same scene, passes and seeds (:mod:`renderers.mitsuba_ao`;
+Mitsuba 3.9 has none of its own), in the LLVM variant only.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ from harness.adapters.registry import Checkpoint, RenderResult
 from harness.adapters.seeds import pass_seed, spp_passes
 from harness.scenes.materials import Dielectric, Diffuse, Mirror
 from harness.scenes.model import Scene
+from renderers import mitsuba_ao
 
 MIN_LLVM_MAJOR = 17
 #: Upper bound on width × height × spp of one ``mi.render`` call (~1.5 GB of wavefront state).
@@ -180,12 +185,34 @@ def bsdf_dict(material) -> dict:
     raise ValueError(f"material {material.name!r}: {type(material).__name__} has no Mitsuba translation")
 
 
+def run_passes(spp: int, seed: int, per_pass: int, checkpoints: Sequence[int], sums, image):
+    """Accumulate ``sums(n, pass_seed)`` (a tuple of per-pixel sums over n samples) over the passes of a render.
+
+    Returns (sums over all spp, ``image(sums, spp)``, checkpoints, seconds spent in ``sums``); a checkpoint's
+    image is ``image(sums so far, done)``.
+    """
+    acc, done, elapsed, shots = None, 0, 0.0, []
+    for k, n in enumerate(spp_passes(spp, per_pass, checkpoints)):
+        t0 = time.perf_counter()
+        part = sums(n, pass_seed(seed, k))
+        elapsed += time.perf_counter() - t0
+        acc = part if acc is None else tuple(a + p for a, p in zip(acc, part))
+        done += n
+        if done in checkpoints and done < spp:
+            shots.append(Checkpoint(done, image(acc, done), elapsed))
+    final = image(acc, spp)
+    if spp in checkpoints:
+        shots.append(Checkpoint(spp, final, elapsed))
+    return acc, final, shots, elapsed
+
+
 class Mitsuba3:
-    """Mitsuba 3 path tracer (``path`` integrator)."""
+    """Mitsuba 3 path tracer (``path`` integrator); ambient occlusion by :mod:`renderers.mitsuba_ao`."""
 
     name = "mitsuba"
     features = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
                           "pinhole_camera", "box_filter"})
+    quantities = ("radiance", "ambient_occlusion")
     approximations: tuple[str, ...] = ()
 
     def unavailable_reason(self) -> str | None:
@@ -208,20 +235,33 @@ class Mitsuba3:
         variant, note = self.variant()
         import mitsuba as mi
 
+        info = {"variant": variant, "variant_note": note}
         cam = scene.camera
         per_pass = max(1, MAX_SAMPLES_PER_PASS // (cam.width * cam.height))
         mi_scene = mi.load_dict(scene_dict(scene, per_pass))
-        acc = np.zeros((cam.height, cam.width, 3), dtype=np.float64)
-        done, elapsed, shots = 0, 0.0, []
-        for k, n in enumerate(spp_passes(spp, per_pass, checkpoints)):
-            t0 = time.perf_counter()
-            img = np.asarray(mi.render(mi_scene, spp=n, seed=pass_seed(seed, k)), dtype=np.float64)
-            elapsed += time.perf_counter() - t0
-            acc += img * n
-            done += n
-            if done in checkpoints and done < spp:
-                shots.append(Checkpoint(done, (acc / done).astype(np.float32), elapsed))
-        image = (acc / spp).astype(np.float32)
-        if spp in checkpoints:
-            shots.append(Checkpoint(spp, image, elapsed))
-        return RenderResult(image, elapsed, spp, seed, shots, {"variant": variant, "variant_note": note})
+        if scene.quantity == "ambient_occlusion":
+            return self._render_ao(mi_scene, scene, spp, seed, checkpoints, per_pass, info)
+
+        def sums(n: int, s: int) -> tuple[np.ndarray]:
+            return (np.asarray(mi.render(mi_scene, spp=n, seed=s), dtype=np.float64) * n,)
+
+        _, image, shots, elapsed = run_passes(spp, seed, per_pass, checkpoints, sums,
+                                              lambda acc, n: (acc[0] / n).astype(np.float32))
+        return RenderResult(image, elapsed, spp, seed, shots, info)
+
+    def _render_ao(self, mi_scene, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int], per_pass: int,
+                   info: dict) -> RenderResult:
+        """Ambient occlusion (:mod:`renderers.mitsuba_ao`): grey image and the variance of its mean."""
+        if info["variant"] == "scalar_rgb":
+            raise RuntimeError(f"ambient occlusion needs Mitsuba's llvm_ad_rgb variant: {info['variant_note']}")
+        maxt = mitsuba_ao.unit_max_distance(scene, unit_frame(scene)[1])
+        shape = (scene.camera.height, scene.camera.width)
+
+        def sums(n: int, s: int) -> tuple[np.ndarray, np.ndarray]:
+            return mitsuba_ao.ao_pass(mi_scene, scene, maxt, n, s)
+
+        (s1, s2), image, shots, elapsed = run_passes(
+            spp, seed, per_pass, checkpoints, sums,
+            lambda acc, n: mitsuba_ao.mean_and_variance(acc[0], acc[1], n, shape)[0])
+        variance = mitsuba_ao.mean_and_variance(s1, s2, spp, shape)[1]
+        return RenderResult(image, elapsed, spp, seed, shots, info, variance)
