@@ -195,7 +195,7 @@ def render_html(
     fragments must be built with escaping already done.
     """
     ref_img = np.asarray(reference.image, dtype=np.float32)
-    exposure = metrics.exposure_scale(ref_img)
+    exposure = metrics.display_exposure(ref_img, scene.quantity)
     scene_hash = scene.content_hash()
     runs = runs if runs is not None else pd.DataFrame()
     images = dict(images or {})

@@ -33,7 +33,7 @@ def scene_section(scene, reference: np.ndarray, rows: Sequence[dict], images: Ma
     ``rows`` are result rows (:meth:`harness.workflows.runner.RunRecord.row`),
     ``images`` the ok renderers' images by name.
     """
-    exposure = metrics.exposure_scale(reference)
+    exposure = metrics.display_exposure(reference, scene.quantity)
     figures = [_thumbnail(reference, exposure, "reference")]
     figures += [_thumbnail(img, exposure, name) for name, img in images.items()]
     regions = list(nested_regions(rows[0]) if rows else {})
