@@ -19,11 +19,12 @@ ROOT = Path(__file__).resolve().parent.parent
 PATHTRACER = "renderers/pathtracer.py"
 PHOTONMAP = "renderers/photonmap.py"
 SPPM = "renderers/sppm.py"
+AO = "renderers/ao.py"
 SOURCE = ROOT / PATHTRACER
 CORE = "renderers/core"
 #: The renderers mutants are made of: registered name -> (integrator module, adapter class).
 INTEGRATORS = {"pathtracer": (PATHTRACER, "PathTracer"), "photonmap": (PHOTONMAP, "PhotonMapper"),
-               "sppm": (SPPM, "SPPM")}
+               "sppm": (SPPM, "SPPM"), "ao": (AO, "AORenderer")}
 
 
 class Patch(NamedTuple):
@@ -243,6 +244,29 @@ MUTANTS: tuple[Mutant, ...] = (
         "SPPM's gathered flux not divided by the iteration's photon count",
         (("            phi /= photons\n", "", SPPM),),
         "sppm",
+    ),
+    # -- ambient occlusion (ao) ------------------------------------------------------------------------
+    Mutant(
+        "ao_uniform_as_cosine",
+        "cosine-weighted AO sampled with uniform hemisphere directions but each still counted as V (the pdf "
+        "1/(2π) taken for cos θ/π): the image is the uniform obscurance, too dark beside walls",
+        (("        d = cosine_hemisphere(n[0], n[1], n[2], u1, u2)\n",
+          "        d = uniform_hemisphere(n[0], n[1], n[2], u1, u2)\n", AO),),
+        "ao",
+    ),
+    Mutant(
+        "ao_max_distance_ignored",
+        "the occlusion ray's tfar left at infinity: occluders beyond max_distance count",
+        (("    tfar = ao.max_distance  #", "    tfar = math.inf  #", AO),),
+        "ao",
+    ),
+    Mutant(
+        "ao_normal_flipped",
+        "FaceForward's test the wrong way round: the hemisphere is on the far side of every surface, so the "
+        "rays look into walls and boxes (or the void behind them) instead of the room",
+        (("    return n if cos_o >= 0.0 else (-n[0], -n[1], -n[2])\n",
+          "    return (-n[0], -n[1], -n[2]) if cos_o >= 0.0 else n\n", AO),),
+        "ao",
     ),
 )
 

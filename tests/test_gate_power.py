@@ -91,7 +91,9 @@ SLOW_MUTANTS = {"fresnel_schlick": "tests/test_bsdf.py", "mirror_reflectance_ign
                 # Photon mutants: 23-44 s each in the gate (a numba compile of the copied toolkit, then a
                 # photon expectation; measured), so slow; tests/test_photons.py catches each by default (flux
                 # conservation, the furnaces, the caustic map's contents, SPPM's radius).
-                **{m.name: "tests/test_photons.py" for m in mutants.MUTANTS if m.renderer != "pathtracer"},
+                **{m.name: "tests/test_photons.py" for m in mutants.MUTANTS if m.renderer in ("photonmap", "sppm")},
+                # AO mutants: a compile of the copied toolkit each; tests/test_ao.py catches each by default.
+                **{m.name: "tests/test_ao.py" for m in mutants.MUTANTS if m.renderer == "ao"},
                 # The six costliest path tracer ones in the suite (21-23 s each, measured 2026-12-01), slow to
                 # keep the suite within its time: each was checked to fail these unit tests when patched in.
                 "two_sided_emitter": "tests/test_pathtracer.py", "camera_half_pixel": "tests/test_pathtracer.py",
