@@ -56,7 +56,6 @@ and embreex gets float32 copies of it and of ``tfar = max_distance``.
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Sequence
 
@@ -66,11 +65,12 @@ from harness.adapters.registry import RenderResult
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer
 from renderers.core.camera import camera_basis, camera_rays
-from renderers.core.geometry import SceneGeometry, offset_origin, surface_point
-from renderers.core.rays import add_unoccluded, head, ray_buffer, set_shadow, shadow_buffer
+from renderers.core.geometry import SceneGeometry, surface_point
+from renderers.core.occlusion import face_forward, occlusion_segment
+from renderers.core.rays import add_unoccluded, head, ray_buffer, shadow_buffer
 from renderers.core.rng import uniform
 from renderers.core.sampler import CAMERA_DIMS
-from renderers.core.sampling import cosine_hemisphere, jit, orthonormal_basis
+from renderers.core.sampling import jit
 from renderers.core.schedule import render_image
 
 #: A sample's layout: the pixel jitter (CAMERA_U, CAMERA_V: dimensions 0 and 1, drawn by the toolkit's
@@ -84,45 +84,6 @@ AO_DIMS = CAMERA_DIMS + 2
 def ao_sample(key, path):
     """The two numbers (u1, u2) in [0, 1)² that pick sample ``path``'s direction."""
     return uniform(key, path, AO_U), uniform(key, path, AO_V)
-
-
-@jit
-def uniform_hemisphere(nx: float, ny: float, nz: float, u1: float, u2: float):
-    """A direction about unit normal n with pdf 1/(2π): (dx, dy, dz, cos θ).
-
-    pbrt-v4 §A.5.2 (``SampleUniformHemisphere``: cos θ uniform in [0, 1), φ = 2π u2),
-    with cos θ = 1 − u1 ∈ (0, 1] so that no direction lies exactly in the tangent plane.
-    """
-    z = 1.0 - u1
-    r = math.sqrt(max(0.0, 1.0 - z * z))
-    phi = 2.0 * math.pi * u2
-    lx, ly = r * math.cos(phi), r * math.sin(phi)
-    s, t = orthonormal_basis(nx, ny, nz)
-    return (s[0] * lx + t[0] * ly + nx * z, s[1] * lx + t[1] * ly + ny * z, s[2] * lx + t[2] * ly + nz * z, z)
-
-
-@jit
-def ao_direction(n, cosine, u1, u2):
-    """The sample's direction about ``n``, drawn from the density of the scene's weighting.
-
-    ``cosine``: pdf cos θ / π, for A = 1/π ∫ V cos θ dω; otherwise pdf 1/(2π), for
-    A = 1/(2π) ∫ V dω. Either way the integrand's weight over the pdf is 1.
-    """
-    if cosine:
-        d = cosine_hemisphere(n[0], n[1], n[2], u1, u2)
-    else:
-        d = uniform_hemisphere(n[0], n[1], n[2], u1, u2)
-    return d[0], d[1], d[2]
-
-
-@jit
-def face_forward(n, cos_o):
-    """``n`` turned to the side the camera ray came from (``cos_o = -d·n``): pbrt-v4's FaceForward(n, -d).
-
-    The hemisphere is on the side the camera sees, so a surface seen from its
-    back is not black (:mod:`harness.scenes.quantities`).
-    """
-    return n if cos_o >= 0.0 else (-n[0], -n[1], -n[2])
 
 
 # One kernel for the whole sample, as the path tracer's _shade: it reads and writes the buffers itself
@@ -148,10 +109,7 @@ def _occlusion_rays(prim, t_sphere, rays, key, first, cosine, tfar, miss, geo, A
         x, n0, cos_o, _ = surface_point(geo, p, o, d, t_sphere[i] if p >= geo.n_triangles else 0.0)
         n = face_forward(n0, cos_o)
         u = ao_sample(key, first + i)
-        w = ao_direction(n, cosine, u[0], u[1])
-        set_shadow(occ, k, offset_origin(x, n, geo.offset), w, tfar, i)
-        for c in range(3):
-            occ.c[k, c] = 1.0
+        occlusion_segment(occ, k, x, n, cosine, u[0], u[1], tfar, geo.offset, i, (1.0, 1.0, 1.0))
         k += 1
     return k
 

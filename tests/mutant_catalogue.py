@@ -251,13 +251,13 @@ MUTANTS: tuple[Mutant, ...] = (
         "cosine-weighted AO sampled with uniform hemisphere directions but each still counted as V (the pdf "
         "1/(2π) taken for cos θ/π): the image is the uniform obscurance, too dark beside walls",
         (("        d = cosine_hemisphere(n[0], n[1], n[2], u1, u2)\n",
-          "        d = uniform_hemisphere(n[0], n[1], n[2], u1, u2)\n", AO),),
+          "        d = uniform_hemisphere(n[0], n[1], n[2], u1, u2)\n", f"{CORE}/occlusion.py"),),
         "ao",
     ),
     Mutant(
         "ao_max_distance_ignored",
         "the occlusion ray's tfar left at infinity: occluders beyond max_distance count",
-        (("    tfar = ao.max_distance  #", "    tfar = math.inf  #", AO),),
+        (("    tfar = ao.max_distance  #", '    tfar = float("inf")  #', AO),),
         "ao",
     ),
     Mutant(
@@ -265,7 +265,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "FaceForward's test the wrong way round: the hemisphere is on the far side of every surface, so the "
         "rays look into walls and boxes (or the void behind them) instead of the room",
         (("    return n if cos_o >= 0.0 else (-n[0], -n[1], -n[2])\n",
-          "    return (-n[0], -n[1], -n[2]) if cos_o >= 0.0 else n\n", AO),),
+          "    return (-n[0], -n[1], -n[2]) if cos_o >= 0.0 else n\n", f"{CORE}/occlusion.py"),),
         "ao",
     ),
 )

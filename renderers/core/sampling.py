@@ -91,6 +91,21 @@ def cosine_hemisphere(nx: float, ny: float, nz: float, u1: float, u2: float):
 
 
 @jit
+def uniform_hemisphere(nx: float, ny: float, nz: float, u1: float, u2: float):
+    """A direction about unit normal n with pdf 1/(2π): (dx, dy, dz, cos θ).
+
+    pbrt-v4 §A.5.2 (``SampleUniformHemisphere``: cos θ uniform in [0, 1), φ = 2π u2),
+    with cos θ = 1 − u1 ∈ (0, 1] so that no direction lies exactly in the tangent plane.
+    """
+    z = 1.0 - u1
+    r = math.sqrt(max(0.0, 1.0 - z * z))
+    phi = 2.0 * math.pi * u2
+    lx, ly = r * math.cos(phi), r * math.sin(phi)
+    s, t = orthonormal_basis(nx, ny, nz)
+    return (s[0] * lx + t[0] * ly + nx * z, s[1] * lx + t[1] * ly + ny * z, s[2] * lx + t[2] * ly + nz * z, z)
+
+
+@jit
 def triangle_barycentrics(u1: float, u2: float):
     """Uniform point in a triangle as weights (b1, b2) of edges e1, e2 (Turk 1990; pbrt-v4 §6.5.4)."""
     su = math.sqrt(u1)
