@@ -124,6 +124,7 @@ from renderers.core.adapter import ToolkitRenderer
 from renderers.core.gbuffer import gbuffer, view_space
 from renderers.core.geometry import SceneGeometry
 from renderers.core.sampling import jit, orthonormal_basis
+from renderers.core.screen_space import on_screen, plane_depth, project, ray_through, to_edge
 from renderers.core.schedule import default_threads
 
 VARIANTS = ("crytek", "hemisphere", "gtao")
@@ -176,70 +177,8 @@ def hemisphere_kernel(samples: int, weighting: str) -> np.ndarray:
 
 
 # -- reading the depth buffer ----------------------------------------------------------------
-# Why the kernels read the G-buffer arrays themselves and every helper takes scalars: a numba
-# helper that takes arrays and branches keeps a reference-count increment and decrement of each
-# per call (renderers/core/rays.py), atomic, and shared by the threads: per depth-buffer read it
-# made crytek's pass 2x slower.
-
-@jit
-def _project(x, y, z, cx, cy, cu, cv):
-    """Where the view-space point (x, y, z), z > 0, lands: image coordinates (u = column, v = row, continuous
-    pixel units) and its view ray (dx, dy, 1) = (x/z, y/z, 1).
-
-    ``cx`` = width/(2·tx), ``cy`` = height/(2·ty), ``cu`` = width/2, ``cv`` = height/2, computed once per pass:
-    one division per point instead of four.
-    """
-    iz = 1.0 / z
-    dx, dy = x * iz, y * iz
-    return cu + dx * cx, cv - dy * cy, dx, dy
-
-
-@jit
-def _ray_through(u, v, ax, ay, tx, ty):
-    """(dx, dy) of the view ray (dx, dy, 1) through image point (u, v): the inverse of :func:`_project`.
-
-    ``ax`` = 2·tx/width and ``ay`` = 2·ty/height, computed once per pass.
-    """
-    return u * ax - tx, ty - v * ay
-
-
-@jit
-def _on_screen(u, v, width, height) -> bool:
-    return 0.0 <= u < width and 0.0 <= v < height
-
-
-@jit
-def _to_edge(u, v, du, dv, width, height):
-    """How far (pixels) from (u, v), on screen, the line along the unit direction (du, dv) stays on screen."""
-    t = np.inf
-    if du > 0.0:
-        t = (width - u) / du
-    elif du < 0.0:
-        t = -u / du
-    if dv > 0.0:
-        t = min(t, (height - v) / dv)
-    elif dv < 0.0:
-        t = min(t, -v / dv)
-    return t * (1.0 - 1e-9)  # the edge itself is off screen
-
-
-@jit
-def _plane_depth(x, y, z, nx, ny, nz, dx, dy):
-    """Depth along the view ray (dx, dy, 1) of what a pixel shows: the plane through its point (x, y, z)
-    with its normal n; inf where it shows nothing (z is NaN).
-
-    Exact on flat surfaces (a plane never occludes itself); the pixel's own
-    depth where the ray meets that plane edge-on or behind the camera.
-    """
-    if not z < np.inf:  # NaN: the pixel's camera ray missed
-        return np.inf
-    den = dx * nx + dy * ny + nz
-    if den < 0.0:  # the normal faces the camera, so a ray that sees the plane's front has d·n < 0
-        t = (x * nx + y * ny + z * nz) / den
-        if t > 0.0:
-            return t
-    return z
-
+# The kernels read the G-buffer arrays themselves and every helper takes scalars
+# (renderers/core/screen_space.py says why: an array-taking helper made crytek's pass 2x slower).
 
 @jit
 def _occludes(behind, thickness) -> bool:
@@ -268,10 +207,10 @@ def _crytek(gb, kernel, radius, thickness, width, height, tx, ty, row0, row1, ou
                 qx, qy, qz = px + radius * kernel[k, 0], py + radius * kernel[k, 1], pz + radius * kernel[k, 2]
                 zb = np.inf
                 if qz > 0.0:
-                    u, v, dx, dy = _project(qx, qy, qz, cx, cy, cu, cv)
-                    if _on_screen(u, v, width, height):
+                    u, v, dx, dy = project(qx, qy, qz, cx, cy, cu, cv)
+                    if on_screen(u, v, width, height):
                         i, j = int(v), int(u)
-                        zb = _plane_depth(gb[i, j, 0], gb[i, j, 1], gb[i, j, 2], gb[i, j, 3], gb[i, j, 4],
+                        zb = plane_depth(gb[i, j, 0], gb[i, j, 1], gb[i, j, 2], gb[i, j, 3], gb[i, j, 4],
                                           gb[i, j, 5], dx, dy)
                 if not _occludes(qz - zb, thickness):
                     free += 1
@@ -301,11 +240,11 @@ def _hemisphere(gb, kernel, radius, thickness, width, height, tx, ty, row0, row1
                 qz = pz + a * s[2] + b * t[2] + c * nz
                 if not qz > 0.0:
                     continue
-                u, v, dx, dy = _project(qx, qy, qz, cx, cy, cu, cv)
-                if not _on_screen(u, v, width, height):
+                u, v, dx, dy = project(qx, qy, qz, cx, cy, cu, cv)
+                if not on_screen(u, v, width, height):
                     continue
                 i, j = int(v), int(u)
-                zb = _plane_depth(gb[i, j, 0], gb[i, j, 1], gb[i, j, 2], gb[i, j, 3], gb[i, j, 4], gb[i, j, 5],
+                zb = plane_depth(gb[i, j, 0], gb[i, j, 1], gb[i, j, 2], gb[i, j, 3], gb[i, j, 4], gb[i, j, 5],
                                   dx, dy)
                 if _occludes(qz - zb, thickness) and abs(pz - zb) <= radius:  # the range check
                     occluded += 1
@@ -381,15 +320,15 @@ def _gtao(gb, radius, thickness, slices, steps, cosine, width, height, tx, ty, r
                     hc = lowest
                     # The steps spread over the on-screen part of the segment: the screen shows nothing
                     # beyond its edge, so occluders there are missed whatever the radius.
-                    dt = side * min(r_px, _to_edge(col + 0.5, row + 0.5, side * du, side * dv, width, height)) / steps
+                    dt = side * min(r_px, to_edge(col + 0.5, row + 0.5, side * du, side * dv, width, height)) / steps
                     for j in range(1, steps + 1):
                         t = dt * j
                         su, sv = col + 0.5 + t * du, row + 0.5 + t * dv
-                        if not _on_screen(su, sv, width, height):
+                        if not on_screen(su, sv, width, height):
                             break
-                        dx, dy = _ray_through(su, sv, ax, ay, tx, ty)
+                        dx, dy = ray_through(su, sv, ax, ay, tx, ty)
                         i, jj = int(sv), int(su)
-                        zb = _plane_depth(gb[i, jj, 0], gb[i, jj, 1], gb[i, jj, 2], gb[i, jj, 3], gb[i, jj, 4],
+                        zb = plane_depth(gb[i, jj, 0], gb[i, jj, 1], gb[i, jj, 2], gb[i, jj, 3], gb[i, jj, 4],
                                           gb[i, jj, 5], dx, dy)
                         wx, wy, wz = zb * dx - p[0], zb * dy - p[1], zb - pz
                         d2 = wx * wx + wy * wy + wz * wz
