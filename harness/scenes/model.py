@@ -13,6 +13,9 @@ Units and colour space (named here once for the whole harness)
 - **Radiance** (``emitter.radiance`` and image pixels) is per linear-sRGB
   channel, in W·sr⁻¹·m⁻² relative to the scene unit; images are the
   box-filtered mean of the radiance arriving through each pixel.
+- **Ambient occlusion** (images of a scene whose ``quantity`` is
+  ``ambient_occlusion``) is a dimensionless fraction in [0, 1], the same in
+  all three channels; its definition is :mod:`harness.scenes.quantities`'.
 - **Reflectance** of a diffuse material is its albedo per channel, in [0, 1];
   of a mirror, its specular reflectance per channel. Materials and their
   fields are :mod:`harness.scenes.materials`'.
