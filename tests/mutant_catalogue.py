@@ -20,11 +20,12 @@ PATHTRACER = "renderers/pathtracer.py"
 PHOTONMAP = "renderers/photonmap.py"
 SPPM = "renderers/sppm.py"
 AO = "renderers/ao.py"
+AMBIENT = "renderers/ambient.py"
 SOURCE = ROOT / PATHTRACER
 CORE = "renderers/core"
 #: The renderers mutants are made of: registered name -> (integrator module, adapter class).
 INTEGRATORS = {"pathtracer": (PATHTRACER, "PathTracer"), "photonmap": (PHOTONMAP, "PhotonMapper"),
-               "sppm": (SPPM, "SPPM"), "ao": (AO, "AORenderer")}
+               "sppm": (SPPM, "SPPM"), "ao": (AO, "AORenderer"), "ambient": (AMBIENT, "AOAmbient")}
 
 
 class Patch(NamedTuple):
@@ -267,6 +268,15 @@ MUTANTS: tuple[Mutant, ...] = (
         (("    return n if cos_o >= 0.0 else (-n[0], -n[1], -n[2])\n",
           "    return (-n[0], -n[1], -n[2]) if cos_o >= 0.0 else n\n", f"{CORE}/occlusion.py"),),
         "ao",
+    ),
+    # -- the AO-ambient approximation (ambient) --------------------------------------------------------
+    Mutant(
+        "ambient_not_occluded",
+        "the ambient term added without its occlusion rays' verdict (AO taken as 1): corners and the floor "
+        "round the boxes as bright as open walls",
+        (("            add_unoccluded(L, seg, self.geom.unoccluded(seg.o, seg.d, seg.t))\n",
+          "            add_unoccluded(L, seg, np.ones(k, bool))\n", AMBIENT),),
+        "ambient",
     ),
 )
 

@@ -94,6 +94,7 @@ SLOW_MUTANTS = {"fresnel_schlick": "tests/test_bsdf.py", "mirror_reflectance_ign
                 **{m.name: "tests/test_photons.py" for m in mutants.MUTANTS if m.renderer in ("photonmap", "sppm")},
                 # AO mutants: a compile of the copied toolkit each; tests/test_ao.py catches each by default.
                 **{m.name: "tests/test_ao.py" for m in mutants.MUTANTS if m.renderer == "ao"},
+                "ambient_not_occluded": "tests/test_ambient.py",
                 # The six costliest path tracer ones in the suite (21-23 s each, measured 2026-12-01), slow to
                 # keep the suite within its time: each was checked to fail these unit tests when patched in.
                 "two_sided_emitter": "tests/test_pathtracer.py", "camera_half_pixel": "tests/test_pathtracer.py",
