@@ -55,7 +55,7 @@ import warnings
 import numpy as np
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
-from harness.scenes.quantities import DEFAULT_QUANTITY
+from harness.scenes.quantities import DEFAULT_QUANTITY, has_colour
 
 with warnings.catch_warnings():
     # colour-science warns at import when matplotlib is missing; we never plot.
@@ -141,7 +141,7 @@ def display_exposure(ref, quantity: str = DEFAULT_QUANTITY) -> float:
     shown as it is (exposure 1: A = 1 is white); a key-value exposure would
     brighten a darker AO image and hide the difference.
     """
-    return exposure_scale(ref) if quantity == DEFAULT_QUANTITY else 1.0
+    return exposure_scale(ref) if has_colour(quantity) else 1.0
 
 
 def display_encode(img, exposure: float) -> np.ndarray:
@@ -289,7 +289,7 @@ def image_metrics(img, ref, exposure: float | None = None, quantity: str = DEFAU
         exposure = display_exposure(ref, quantity)
     clean = zero_broken_pixels(img)
     colour_stats = {}
-    if quantity == DEFAULT_QUANTITY:
+    if has_colour(quantity):
         _, de_map = delta_e2000(clean, ref, exposure=exposure, full=True)
         colour_stats = delta_e2000_stats(de_map)
     # Mean radiance skips broken pixels rather than zeroing them: they are

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from harness.evaluate import metrics
-from harness.scenes.quantities import DEFAULT_QUANTITY
+from harness.scenes.quantities import has_colour
 
 
 def render_variance(ref_var: np.ndarray, ref_spp: int, spp: int) -> np.ndarray:
@@ -84,7 +84,7 @@ def noise_yardsticks(image: np.ndarray, reference, spp: int) -> dict:
         "noise_rmse": float(np.sqrt(np.mean(var))),
         "noise_mean_radiance_z": float(mean_radiance_z(image, ref, ref_var, ref_spp, spp)),
     }
-    if reference.quantity == DEFAULT_QUANTITY:  # ΔE of an AO image means nothing
+    if has_colour(reference.quantity):
         noisy = noise_image(ref, reference.noise, reference.noise_spp, ref_spp, spp)
         out["noise_delta_e2000_mean"] = float(metrics.delta_e2000(noisy, ref))
     return out

@@ -49,7 +49,7 @@ from harness.evaluate import metrics
 from harness.evaluate import noise
 from harness.evaluate.registry import COLOUR_METRICS, REGION_METRICS, REGION_PREFIX, region_metric
 from harness.scenes.model import Scene, triangle_arrays
-from harness.scenes.quantities import DEFAULT_QUANTITY
+from harness.scenes.quantities import has_colour
 
 #: Rays per pixel along each axis (see the module docstring for why 4).
 SUBPIXELS = 4
@@ -281,7 +281,7 @@ def region_metrics(image, reference, masks: dict[str, np.ndarray], spp: int | No
         img_var = 0.0
     diff_var = ref_var + img_var
     exposure = metrics.display_exposure(ref, reference.quantity)
-    colour = reference.quantity == DEFAULT_QUANTITY  # ΔE of an AO image means nothing
+    colour = has_colour(reference.quantity)
     clean = metrics.zero_broken_pixels(img)
     out = {}
     for name, mask in masks.items():

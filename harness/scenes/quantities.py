@@ -52,6 +52,12 @@ AO_WEIGHTINGS: dict[str, str] = {
     "uniform": "A = 1/(2 pi) ∫ V dω: obscurance with a step falloff (uniform over the hemisphere)",
 }
 AO_NORMALS = ("geometric", "shading")
+
+
+def has_colour(quantity: str) -> bool:
+    """Whether images of ``quantity`` are colours (radiance): then colour differences (ΔE) and a key-value
+    exposure apply; an ambient-occlusion image is one value per pixel, written as grey."""
+    return quantity == "radiance"
 _AO_KEYS = ("max_distance", "max_distance_relative", "weighting", "normal", "miss_value")
 
 
