@@ -99,7 +99,6 @@ passes double, so power-of-two checkpoints are free.
 from __future__ import annotations
 
 import math
-import time
 from typing import NamedTuple, Sequence
 
 import numpy as np
@@ -108,7 +107,7 @@ from harness.adapters.registry import Checkpoint, RenderResult
 from harness.adapters.settings import Setting, resolve_settings
 from harness.scenes.model import Scene
 from harness.store.references import load_reference
-from renderers.core.adapter import ToolkitRenderer
+from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.geometry import SceneGeometry
 from renderers.core.occlusion import occlusion_segment
 from renderers.core.rays import add_unoccluded, head, shadow_buffer
@@ -277,18 +276,14 @@ class AOAmbient(ToolkitRenderer):
         s = resolve_settings(self, settings or {})
         threads = self.threads or default_threads()
         reference = load_reference(scene) if s["ambient"] == "oracle" else None  # refuse before rendering
-        t0 = time.perf_counter()
-        geom = SceneGeometry(scene)
         tfar = s["ao_max_distance"] * scene.extent()
+        geom, setup_s = warmed_geometry(scene, lambda g: Shading(g, scene, lambda depth: np.ones((len(depth), 3)),
+                                                                 1, tfar).trace(0, 1, 1, np.uint64(0)))
         terms = radiosity_ambient(scene_surfaces(geom))
         if (s["ambient"] == "radiosity" and scene.max_depth < 0
                 and ((terms.power > 0.0) & (terms.mean_reflectance >= 1.0)).any()):
             raise ValueError(f"{scene.name}: the radiosity ambient diverges: mean reflectance "
                              f"{terms.mean_reflectance.tolist()} reaches 1 with unbounded max_depth")
-        # Compile (or load from numba's cache) before the clock starts.
-        Shading(geom, scene, lambda depth: np.ones((len(depth), 3)), 1, tfar).trace(0, 1, 1, np.uint64(0))
-        geom.rays = 0
-        setup_s = time.perf_counter() - t0
         info = dict(s, ao_max_distance_units=tfar, setup_s=round(setup_s, 3))
 
         def render_with(ambient) -> RenderResult:

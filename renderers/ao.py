@@ -56,14 +56,13 @@ and embreex gets float32 copies of it and of ``tfar = max_distance``.
 
 from __future__ import annotations
 
-import time
 from typing import Sequence
 
 import numpy as np
 
 from harness.adapters.registry import RenderResult
 from harness.scenes.model import Scene
-from renderers.core.adapter import ToolkitRenderer
+from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.camera import camera_basis, camera_rays
 from renderers.core.geometry import SceneGeometry, surface_point
 from renderers.core.occlusion import face_forward, occlusion_segment
@@ -144,12 +143,7 @@ class AORenderer(ToolkitRenderer):
             # The runner never gets here (harness.adapters.registry.missing_features); a direct call might.
             raise ValueError(f"{scene.name}: the ao renderer computes ambient occlusion, and this scene's "
                              f"quantity is {scene.quantity}")
-        t0 = time.perf_counter()
-        geom = SceneGeometry(scene)
-        # Compile (or load from numba's cache) before the clock starts.
-        trace_ao(geom, scene, 0, 1, 1, np.uint64(0))
-        geom.rays = 0
-        setup_s = time.perf_counter() - t0
+        geom, setup_s = warmed_geometry(scene, lambda g: trace_ao(g, scene, 0, 1, 1, np.uint64(0)))
         result = render_image(scene, spp, seed, lambda *unit: trace_ao(geom, scene, *unit), checkpoints,
                               self.threads)
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))

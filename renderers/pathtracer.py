@@ -41,7 +41,6 @@ is two-sided).
 
 from __future__ import annotations
 
-import time
 from typing import Sequence
 
 import numpy as np
@@ -51,7 +50,7 @@ from harness.adapters.settings import Setting
 from harness.scenes.model import Scene
 from renderers.core.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, refraction_scale, two_sided
 from renderers.core.camera import camera_basis, camera_rays
-from renderers.core.adapter import ToolkitRenderer
+from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.geometry import SceneGeometry, offset_origin, surface_point
 from renderers.core.lights import sample_emitter, solid_angle_pdf, solid_angle_pdf_along, towards_emitter
 from renderers.core.roulette import Q_MAX, RR_DEPTH, continue_path
@@ -188,12 +187,7 @@ class PathTracer(ToolkitRenderer):
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
         rr_depth = (settings or {}).get("rr_depth", RR_DEPTH)
-        t0 = time.perf_counter()
-        geom = SceneGeometry(scene)
-        # Compile (or load from numba's cache) before the clock starts.
-        trace_paths(geom, scene, 0, 1, 1, np.uint64(0), rr_depth)
-        geom.rays = 0
-        setup_s = time.perf_counter() - t0
+        geom, setup_s = warmed_geometry(scene, lambda g: trace_paths(g, scene, 0, 1, 1, np.uint64(0), rr_depth))
         result = render_image(scene, spp, seed, lambda *unit: trace_paths(geom, scene, *unit, rr_depth),
                               checkpoints, self.threads, {"rr_depth": rr_depth, "rr_q_max": Q_MAX})
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))

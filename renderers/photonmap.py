@@ -60,7 +60,7 @@ from harness.adapters.seeds import pass_key
 from harness.adapters.settings import Setting, resolve_settings
 from harness.scenes.model import Scene
 from renderers.core.bsdf import LAMBERT
-from renderers.core.adapter import ToolkitRenderer
+from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.geometry import SceneGeometry
 from renderers.core.photon_map import KERNELS, UNBOUNDED, PhotonMap, PrecomputedIrradiance, depth_budget
 from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, empty_photons, shoot, subset
@@ -106,10 +106,7 @@ class PhotonMapper(ToolkitRenderer):
                settings: dict | None = None) -> RenderResult:
         s = resolve_settings(self, settings or {})
         threads = self.threads or default_threads()
-        t0 = time.perf_counter()
-        geom = SceneGeometry(scene)
-        _warm_up(geom, scene)
-        setup_s = time.perf_counter() - t0
+        geom, setup_s = warmed_geometry(scene, lambda g: _warm_up(g, scene))
         t0 = time.perf_counter()
         pass2 = build_pass2(geom, scene, seed, s, threads)
         photons_s = time.perf_counter() - t0
@@ -204,4 +201,3 @@ def _warm_up(geom: SceneGeometry, scene: Scene) -> None:
     p2.shade(0, 1, 1, np.uint64(0))
     p2.s = dict(settings, gather_rays=0)
     p2.shade(0, 1, 1, np.uint64(0))
-    geom.rays = 0

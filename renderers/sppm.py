@@ -57,7 +57,7 @@ from harness.adapters.registry import Checkpoint, RenderResult
 from harness.adapters.seeds import pass_key
 from harness.adapters.settings import Setting, resolve_settings
 from harness.scenes.model import Scene
-from renderers.core.adapter import ToolkitRenderer
+from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.geometry import SceneGeometry
 from renderers.core.photon_map import depth_budget, pairs_that_count
 from renderers.core.photons import BATCH, STORE_INDIRECT, trace_photons
@@ -91,13 +91,9 @@ class SPPM(ToolkitRenderer):
             raise ValueError(f"spp must be >= 1, got {spp}")
         s = resolve_settings(self, settings or {})
         threads = self.threads or default_threads()
-        t0 = time.perf_counter()
-        geom = SceneGeometry(scene)
+        geom, setup_s = warmed_geometry(scene, lambda g: Progress(g, scene, s).iterate(np.uint64(0), np.uint64(0), 1,
+                                                                                       photons=1))
         state = Progress(geom, scene, s)
-        state.iterate(np.uint64(0), np.uint64(0), 1, photons=1)  # compile the kernels before the clock starts
-        setup_s = time.perf_counter() - t0
-        state = Progress(geom, scene, s)
-        geom.rays = 0
         photons = s["photons_per_iteration"] or state.pixels
         shots, t0 = [], time.perf_counter()
         for i in range(spp):

@@ -7,6 +7,12 @@ settings, so the rest is written once here.
 
 from __future__ import annotations
 
+import time
+from typing import Callable
+
+from harness.scenes.model import Scene
+from renderers.core.geometry import SceneGeometry
+
 #: Scene features the shared toolkit models (renderers/core): every renderer of ours inherits them.
 TOOLKIT_FEATURES = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
                               "pinhole_camera", "box_filter"})
@@ -32,3 +38,14 @@ class ToolkitRenderer:
         from importlib.metadata import version
 
         return f"cornell-harness {version('cornell-harness')} (embreex {version('embreex')})"
+
+
+def warmed_geometry(scene: Scene, warm_up: Callable[[SceneGeometry], object]) -> tuple[SceneGeometry, float]:
+    """The scene's Embree geometry after ``warm_up(geom)`` compiled (or loaded from numba's cache) the
+    renderer's kernels, and the seconds both took: the set-up a render's time leaves out. The rays the
+    warm-up traced are not counted in ``geom.rays``."""
+    t0 = time.perf_counter()
+    geom = SceneGeometry(scene)
+    warm_up(geom)
+    geom.rays = 0
+    return geom, time.perf_counter() - t0
