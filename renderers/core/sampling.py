@@ -26,6 +26,7 @@ import os
 from pathlib import Path
 
 import numba
+import numpy as np
 
 INV_PI = 1.0 / math.pi
 _RENDERERS = Path(__file__).resolve().parents[1]
@@ -117,3 +118,33 @@ def power_heuristic(pdf_a: float, pdf_b: float) -> float:
     """Veach's power heuristic (β = 2), Veach 1997 thesis eq. 9.13; 0 when both pdfs are 0."""
     a2, b2 = pdf_a * pdf_a, pdf_b * pdf_b
     return a2 / (a2 + b2) if a2 + b2 > 0.0 else 0.0
+
+
+def spherical_fibonacci(n: int) -> np.ndarray:
+    """n directions (n, 3) spread evenly over the sphere: the spherical Fibonacci point set.
+
+    Keinert, Innmann, Sänger and Stamminger 2015, "Spherical Fibonacci Mapping"
+    (ACM TOG 34(6)), eq. 2: z_i = 1 − (2i + 1)/n, φ_i = 2π·frac(i/Φ) with Φ the
+    golden ratio (RTXGI's ``RTXGISphericalFibonacci``): equal-area bands in z,
+    so each direction stands for 4π/n of solid angle.
+    """
+    i = np.arange(n, dtype=np.float64)
+    phi = 2.0 * math.pi * np.modf(i * (math.sqrt(5.0) * 0.5 - 0.5))[0]
+    z = 1.0 - (2.0 * i + 1.0) / n
+    r = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
+    return np.stack([np.cos(phi) * r, np.sin(phi) * r, z], axis=1)
+
+
+def random_rotation(u1: float, u2: float, u3: float) -> np.ndarray:
+    """A rotation matrix (3, 3) uniformly distributed over SO(3), from three uniform numbers.
+
+    Shoemake 1992, "Uniform Random Rotations" (Graphics Gems III, §III.6): the
+    unit quaternion (√(1−u1) sin 2πu2, √(1−u1) cos 2πu2, √u1 sin 2πu3, √u1 cos 2πu3)
+    is uniform on S³, hence its rotation uniform on SO(3).
+    """
+    a, b = math.sqrt(1.0 - u1), math.sqrt(u1)
+    x, y = a * math.sin(2.0 * math.pi * u2), a * math.cos(2.0 * math.pi * u2)
+    z, w = b * math.sin(2.0 * math.pi * u3), b * math.cos(2.0 * math.pi * u3)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
