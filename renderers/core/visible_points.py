@@ -49,11 +49,12 @@ class VisiblePoints(NamedTuple):
     weight: np.ndarray  # (m, 3) float64 β·ρ: the reflected radiance is weight/π · irradiance
     depth: np.ndarray  # (m,) int64 camera segments to the point
     found: np.ndarray  # (m,) bool
+    incoming: np.ndarray  # (m, 3) float64 unit direction of the segment that reached the point
 
 
 def visible_buffer(m: int) -> VisiblePoints:
     return VisiblePoints(np.zeros((m, 3)), np.zeros((m, 3)), np.zeros((m, 3)), np.zeros(m, np.int64),
-                         np.zeros(m, bool))
+                         np.zeros(m, bool), np.zeros((m, 3)))
 
 
 @jit
@@ -94,6 +95,7 @@ def _step(prim, t_sphere, rays, key, first, dim_base, depth, emission, nee, exte
                 vp.position[q, c] = x[c]
                 vp.normal[q, c] = n[c]
                 vp.weight[q, c] = beta[c] * rho[c]
+                vp.incoming[q, c] = d[c]
             if nee and extend and geo.emitter_ids.size > 0:
                 y, ny, e, pe = sample_emitter(_u(key, j, dim_base, depth, EMITTER_PICK),
                                               _u(key, j, dim_base, depth, EMITTER_U),
