@@ -1,0 +1,247 @@
+"""Irradiance probes (DDGI): direct light exact, indirect light from a grid of ray-traced probes.
+
+The renderer ``probes``: :mod:`renderers.ddgi`'s volume (Majercik et al. 2019)
+on the shared toolkit. A render is
+
+1. **probe updates** (progress on stderr when it is a terminal): each
+   traces ``rays_per_probe`` rays from every probe, lights their hits with
+   next-event estimation plus the previous update's irradiance, and blends
+   them into the probes' maps (:func:`update_probes`). The first ``bounces``
+   updates replace the probes (the seed's "repeat for more bounces": after k
+   of them the probes carry k bounces); the next ``iterations`` are blended
+   with what the probes hold (:func:`history_weight`): RTXGI's exponential
+   moving average with ``hysteresis``, whose noise settles at a floor, or
+   the ``exact`` running mean a static scene allows. Probes of a work unit
+   are traced and blended on one thread; the volume an update reads is the
+   previous one, so the result does not depend on the thread count;
+2. **the camera pass**, ``spp`` samples per pixel
+   (:mod:`renderers.core.visible_points`): each camera path follows mirrors
+   and glass to its first diffuse point x, collecting emission and direct
+   light by next-event estimation exactly as the path tracer's first
+   vertices do, then adds ρ/π · E(x) with E the probes' indirect irradiance
+   (:func:`renderers.ddgi.probe_irradiance`, normal and view bias, 8 probes
+   with trilinear, wrap and Chebyshev visibility weights). With a bounded
+   ``max_depth`` the indirect term is added where at least one bounce fits
+   (depth + 2 ≤ max_depth); the probes' own bounce count is ``bounces`` and
+   more (each blended update adds one).
+
+The probe grid spans the scene's bounding box shrunk by ``margin`` of its
+size on every side (or the box ``bounds`` gives), ``grid`` probes per axis.
+Normal and view bias are given in units of the smallest probe spacing, so
+they scale with the grid and the scene (RTXGI's Cornell box sample:
+spacing 0.3, normal bias 0.02, view bias 0.1).
+
+The estimate is biased (probe resolution, interpolation, visibility
+heuristics, finite updates) and does not converge to the reference as spp
+grows: ``estimator = "biased"``; the harness measures its bias per region.
+Time includes the probe updates (``info["probes_s"]``). Random numbers:
+probe updates use :func:`harness.adapters.seeds.pass_key` stream
+:data:`PROBE_STREAM` with the update's index; the camera pass the toolkit's
+per-vertex layout, so images are bit-identical for any thread count.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Sequence
+
+import numpy as np
+from tqdm import tqdm
+
+from harness.adapters.registry import RenderResult
+from harness.adapters.seeds import pass_key
+from harness.adapters.settings import Setting, SettingsError, resolve_settings
+from harness.scenes.model import Scene
+from renderers import ddgi
+from renderers.core.adapter import ToolkitRenderer, warmed_geometry
+from renderers.core.geometry import SceneGeometry
+from renderers.core.rng import uniform
+from renderers.core.sampling import INV_PI, jit, random_rotation, spherical_fibonacci
+from renderers.core.schedule import default_threads, render_image, run_units
+from renderers.core.visible_points import camera_visible_points
+
+PROBE_STREAM = 3
+#: The update's rotation draws dimensions 0-2 of this path of its key, above any probe ray's index.
+ROTATION_PATH = (1 << 40) - 1
+#: Probe rays per work unit (whole probes), as the camera pass's unit sizes.
+UNIT_RAYS = 1 << 14
+AVERAGING = ("ema", "exact")
+
+
+class IrradianceProbes(ToolkitRenderer):
+    """DDGI irradiance probes on Embree (module docstring): multithreaded, biased."""
+
+    name = "probes"
+    estimator = "biased"
+    approximations = ("indirect light is interpolated from a grid of irradiance probes (DDGI): blurred "
+                      "between probes, visibility by a Chebyshev bound, RTXGI's energy heuristics; biased",
+                      "mirrors and glass seen by probe rays reflect nothing into the probes")
+    settings = (
+        Setting("grid", int, 8, "probes per axis (RTXGI's Cornell box: 9 at spacing 0.3 for a box of 2.4)",
+                low=2, high=64),
+        Setting("margin", float, 0.05, "the probe grid spans the scene's bounding box shrunk by this fraction "
+                "of its size on each side", low=0.0, high=0.49),
+        Setting("bounds", str, "", "the probe grid's corners 'x0,y0,z0,x1,y1,z1' instead of the shrunk bounding "
+                "box (empty: the default)"),
+        Setting("rays_per_probe", int, 256, "rays per probe per update (RTXGI probeNumRays 256)", low=8,
+                high=8192),
+        Setting("bounces", int, 8, "first probe updates, each replacing the probes (no history): after k of "
+                "them the probes carry k bounces", low=1, high=1000),
+        Setting("iterations", int, 16, "probe updates after the bounces, blended into the probes over time "
+                "(RTXGI's per-frame updates)", low=0, high=100_000),
+        Setting("hysteresis", float, 0.97, "weight of a texel's old value in an 'ema' update (RTXGI "
+                "probeHysteresis 0.97)", low=0.0, high=0.999),
+        Setting("averaging", str, "ema", "temporal blend of the iterations: ema (RTXGI: lerp with the "
+                "hysteresis) or exact (the running mean, for a static scene)", choices=AVERAGING),
+        Setting("irradiance_texels", int, 6, "octahedral irradiance texels per side, border excluded (RTXGI 6)",
+                low=2, high=64),
+        Setting("depth_texels", int, 14, "octahedral distance texels per side, border excluded (RTXGI 14)",
+                low=2, high=128),
+        Setting("sharpness", float, 50.0, "exponent of the cosine weight of distances (RTXGI "
+                "probeDistanceExponent 50)", low=1.0, high=1000.0),
+        Setting("normal_bias", float, 0.067, "lookup offset along the normal, in probe spacings (RTXGI Cornell "
+                "box: 0.02 at spacing 0.3)", low=0.0, high=1.0),
+        Setting("view_bias", float, 0.333, "lookup offset towards the viewer, in probe spacings (RTXGI Cornell "
+                "box: 0.1 at spacing 0.3)", low=0.0, high=1.0),
+        Setting("visibility", bool, True, "weight probes by Chebyshev visibility from their distance moments"),
+        Setting("gamma_blending", bool, True, "blend irradiance in gamma 5 over time and gamma 2 in space "
+                "(RTXGI probeIrradianceEncodingGamma 5); false: linear"),
+        Setting("half_normalisation", bool, True, "texel = pi * sum(L w) / sum(w) (RTXGI's 1/(2 sum w), times "
+                "2 pi); false: the Monte Carlo estimate 4 pi / N * sum(L w)"),
+        Setting("weight_floor", bool, True, "visibility weight at least 0.05 (RTXGI); false: 0"),
+        Setting("crush", bool, True, "weights under 0.2 scaled by (w / 0.2)^2 (RTXGI); false: left alone"),
+    )
+
+    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
+               settings: dict | None = None) -> RenderResult:
+        s = resolve_settings(self, settings or {})
+        threads = self.threads or default_threads()
+        grid = grid_of(scene, s)
+        geom, setup_s = warmed_geometry(scene, lambda g: _warm_up(g, scene, grid, s))
+        t0 = time.perf_counter()
+        volume = update_probes(geom, grid, seed, s, threads, progress=True)
+        probes_s = time.perf_counter() - t0
+        result = render_image(scene, spp, seed, CameraPass(geom, scene, volume).trace, checkpoints, threads)
+        result.time_s += probes_s
+        for c in result.checkpoints:
+            c.time_s += probes_s
+        result.info.update(s, probes=int(np.prod(grid.counts)), probe_spacing=grid.spacing.tolist(),
+                           probe_origin=grid.origin.tolist(), probes_s=round(probes_s, 3),
+                           setup_s=round(setup_s, 3), rays=geom.rays)
+        return result
+
+
+def grid_of(scene: Scene, settings: dict) -> ddgi.ProbeGrid:
+    """The probe grid the settings ask for (raises SettingsError naming ``bounds`` if it is malformed)."""
+    counts = np.full(3, settings["grid"], np.int64)
+    if settings["bounds"]:
+        try:
+            corners = [float(v) for v in settings["bounds"].split(",")]
+        except ValueError:
+            corners = []
+        lo, hi = np.asarray(corners[:3]), np.asarray(corners[3:])
+        if len(corners) != 6 or not np.all(hi > lo):
+            raise SettingsError(f"renderer 'probes': setting bounds={settings['bounds']!r}: expected "
+                                "'x0,y0,z0,x1,y1,z1' with x1 > x0, y1 > y0, z1 > z0")
+        return ddgi.probe_grid(lo, hi, counts)
+    lo, hi = scene.bounds()
+    inset = settings["margin"] * (hi - lo)
+    lo, hi = lo + inset, hi - inset
+    hi = np.where(hi > lo, hi, lo + 1e-6 * scene.extent())  # a flat scene: a flat grid still needs a spacing
+    return ddgi.probe_grid(lo, hi, counts)
+
+
+def volume_of(grid: ddgi.ProbeGrid, settings: dict) -> ddgi.Volume:
+    """Black probes with the lookup parameters the settings ask for (biases in scene units)."""
+    spacing = float(grid.spacing.min())
+    return ddgi.empty_volume(grid, settings["irradiance_texels"], settings["depth_texels"],
+                             settings["normal_bias"] * spacing, settings["view_bias"] * spacing,
+                             ddgi.ENCODING_GAMMA if settings["gamma_blending"] else 1.0, settings["visibility"],
+                             ddgi.WEIGHT_FLOOR if settings["weight_floor"] else 0.0,
+                             ddgi.CRUSH_THRESHOLD if settings["crush"] else 0.0)
+
+
+def update_probes(geom: SceneGeometry, grid: ddgi.ProbeGrid, seed: int, settings: dict, threads: int,
+                  progress: bool = False, on_update=None) -> ddgi.Volume:
+    """The volume after ``bounces`` updates without history, then ``iterations`` blended ones, from black.
+
+    ``on_update(k, volume)``, if given, sees the volume after each update k = 1, 2, ...
+    """
+    volume = volume_of(grid, settings)
+    positions = ddgi.probe_positions(grid)
+    fibonacci = spherical_fibonacci(settings["rays_per_probe"])
+    probes, n = len(positions), len(fibonacci)
+    per_unit = max(1, UNIT_RAYS // n)
+    ni, nd = settings["irradiance_texels"], settings["depth_texels"]
+    bounces, updates = settings["bounces"], settings["bounces"] + settings["iterations"]
+    bar = tqdm(total=updates, desc="probe updates", unit="update", file=sys.stderr, dynamic_ncols=True,
+               leave=False, disable=None if progress else True)
+    for k in range(updates):
+        key = pass_key(seed, k, PROBE_STREAM)
+        rotation = random_rotation(*(uniform(key, ROTATION_PATH, d) for d in range(3)))
+        directions = np.ascontiguousarray(fibonacci @ rotation.T)
+        h = history_weight(k, bounces, settings["hysteresis"], settings["averaging"])
+        irradiance, moments = np.empty((probes, ni, ni, 3)), np.empty((probes, nd, nd, 2))
+
+        def work(p0: int, volume=volume, directions=directions, key=key, h=h):
+            count = min(per_unit, probes - p0)
+            radiance, distance = ddgi.trace_probe_rays(geom, volume, positions, directions, p0, count, key)
+            return ddgi.blend(volume, p0, radiance, distance, directions, h, settings["half_normalisation"],
+                              settings["sharpness"])
+
+        def reduce(p0: int, maps, irradiance=irradiance, moments=moments) -> None:
+            irradiance[p0:p0 + len(maps[0])], moments[p0:p0 + len(maps[1])] = maps
+
+        run_units(range(0, probes, per_unit), work, reduce, threads)
+        volume = ddgi.with_maps(volume, irradiance, moments)
+        bar.update(1)
+        if on_update is not None:
+            on_update(k + 1, volume)
+    bar.close()
+    return volume
+
+
+def history_weight(k: int, bounces: int, hysteresis: float, averaging: str) -> float:
+    """The old texel's weight h in update k (from 0): 0 during the bounces; then the hysteresis (``ema``), or
+    j/(j + 1) at the j-th blended update (``exact``: the running mean, the bounces' result counting once)."""
+    if k < bounces:
+        return 0.0
+    if averaging == "ema":
+        return hysteresis
+    j = k - bounces + 1
+    return j / (j + 1.0)
+
+
+@jit
+def _add_indirect(found, vp, vol, max_depth, L):
+    """L += ρ/π · E at each found visible point where a bounce fits (``weight`` is β·ρ)."""
+    for j in range(found.size):
+        q = found[j]
+        if max_depth >= 0 and vp.depth[q] + 2 > max_depth:
+            continue
+        e = ddgi.probe_irradiance(vol, (vp.position[q, 0], vp.position[q, 1], vp.position[q, 2]),
+                                  (vp.normal[q, 0], vp.normal[q, 1], vp.normal[q, 2]),
+                                  (vp.incoming[q, 0], vp.incoming[q, 1], vp.incoming[q, 2]))
+        for c in range(3):
+            L[q, c] += vp.weight[q, c] * INV_PI * e[c]
+
+
+class CameraPass:
+    """One render's trace function: the toolkit's visible points plus the probes' indirect light."""
+
+    def __init__(self, geom: SceneGeometry, scene: Scene, volume: ddgi.Volume):
+        self.geom, self.scene, self.volume = geom, scene, volume
+
+    def trace(self, first: int, stop: int, pixels: int, key: np.uint64) -> np.ndarray:
+        L, vp = camera_visible_points(self.geom, self.scene, first, stop, pixels, key)
+        _add_indirect(np.flatnonzero(vp.found), vp, self.volume, self.scene.max_depth, L)
+        return L
+
+
+def _warm_up(geom: SceneGeometry, scene: Scene, grid: ddgi.ProbeGrid, settings: dict) -> None:
+    """Compile (or load from numba's cache) every kernel before the clock starts: one tiny update and pass."""
+    small = dict(settings, bounces=1, iterations=0, rays_per_probe=8)
+    tiny = ddgi.ProbeGrid(grid.origin, grid.spacing * (grid.counts - 1), np.full(3, 2, np.int64))
+    volume = update_probes(geom, tiny, 0, small, 1)
+    CameraPass(geom, scene, volume).trace(0, 1, 1, np.uint64(0))
