@@ -61,10 +61,11 @@ Not modelled: RTXGI's probe relocation and classification, its change
 limiting (``probeIrradianceThreshold``, ``probeBrightnessThreshold``) and
 texture quantisation: the volume is float64 throughout.
 
-Temporal blending: each texel becomes lerp(new, old, h), with h the
-hysteresis (RTXGI 0.97; 0 where the texel is still all zero, as RTXGI) or,
-for ``exact`` averaging of a static scene, h = (k − 1)/k at update k, the
-running mean of all updates.
+Temporal blending (:func:`blend`): each texel becomes lerp(new, old, h),
+with h chosen by the caller per update (:func:`renderers.probes.history_weight`:
+0 to replace, RTXGI's hysteresis 0.97, or the running mean's j/(j + 1)),
+and 0 wherever the old texel is still all zero (a probe's first update, as
+RTXGI).
 """
 
 from __future__ import annotations
