@@ -42,6 +42,7 @@ per-vertex layout, so images are bit-identical for any thread count.
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from typing import Sequence
@@ -141,9 +142,12 @@ def grid_of(scene: Scene, settings: dict) -> ddgi.ProbeGrid:
         except ValueError:
             corners = []
         lo, hi = np.asarray(corners[:3]), np.asarray(corners[3:])
-        if len(corners) != 6 or not np.all(hi > lo):
+        with np.errstate(over="ignore"):
+            size = float(np.linalg.norm(hi - lo)) if len(corners) == 6 else 0.0
+        # A size that overflows (1e300) would make the clamp distance inf: refused with the infinite ones.
+        if len(corners) != 6 or not np.all(hi > lo) or not math.isfinite(size):
             raise SettingsError(f"renderer 'probes': setting bounds={settings['bounds']!r}: expected "
-                                "'x0,y0,z0,x1,y1,z1' with x1 > x0, y1 > y0, z1 > z0")
+                                "'x0,y0,z0,x1,y1,z1', finite, with x1 > x0, y1 > y0, z1 > z0")
         return ddgi.probe_grid(lo, hi, counts)
     lo, hi = scene.bounds()
     inset = settings["margin"] * (hi - lo)
