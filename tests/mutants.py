@@ -1,21 +1,25 @@
 """Deliberately broken copies of our renderers, for measuring the CI gate's power.
 
 Each :class:`Mutant` is a realistic bug in one of our renderers
-(:data:`INTEGRATORS`: the path tracer, the photon mapper, SPPM), written as
-exact source patches: an ``old`` snippet replaced by ``new`` in the
-renderer's module (the integrator, e.g. ``renderers/pathtracer.py``) or in a
-module of the toolkit it is built on (``renderers/core/``), wherever the
-line now lives. :func:`load_mutant` writes the patched sources to real files
-(so numba's ``cache=True`` has a locator) as uniquely named modules, imports
-them, and returns a :class:`harness.adapters.registry.RendererEntry` named
+(:data:`INTEGRATORS`: the path tracer, the photon mapper, SPPM, ao, ambient,
+probes), written as exact source patches: an ``old`` snippet replaced by
+``new`` in the renderer's module (the integrator, e.g.
+``renderers/pathtracer.py``), in a module of the toolkit it is built on
+(``renderers/core/``) or in another module of ``renderers/`` it imports (the
+probes' algorithm, ``renderers/ddgi.py``), wherever the line now lives.
+:func:`load_mutant` writes the patched sources to real files (so numba's
+``cache=True`` has a locator) as uniquely named modules, imports them, and
+returns a :class:`harness.adapters.registry.RendererEntry` named
 after the renderer, which :func:`harness.gate.checks.run_gate` takes as an override.
 
 A mutant is a set of modules: the integrator is ``cbox_mutant_<name>``; a
-mutant that patches the toolkit gets a copy ``cbox_mutant_<name>__<stem>`` of
-each core module ``renderers/core/<stem>.py`` but the scalar helpers
-(:data:`SHARED_CORE`), patched or not, so no part of the renderer still sees
-the unpatched code and no shared module is compiled for the copies' types;
-their ``from renderers.core.<stem> import`` lines are pointed at the copies.
+mutant that patches any other module (``renderers/core/<stem>.py``, or
+``renderers/<stem>.py`` such as ``ddgi``) gets a copy
+``cbox_mutant_<name>__<stem>`` of it and of each core module but the scalar
+helpers (:data:`SHARED_CORE`), patched or not, so no part of the renderer
+still sees the unpatched code and no shared module is compiled for the
+copies' types; their ``from renderers.core.<stem> import`` (and
+``from renderers import <stem>``) lines are pointed at the copies.
 
 Every patch must apply exactly once: if a refactor moves or rewrites a
 snippet, :func:`patched_sources` raises instead of silently testing an
@@ -35,8 +39,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from harness.adapters.registry import RendererEntry
-from mutant_catalogue import (BY_NAME, CORE, INTEGRATORS, ISOLATED, LOW_POWER, MUTANTS, PATHTRACER,  # noqa: F401
-                              PHOTONMAP, ROOT, SOURCE, SPPM, Mutant, Patch)
+from mutant_catalogue import (BY_NAME, CORE, DDGI, INTEGRATORS, ISOLATED, LOW_POWER, MUTANTS,  # noqa: F401
+                              PATHTRACER, PHOTONMAP, PROBES, ROOT, SOURCE, SPPM, Mutant, Patch)
 
 #: Core modules every mutant shares with the real renderer: scalar helpers, no types of their own.
 SHARED_CORE = ("sampling", "rng")
@@ -53,9 +57,14 @@ def original_source(renderer: str = "pathtracer") -> str:
     return (ROOT / INTEGRATORS[renderer][0]).read_text(encoding="utf-8")
 
 
+#: The integrators' files: a mutant's copy of one of these is its top module, ``cbox_mutant_<name>``.
+INTEGRATOR_FILES = frozenset(f for f, _ in INTEGRATORS.values())
+
+
 def module_name(name: str, file: str = PATHTRACER) -> str:
-    """The mutant's module for ``file``: ``cbox_mutant_<name>`` for its integrator, ``..__<stem>`` for core."""
-    return f"cbox_mutant_{name}__{Path(file).stem}" if file.startswith(f"{CORE}/") else f"cbox_mutant_{name}"
+    """The mutant's module for ``file``: ``cbox_mutant_<name>`` for its integrator, ``..__<stem>`` for a core
+    module or another module of ``renderers/`` (``renderers/ddgi.py``: ``cbox_mutant_<name>__ddgi``)."""
+    return f"cbox_mutant_{name}" if file in INTEGRATOR_FILES else f"cbox_mutant_{name}__{Path(file).stem}"
 
 
 def _core_module(file: str) -> str:
@@ -63,11 +72,23 @@ def _core_module(file: str) -> str:
 
 
 def _imports(text: str, module: str) -> bool:
-    return re.search(rf"^\s*from {re.escape(module)} import ", text, re.M) is not None
+    return re.search(rf"^\s*(from {re.escape(module)} import |import {re.escape(module)} as )", text, re.M) is not None
 
 
 def _redirect(text: str, module: str, to: str) -> str:
-    return re.sub(rf"^(\s*from ){re.escape(module)}( import )", rf"\g<1>{to}\g<2>", text, flags=re.M)
+    """``text`` with its imports of ``module`` pointed at ``to``: ``from <module> import ...`` and, for a module
+    imported whole from its package (``from renderers import ddgi``), ``import <to> as ddgi``."""
+    text = re.sub(rf"^(\s*from ){re.escape(module)}( import )", rf"\g<1>{to}\g<2>", text, flags=re.M)
+    package, _, stem = module.rpartition(".")
+    text = re.sub(rf"^(\s*)from {re.escape(package)} import {stem}[ \t]*$", rf"\g<1>import {to} as {stem}", text,
+                  flags=re.M)
+    # Any other form would leave the copy importing the unpatched module: a mutant that tests nothing.
+    left = re.search(rf"^\s*(from {re.escape(package)} import [^\n]*\b{stem}\b|import {re.escape(module)}\b)",
+                     text, re.M)
+    assert left is None, (f"{left.group(0).strip()!r} imports {module} in a form the mutant machinery does not "
+                          f"redirect to its copy; write it 'from {package} import {stem}' or "
+                          f"'from {module} import ...'")
+    return text
 
 
 def patched_sources(mutant: Mutant | str, sources: dict[str, str] | None = None) -> dict[str, str]:
