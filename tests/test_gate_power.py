@@ -81,6 +81,24 @@ def test_load_mutant_imports_a_renderer_from_a_real_file(work):
         mutants.patched_source("swap_rb")
 
 
+def test_probes_mutants_patch_a_copy_of_ddgi_that_the_integrator_imports():
+    """A patch in renderers/ddgi.py (neither an integrator nor core) gets its own copy, with the toolkit's, and
+    probes.py's ``from renderers import ddgi`` is pointed at it; an import form the machinery cannot redirect
+    fails loudly instead of leaving the copy on the unpatched module."""
+    name = "chebyshev_inverted"
+    texts = mutants.patched_sources(name)
+    top, helper = texts[mutants.PROBES], texts[mutants.DDGI]
+    assert mutants.module_name(name, mutants.DDGI) == f"cbox_mutant_{name}__ddgi"
+    assert f"import cbox_mutant_{name}__ddgi as ddgi\n" in top and "from renderers import ddgi" not in top
+    assert "if r < mean:" in helper and f"from cbox_mutant_{name}__octahedral import " in helper
+    assert f"from cbox_mutant_{name}__visible_points import " in top  # the toolkit copied too (but SHARED_CORE)
+    assert mutants._imports(top, f"cbox_mutant_{name}__ddgi")
+    source = mutants.original_source("probes").replace("from renderers import ddgi\n",
+                                                       "from renderers import ddgi, core\n")
+    with pytest.raises(AssertionError, match="does not redirect"):
+        mutants.patched_sources(name, {mutants.PROBES: source})
+
+
 # -- power -----------------------------------------------------------------------------
 
 #: Mutants that only the caustics expectation shows: the gate detects them after rendering every cheaper
@@ -95,6 +113,11 @@ SLOW_MUTANTS = {"fresnel_schlick": "tests/test_bsdf.py", "mirror_reflectance_ign
                 # AO mutants: a compile of the copied toolkit each; tests/test_ao.py catches each by default.
                 **{m.name: "tests/test_ao.py" for m in mutants.MUTANTS if m.renderer == "ao"},
                 "ambient_not_occluded": "tests/test_ambient.py",
+                # Probe mutants: a compile of the copied toolkit and ddgi each (25-40 s in the gate, measured
+                # 2026-12-02); each fails tests/test_probes.py when patched in (checked): chebyshev_inverted its
+                # two-rooms leak test (dark/lit 0.18, budget 0.002), irradiance_not_cosine_weighted its half-space
+                # sky blend, probe_index_off_by_one its lookup at a probe and between two.
+                **{m.name: "tests/test_probes.py" for m in mutants.MUTANTS if m.renderer == "probes"},
                 # The six costliest path tracer ones in the suite (21-23 s each, measured 2026-12-01), slow to
                 # keep the suite within its time: each was checked to fail these unit tests when patched in.
                 "two_sided_emitter": "tests/test_pathtracer.py", "camera_half_pixel": "tests/test_pathtracer.py",
