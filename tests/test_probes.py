@@ -31,6 +31,7 @@ probes put there is leak (test :func:`test_two_rooms_visibility_stops_the_leak`)
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -558,3 +559,19 @@ def test_bounds_moves_the_grid(two_rooms):
     plain = IrradianceProbes(threads=2).render(two_rooms, 1, 0, settings=settings)
     assert plain.info["probe_origin"] == pytest.approx(default.origin.tolist(), abs=1e-15)
     assert not np.array_equal(plain.image, moved.image)
+
+
+# -- the gate --------------------------------------------------------------------------------------
+
+def test_probes_pass_their_gate_expectation():
+    """The unmutated renderer passes the project gate's ``probes`` expectation (its budgets and baseline): the
+    budgets were set 1.2x over the worst of seeds 0-9 and the render is a pure function of its seed, so a failure
+    here is a change of the renderer, not chance. The three probe mutants fail it (tests/test_gate_power.py)."""
+    from harness.gate.config import load_config
+    from harness.gate.run import run_gate
+
+    cfg = load_config(Path(__file__).resolve().parents[1] / "gate.toml")
+    cfg.expectations = [e for e in cfg.expectations if e.renderer == "probes"]
+    assert len(cfg.expectations) == 1
+    outcome, = run_gate(cfg, sandbox=False)
+    assert outcome.passed, [c.message for c in outcome.checks if not c.passed]
