@@ -21,11 +21,13 @@ bias²/variance split per region; ``cbox report OUT/probes`` adds the HTML repor
 3. **Each heuristic switched off, one at a time**, at the default settings (grid 8, rays 256): ΔE mean, the signed
    error of the mean radiance per region (mean over seeds = the mean image's) and bias² per region from the
    summary; figures of where the bias sits.
+4. **Light leaks** on ``two-rooms`` (a thin wall; the right room exactly black), ``probes`` with Chebyshev
+   visibility on and off at 64 spp: each floor's mean luminance and the dark one's as a fraction of the lit one.
 
 Figures (``--images``, default docs/images): ``probes-{grid,rays,iterations}.svg`` (ΔE mean against time, with the
 path tracer), ``probes-spp.svg`` (against spp), ``probes-equal-time.svg``, ``probes-heuristics.svg`` (bias² per
-region) and ``probes-bias.png`` (where the bias sits): the harness's own charts (:mod:`reports.plots`), made
-standalone on a white page.
+region): the harness's own charts (:mod:`reports.plots`), made standalone on a white page; ``probes-bias.png``
+(where the bias sits) and ``probes-leak.png`` (two-rooms, visibility on and off).
 
 Results are cached in ``--out`` (the experiments' parquet cells and EXR images): running the command again renders
 only what is missing. ``--quick`` runs a tiny version (grid 4 and 6, 2+2 updates, spp <= 8) into ``OUT-quick``
@@ -54,6 +56,7 @@ from harness.adapters.registry import resolve, sweep
 from harness.adapters.settings import parse_sweep
 from harness.evaluate import metrics
 from harness.evaluate.convergence import slope_over_seeds, time_to_target
+from harness.evaluate.regions import region_masks
 from harness.scenes.library import resolve_scene
 from harness.store.atomic import atomic_path
 from harness.store.experiments import SUMMARY_FILE, cell_name, final_images
@@ -64,6 +67,7 @@ from reports.charts import convergence_table
 from reports.plots import BarGroup, Series, bars_svg, line_plot_svg
 
 SCENE = "cornell-box"
+LEAK_SCENE, LEAK_SPP = "two-rooms", 64
 DE = "delta_e2000_mean"
 #: (base renderer, sweeps {figure name: sweep}, heuristics switched off one at a time: (label, setting)).
 FULL = ("probes", {"grid": "probes.grid=4,6,8,12", "rays": "probes.rays_per_probe=64,256,1024",
@@ -350,6 +354,48 @@ def bias_figure(out: Path, ref, runs, names: dict, path: Path, lim: float = 0.25
     canvas.quantize(256, method=Image.Quantize.FASTOCTREE).save(path, optimize=True)
 
 
+def light_leak(out: Path, images: Path, seeds, spp: int, command: str) -> list[dict]:
+    """Part 4, ``two-rooms`` (its right room is exactly black): each floor's mean luminance with Chebyshev visibility
+    on and off (seeds' mean), the dark floor's as a fraction of the lit floor's, and ``probes-leak.png``: reference
+    and both renders exposed for the lit floor and 32 times brighter (where the leak shows)."""
+    scene = resolve_scene(LEAK_SCENE)
+    ref = load_reference(scene)
+    default = resolve(["probes"])[0]
+    entries = {"visibility on (default)": default, "visibility off": default.with_settings({"visibility": False})}
+    experiment(out / LEAK_SCENE, scene, ref, list(entries.values()), [spp], seeds, command)
+    masks = region_masks(scene)
+    lum = lambda a: np.asarray(a, np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    shown, rows = [], []
+    folder = out / LEAK_SCENE / "images"
+    images_of = {"reference": ref.image}
+    for lab, e in entries.items():
+        images_of[lab] = np.mean([read_exr(folder / f"{cell_name(e.name, s)}.exr") for s in seeds], axis=0)
+    for lab, mean in images_of.items():
+        lit, dark = (float(lum(mean)[masks[r]].mean()) for r in ("lit-floor", "dark-floor"))
+        rows.append({"label": lab, "lit_floor": lit, "dark_floor": dark, "dark_over_lit": dark / lit})
+        shown.append((lab, mean))
+    print(f"\n## 4. Light leaks on {LEAK_SCENE} ({spp} spp, seeds' mean)\n\n"
+          "| probes | lit floor (mean luminance) | dark floor | dark / lit |\n|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['label']} | {fmt(r['lit_floor'], '.4f')} | {fmt(r['dark_floor'], '.2e')} | "
+              f"{fmt(r['dark_over_lit'], '.2e')} |")
+    # The dark half would drive an image-wide exposure to saturate the lit room: expose for the lit floor instead.
+    k, zoom = 0.18 / rows[0]["lit_floor"], 2
+    h, w = (zoom * n for n in ref.image.shape[:2])
+    canvas = Image.new("RGB", (len(shown) * (w + 4), 2 * (h + 16) + 16), "white")
+    d = ImageDraw.Draw(canvas)
+    for i, (lab, img) in enumerate(shown):
+        for j, gain in enumerate((1, 32)):
+            x, y = i * (w + 4), j * (h + 16)
+            d.text((x + 2, y + 2), f"{lab}, x{gain}" if gain > 1 else lab, fill="black")
+            px = np.round(metrics.display_encode(img, k * gain) * 255).astype(np.uint8)
+            canvas.paste(Image.fromarray(px).resize((w, h), Image.NEAREST), (x, y + 14))
+    d.text((2, 2 * (h + 16) + 2), "top: exposed for the lit floor (left room); bottom: 32 times brighter. The right "
+           "room is exactly black: what shows there leaked through the wall.", fill="black")
+    canvas.save(images / "probes-leak.png", optimize=True)
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=Path("out/bench-probes"))
@@ -392,9 +438,10 @@ def main() -> None:
     ends = {e.name: configs[e.name] for e in (swept["grid"][0], swept["grid"][-1])}
     bias_figure(out / "probes", ref, runs, {default.name: "default (RTXGI)", **ends, **heur_names},
                 images / "probes-bias.png")
+    leak = light_leak(out, images, seeds, LEAK_SPP if not a.quick else 4, command)
     total = time.perf_counter() - t_start
-    (out / "summary.json").write_text(json.dumps({"plateau": plateau, "equal_time": crossing,
-                                                  "heuristics": heur_res, "wall_s": total}, indent=1, default=str))
+    (out / "summary.json").write_text(json.dumps({"plateau": plateau, "equal_time": crossing, "heuristics": heur_res,
+                                                  "light_leak": leak, "wall_s": total}, indent=1, default=str))
     print(f"Total wall time {total:.0f} s ({CELLS['done']} cells rendered, {CELLS['stored']} stored); results in "
           f"{out} (`cbox report {out}/probes` builds that experiment's HTML report).")
 
