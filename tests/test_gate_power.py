@@ -125,7 +125,12 @@ SLOW_MUTANTS = {"fresnel_schlick": "tests/test_bsdf.py", "mirror_reflectance_ign
                 "ior2_missing": "tests/test_specular.py", "tir_absorbed": "tests/test_specular.py",
                 # Two more (15-16 s each, measured 2026-12-02) when the AO tests joined the suite; both fail
                 # tests/test_pathtracer.py::test_white_furnace when patched in (checked).
-                "energy_loss_1pct": "tests/test_pathtracer.py", "shadow_tfar_past_light": "tests/test_pathtracer.py"}
+                "energy_loss_1pct": "tests/test_pathtracer.py", "shadow_tfar_past_light": "tests/test_pathtracer.py",
+                # Three more (13-17 s each, measured 2026-12-02) when the probes joined the suite; each fails
+                # tests/test_pathtracer.py::test_white_furnace when patched in (checked: NaN, and the albedo 0.5
+                # furnace off by 7% and 5%).
+                "nan_throughput": "tests/test_pathtracer.py", "cosine_pdf_mismatch": "tests/test_pathtracer.py",
+                "rr_no_compensation": "tests/test_pathtracer.py"}
 
 
 def _params() -> list:
