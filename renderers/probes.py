@@ -65,7 +65,7 @@ from renderers.core.visible_points import camera_visible_points
 PROBE_STREAM = 3
 #: The update's rotation draws dimensions 0-2 of this path of its key, above any probe ray's index.
 ROTATION_PATH = (1 << 40) - 1
-#: Probe rays per work unit (whole probes), as the camera pass's unit sizes.
+#: Most probe rays per work unit (whole probes), as the camera pass's unit sizes.
 UNIT_RAYS = 1 << 14
 AVERAGING = ("ema", "exact")
 
@@ -176,7 +176,7 @@ def update_probes(geom: SceneGeometry, grid: ddgi.ProbeGrid, seed: int, settings
     positions = ddgi.probe_positions(grid)
     fibonacci = spherical_fibonacci(settings["rays_per_probe"])
     probes, n = len(positions), len(fibonacci)
-    per_unit = max(1, UNIT_RAYS // n)
+    per_unit = probes_per_unit(probes, n, threads)
     ni, nd = settings["irradiance_texels"], settings["depth_texels"]
     bounces, updates = settings["bounces"], settings["bounces"] + settings["iterations"]
     bar = tqdm(total=updates, desc="probe updates", unit="update", file=sys.stderr, dynamic_ncols=True,
@@ -204,6 +204,13 @@ def update_probes(geom: SceneGeometry, grid: ddgi.ProbeGrid, seed: int, settings
             on_update(k + 1, volume)
     bar.close()
     return volume
+
+
+def probes_per_unit(probes: int, rays: int, threads: int) -> int:
+    """Probes per work unit of an update: at most :data:`UNIT_RAYS` rays, and enough units to keep every thread
+    busy (a small grid was one unit, on one thread). The cut cannot change the volume: a probe ray's numbers
+    are keyed by its index, each probe is blended alone, and every unit reads the previous volume."""
+    return max(1, min(UNIT_RAYS // rays, -(-probes // (2 * threads))))
 
 
 def history_weight(k: int, bounces: int, hysteresis: float, averaging: str) -> float:

@@ -45,7 +45,7 @@ from renderers.core.geometry import SceneGeometry
 from renderers.core.octahedral import texel_directions
 from renderers.core.sampling import random_rotation, spherical_fibonacci
 from renderers.pathtracer import PathTracer
-from renderers.probes import UNIT_RAYS, IrradianceProbes, grid_of, update_probes, volume_of
+from renderers.probes import IrradianceProbes, grid_of, probes_per_unit, update_probes, volume_of
 
 pytest.importorskip("embreex")
 
@@ -507,12 +507,12 @@ def test_two_rooms_leak_with_the_default_settings(two_rooms):
 # -- determinism -----------------------------------------------------------------------------------
 
 def test_images_depend_on_the_seed_only(two_rooms):
-    """Grid 4 (64 probes) at 512 rays per probe is two work units of probes (:data:`renderers.probes.UNIT_RAYS`),
-    2 replacing and 2 blended updates, 4 spp: the volume after the updates and the rendered image (and its
-    variance) are bit-identical on 1 and 2 threads and from one render to the next with the same seed, and
-    differ with another seed."""
+    """Grid 4 (64 probes) at 512 rays per probe, cut into work units of probes differently on 1 and 2 threads
+    (:func:`renderers.probes.probes_per_unit`), 2 replacing and 2 blended updates, 4 spp: the volume after the
+    updates and the rendered image (and its variance) are bit-identical on 1 and 2 threads and from one render
+    to the next with the same seed, and differ with another seed."""
     settings = {"grid": 4, "rays_per_probe": 512, "bounces": 2, "iterations": 2}
-    assert 64 // (UNIT_RAYS // 512) >= 2  # the probes are cut into more than one unit
+    assert 1 < probes_per_unit(64, 512, 2) < probes_per_unit(64, 512, 1) < 64  # several units, cut differently
     resolved = probe_settings(**settings)
     grid = grid_of(two_rooms, resolved)
     geom = SceneGeometry(two_rooms)
