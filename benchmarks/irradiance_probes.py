@@ -330,14 +330,13 @@ def bias_figure(out: Path, ref, runs, names: dict, path: Path, lim: float = 0.25
     """Per configuration, the seeds' mean image against the reference: relative luminance error, smoothed (a
     Gaussian of 1 pixel: what is left of the camera noise), blue where darker, red where lighter (±lim
     saturates); the reference first."""
-    lum = lambda a: np.asarray(a, np.float64) @ np.array([0.2126, 0.7152, 0.0722])
-    r_lum = lum(ref.image)
+    r_lum = metrics.luminance(ref.image)
     seeds = sorted(runs["seed"].dropna().astype(int).unique())
     shown = metrics.display_encode(ref.image, metrics.display_exposure(ref.image, ref.quantity))
     panels = [("reference", np.round(shown * 255).astype(np.uint8))]
     for name, lab in names.items():
         mean = np.mean([read_exr(out / "images" / f"{cell_name(name, s)}.exr") for s in seeds], axis=0)
-        t = np.clip(gaussian_filter((lum(mean) - r_lum) / np.maximum(r_lum, 1e-3), 1.0) / lim, -1, 1)
+        t = np.clip(gaussian_filter((metrics.luminance(mean) - r_lum) / np.maximum(r_lum, 1e-3), 1.0) / lim, -1, 1)
         rgb = np.stack([np.where(t > 0, 1, 1 + t), 1 - np.abs(t), np.where(t < 0, 1, 1 - t)], axis=-1)
         panels.append((lab, np.round(rgb * 255).astype(np.uint8)))
     cols = 4
@@ -364,14 +363,13 @@ def light_leak(out: Path, images: Path, seeds, spp: int, command: str) -> list[d
     entries = {"visibility on (default)": default, "visibility off": default.with_settings({"visibility": False})}
     experiment(out / LEAK_SCENE, scene, ref, list(entries.values()), [spp], seeds, command)
     masks = region_masks(scene)
-    lum = lambda a: np.asarray(a, np.float64) @ np.array([0.2126, 0.7152, 0.0722])
     shown, rows = [], []
     folder = out / LEAK_SCENE / "images"
     images_of = {"reference": ref.image}
     for lab, e in entries.items():
         images_of[lab] = np.mean([read_exr(folder / f"{cell_name(e.name, s)}.exr") for s in seeds], axis=0)
     for lab, mean in images_of.items():
-        lit, dark = (float(lum(mean)[masks[r]].mean()) for r in ("lit-floor", "dark-floor"))
+        lit, dark = (float(metrics.luminance(mean)[masks[r]].mean()) for r in ("lit-floor", "dark-floor"))
         rows.append({"label": lab, "lit_floor": lit, "dark_floor": dark, "dark_over_lit": dark / lit})
         shown.append((lab, mean))
     print(f"\n## 4. Light leaks on {LEAK_SCENE} ({spp} spp, seeds' mean)\n\n"
