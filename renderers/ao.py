@@ -51,7 +51,7 @@ are free.
 
 Numerics: float64 maths; the occlusion ray leaves from ``x + offset·n``
 with the toolkit's scene-scaled offset (:func:`renderers.core.geometry.offset_origin`),
-and embreex gets float32 copies of it and of ``tfar = max_distance``.
+and Embree gets float32 copies of it and of ``tfar = max_distance``.
 """
 
 from __future__ import annotations
@@ -132,7 +132,7 @@ def trace_ao(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: i
 
 
 class AORenderer(ToolkitRenderer):
-    """Our ambient occlusion renderer (embreex, batched queries, multithreaded): the scene's AO, unbiased."""
+    """Our ambient occlusion renderer (Embree, batched queries, multithreaded): the scene's AO, unbiased."""
 
     name = "ao"
     estimator = "unbiased"

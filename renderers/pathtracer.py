@@ -178,7 +178,7 @@ def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels
 
 
 class PathTracer(ToolkitRenderer):
-    """Our path tracer (embreex, vectorised wavefront, multithreaded)."""
+    """Our path tracer (Embree, vectorised wavefront, multithreaded)."""
 
     name = "pathtracer"
     settings = (Setting("rr_depth", int, RR_DEPTH, "path vertex from which Russian roulette may end a path",

@@ -28,10 +28,12 @@ class ToolkitRenderer:
         self.threads = threads
 
     def unavailable_reason(self) -> str | None:
-        try:
-            import embreex  # noqa: F401
-        except ImportError as e:
-            return f"embreex is not installed ({e}); pip install embreex"
+        try:  # Embree's library comes in embreex's wheel (renderers.core.embree)
+            from renderers.core.embree import library
+
+            library()
+        except (ImportError, OSError) as e:
+            return f"Embree is not available ({e}); pip install embreex"
         return None
 
     def version(self) -> str:

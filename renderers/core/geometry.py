@@ -1,8 +1,8 @@
 """Scene conversion and ray queries shared by our renderers: Embree's triangles and analytic spheres.
 
 :class:`SceneGeometry` turns a :class:`harness.scenes.model.Scene` into the
-per-primitive float64 tables the shading code reads, and owns the embreex
-scene that answers ray queries. It is the one place that computes triangle
+per-primitive float64 tables the shading code reads, and owns the Embree
+scene that answers ray queries (:mod:`renderers.core.embree`). It is the one place that computes triangle
 areas and normals; the emitter-sampling tables built from them are
 :mod:`renderers.core.lights`' and the material tables :mod:`renderers.core.bsdf`'.
 Kernels get every table at once as :meth:`SceneGeometry.tables`, a
@@ -17,8 +17,8 @@ scene without spheres never runs the sphere code.
 Numerical conventions (every renderer of ours relies on them):
 
 - All maths is float64; kernels also write float32 copies of the rays they
-  make, because embreex takes float32 only (:mod:`renderers.core.rays`).
-- embreex has no ``tnear``: rays leaving a surface start at
+  make, because Embree takes float32 only (:mod:`renderers.core.rays`).
+- Queries start at tnear 0: rays leaving a surface start at
   ``x + offset * n`` on the side they travel to (:func:`offset_origin`; pbrt-v4
   §6.8.6 offsets by a bound of the hit point's error instead), with
   ``offset`` scaled to the scene (:data:`OFFSET_REL` of its size), so a scene
@@ -39,6 +39,7 @@ import math
 
 from harness.scenes.model import Scene, triangle_arrays
 from renderers.core.bsdf import material_tables
+from renderers.core.embree import EmbreeScene, closest_triangles, ray_record, segments_clear
 from renderers.core.lights import emitter_tables
 from renderers.core.sampling import jit
 
@@ -72,9 +73,6 @@ class SceneGeometry:
     """Triangles of a scene, with the Embree scene built over them."""
 
     def __init__(self, scene: Scene):
-        from embreex import rtcore_scene as rtcs
-        from embreex.mesh_construction import TriangleMesh
-
         tri = triangle_arrays(scene)
         verts, faces = tri["vertices"], tri["triangles"]
         self.v0 = verts[faces[:, 0]]
@@ -104,8 +102,7 @@ class SceneGeometry:
         self.emitters = emitters._replace(pdf_area=np.concatenate([emitters.pdf_area, np.zeros(n_spheres)]))
         self.rays = 0  # rays traced so far (closest-hit and shadow), for benchmarks
         self._rays_lock = threading.Lock()
-        self._embree = rtcs.EmbreeScene()
-        self._mesh = TriangleMesh(self._embree, verts.astype(np.float32), faces.astype(np.int32))
+        self._embree = EmbreeScene(verts.astype(np.float32), faces)
 
     @property
     def has_emitters(self) -> bool:
@@ -136,7 +133,9 @@ class SceneGeometry:
         if len(origins) == 0:
             return np.zeros(0, np.int32)
         self._count(len(origins))
-        return self._embree.run(origins, directions, query="INTERSECT")
+        prim = np.empty(len(origins), np.int32)
+        closest_triangles(self._embree.handle, origins, directions, prim, ray_record())
+        return prim
 
     def closest_hits(self, rays) -> tuple[np.ndarray, np.ndarray]:
         """Closest primitive per ray of a :class:`renderers.core.rays.RayBuffer` (-1: miss), and distances.
@@ -157,7 +156,8 @@ class SceneGeometry:
         if len(origins) == 0:
             return np.zeros(0, bool)
         self._count(len(origins))
-        visible = self._embree.run(origins, directions, dists=tfar, query="OCCLUDED") == -1  # -1: unblocked
+        visible = np.empty(len(origins), bool)
+        segments_clear(self._embree.handle, origins, directions, tfar, visible, ray_record())
         if self.has_spheres:
             _spheres_occlude(origins, directions, tfar, self.sphere_center, self.sphere_radius, visible)
         return visible

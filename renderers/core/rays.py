@@ -5,7 +5,7 @@ queues of pbrt-v4's wavefront integrator, ch. 15, are the same idea): kernels
 read one buffer and write the next, and Embree answers each buffer in one call.
 
 - :class:`RayBuffer`: float64 origin and direction (what shading reads),
-  one float32 copy of both (``o32``, ``d32``: embreex takes float32 only),
+  one float32 copy of both (``o32``, ``d32``: Embree takes float32 only),
   the path's index in its work unit, its throughput β, the solid-angle
   pdf of the sampling decision that made the ray (0 for camera rays and
   delta-BSDF samples), and the part of β that refraction's radiance scaling

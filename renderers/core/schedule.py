@@ -24,7 +24,7 @@ of threads, though the unit size follows the thread count to keep every
 thread busy. Units of all passes flow through one pipeline (no barrier
 between passes). Unit sizes (2^13 to 2^15 paths) were measured on the
 Cornell box (BENCHMARKS.md): smaller units keep a unit's arrays in cache,
-and embreex still releases the GIL for batches of that size (2 threads: 1.7-2x).
+and the ray queries hold no GIL (:mod:`renderers.core.embree`).
 """
 
 from __future__ import annotations
