@@ -1,4 +1,4 @@
-"""Path tracer speed, in one run: ours vs Mitsuba 3, and our rays vs raw embreex.
+"""Path tracer speed and efficiency, in one run: ours vs Mitsuba 3, and our rays vs raw embreex.
 
 On ``cornell-box`` at the same resolution, spp and max_depth for both:
 
@@ -6,10 +6,18 @@ On ``cornell-box`` at the same resolution, spp and max_depth for both:
     from inside the box, batches of 2^17 on the same number of threads);
 (b) our path tracer: paths/s and rays/s (closest-hit + shadow rays);
 (c) Mitsuba ``path`` integrator (``llvm_ad_rgb`` when LLVM is found), paths/s
-    after a warm-up render that compiles its kernels.
+    after a warm-up render that compiles its kernels;
+(d) efficiency 1/(MSE·time) at ``--efficiency-spp`` against the stored
+    reference, median over ``--seeds`` seeds, for each of our samplers and
+    Mitsuba's ``independent``, ``multijitter`` and ``ldsampler``;
+(e) time to ΔE mean ≤ ``--target`` (CIEDE2000, the harness's metric), median
+    over the seeds: ours with the sampler of best efficiency (checkpoints of one
+    progressive render), Mitsuba with its best (one timed render per spp of
+    :data:`MITSUBA_SPPS`), interpolated log-log between the spp that brackets it.
 
-Each figure is the median of ``--repeats`` timed runs; the ratios printed
-are ours/Mitsuba (paths/s) and our rays/s over raw rays/s. Run:
+Each throughput figure is the median of ``--repeats`` timed runs; the ratios
+printed are ours/Mitsuba (paths/s, efficiency, time to target) and our rays/s
+over raw rays/s. Run (about 15 minutes on 2 cores):
 
     .venv/bin/python benchmarks/pathtracer.py --spp 64 --repeats 5
 """
@@ -25,13 +33,22 @@ import time
 
 import numpy as np
 
+import pandas as pd
+
+from harness.evaluate import metrics
+from harness.evaluate.convergence import time_to_target
 from harness.scenes.library import resolve_scene
 from harness.scenes.model import Scene, triangle_arrays
+from harness.store.references import load_reference
+from renderers.core.sampler import SAMPLERS
 from renderers.core.schedule import default_threads
 from renderers.mitsuba3 import Mitsuba3, scene_dict
 from renderers.pathtracer import PathTracer
 
 RAW_BATCH = 1 << 17  # rays per embreex call in (a): large, its best case
+MITSUBA_SAMPLERS = ("independent", "multijitter", "ldsampler")
+#: Squares and powers of two, so multijitter and ldsampler take them as they are.
+MITSUBA_SPPS = (16, 64, 256, 1024, 4096)
 
 
 def raw_embree_rays_per_s(scene: Scene, threads: int, repeats: int, batches_per_thread: int = 8) -> float:
@@ -90,22 +107,83 @@ def mitsuba(scene: Scene, spp: int, repeats: int) -> dict:
     return {"time_s": t, "paths_per_s": scene.camera.width * scene.camera.height * spp / t, "variant": variant}
 
 
+def _mitsuba_scene(scene: Scene, spp: int, sampler: str):
+    import mitsuba as mi
+
+    Mitsuba3().variant()  # selects the variant
+    mi_scene = mi.load_dict(scene_dict(scene, spp, sampler))
+    np.asarray(mi.render(mi_scene, spp=spp, seed=12345))  # JIT warm-up
+    return mi_scene
+
+
+def _mitsuba_render(mi_scene, spp: int, seed: int) -> tuple[np.ndarray, float]:
+    import mitsuba as mi
+
+    t0 = time.perf_counter()
+    img = np.asarray(mi.render(mi_scene, spp=spp, seed=seed), dtype=np.float64)  # asarray waits for the kernel
+    return img, time.perf_counter() - t0
+
+
+def efficiency(scene: Scene, ref: np.ndarray, spp: int, seeds: int) -> dict:
+    """{label: (median MSE, median time s, 1/(MSE·time))} for our samplers and Mitsuba's, at ``spp``."""
+    out = {}
+    pt = PathTracer()
+    for sampler in SAMPLERS:
+        pt.render(scene.with_resolution(8, 8), 1, 0, settings={"sampler": sampler})  # compile
+        runs = [pt.render(scene, spp, seed, settings={"sampler": sampler}) for seed in range(seeds)]
+        out[f"ours {sampler}"] = _figures([np.mean((r.image - ref) ** 2) for r in runs], [r.time_s for r in runs])
+    for sampler in MITSUBA_SAMPLERS:
+        mi_scene = _mitsuba_scene(scene, spp, sampler)
+        runs = [_mitsuba_render(mi_scene, spp, seed) for seed in range(seeds)]
+        out[f"mitsuba {sampler}"] = _figures([np.mean((img - ref) ** 2) for img, _ in runs], [t for _, t in runs])
+    return out
+
+
+def _figures(mses: list, times: list) -> tuple[float, float, float]:
+    mse, t = statistics.median(mses), statistics.median(times)
+    return mse, t, 1.0 / (mse * t)
+
+
+def time_to_delta_e(scene: Scene, ref: np.ndarray, ours_sampler: str, mitsuba_sampler: str, target: float,
+                    seeds: int, max_spp: int) -> tuple[float, float]:
+    """Median seconds to ΔE mean ≤ ``target``: (ours, Mitsuba); NaN if not reached by ``max_spp``."""
+    exposure = metrics.exposure_scale(ref)
+    spps = [s for s in MITSUBA_SPPS if s <= max_spp]
+    rows = []
+    pt = PathTracer()
+    for seed in range(seeds):
+        r = pt.render(scene, max_spp, seed, checkpoints=spps, settings={"sampler": ours_sampler})
+        rows += [("ours", seed, c.time_s, metrics.delta_e2000(c.image, ref, exposure)) for c in r.checkpoints]
+    mi_scenes = {spp: _mitsuba_scene(scene, spp, mitsuba_sampler) for spp in spps}
+    for seed in range(seeds):
+        for spp in spps:
+            img, t = _mitsuba_render(mi_scenes[spp], spp, seed)
+            rows.append(("mitsuba", seed, t, metrics.delta_e2000(img, ref, exposure)))
+    df = pd.DataFrame(rows, columns=["who", "seed", "time_s", "delta_e"])
+    return tuple(time_to_target(df[df.who == who], "delta_e", target) for who in ("ours", "mitsuba"))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", default="cornell-box")
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--seeds", type=int, default=3, help="seeds of (d) and (e) (medians over them)")
+    ap.add_argument("--efficiency-spp", type=int, default=256, help="spp of the efficiency comparison (d)")
+    ap.add_argument("--target", type=float, default=1.0, help="ΔE mean of the time-to-target comparison (e)")
+    ap.add_argument("--max-spp", type=int, default=1024, help="largest spp rendered for (e)")
+    ap.add_argument("--skip-throughput", action="store_true", help="only (d) and (e)")
     ap.add_argument("--json", action="store_true", help="print the results as JSON too")
     args = ap.parse_args()
     base = resolve_scene(args.scene)
     threads = default_threads()
-    raw = raw_embree_rays_per_s(base, threads, args.repeats)
+    raw = 0.0 if args.skip_throughput else raw_embree_rays_per_s(base, threads, args.repeats)
     results = {"threads": threads, "cpus": os.cpu_count(), "spp": args.spp,
                "resolution": [base.camera.width, base.camera.height], "raw_embree_rays_per_s": raw, "depths": {}}
     print(f"{args.scene} {base.camera.width}x{base.camera.height}, {args.spp} spp, {threads} threads, "
           f"median of {args.repeats}")
     print(f"(a) raw embreex closest-hit: {raw / 1e6:7.2f} M rays/s")
-    for max_depth in (base.max_depth, 8):
+    for max_depth in () if args.skip_throughput else (base.max_depth, 8):
         scene = base.with_max_depth(max_depth)
         o, m = ours(scene, args.spp, args.repeats), mitsuba(scene, args.spp, args.repeats)
         label = "unbounded" if max_depth < 0 else f"max_depth {max_depth}"
@@ -118,6 +196,21 @@ def main() -> None:
         results["depths"][label] = {"ours": o, "mitsuba": m,
                                     "ours_over_mitsuba": o["paths_per_s"] / m["paths_per_s"],
                                     "our_rays_over_raw": o["rays_per_s"] / raw}
+    ref = np.asarray(load_reference(base).image, dtype=np.float64)
+    eff = efficiency(base, ref, args.efficiency_spp, args.seeds)
+    print(f"--- (d) efficiency 1/(MSE·time) at {args.efficiency_spp} spp, median of {args.seeds} seeds")
+    baseline = eff["mitsuba multijitter"][2]
+    for label, (mse, t, e) in eff.items():
+        print(f"{label:22s} RMSE {mse ** 0.5:.5f}  time {t:6.2f} s  efficiency {e:9.1f}  "
+              f"/ mitsuba multijitter {e / baseline:.2f}")
+    best_ours = max((k for k in eff if k.startswith("ours")), key=lambda k: eff[k][2]).split()[1]
+    best_mi = max((k for k in eff if k.startswith("mitsuba")), key=lambda k: eff[k][2]).split()[1]
+    ours_t, mi_t = time_to_delta_e(base, ref, best_ours, best_mi, args.target, args.seeds, args.max_spp)
+    print(f"--- (e) time to ΔE mean <= {args.target:g}, median of {args.seeds} seeds")
+    print(f"ours ({best_ours}) {ours_t:.2f} s   mitsuba ({best_mi}) {mi_t:.2f} s   ours/mitsuba {ours_t / mi_t:.2f}")
+    results.update(efficiency={k: dict(zip(("mse", "time_s", "efficiency"), v)) for k, v in eff.items()},
+                   time_to_delta_e={"target": args.target, "ours": [best_ours, ours_t],
+                                    "mitsuba": [best_mi, mi_t], "ours_over_mitsuba": ours_t / mi_t})
     if args.json:
         print(json.dumps(results, indent=1))
 

@@ -112,6 +112,7 @@ from renderers.core.geometry import SceneGeometry
 from renderers.core.occlusion import occlusion_segment
 from renderers.core.rays import add_unoccluded, head, shadow_buffer
 from renderers.core.rng import uniform
+from renderers.core.sampler import Stream, independent
 from renderers.core.sampling import jit
 from renderers.core.schedule import default_threads, render_image
 from renderers.core.visible_points import camera_visible_points
@@ -215,7 +216,8 @@ class Shading:
         for no ambient term."""
         self.geom, self.scene, self.ambient, self.samples, self.tfar = geom, scene, ambient, samples, tfar
 
-    def trace(self, first: int, stop: int, pixels: int, key: np.uint64) -> np.ndarray:
+    def trace(self, first: int, stop: int, pixels: int, stream: Stream) -> np.ndarray:
+        key = stream.key  # the independent sampler's pass key
         L, vp = camera_visible_points(self.geom, self.scene, first, stop, pixels, key)
         if self.ambient is None:
             return L
@@ -278,7 +280,7 @@ class AOAmbient(ToolkitRenderer):
         reference = load_reference(scene) if s["ambient"] == "oracle" else None  # refuse before rendering
         tfar = s["ao_max_distance"] * scene.extent()
         geom, setup_s = warmed_geometry(scene, lambda g: Shading(g, scene, lambda depth: np.ones((len(depth), 3)),
-                                                                 1, tfar).trace(0, 1, 1, np.uint64(0)))
+                                                                 1, tfar).trace(0, 1, 1, independent(0)))
         terms = radiosity_ambient(scene_surfaces(geom))
         if (s["ambient"] == "radiosity" and scene.max_depth < 0
                 and ((terms.power > 0.0) & (terms.mean_reflectance >= 1.0)).any()):

@@ -41,10 +41,10 @@ medium boundaries, which our scenes have none of). Spheres occlude through
 after Embree's triangles.
 
 Random numbers: a sample makes two decisions, each with named dimensions of
-its own layout over :func:`renderers.core.rng.uniform` (as
+its own layout, drawn from the ``sampler`` setting's stream (as
 :mod:`renderers.core.sampler` describes): the pixel jitter of the toolkit's
 camera rays (dimensions 0-1, :data:`renderers.core.sampler.CAMERA_U` and
-``CAMERA_V``), then the direction (:data:`AO_U`, :data:`AO_V`). The
+``CAMERA_V``), then the direction (:data:`AO_U`, :data:`AO_V`), each a 2D draw. The
 image depends on the seed only, bit for bit, for any thread count
 (:mod:`renderers.core.schedule`); passes double, so power-of-two checkpoints
 are free.
@@ -67,8 +67,7 @@ from renderers.core.camera import camera_basis, camera_rays
 from renderers.core.geometry import SceneGeometry, surface_point
 from renderers.core.occlusion import face_forward, occlusion_segment
 from renderers.core.rays import add_unoccluded, head, ray_buffer, shadow_buffer
-from renderers.core.rng import uniform
-from renderers.core.sampler import CAMERA_DIMS
+from renderers.core.sampler import CAMERA_DIMS, SAMPLER_SETTING, Stream, independent, sample_2d
 from renderers.core.sampling import jit
 from renderers.core.schedule import render_image
 
@@ -80,15 +79,15 @@ AO_DIMS = CAMERA_DIMS + 2
 
 
 @jit
-def ao_sample(key, path):
+def ao_sample(stream, path):
     """The two numbers (u1, u2) in [0, 1)² that pick sample ``path``'s direction."""
-    return uniform(key, path, AO_U), uniform(key, path, AO_V)
+    return sample_2d(stream, path, AO_U)
 
 
 # One kernel for the whole sample, as the path tracer's _shade: it reads and writes the buffers itself
 # (helpers that take arrays and branch cost reference counting and inlining, renderers/core/rays.py).
 @jit
-def _occlusion_rays(prim, t_sphere, rays, key, first, cosine, tfar, miss, geo, A, occ):
+def _occlusion_rays(prim, t_sphere, rays, stream, first, cosine, tfar, miss, geo, A, occ):
     """For camera ray i of a unit (hit ``prim[i]``, -1: missed), its occlusion ray, into ``occ``.
 
     A miss writes ``miss`` into ``A[i]``; a hit leaves ``A[i]`` at 0 and writes
@@ -107,24 +106,24 @@ def _occlusion_rays(prim, t_sphere, rays, key, first, cosine, tfar, miss, geo, A
         o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
         x, n0, cos_o, _ = surface_point(geo, p, o, d, t_sphere[i] if p >= geo.n_triangles else 0.0)
         n = face_forward(n0, cos_o)
-        u = ao_sample(key, first + i)
+        u = ao_sample(stream, first + i)
         occlusion_segment(occ, k, x, n, cosine, u[0], u[1], tfar, geo.offset, i, (1.0, 1.0, 1.0))
         k += 1
     return k
 
 
-def trace_ao(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: int, key: np.uint64) -> np.ndarray:
+def trace_ao(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: int, stream: Stream) -> np.ndarray:
     """AO estimates (m, 3): 0, 1 or the miss value, for samples ``first .. stop-1`` (j sees pixel j mod ``pixels``)."""
     ao = scene.ambient_occlusion
     m = stop - first
     cam = scene.camera
     rays = ray_buffer(m)
-    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, key, rays)
+    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, rays)
     prim, t_sphere = geom.closest_hits(rays)  # Embree's triangles, then the spheres (float64)
     A = np.zeros((m, 3))
     occ = shadow_buffer(m)
     tfar = ao.max_distance  # an occluder counts only if nearer than this (inf: any)
-    k = _occlusion_rays(prim, t_sphere, rays, key, first, ao.weighting == "cosine", tfar, ao.miss_value,
+    k = _occlusion_rays(prim, t_sphere, rays, stream, first, ao.weighting == "cosine", tfar, ao.miss_value,
                         geom.tables(), A, occ)
     seg = head(occ, k)
     add_unoccluded(A, seg, geom.unoccluded(seg.o, seg.d, seg.t))
@@ -137,14 +136,16 @@ class AORenderer(ToolkitRenderer):
     name = "ao"
     estimator = "unbiased"
     quantities = ("ambient_occlusion",)
+    settings = (SAMPLER_SETTING,)
 
-    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = ()) -> RenderResult:
+    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
+               settings: dict | None = None) -> RenderResult:
         if scene.quantity != "ambient_occlusion" or scene.ambient_occlusion is None:
             # The runner never gets here (harness.adapters.registry.missing_features); a direct call might.
             raise ValueError(f"{scene.name}: the ao renderer computes ambient occlusion, and this scene's "
                              f"quantity is {scene.quantity}")
-        geom, setup_s = warmed_geometry(scene, lambda g: trace_ao(g, scene, 0, 1, 1, np.uint64(0)))
+        geom, setup_s = warmed_geometry(scene, lambda g: trace_ao(g, scene, 0, 1, 1, independent(0)))
         result = render_image(scene, spp, seed, lambda *unit: trace_ao(geom, scene, *unit), checkpoints,
-                              self.threads)
+                              self.threads, sampler=(settings or {}).get("sampler", SAMPLER_SETTING.default))
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
         return result

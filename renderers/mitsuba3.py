@@ -112,8 +112,12 @@ def unit_frame(scene: Scene) -> tuple[np.ndarray, float]:
     return (lo + hi) / 2.0, 1.0 / scene.extent()
 
 
-def scene_dict(scene: Scene, spp: int) -> dict:
+def scene_dict(scene: Scene, spp: int, sampler: str = "independent") -> dict:
     """The scene as a ``mi.load_dict`` dictionary (Mitsuba must be imported).
+
+    ``sampler`` is a Mitsuba sampler plugin (the adapter renders with
+    ``independent``; ``benchmarks/pathtracer.py`` compares ``multijitter`` and
+    ``ldsampler``, which round spp up to a square or a power of two).
 
     Geometry and camera are first moved and scaled so the scene's bounding
     box is centred on the origin with a diagonal of 1. Mitsuba offsets new
@@ -142,7 +146,7 @@ def scene_dict(scene: Scene, spp: int) -> dict:
             "far_clip": 1e4,
             "to_world": mi.ScalarTransform4f().look_at(origin=point(cam.position), target=point(cam.look_at),
                                                        up=cam.up),
-            "sampler": {"type": "independent", "sample_count": spp},
+            "sampler": {"type": sampler, "sample_count": spp},
             "film": {
                 "type": "hdrfilm",
                 "width": cam.width,

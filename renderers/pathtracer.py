@@ -33,7 +33,8 @@ the film are the shared toolkit's (``renderers/core/``).
 
 Random numbers: vertex k of a path uses the named dimensions of
 :mod:`renderers.core.sampler` (emitter pick and point, BSDF direction,
-roulette). Robustness: maths in float64; every pdf division is guarded (a
+roulette), drawn by the ``sampler`` setting's sampler (default ``pmj02``,
+the best time to error measured on cornell-box: BENCHMARKS.md). Robustness: maths in float64; every pdf division is guarded (a
 zero pdf gives a zero contribution, never NaN or Inf); a one-sided surface
 hit from its back side reflects and emits nothing and ends the path (glass
 is two-sided).
@@ -56,7 +57,8 @@ from renderers.core.lights import sample_emitter, solid_angle_pdf, solid_angle_p
 from renderers.core.roulette import Q_MAX, RR_DEPTH, continue_path
 from renderers.core.rays import (add_unoccluded, head, ray_buffer, set_path, set_ray, set_shadow, shadow_buffer,
                                  shadow_segment)
-from renderers.core.sampler import BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, vertex_1d, vertex_2d
+from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, SAMPLER_SETTING, Stream,
+                                    independent, vertex_1d, vertex_2d)
 from renderers.core.sampling import jit, power_heuristic
 from renderers.core.schedule import render_image
 
@@ -92,7 +94,7 @@ def _light_sample(x, n, mat, y, ny, pe):
 # reads/writes the buffers itself: helpers that take arrays and branch cost
 # reference counting and inlining (renderers/core/rays.py), so they stay here.
 @jit
-def _shade(prim, t_sphere, rays, key, first, depth, extend, roulette, geo, L, shadow, nxt):
+def _shade(prim, t_sphere, rays, stream, first, depth, extend, roulette, geo, L, shadow, nxt):
     """Shade one bounce of a wavefront: ray i of ``rays`` hit primitive ``prim[i]`` (-1: missed).
 
     ``t_sphere`` holds the distances of sphere hits (:meth:`SceneGeometry.closest_hits`).
@@ -100,7 +102,7 @@ def _shade(prim, t_sphere, rays, key, first, depth, extend, roulette, geo, L, sh
     another segment), writes one NEE shadow segment into ``shadow`` and one
     continuation ray into ``nxt`` per path, with Russian roulette if
     ``roulette``. Ray paths are indices local to the unit; random numbers are
-    drawn for path ``first + path``, its index in the pass. Returns (shadow
+    drawn from ``stream`` for path ``first + path``, its index in the pass. Returns (shadow
     segments, next rays).
     """
     ns = 0
@@ -127,8 +129,8 @@ def _shade(prim, t_sphere, rays, key, first, depth, extend, roulette, geo, L, sh
         j = first + q
         rho = (geo.reflectance[p, 0], geo.reflectance[p, 1], geo.reflectance[p, 2])
         if geo.emitter_ids.size > 0 and not is_delta(mat):
-            u = vertex_2d(key, j, depth, EMITTER_U)
-            y, ny, e, pe = sample_emitter(vertex_1d(key, j, depth, EMITTER_PICK), u[0], u[1], geo)
+            u = vertex_2d(stream, j, depth, EMITTER_U)
+            y, ny, e, pe = sample_emitter(vertex_1d(stream, j, depth, EMITTER_PICK), u[0], u[1], geo)
             cos_x, g = _light_sample(x, n, mat, y, ny, pe)
             if cos_x > 0.0:
                 # Between the two offset points, stopping short of the light (which must not shadow itself).
@@ -139,11 +141,11 @@ def _shade(prim, t_sphere, rays, key, first, depth, extend, roulette, geo, L, sh
                     for c in range(3):
                         shadow.c[ns, c] = bsdf_eval(mat, beta[c] * rho[c], cos_x) * geo.radiance[e, c] * g
                     ns += 1
-        u = vertex_2d(key, j, depth, BSDF_U)
+        u = vertex_2d(stream, j, depth, BSDF_U)
         wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p], u[0], u[1])
         scale = rays.scale[i] * refraction_scale(mat, cos_o, cos_w, geo.eta[p])
         alive, b, pdf = continue_path(mat, valid, cos_w, f, beta, scale,
-                                       vertex_1d(key, j, depth, ROULETTE) if roulette else 1.0, roulette)
+                                       vertex_1d(stream, j, depth, ROULETTE) if roulette else 1.0, roulette)
         if alive:
             side = n if cos_w > 0.0 else (-n[0], -n[1], -n[2])  # the new ray leaves on the side it travels to
             set_ray(nxt, nn, offset_origin(x, side, geo.offset), wi)
@@ -152,7 +154,7 @@ def _shade(prim, t_sphere, rays, key, first, depth, extend, roulette, geo, L, sh
     return ns, nn
 
 
-def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: int, key: np.uint64,
+def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: int, stream: Stream,
                 rr_depth: int = RR_DEPTH) -> np.ndarray:
     """Radiance estimates (m, 3) for paths ``first .. stop-1`` (path j sees pixel j mod ``pixels``)."""
     m = stop - first
@@ -162,13 +164,13 @@ def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels
     L = np.zeros((m, 3))
     cur, nxt = ray_buffer(m), ray_buffer(m)  # double buffer: shade reads one wavefront, writes the next
     shadow = shadow_buffer(m)
-    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, key, cur)
+    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, cur)
     n, depth = m, 1  # live rays; segments so far, the current ray included
     while n:
         rays = head(cur, n)
         prim, t_sphere = geom.closest_hits(rays)
         extend = unbounded or depth + 1 <= scene.max_depth
-        ns, n = _shade(prim, t_sphere, rays, key, first, depth, extend, depth >= rr_depth, geo, L, shadow, nxt)
+        ns, n = _shade(prim, t_sphere, rays, stream, first, depth, extend, depth >= rr_depth, geo, L, shadow, nxt)
         if ns:
             seg = head(shadow, ns)
             add_unoccluded(L, seg, geom.unoccluded(seg.o, seg.d, seg.t))
@@ -182,13 +184,14 @@ class PathTracer(ToolkitRenderer):
 
     name = "pathtracer"
     settings = (Setting("rr_depth", int, RR_DEPTH, "path vertex from which Russian roulette may end a path",
-                        low=1, high=1000),)
+                        low=1, high=1000), SAMPLER_SETTING)
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
         rr_depth = (settings or {}).get("rr_depth", RR_DEPTH)
-        geom, setup_s = warmed_geometry(scene, lambda g: trace_paths(g, scene, 0, 1, 1, np.uint64(0), rr_depth))
+        sampler = (settings or {}).get("sampler", SAMPLER_SETTING.default)
+        geom, setup_s = warmed_geometry(scene, lambda g: trace_paths(g, scene, 0, 1, 1, independent(0), rr_depth))
         result = render_image(scene, spp, seed, lambda *unit: trace_paths(geom, scene, *unit, rr_depth),
-                              checkpoints, self.threads, {"rr_depth": rr_depth, "rr_q_max": Q_MAX})
+                              checkpoints, self.threads, {"rr_depth": rr_depth, "rr_q_max": Q_MAX}, sampler)
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
         return result

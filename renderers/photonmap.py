@@ -65,6 +65,7 @@ from renderers.core.geometry import SceneGeometry
 from renderers.core.photon_map import KERNELS, UNBOUNDED, PhotonMap, PrecomputedIrradiance, depth_budget
 from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, empty_photons, shoot, subset
 from renderers.core.rays import head, ray_buffer
+from renderers.core.sampler import Stream, independent
 from renderers.core.schedule import default_threads, render_image
 from renderers.core.visible_points import camera_visible_points, gather_rays, walk_to_diffuse
 
@@ -148,9 +149,9 @@ class Pass2:
                     self.global_map, PRECOMPUTE_STRIDE, self.s["k"], self.r_global, self.s["kernel"], budget)
             return self._precomputed[budget]
 
-    def shade(self, first: int, stop: int, pixels: int, key: np.uint64) -> np.ndarray:
+    def shade(self, first: int, stop: int, pixels: int, stream: Stream) -> np.ndarray:
         """Radiance estimates (m, 3) of camera paths first .. stop-1 (render_image's trace function)."""
-        s, geom = self.s, self.geom
+        s, geom, key = self.s, self.geom, stream.key  # the independent sampler's pass key
         L, vp = camera_visible_points(geom, self.scene, first, stop, pixels, key)
         f = np.flatnonzero(vp.found)
         x, n, w, budget = vp.position[f], vp.normal[f], vp.weight[f], depth_budget(self.scene.max_depth, vp.depth[f])
@@ -198,6 +199,6 @@ def _warm_up(geom: SceneGeometry, scene: Scene) -> None:
     """Compile (or load from numba's cache) every kernel before the clock starts."""
     settings = resolve_settings(PhotonMapper, {"global_photons": 64, "caustic_photons": 0})
     p2 = build_pass2(geom, scene, 0, settings, 1)
-    p2.shade(0, 1, 1, np.uint64(0))
+    p2.shade(0, 1, 1, independent(0))
     p2.s = dict(settings, gather_rays=0)
-    p2.shade(0, 1, 1, np.uint64(0))
+    p2.shade(0, 1, 1, independent(0))

@@ -58,6 +58,7 @@ from renderers import ddgi
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.geometry import SceneGeometry
 from renderers.core.rng import uniform
+from renderers.core.sampler import Stream, independent
 from renderers.core.sampling import INV_PI, jit, random_rotation, spherical_fibonacci
 from renderers.core.schedule import default_threads, render_image, run_units
 from renderers.core.visible_points import camera_visible_points
@@ -244,8 +245,8 @@ class CameraPass:
     def __init__(self, geom: SceneGeometry, scene: Scene, volume: ddgi.Volume):
         self.geom, self.scene, self.volume = geom, scene, volume
 
-    def trace(self, first: int, stop: int, pixels: int, key: np.uint64) -> np.ndarray:
-        L, vp = camera_visible_points(self.geom, self.scene, first, stop, pixels, key)
+    def trace(self, first: int, stop: int, pixels: int, stream: Stream) -> np.ndarray:
+        L, vp = camera_visible_points(self.geom, self.scene, first, stop, pixels, stream.key)
         _add_indirect(np.flatnonzero(vp.found), vp, self.volume, self.scene.max_depth, L)
         return L
 
@@ -255,4 +256,4 @@ def _warm_up(geom: SceneGeometry, scene: Scene, grid: ddgi.ProbeGrid, settings: 
     small = dict(settings, bounces=1, iterations=0, rays_per_probe=8)
     tiny = ddgi.ProbeGrid(grid.origin, grid.spacing * (grid.counts - 1), np.full(3, 2, np.int64))
     volume = update_probes(geom, tiny, 0, small, 1)
-    CameraPass(geom, scene, volume).trace(0, 1, 1, np.uint64(0))
+    CameraPass(geom, scene, volume).trace(0, 1, 1, independent(0))

@@ -51,17 +51,17 @@ def camera_ray(basis, width: int, height: int, pixel: int, u1: float, u2: float)
 
 
 @jit
-def camera_rays(basis, width, height, first, pixels, key, rays):
+def camera_rays(basis, width, height, first, pixels, stream, rays):
     """Camera rays for paths first .. first + len(rays) - 1 of a pass into ``rays`` (a RayBuffer).
 
     Path j looks through pixel j mod ``pixels``, jittered by its camera
-    dimensions (:func:`renderers.core.sampler.camera_sample`); ray i starts
+    dimensions of ``stream`` (:func:`renderers.core.sampler.camera_sample`); ray i starts
     path i of the unit with throughput 1 and pdf 0 (no sampling decision).
     """
     origin = (basis[0, 0], basis[0, 1], basis[0, 2])
     for i in range(rays.path.size):
         j = first + i
-        u, v = camera_sample(key, j)
+        u, v = camera_sample(stream, j)
         set_ray(rays, i, origin, camera_ray(basis, width, height, j % pixels, u, v))
         set_path(rays, i, i, (1.0, 1.0, 1.0), 0.0)
 

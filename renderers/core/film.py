@@ -10,7 +10,14 @@ From the sums after n samples per pixel: the image is the mean ``S/n``, and
 the variance of that mean is the unbiased sample variance over n,
 ``(S₂/n - (S/n)²) / (n - 1)``, clamped at 0 against rounding: what the
 harness's z-tests compare, and what the references store as their variance
-image.
+image. That holds for independent samples only. A film of K > 1 batches
+(a low-discrepancy sampler's independent randomisations, sample s in batch
+s mod K: :mod:`renderers.core.sampler`) also sums each batch, and the
+variance of the mean is the spread of the B = min(K, n) batch means m_b
+about their mean, ``Σ (m_b - m̄)² / (B (B - 1))`` (the usual estimate from
+independent replicates of randomised QMC: L'Ecuyer & Lemieux 2002, "Recent
+advances in randomized quasi-Monte Carlo methods"); unbiased when K divides
+n, as at every power-of-two checkpoint ≥ K.
 
 A box filter is the only pixel filter (each path belongs to exactly one
 pixel), as in the references; a filter with wider support would splat.
@@ -36,18 +43,32 @@ def accumulate(acc, acc2, first, values):
             acc2[k, c] += v * v
 
 
-class Film:
-    """Sums over the samples of a (height, width) image, three channels, float64."""
+@jit
+def accumulate_batches(acc_b, first, first_sample, values):
+    """acc_b[s mod K, (first + i) mod P] += values[i], s = first_sample + (first + i) div P its sample index."""
+    k, p = acc_b.shape[0], acc_b.shape[1]
+    for i in range(values.shape[0]):
+        b = (first_sample + (first + i) // p) % k
+        for c in range(values.shape[1]):
+            acc_b[b, (first + i) % p, c] += values[i, c]
 
-    def __init__(self, width: int, height: int):
+
+class Film:
+    """Sums over the samples of a (height, width) image, three channels, float64; per batch if ``batches`` > 1."""
+
+    def __init__(self, width: int, height: int, batches: int = 1):
         self.shape = (height, width, 3)
         self.pixels = width * height
         self.acc = np.zeros((self.pixels, 3))
         self.acc2 = np.zeros((self.pixels, 3))  # sums of squares, for the variance
+        self.acc_b = np.zeros((batches, self.pixels, 3)) if batches > 1 else None
 
-    def add(self, first: int, values: np.ndarray) -> None:
-        """Estimates (m, 3) of paths first .. first + m - 1 of a pass (in order, after the paths before them)."""
+    def add(self, first: int, values: np.ndarray, first_sample: int = 0) -> None:
+        """Estimates (m, 3) of paths first .. first + m - 1 of a pass (in order, after the paths before them)
+        whose first sample per pixel is ``first_sample``."""
         accumulate(self.acc, self.acc2, first, values)
+        if self.acc_b is not None:
+            accumulate_batches(self.acc_b, first, first_sample, values)
 
     def image(self, n: int) -> np.ndarray:
         """The mean after ``n`` samples per pixel, float32 (height, width, 3)."""
@@ -57,8 +78,18 @@ class Film:
         """Per-pixel variance of :meth:`image` ``(n)``, float32; None for one sample (no estimate)."""
         if n < 2:
             return None
+        if self.acc_b is not None:
+            return self._batch_variance(n)
         mean = self.acc / n
         return (np.maximum(self.acc2 / n - mean * mean, 0.0) / (n - 1)).reshape(self.shape).astype(np.float32)
+
+    def _batch_variance(self, n: int) -> np.ndarray:
+        k = self.acc_b.shape[0]
+        b = min(k, n)
+        counts = n // k + (np.arange(b) < n % k)  # samples in each batch so far
+        means = self.acc_b[:b] / counts[:, None, None]
+        spread = ((means - means.mean(axis=0)) ** 2).sum(axis=0) / (b * (b - 1))
+        return spread.reshape(self.shape).astype(np.float32)
 
     def checkpoint(self, n: int, time_s: float) -> Checkpoint:
         return Checkpoint(n, self.image(n), time_s)

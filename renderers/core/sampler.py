@@ -1,9 +1,8 @@
-"""Named sample dimensions: which random number of a path each decision uses.
+"""Samplers, and named sample dimensions: which number of a path each decision uses.
 
 In the spirit of pbrt-v4's ``Sampler::Get1D``/``Get2D`` (§8.3), a path's
-decisions consume its counter-based random numbers
-(:func:`renderers.core.rng.uniform`) in a fixed order, but here every
-dimension has a name instead of hand arithmetic in the kernels:
+decisions consume numbers in a fixed order, but every dimension has a name
+instead of hand arithmetic in the kernels:
 
 - dimensions 0 and 1 (:data:`CAMERA_U`, :data:`CAMERA_V`) jitter the camera
   ray inside its pixel;
@@ -13,18 +12,43 @@ dimension has a name instead of hand arithmetic in the kernels:
 
 A dimension is a pure function of (depth, offset), so a decision that is
 skipped (no emitter, a path ended) never shifts the numbers of the ones
-after it, and two estimators that share the layout see the same numbers
-for the same decision. Changing any number here changes every image:
+after it. Changing any number here changes every image:
 ``tests/test_pathtracer_pinned.py`` pins them.
 
-A renderer whose decisions differ (photons from a light, probe rays) names
-its own layout the same way, over :func:`uniform` with its own key.
+Which numbers a dimension gets is the sampler's (:data:`SAMPLERS`), carried
+to kernels as a :class:`Stream`; every sample stays a pure function of
+(seed, pixel, sample index, dimension), so images do not depend on threads:
+
+- ``independent``: counter-based uniform numbers (:func:`renderers.core.rng.uniform`)
+  of (pass key, path index, dimension), as every renderer had before samplers.
+- ``pmj02``: every 1D/2D decision its own progressive (0, 2)-sequence,
+  shuffled and Owen-scrambled (:func:`renderers.core.sobol.padded_2d`;
+  Burley 2020's padding): each power-of-two prefix of a pixel's samples is
+  stratified in every elementary interval, as pmj02 is.
+- ``sobol``: one Owen-scrambled Sobol' sequence across all of a path's
+  dimensions per pixel (:func:`renderers.core.sobol.sobol_1d`; pbrt-v4's
+  ``SobolSampler`` with per-pixel scrambling), uniform past its 64 dimensions.
+
+**Variance of a low-discrepancy mean.** Its samples are negatively
+correlated, so the per-sample variance over n overstates its error and a
+z-test using it loses power. The low-discrepancy samplers therefore split a
+pixel's samples into :data:`BATCHES` independent randomisations: sample s
+belongs to batch ``s mod K`` and is point ``s div K`` of that batch's own
+scrambling (its key). The batch means are independent and unbiased, so
+their spread gives the variance of the mean (:class:`renderers.core.film.Film`),
+and every power-of-two checkpoint ≥ K gives each batch a power-of-two prefix.
 """
 
 from __future__ import annotations
 
-from renderers.core.rng import uniform
+from typing import NamedTuple
+
+import numpy as np
+
+from harness.adapters.settings import Setting
+from renderers.core.rng import mix64, uniform
 from renderers.core.sampling import jit
+from renderers.core.sobol import SOBOL_MATRICES, padded_1d, padded_2d, sobol_1d
 
 #: The camera ray's jitter inside its pixel (box filter), x then y.
 CAMERA_U = 0
@@ -41,6 +65,68 @@ BSDF_V = 4
 ROULETTE = 5
 DIMS_PER_VERTEX = 6
 
+INDEPENDENT, PMJ02, SOBOL = 0, 1, 2
+#: Sampler names (the ``sampler`` setting) and their ids in a :class:`Stream`.
+SAMPLERS = {"independent": INDEPENDENT, "pmj02": PMJ02, "sobol": SOBOL}
+#: Independent randomisations of a low-discrepancy render (the issue's K ≥ 8; more batches
+#: give a steadier variance, fewer keep more of the sequence's stratification per batch).
+BATCHES = 8
+#: The ``sampler`` setting of our renderers that draw from a :class:`Stream`.
+SAMPLER_SETTING = Setting("sampler", str, "pmj02",
+                          "random numbers: independent, pmj02 (progressive (0,2)-sequences per decision) or sobol "
+                          f"(Owen-scrambled, all dimensions); the last two report the variance of {BATCHES} "
+                          "independent batches", choices=tuple(SAMPLERS))
+#: ``pass_key`` stream of a low-discrepancy render's key (one key for all passes: a sequence spans them).
+SEQUENCE_STREAM = 16
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+
+
+class Stream(NamedTuple):
+    """What a kernel needs to draw the numbers of path j of a pass: pixel j mod ``pixels``, sample
+    ``first_sample + j div pixels`` of that pixel."""
+
+    kind: int  # INDEPENDENT, PMJ02 or SOBOL
+    key: np.uint64  # the pass's key (independent) or the render's (low-discrepancy)
+    pixels: int
+    first_sample: int
+    batches: int  # 1 for independent
+    matrices: np.ndarray  # renderers.core.sobol.SOBOL_MATRICES
+
+
+def independent(key: np.uint64, pixels: int = 1) -> Stream:
+    """The ``independent`` stream of pass ``key``: uniform(key, path, dim), whatever the pixel."""
+    return Stream(INDEPENDENT, np.uint64(key), max(pixels, 1), 0, 1, SOBOL_MATRICES)
+
+
+@jit
+def _point(st, path):
+    """(batch key, pixel, index in the batch's sequence) of ``path`` under a low-discrepancy stream."""
+    s = st.first_sample + path // st.pixels
+    return mix64(st.key ^ (np.uint64(s % st.batches) * _GOLDEN)), path % st.pixels, s // st.batches
+
+
+@jit
+def sample_1d(st, path, dim) -> float:
+    """Number ``dim`` of ``path`` (pbrt's Get1D)."""
+    if st.kind == INDEPENDENT:
+        return uniform(st.key, path, dim)
+    key, pixel, index = _point(st, path)
+    if st.kind == SOBOL:
+        return sobol_1d(key, pixel, index, dim, st.matrices)
+    return padded_1d(key, pixel, index, dim, st.matrices)
+
+
+@jit
+def sample_2d(st, path, dim):
+    """Numbers ``dim`` and ``dim + 1`` of ``path``, stratified jointly (pbrt's Get2D)."""
+    if st.kind == INDEPENDENT:
+        return uniform(st.key, path, dim), uniform(st.key, path, dim + 1)
+    key, pixel, index = _point(st, path)
+    if st.kind == SOBOL:
+        return sobol_1d(key, pixel, index, dim, st.matrices), sobol_1d(key, pixel, index, dim + 1, st.matrices)
+    return padded_2d(key, pixel, index, dim, st.matrices)
+
 
 @jit
 def vertex_dim(depth, offset):
@@ -49,19 +135,18 @@ def vertex_dim(depth, offset):
 
 
 @jit
-def camera_sample(key, path):
+def camera_sample(st, path):
     """The pixel jitter (u, v) in [0, 1)² of ``path``."""
-    return uniform(key, path, CAMERA_U), uniform(key, path, CAMERA_V)
+    return sample_2d(st, path, CAMERA_U)
 
 
 @jit
-def vertex_1d(key, path, depth, offset) -> float:
+def vertex_1d(st, path, depth, offset) -> float:
     """One number of vertex ``depth`` (pbrt's Get1D)."""
-    return uniform(key, path, vertex_dim(depth, offset))
+    return sample_1d(st, path, vertex_dim(depth, offset))
 
 
 @jit
-def vertex_2d(key, path, depth, offset):
-    """Two consecutive numbers of vertex ``depth``, from ``offset`` on (pbrt's Get2D)."""
-    dim = vertex_dim(depth, offset)
-    return uniform(key, path, dim), uniform(key, path, dim + 1)
+def vertex_2d(st, path, depth, offset):
+    """Two numbers of vertex ``depth``, from ``offset`` on, stratified jointly (pbrt's Get2D)."""
+    return sample_2d(st, path, vertex_dim(depth, offset))

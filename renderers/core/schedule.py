@@ -42,15 +42,18 @@ from harness.adapters.seeds import pass_key, spp_passes
 from harness.adapters.settings import SettingsError
 from harness.scenes.model import Scene
 from renderers.core.film import Film
+from renderers.core.sampler import BATCHES, INDEPENDENT, SAMPLERS, SEQUENCE_STREAM, Stream
+from renderers.core.sobol import SOBOL_MATRICES
 
 MAX_UNIT_PATHS = 1 << 15
 MIN_UNIT_PATHS = 1 << 13
 #: Pass sizes double without a cap: the unit size already bounds memory.
 _NO_CAP = 1 << 40
 
-#: trace(first, stop, pixels, key) -> radiance estimates (stop - first, 3) float64
-#: for the paths first..stop-1 of a pass; path j looks through pixel j mod pixels.
-TraceFn = Callable[[int, int, int, np.uint64], np.ndarray]
+#: trace(first, stop, pixels, stream) -> radiance estimates (stop - first, 3) float64
+#: for the paths first..stop-1 of a pass; path j looks through pixel j mod pixels
+#: and draws its numbers from the pass's sampler stream (renderers.core.sampler.Stream).
+TraceFn = Callable[[int, int, int, Stream], np.ndarray]
 
 J = TypeVar("J")
 R = TypeVar("R")
@@ -125,24 +128,34 @@ def render_image(
     checkpoints: Sequence[int] = (),
     threads: int | None = None,
     info: dict | None = None,
+    sampler: str = "independent",
 ) -> RenderResult:
-    """Run ``trace`` over every (pixel, sample) and average into an image, with its variance and checkpoints."""
+    """Run ``trace`` over every (pixel, sample) and average into an image, with its variance and checkpoints.
+
+    ``sampler`` names one of :data:`renderers.core.sampler.SAMPLERS`; a
+    low-discrepancy one gets its variance from independent batches.
+    """
     if spp < 1:
         raise ValueError(f"spp must be >= 1, got {spp}")
     cam = scene.camera
-    film = Film(cam.width, cam.height)
+    kind = SAMPLERS[sampler]
+    batches = 1 if kind == INDEPENDENT else BATCHES
+    film = Film(cam.width, cam.height, batches)
     threads = threads or default_threads()
     passes = list(spp_passes(spp, _NO_CAP, checkpoints))
-    keys = [pass_key(seed, k) for k in range(len(passes))]
+    starts = np.concatenate([[0], np.cumsum(passes)[:-1]]).astype(int)
+    sequence_key = pass_key(seed, 0, SEQUENCE_STREAM)
+    streams = [Stream(kind, pass_key(seed, k) if kind == INDEPENDENT else sequence_key, film.pixels, int(starts[k]),
+                      batches, SOBOL_MATRICES) for k in range(len(passes))]
     done, shots = 0, []
     t0 = time.perf_counter()
 
     def work(unit: Unit) -> np.ndarray:
-        return trace(unit.first, unit.stop, film.pixels, keys[unit.index])
+        return trace(unit.first, unit.stop, film.pixels, streams[unit.index])
 
     def reduce(unit: Unit, values: np.ndarray) -> None:
         nonlocal done
-        film.add(unit.first, values)
+        film.add(unit.first, values, int(starts[unit.index]))
         if unit.last:
             done += passes[unit.index]
             if done in checkpoints and done < spp:
@@ -153,4 +166,5 @@ def render_image(
     image = film.image(spp)
     if spp in checkpoints:
         shots.append(Checkpoint(spp, image, elapsed))
-    return RenderResult(image, elapsed, spp, seed, shots, {"threads": threads, **(info or {})}, film.variance(spp))
+    meta = {"threads": threads, "sampler": sampler, **({"batches": batches} if batches > 1 else {}), **(info or {})}
+    return RenderResult(image, elapsed, spp, seed, shots, meta, film.variance(spp))

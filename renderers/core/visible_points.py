@@ -37,7 +37,7 @@ from renderers.core.rays import (RayBuffer, add_unoccluded, head, ray_buffer, se
                                  shadow_buffer, shadow_segment)
 from renderers.core.rng import uniform
 from renderers.core.roulette import RR_DEPTH, continue_path
-from renderers.core.sampler import BSDF_U, BSDF_V, EMITTER_PICK, EMITTER_U, EMITTER_V, ROULETTE, vertex_dim
+from renderers.core.sampler import BSDF_U, BSDF_V, EMITTER_PICK, EMITTER_U, EMITTER_V, ROULETTE, independent, vertex_dim
 from renderers.core.sampling import jit
 
 
@@ -168,7 +168,7 @@ def camera_visible_points(geom: SceneGeometry, scene: Scene, first: int, stop: i
     """Camera paths ``first .. stop-1`` of a pass (path j sees pixel j mod ``pixels``) to their visible points."""
     cam = scene.camera
     rays = ray_buffer(stop - first)
-    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, key, rays)
+    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, independent(key), rays)
     return walk_to_diffuse(geom, scene, rays, key, first)
 
 
