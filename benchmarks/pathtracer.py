@@ -12,8 +12,9 @@ On ``cornell-box`` at the same resolution, spp and max_depth for both:
     Mitsuba's ``independent``, ``multijitter`` and ``ldsampler``;
 (e) time to ΔE mean ≤ ``--target`` (CIEDE2000, the harness's metric), median
     over the seeds: ours with the sampler of best efficiency (checkpoints of one
-    progressive render), Mitsuba with its best (one timed render per spp of
-    :data:`MITSUBA_SPPS`), interpolated log-log between the spp that brackets it.
+    progressive render, every power of two from 16), Mitsuba with its best (one
+    timed render per spp of :data:`MITSUBA_SPPS`), interpolated log-log between
+    the renders that bracket it.
 
 Each throughput figure is the median of ``--repeats`` timed runs; the ratios
 printed are ours/Mitsuba (paths/s, efficiency, time to target) and our rays/s
@@ -81,10 +82,11 @@ def raw_embree_rays_per_s(scene: Scene, threads: int, repeats: int, batches_per_
     return threads * batches_per_thread * n / statistics.median(times)
 
 
-def ours(scene: Scene, spp: int, repeats: int) -> dict:
+def ours(scene: Scene, spp: int, repeats: int, sampler: str) -> dict:
     pt = PathTracer()
-    pt.render(scene.with_resolution(8, 8), 1, 0)  # numba cache load / compile
-    runs = [pt.render(scene, spp, seed=k) for k in range(repeats)]
+    settings = {"sampler": sampler}
+    pt.render(scene.with_resolution(8, 8), 1, 0, settings=settings)  # numba cache load / compile
+    runs = [pt.render(scene, spp, seed=k, settings=settings) for k in range(repeats)]
     t = statistics.median(r.time_s for r in runs)
     rays = statistics.median(r.info["rays"] for r in runs)
     paths = scene.camera.width * scene.camera.height * spp
@@ -151,8 +153,9 @@ def time_to_delta_e(scene: Scene, ref: np.ndarray, ours_sampler: str, mitsuba_sa
     spps = [s for s in MITSUBA_SPPS if s <= max_spp]
     rows = []
     pt = PathTracer()
+    checkpoints = [1 << k for k in range(4, max_spp.bit_length()) if 1 << k <= max_spp]  # free for us
     for seed in range(seeds):
-        r = pt.render(scene, max_spp, seed, checkpoints=spps, settings={"sampler": ours_sampler})
+        r = pt.render(scene, max_spp, seed, checkpoints=checkpoints, settings={"sampler": ours_sampler})
         rows += [("ours", seed, c.time_s, metrics.delta_e2000(c.image, ref, exposure)) for c in r.checkpoints]
     mi_scenes = {spp: _mitsuba_scene(scene, spp, mitsuba_sampler) for spp in spps}
     for seed in range(seeds):
@@ -172,32 +175,39 @@ def main() -> None:
     ap.add_argument("--efficiency-spp", type=int, default=256, help="spp of the efficiency comparison (d)")
     ap.add_argument("--target", type=float, default=1.0, help="ΔE mean of the time-to-target comparison (e)")
     ap.add_argument("--max-spp", type=int, default=1024, help="largest spp rendered for (e)")
-    ap.add_argument("--skip-throughput", action="store_true", help="only (d) and (e)")
+    ap.add_argument("--parts", default="abc,d,e", help="which parts to run, comma-separated: abc (throughput), "
+                    "d (efficiency), e (time to target, which needs d's ranking); default all")
     ap.add_argument("--json", action="store_true", help="print the results as JSON too")
     args = ap.parse_args()
     base = resolve_scene(args.scene)
     threads = default_threads()
-    raw = 0.0 if args.skip_throughput else raw_embree_rays_per_s(base, threads, args.repeats)
+    parts = set(args.parts.split(","))
+    raw = raw_embree_rays_per_s(base, threads, args.repeats) if "abc" in parts else 0.0
     results = {"threads": threads, "cpus": os.cpu_count(), "spp": args.spp,
                "resolution": [base.camera.width, base.camera.height], "raw_embree_rays_per_s": raw, "depths": {}}
     print(f"{args.scene} {base.camera.width}x{base.camera.height}, {args.spp} spp, {threads} threads, "
           f"median of {args.repeats}")
     print(f"(a) raw embreex closest-hit: {raw / 1e6:7.2f} M rays/s")
-    for max_depth in () if args.skip_throughput else (base.max_depth, 8):
+    for max_depth in (base.max_depth, 8) if "abc" in parts else ():
         scene = base.with_max_depth(max_depth)
-        o, m = ours(scene, args.spp, args.repeats), mitsuba(scene, args.spp, args.repeats)
+        m = mitsuba(scene, args.spp, args.repeats)
         label = "unbounded" if max_depth < 0 else f"max_depth {max_depth}"
         print(f"--- {label}")
-        print(f"(b) ours:    {o['paths_per_s'] / 1e6:7.3f} M paths/s  {o['rays_per_s'] / 1e6:7.2f} M rays/s "
-              f"({o['rays_per_path']:.2f} rays/path)")
-        print(f"(c) mitsuba: {m['paths_per_s'] / 1e6:7.3f} M paths/s  ({m['variant']})")
-        print(f"    ours/mitsuba paths/s = {o['paths_per_s'] / m['paths_per_s']:.2f}   "
-              f"our rays / raw rays = {o['rays_per_s'] / raw:.2f}")
-        results["depths"][label] = {"ours": o, "mitsuba": m,
-                                    "ours_over_mitsuba": o["paths_per_s"] / m["paths_per_s"],
-                                    "our_rays_over_raw": o["rays_per_s"] / raw}
+        print(f"(c) mitsuba: {m['paths_per_s'] / 1e6:7.3f} M paths/s  ({m['variant']}, independent sampler)")
+        results["depths"][label] = {"mitsuba": m}
+        for sampler in ("independent", "pmj02"):
+            o = ours(scene, args.spp, args.repeats, sampler)
+            print(f"(b) ours ({sampler}): {o['paths_per_s'] / 1e6:7.3f} M paths/s  {o['rays_per_s'] / 1e6:7.2f} M "
+                  f"rays/s ({o['rays_per_path']:.2f} rays/path); ours/mitsuba paths/s = "
+                  f"{o['paths_per_s'] / m['paths_per_s']:.2f}, our rays / raw rays = {o['rays_per_s'] / raw:.2f}")
+            results["depths"][label][f"ours {sampler}"] = {**o, "ours_over_mitsuba": o["paths_per_s"] / m["paths_per_s"],
+                                                          "our_rays_over_raw": o["rays_per_s"] / raw}
+    if not {"d", "e"} & parts:
+        if args.json:
+            print(json.dumps(results, indent=1))
+        return
     ref = np.asarray(load_reference(base).image, dtype=np.float64)
-    eff = efficiency(base, ref, args.efficiency_spp, args.seeds)
+    eff = efficiency(base, ref, args.efficiency_spp, args.seeds)  # (e) picks each side's best sampler from it
     print(f"--- (d) efficiency 1/(MSE·time) at {args.efficiency_spp} spp, median of {args.seeds} seeds")
     baseline = eff["mitsuba multijitter"][2]
     for label, (mse, t, e) in eff.items():
