@@ -3,7 +3,8 @@
 A wavefront's rays (:mod:`renderers.core.rays`) are answered by a numba
 loop calling ``rtcIntersect1``/``rtcOccluded1`` per ray: the same queries
 embreex's batched ``run`` made, without its per-ray Cython overhead
-(``benchmarks/embree_direct.py``: 1.37x its throughput, identical hits).
+(``benchmarks/embree_direct.py``: 1.06x its rays/s, identical hits; the
+path tracer gains ~10%, since the query is not all of a wavefront's cost).
 A path-at-a-time megakernel calling the same functions between bounces was
 tried too and was slower than the wavefront (BENCHMARKS.md).
 

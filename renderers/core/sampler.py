@@ -68,8 +68,8 @@ DIMS_PER_VERTEX = 6
 INDEPENDENT, PMJ02, SOBOL = 0, 1, 2
 #: Sampler names (the ``sampler`` setting) and their ids in a :class:`Stream`.
 SAMPLERS = {"independent": INDEPENDENT, "pmj02": PMJ02, "sobol": SOBOL}
-#: Independent randomisations of a low-discrepancy render (the issue's K ≥ 8; more batches
-#: give a steadier variance, fewer keep more of the sequence's stratification per batch).
+#: Independent randomisations of a low-discrepancy render: 7 degrees of freedom per pixel's variance.
+#: More give a steadier variance, fewer keep more stratification (docs/sampling.md measures both).
 BATCHES = 8
 #: The ``sampler`` setting of our renderers that draw from a :class:`Stream`.
 SAMPLER_SETTING = Setting("sampler", str, "pmj02",
