@@ -48,11 +48,11 @@ def _eval(which, keys, pixels, indices, dims, matrices):
     for i in range(len(keys)):
         k, p, j, d = keys[i], pixels[i], indices[i], dims[i]
         if which == PADDED_2D:
-            out[i, 0], out[i, 1] = padded_2d(k, p, j, d, matrices)
+            out[i, 0], out[i, 1] = padded_2d(k, p, j, d)
         elif which == SOBOL_PAIR:
             out[i, 0], out[i, 1] = sobol_1d(k, p, j, d, matrices), sobol_1d(k, p, j, d + 1, matrices)
         else:
-            out[i, 0] = padded_1d(k, p, j, d, matrices)
+            out[i, 0] = padded_1d(k, p, j, d)
     return out
 
 
@@ -199,9 +199,9 @@ def test_values_are_a_pure_function_of_key_pixel_index_dim():
         assert np.unique(ref[:, 0]).size > 0.99 * len(ref)  # and they do depend on every argument
     for i in order[:50]:
         k, p, j, d = keys[i], int(pixels[i]), int(indices[i]), int(dims[i])
-        assert padded_2d(k, p, j, d, SOBOL_MATRICES) == tuple(_eval(PADDED_2D, keys[i:i + 1], pixels[i:i + 1],
+        assert padded_2d(k, p, j, d) == tuple(_eval(PADDED_2D, keys[i:i + 1], pixels[i:i + 1],
                                                                     indices[i:i + 1], dims[i:i + 1], SOBOL_MATRICES)[0])
-        assert padded_1d(k, p, j, d, SOBOL_MATRICES) == padded_2d(k, p, j, d, SOBOL_MATRICES)[0]
+        assert padded_1d(k, p, j, d) == padded_2d(k, p, j, d)[0]
         assert sobol_1d(k, p, j, d, SOBOL_MATRICES) == sobol_1d(k, p, j, d, SOBOL_MATRICES.copy())
 
 

@@ -114,7 +114,7 @@ def sample_1d(st, path, dim) -> float:
     key, pixel, index = _point(st, path)
     if st.kind == SOBOL:
         return sobol_1d(key, pixel, index, dim, st.matrices)
-    return padded_1d(key, pixel, index, dim, st.matrices)
+    return padded_1d(key, pixel, index, dim)
 
 
 @jit
@@ -125,7 +125,7 @@ def sample_2d(st, path, dim):
     key, pixel, index = _point(st, path)
     if st.kind == SOBOL:
         return sobol_1d(key, pixel, index, dim, st.matrices), sobol_1d(key, pixel, index, dim + 1, st.matrices)
-    return padded_2d(key, pixel, index, dim, st.matrices)
+    return padded_2d(key, pixel, index, dim)
 
 
 @jit

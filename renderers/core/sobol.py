@@ -79,7 +79,8 @@ def _byte_tables(column: np.ndarray) -> np.ndarray:
 
 
 #: Dimension 1's matrix by index byte: a shuffled index has ~16 random bits set, and four table reads
-#: replace a walk over them (padded_2d draws dimension 1 for every 2D decision). 4 KB, in L1.
+#: replace a walk over them (padded_2d draws dimension 1 for every 2D decision). 4 KB, in L1; numba
+#: freezes it into the kernels as a constant, so the padded samplers take no matrices argument.
 _DIM1_BYTES = _byte_tables(SOBOL_MATRICES[1])
 
 _M32 = np.uint64(0xFFFFFFFF)
@@ -195,7 +196,7 @@ def _padded_seeds(key, pixel, dim):
 
 
 @jit
-def padded_1d(key, pixel, index, dim, matrices) -> float:
+def padded_1d(key, pixel, index, dim) -> float:
     """A 1D decision at ``dim``: Sobol' dimension 0 at a shuffled index, Owen-scrambled (Burley 2020's padding).
 
     The shuffle is Owen scrambling of the index, so it maps every aligned block
@@ -211,7 +212,7 @@ def padded_1d(key, pixel, index, dim, matrices) -> float:
 
 
 @jit
-def padded_2d(key, pixel, index, dim, matrices):
+def padded_2d(key, pixel, index, dim):
     """A 2D decision at ``dim``: Sobol' dimensions (0, 1) at a shuffled index, each Owen-scrambled.
 
     Sobol' dimensions 0 and 1 form a (0, 2)-sequence: every aligned block of
