@@ -1,4 +1,4 @@
-"""Embree 4's C API, called one ray at a time from numba kernels: every renderer's ray queries.
+"""Embree 4's C API, called in 8-ray packets from numba kernels: every renderer's ray queries.
 
 A wavefront's rays (:mod:`renderers.core.rays`) are answered by a numba
 loop over 8-ray packets (``rtcIntersect8``/``rtcOccluded8``; consecutive
@@ -137,15 +137,14 @@ def ray_record() -> np.ndarray:
 
 
 @jit
-def _fill_packet(rec, f, o, d, first, n, tfar, per_ray):
-    """Rays first .. first+n-1 (n ≤ 8) into the packet's lanes; the other lanes invalid. tfar[i] if ``per_ray``."""
+def _fill_packet(rec, f, o, d, first, n):
+    """Rays first .. first+n-1 (n ≤ 8) into the packet's lanes, all but tfar; the other lanes invalid."""
     for k in range(PACKET):
         if k < n:
             i = first + k
             f[k], f[PACKET + k], f[2 * PACKET + k], f[_TNEAR + k] = o[i, 0], o[i, 1], o[i, 2], np.float32(0.0)
             f[4 * PACKET + k], f[5 * PACKET + k], f[6 * PACKET + k] = d[i, 0], d[i, 1], d[i, 2]
             f[7 * PACKET + k] = np.float32(0.0)  # time
-            f[_TFAR + k] = tfar[i] if per_ray else tfar[0]
             rec[_MASK + k], rec[_MASK + PACKET + k], rec[_MASK + 2 * PACKET + k] = INVALID_ID, 0, 0  # mask, id, flags
             rec[_VALID + k] = INVALID_ID  # -1: a valid lane
         else:
@@ -156,11 +155,11 @@ def _fill_packet(rec, f, o, d, first, n, tfar, per_ray):
 def closest_triangles(scene, o, d, prim, rec):
     """``prim[i]``: id of the triangle ray i (float32 o, d; t > 0) hits first, -1 for none."""
     f = rec.view(np.float32)
-    no_tfar = np.full(1, _NO_TFAR, np.float32)
     for first in range(0, prim.size, PACKET):
         n = min(PACKET, prim.size - first)
-        _fill_packet(rec, f, o, d, first, n, no_tfar, False)
+        _fill_packet(rec, f, o, d, first, n)
         for k in range(PACKET):
+            f[_TFAR + k] = _NO_TFAR
             rec[_GEOM_ID + k] = INVALID_ID
         _intersect8(rec[_VALID:].ctypes.data, scene, rec.ctypes.data, 0)  # 0: default RTCIntersectArguments
         for k in range(n):
@@ -173,7 +172,9 @@ def segments_clear(scene, o, d, tfar, clear, rec):
     f = rec.view(np.float32)
     for first in range(0, clear.size, PACKET):
         n = min(PACKET, clear.size - first)
-        _fill_packet(rec, f, o, d, first, n, tfar, True)
+        _fill_packet(rec, f, o, d, first, n)
+        for k in range(n):
+            f[_TFAR + k] = tfar[first + k]
         _occluded8(rec[_VALID:].ctypes.data, scene, rec.ctypes.data, 0)
         for k in range(n):
             clear[first + k] = not f[_TFAR + k] < 0.0  # Embree writes -inf into tfar on a hit
