@@ -45,6 +45,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from harness.adapters.seeds import pass_key
 from harness.adapters.settings import Setting
 from renderers.core.rng import mix64, uniform
 from renderers.core.sampling import jit
@@ -94,9 +95,21 @@ class Stream(NamedTuple):
     matrices: np.ndarray  # renderers.core.sobol.SOBOL_MATRICES
 
 
-def independent(key: np.uint64, pixels: int = 1) -> Stream:
+def independent(key: np.uint64, pixels: int = 1, first_sample: int = 0) -> Stream:
     """The ``independent`` stream of pass ``key``: uniform(key, path, dim), whatever the pixel."""
-    return Stream(INDEPENDENT, np.uint64(key), max(pixels, 1), 0, 1, SOBOL_MATRICES)
+    return Stream(INDEPENDENT, np.uint64(key), max(pixels, 1), first_sample, 1, SOBOL_MATRICES)
+
+
+def pass_stream(sampler: str, seed: int, index: int, pixels: int, first_sample: int) -> Stream:
+    """The stream of pass ``index`` (its first sample per pixel ``first_sample``) of a render seeded ``seed``.
+
+    ``independent`` keys each pass (:func:`harness.adapters.seeds.pass_key`); a
+    low-discrepancy sampler keys the whole render, since its sequences span the passes.
+    """
+    kind = SAMPLERS[sampler]
+    if kind == INDEPENDENT:
+        return independent(pass_key(seed, index), pixels, first_sample)
+    return Stream(kind, pass_key(seed, 0, SEQUENCE_STREAM), pixels, first_sample, BATCHES, SOBOL_MATRICES)
 
 
 @jit

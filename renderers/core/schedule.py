@@ -38,12 +38,11 @@ from typing import Callable, Iterable, Iterator, NamedTuple, Sequence, TypeVar
 import numpy as np
 
 from harness.adapters.registry import Checkpoint, RenderResult
-from harness.adapters.seeds import pass_key, spp_passes
+from harness.adapters.seeds import spp_passes
 from harness.adapters.settings import SettingsError
 from harness.scenes.model import Scene
 from renderers.core.film import Film
-from renderers.core.sampler import BATCHES, INDEPENDENT, SAMPLERS, SEQUENCE_STREAM, Stream
-from renderers.core.sobol import SOBOL_MATRICES
+from renderers.core.sampler import Stream, pass_stream
 
 MAX_UNIT_PATHS = 1 << 15
 MIN_UNIT_PATHS = 1 << 13
@@ -138,15 +137,13 @@ def render_image(
     if spp < 1:
         raise ValueError(f"spp must be >= 1, got {spp}")
     cam = scene.camera
-    kind = SAMPLERS[sampler]
-    batches = 1 if kind == INDEPENDENT else BATCHES
-    film = Film(cam.width, cam.height, batches)
-    threads = threads or default_threads()
+    pixels = cam.width * cam.height
     passes = list(spp_passes(spp, _NO_CAP, checkpoints))
     starts = np.concatenate([[0], np.cumsum(passes)[:-1]]).astype(int)
-    sequence_key = pass_key(seed, 0, SEQUENCE_STREAM)
-    streams = [Stream(kind, pass_key(seed, k) if kind == INDEPENDENT else sequence_key, film.pixels, int(starts[k]),
-                      batches, SOBOL_MATRICES) for k in range(len(passes))]
+    streams = [pass_stream(sampler, seed, k, pixels, int(starts[k])) for k in range(len(passes))]
+    batches = streams[0].batches
+    film = Film(cam.width, cam.height, batches)
+    threads = threads or default_threads()
     done, shots = 0, []
     t0 = time.perf_counter()
 
@@ -155,7 +152,7 @@ def render_image(
 
     def reduce(unit: Unit, values: np.ndarray) -> None:
         nonlocal done
-        film.add(unit.first, values, int(starts[unit.index]))
+        film.add(unit.first, values, streams[unit.index].first_sample)
         if unit.last:
             done += passes[unit.index]
             if done in checkpoints and done < spp:
