@@ -94,19 +94,10 @@ def ours(scene: Scene, spp: int, repeats: int, sampler: str) -> dict:
 
 
 def mitsuba(scene: Scene, spp: int, repeats: int) -> dict:
-    adapter = Mitsuba3()
-    variant, note = adapter.variant()
-    import mitsuba as mi
-
-    mi_scene = mi.load_dict(scene_dict(scene, spp))
-    np.asarray(mi.render(mi_scene, spp=spp, seed=12345))  # JIT warm-up
-    times = []
-    for k in range(repeats):
-        t0 = time.perf_counter()
-        np.asarray(mi.render(mi_scene, spp=spp, seed=k))  # asarray waits for the kernel
-        times.append(time.perf_counter() - t0)
-    t = statistics.median(times)
-    return {"time_s": t, "paths_per_s": scene.camera.width * scene.camera.height * spp / t, "variant": variant}
+    mi_scene = _mitsuba_scene(scene, spp, "independent")
+    t = statistics.median(_mitsuba_render(mi_scene, spp, k)[1] for k in range(repeats))
+    return {"time_s": t, "paths_per_s": scene.camera.width * scene.camera.height * spp / t,
+            "variant": Mitsuba3().variant()[0]}
 
 
 def _mitsuba_scene(scene: Scene, spp: int, sampler: str):

@@ -34,8 +34,9 @@ the film are the shared toolkit's (``renderers/core/``).
 Random numbers: vertex k of a path uses the named dimensions of
 :mod:`renderers.core.sampler` (emitter pick and point, BSDF direction,
 roulette), drawn by the ``sampler`` setting's sampler (default ``pmj02``,
-the best time to error measured on cornell-box: BENCHMARKS.md). Robustness: maths in float64; every pdf division is guarded (a
-zero pdf gives a zero contribution, never NaN or Inf); a one-sided surface
+the best efficiency measured: docs/sampling.md). Robustness: maths in
+float64; every pdf division is guarded (a zero pdf gives a zero
+contribution, never NaN or Inf); a one-sided surface
 hit from its back side reflects and emits nothing and ends the path (glass
 is two-sided).
 """
