@@ -67,7 +67,7 @@ from renderers.core.camera import camera_basis, camera_rays
 from renderers.core.geometry import SceneGeometry, surface_point
 from renderers.core.occlusion import face_forward, occlusion_segment
 from renderers.core.rays import add_unoccluded, head, ray_buffer, shadow_buffer
-from renderers.core.sampler import CAMERA_DIMS, SAMPLER_SETTING, Stream, independent, sample_2d
+from renderers.core.sampler import CAMERA_DIMS, SAMPLER_SETTING, Stream, independent, path_point, sample_2d
 from renderers.core.sampling import jit
 from renderers.core.schedule import render_image
 
@@ -81,7 +81,7 @@ AO_DIMS = CAMERA_DIMS + 2
 @jit
 def ao_sample(stream, path):
     """The two numbers (u1, u2) in [0, 1)² that pick sample ``path``'s direction."""
-    return sample_2d(stream, path, AO_U)
+    return sample_2d(stream, path_point(stream, path), AO_U)
 
 
 # One kernel for the whole sample, as the path tracer's _shade: it reads and writes the buffers itself

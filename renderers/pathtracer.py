@@ -59,7 +59,7 @@ from renderers.core.roulette import Q_MAX, RR_DEPTH, continue_path
 from renderers.core.rays import (add_unoccluded, head, ray_buffer, set_path, set_ray, set_shadow, shadow_buffer,
                                  shadow_segment)
 from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, SAMPLER_SETTING, Stream,
-                                    independent, vertex_1d, vertex_2d)
+                                    independent, path_point, vertex_1d, vertex_2d)
 from renderers.core.sampling import jit, power_heuristic
 from renderers.core.schedule import render_image
 
@@ -127,11 +127,11 @@ def _shade(prim, t_sphere, rays, stream, first, depth, extend, roulette, geo, L,
                 L[q, c] += beta[c] * geo.radiance[p, c] * w
         if not extend:
             continue
-        j = first + q
+        pt = path_point(stream, first + q)
         rho = (geo.reflectance[p, 0], geo.reflectance[p, 1], geo.reflectance[p, 2])
         if geo.emitter_ids.size > 0 and not is_delta(mat):
-            u = vertex_2d(stream, j, depth, EMITTER_U)
-            y, ny, e, pe = sample_emitter(vertex_1d(stream, j, depth, EMITTER_PICK), u[0], u[1], geo)
+            u = vertex_2d(stream, pt, depth, EMITTER_U)
+            y, ny, e, pe = sample_emitter(vertex_1d(stream, pt, depth, EMITTER_PICK), u[0], u[1], geo)
             cos_x, g = _light_sample(x, n, mat, y, ny, pe)
             if cos_x > 0.0:
                 # Between the two offset points, stopping short of the light (which must not shadow itself).
@@ -142,11 +142,11 @@ def _shade(prim, t_sphere, rays, stream, first, depth, extend, roulette, geo, L,
                     for c in range(3):
                         shadow.c[ns, c] = bsdf_eval(mat, beta[c] * rho[c], cos_x) * geo.radiance[e, c] * g
                     ns += 1
-        u = vertex_2d(stream, j, depth, BSDF_U)
+        u = vertex_2d(stream, pt, depth, BSDF_U)
         wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p], u[0], u[1])
         scale = rays.scale[i] * refraction_scale(mat, cos_o, cos_w, geo.eta[p])
         alive, b, pdf = continue_path(mat, valid, cos_w, f, beta, scale,
-                                       vertex_1d(stream, j, depth, ROULETTE) if roulette else 1.0, roulette)
+                                       vertex_1d(stream, pt, depth, ROULETTE) if roulette else 1.0, roulette)
         if alive:
             side = n if cos_w > 0.0 else (-n[0], -n[1], -n[2])  # the new ray leaves on the side it travels to
             set_ray(nxt, nn, offset_origin(x, side, geo.offset), wi)

@@ -57,8 +57,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "light_pdf_2pct",
         "light pdf 2% too high where NEE reads it (pe = light_pdf_area[e] * 1.02, e.g. a stale area table)",
-        (("pe = sample_emitter(vertex_1d(stream, j, depth, EMITTER_PICK), u[0], u[1], geo)\n",
-          "pe = sample_emitter(vertex_1d(stream, j, depth, EMITTER_PICK), u[0], u[1], geo)\n"
+        (("pe = sample_emitter(vertex_1d(stream, pt, depth, EMITTER_PICK), u[0], u[1], geo)\n",
+          "pe = sample_emitter(vertex_1d(stream, pt, depth, EMITTER_PICK), u[0], u[1], geo)\n"
           "            pe = pe * 1.02\n"),),
     ),
     Mutant(

@@ -19,8 +19,8 @@ from harness.scenes.library import resolve_scene
 from renderers.core import film as film_module
 from renderers.core.film import Film
 from renderers.core.rng import uniform
-from renderers.core.sampler import (BATCHES, CAMERA_U, PMJ02, SOBOL, Stream, independent, sample_1d, sample_2d,
-                                    vertex_dim)
+from renderers.core.sampler import (BATCHES, CAMERA_U, PMJ02, SOBOL, Stream, independent, path_point, sample_1d,
+                                    sample_2d, vertex_dim)
 from renderers.core.sobol import SOBOL_MATRICES
 from renderers.pathtracer import PathTracer
 
@@ -34,7 +34,7 @@ PIXELS = 7  # not a power of two: pixel and sample index must not alias
 def _draw_2d(st, paths, dim):
     out = np.empty((paths.size, 2))
     for k in range(paths.size):
-        out[k, 0], out[k, 1] = sample_2d(st, paths[k], dim)
+        out[k, 0], out[k, 1] = sample_2d(st, path_point(st, paths[k]), dim)
     return out
 
 
@@ -42,7 +42,7 @@ def _draw_2d(st, paths, dim):
 def _draw_1d(st, paths, dim):
     out = np.empty(paths.size)
     for k in range(paths.size):
-        out[k] = sample_1d(st, paths[k], dim)
+        out[k] = sample_1d(st, path_point(st, paths[k]), dim)
     return out
 
 

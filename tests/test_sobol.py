@@ -14,6 +14,7 @@ from renderers.core.sobol import (
     nested_uniform_scramble,
     padded_1d,
     padded_2d,
+    pixel_seed,
     reverse_bits32,
     sobol_1d,
     sobol_sample,
@@ -46,13 +47,13 @@ def _eval(which, keys, pixels, indices, dims, matrices):
     """Samples (n, 2): padded_2d; sobol_1d at (dim, dim + 1); padded_1d (second column 0)."""
     out = np.zeros((len(keys), 2))
     for i in range(len(keys)):
-        k, p, j, d = keys[i], pixels[i], indices[i], dims[i]
+        h, j, d = pixel_seed(keys[i], pixels[i]), indices[i], dims[i]
         if which == PADDED_2D:
-            out[i, 0], out[i, 1] = padded_2d(k, p, j, d)
+            out[i, 0], out[i, 1] = padded_2d(h, j, d)
         elif which == SOBOL_PAIR:
-            out[i, 0], out[i, 1] = sobol_1d(k, p, j, d, matrices), sobol_1d(k, p, j, d + 1, matrices)
+            out[i, 0], out[i, 1] = sobol_1d(h, j, d, matrices), sobol_1d(h, j, d + 1, matrices)
         else:
-            out[i, 0] = padded_1d(k, p, j, d)
+            out[i, 0] = padded_1d(h, j, d)
     return out
 
 
@@ -111,7 +112,8 @@ def test_bit_helpers_match_a_python_reference():
     np.testing.assert_array_equal(_ints(2, x, seed, SOBOL_MATRICES), nus)
     assert reverse_bits32(1) == 1 << 31 and reverse_bits32(M32) == M32  # plain scalar calls from Python too
     assert to_unit(0) == 0.0 and to_unit(M32) < 1.0 and to_unit(1 << 31) == 0.5
-    assert 0 <= hash_seed(KEYS[0], 3, 5) <= M32 and hash_seed(KEYS[0], 3, 5) != hash_seed(KEYS[0], 5, 3)
+    seed, other = (np.uint64(pixel_seed(KEYS[0], p)) for p in (3, 5))  # Python ints past 2^63 would overflow int64
+    assert 0 <= hash_seed(seed, 5) <= M32 and hash_seed(seed, 5) != hash_seed(other, 3)
 
 
 def test_owen_scramble_is_nested():
@@ -198,11 +200,11 @@ def test_values_are_a_pure_function_of_key_pixel_index_dim():
         np.testing.assert_array_equal(threaded.view(np.uint64), ref.view(np.uint64))
         assert np.unique(ref[:, 0]).size > 0.99 * len(ref)  # and they do depend on every argument
     for i in order[:50]:
-        k, p, j, d = keys[i], int(pixels[i]), int(indices[i]), int(dims[i])
-        assert padded_2d(k, p, j, d) == tuple(_eval(PADDED_2D, keys[i:i + 1], pixels[i:i + 1],
-                                                                    indices[i:i + 1], dims[i:i + 1], SOBOL_MATRICES)[0])
-        assert padded_1d(k, p, j, d) == padded_2d(k, p, j, d)[0]
-        assert sobol_1d(k, p, j, d, SOBOL_MATRICES) == sobol_1d(k, p, j, d, SOBOL_MATRICES.copy())
+        h, j, d = np.uint64(pixel_seed(keys[i], int(pixels[i]))), int(indices[i]), int(dims[i])
+        assert padded_2d(h, j, d) == tuple(_eval(PADDED_2D, keys[i:i + 1], pixels[i:i + 1],
+                                                 indices[i:i + 1], dims[i:i + 1], SOBOL_MATRICES)[0])
+        assert padded_1d(h, j, d) == padded_2d(h, j, d)[0]
+        assert sobol_1d(h, j, d, SOBOL_MATRICES) == sobol_1d(h, j, d, SOBOL_MATRICES.copy())
 
 
 def test_randomisation_is_unbiased_and_decisions_uncorrelated():
@@ -234,7 +236,7 @@ def test_randomisation_is_unbiased_and_decisions_uncorrelated():
     # The test has power: without the index shuffle two padded decisions share the index's bits and correlate.
     i = np.arange(m, dtype=np.uint64)
     vdc = _ints(0, i, i, SOBOL_MATRICES)
-    u, v = (_ints(2, vdc, np.full(m, hash_seed(1, 2, d), dtype=np.uint64), SOBOL_MATRICES) for d in (3, 4))
+    u, v = (_ints(2, vdc, np.full(m, hash_seed(np.uint64(pixel_seed(1, 2)), d), dtype=np.uint64), SOBOL_MATRICES) for d in (3, 4))
     assert abs(np.corrcoef(u.astype(float), v.astype(float))[0, 1]) > 5 * bound
 
 

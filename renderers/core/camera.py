@@ -22,7 +22,7 @@ import numpy as np
 
 from harness.scenes.model import Camera
 from renderers.core.rays import set_path, set_ray
-from renderers.core.sampler import camera_sample
+from renderers.core.sampler import camera_sample, path_point
 from renderers.core.sampling import jit
 
 
@@ -61,7 +61,7 @@ def camera_rays(basis, width, height, first, pixels, stream, rays):
     origin = (basis[0, 0], basis[0, 1], basis[0, 2])
     for i in range(rays.path.size):
         j = first + i
-        u, v = camera_sample(stream, j)
+        u, v = camera_sample(stream, path_point(stream, j))
         set_ray(rays, i, origin, camera_ray(basis, width, height, j % pixels, u, v))
         set_path(rays, i, i, (1.0, 1.0, 1.0), 0.0)
 

@@ -49,7 +49,7 @@ from harness.adapters.seeds import pass_key
 from harness.adapters.settings import Setting
 from renderers.core.rng import mix64, uniform
 from renderers.core.sampling import jit
-from renderers.core.sobol import SOBOL_MATRICES, padded_1d, padded_2d, sobol_1d
+from renderers.core.sobol import SOBOL_MATRICES, padded_1d, padded_2d, pixel_seed, sobol_1d
 
 #: The camera ray's jitter inside its pixel (box filter), x then y.
 CAMERA_U = 0
@@ -113,32 +113,40 @@ def pass_stream(sampler: str, seed: int, index: int, pixels: int, first_sample: 
 
 
 @jit
-def _point(st, path):
-    """(batch key, pixel, index in the batch's sequence) of ``path`` under a low-discrepancy stream."""
+def path_point(st, path):
+    """Where ``path``'s numbers come from, computed once per path and passed to the sample functions.
+
+    ``independent``: (pass key, path). Low-discrepancy: (pixel seed of the
+    path's batch key and pixel, index in that batch's sequence); the
+    divisions and the hashing they share stay out of every decision.
+    """
+    if st.kind == INDEPENDENT:
+        return np.uint64(st.key), np.int64(path)
     s = st.first_sample + path // st.pixels
-    return mix64(st.key ^ (np.uint64(s % st.batches) * _GOLDEN)), path % st.pixels, s // st.batches
+    batch_key = mix64(st.key ^ (np.uint64(s % st.batches) * _GOLDEN))
+    return pixel_seed(batch_key, path % st.pixels), np.int64(s // st.batches)
 
 
 @jit
-def sample_1d(st, path, dim) -> float:
-    """Number ``dim`` of ``path`` (pbrt's Get1D)."""
+def sample_1d(st, point, dim) -> float:
+    """Number ``dim`` of the path at ``point`` (:func:`path_point`; pbrt's Get1D)."""
+    seed, index = point
     if st.kind == INDEPENDENT:
-        return uniform(st.key, path, dim)
-    key, pixel, index = _point(st, path)
+        return uniform(seed, index, dim)
     if st.kind == SOBOL:
-        return sobol_1d(key, pixel, index, dim, st.matrices)
-    return padded_1d(key, pixel, index, dim)
+        return sobol_1d(seed, index, dim, st.matrices)
+    return padded_1d(seed, index, dim)
 
 
 @jit
-def sample_2d(st, path, dim):
-    """Numbers ``dim`` and ``dim + 1`` of ``path``, stratified jointly (pbrt's Get2D)."""
+def sample_2d(st, point, dim):
+    """Numbers ``dim`` and ``dim + 1`` of the path at ``point``, stratified jointly (pbrt's Get2D)."""
+    seed, index = point
     if st.kind == INDEPENDENT:
-        return uniform(st.key, path, dim), uniform(st.key, path, dim + 1)
-    key, pixel, index = _point(st, path)
+        return uniform(seed, index, dim), uniform(seed, index, dim + 1)
     if st.kind == SOBOL:
-        return sobol_1d(key, pixel, index, dim, st.matrices), sobol_1d(key, pixel, index, dim + 1, st.matrices)
-    return padded_2d(key, pixel, index, dim)
+        return sobol_1d(seed, index, dim, st.matrices), sobol_1d(seed, index, dim + 1, st.matrices)
+    return padded_2d(seed, index, dim)
 
 
 @jit
@@ -148,18 +156,18 @@ def vertex_dim(depth, offset):
 
 
 @jit
-def camera_sample(st, path):
-    """The pixel jitter (u, v) in [0, 1)² of ``path``."""
-    return sample_2d(st, path, CAMERA_U)
+def camera_sample(st, point):
+    """The pixel jitter (u, v) in [0, 1)² of the path at ``point``."""
+    return sample_2d(st, point, CAMERA_U)
 
 
 @jit
-def vertex_1d(st, path, depth, offset) -> float:
-    """One number of vertex ``depth`` (pbrt's Get1D)."""
-    return sample_1d(st, path, vertex_dim(depth, offset))
+def vertex_1d(st, point, depth, offset) -> float:
+    """One number of vertex ``depth`` of the path at ``point`` (pbrt's Get1D)."""
+    return sample_1d(st, point, vertex_dim(depth, offset))
 
 
 @jit
-def vertex_2d(st, path, depth, offset):
-    """Two numbers of vertex ``depth``, from ``offset`` on, stratified jointly (pbrt's Get2D)."""
-    return sample_2d(st, path, vertex_dim(depth, offset))
+def vertex_2d(st, point, depth, offset):
+    """Two numbers of vertex ``depth`` of the path at ``point``, from ``offset`` on, stratified jointly."""
+    return sample_2d(st, point, vertex_dim(depth, offset))

@@ -161,64 +161,73 @@ def to_unit(x) -> float:
 
 
 @jit
-def _hash3(a, b, c):
-    # Chained SplitMix64 finalisers; the odd multiplier spreads small pixels and dimensions over 64 bits.
-    h = mix64(np.uint64(a) + _GOLDEN)
-    h = mix64(h ^ (np.uint64(b) * _GOLDEN))
-    return mix64(h ^ (np.uint64(c) * _GOLDEN))
+def pixel_seed(key, pixel):
+    """The hash of (key, pixel) that every dimension's seed of that pixel starts from.
+
+    The samplers' seeds are chained SplitMix64 finalisers of (key, pixel,
+    dimension); a kernel computes this prefix once per path and each decision
+    adds only its dimension (:func:`hash_seed`), a third of the hashing.
+    """
+    return mix64(mix64(np.uint64(key) + _GOLDEN) ^ (np.uint64(pixel) * _GOLDEN))
 
 
 @jit
-def hash_seed(a, b, c):
-    """A well-mixed 32-bit seed from three integers in [0, 2^64), e.g. (key, pixel, dimension)."""
-    return np.uint32(_hash3(a, b, c) >> _S32)
+def _dim_hash(seed, dim):
+    # The odd multiplier spreads small dimensions over 64 bits.
+    return mix64(np.uint64(seed) ^ (np.uint64(dim) * _GOLDEN))
 
 
 @jit
-def sobol_1d(key, pixel, index, dim, matrices) -> float:
-    """Dimension ``dim`` of the global Sobol' sequence at ``index``, Owen-scrambled per (key, pixel, dim).
+def hash_seed(seed, dim):
+    """A well-mixed 32-bit seed for dimension ``dim`` of a pixel's :func:`pixel_seed`."""
+    return np.uint32(_dim_hash(seed, dim) >> _S32)
+
+
+@jit
+def sobol_1d(seed, index, dim, matrices) -> float:
+    """Dimension ``dim`` of the global Sobol' sequence at ``index``, Owen-scrambled per (pixel seed, dim).
 
     A pixel's points are one Owen scrambling of the sequence, so every
     power-of-two prefix (and later aligned block) of dimensions 0 and 1 is a
     (0, m, 2)-net. Dimensions past ``matrices`` fall back to
-    :func:`renderers.core.rng.uniform`, still a pure function of the four.
+    :func:`renderers.core.rng.uniform`, still a pure function of the three.
     """
     if dim >= matrices.shape[0]:
-        return uniform(_hash3(key, pixel, dim), index, 0)
-    return to_unit(nested_uniform_scramble(sobol_sample(index, dim, matrices), hash_seed(key, pixel, dim)))
+        return uniform(_dim_hash(seed, dim), index, 0)
+    return to_unit(nested_uniform_scramble(sobol_sample(index, dim, matrices), hash_seed(seed, dim)))
 
 
 @jit
-def _padded_seeds(key, pixel, dim):
+def _padded_seeds(seed, dim):
     # (index shuffle, first coordinate, second coordinate): both words of one hash, and a word of its remix.
-    h = _hash3(key, pixel, dim)
+    h = _dim_hash(seed, dim)
     return np.uint32(h & _M32), np.uint32(h >> _S32), np.uint32(mix64(h + _GOLDEN) >> _S32)
 
 
 @jit
-def padded_1d(key, pixel, index, dim) -> float:
+def padded_1d(seed, index, dim) -> float:
     """A 1D decision at ``dim``: Sobol' dimension 0 at a shuffled index, Owen-scrambled (Burley 2020's padding).
 
     The shuffle is Owen scrambling of the index, so it maps every aligned block
     [j·2^m, (j+1)·2^m) of indices onto an aligned block, whose points are a
     net (the higher index bits add a constant digital shift, the low m bits
     go through the matrix's invertible top-left m×m corner): stratification
-    survives while the shuffle, seeded per (key, pixel, dim), decorrelates the
+    survives while the shuffle, seeded per (pixel seed, dim), decorrelates the
     decisions. Equals the first coordinate of :func:`padded_2d` at the same arguments.
     """
-    shuffle, sx, _ = _padded_seeds(key, pixel, dim)
+    shuffle, sx, _ = _padded_seeds(seed, dim)
     # Dimension 0 is the reversed index, so scramble(reverse(i)) = reverse(LK(i)): two reversals fewer.
     return to_unit(reverse_bits32(laine_karras_permutation(nested_uniform_scramble(index, shuffle), sx)))
 
 
 @jit
-def padded_2d(key, pixel, index, dim):
+def padded_2d(seed, index, dim):
     """A 2D decision at ``dim``: Sobol' dimensions (0, 1) at a shuffled index, each Owen-scrambled.
 
     Sobol' dimensions 0 and 1 form a (0, 2)-sequence: every aligned block of
     2^m indices is a (0, m, 2)-net, which the shuffle (see :func:`padded_1d`)
     and Owen scrambling (a nested permutation of elementary intervals) keep.
     """
-    shuffle, sx, sy = _padded_seeds(key, pixel, dim)
+    shuffle, sx, sy = _padded_seeds(seed, dim)
     x, y = _sobol_01(nested_uniform_scramble(index, shuffle))
     return to_unit(nested_uniform_scramble(x, sx)), to_unit(nested_uniform_scramble(y, sy))
