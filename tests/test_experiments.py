@@ -138,3 +138,57 @@ def test_converge_region_target_must_name_a_region_of_the_scene(tmp_path):
     assert proc.returncode == 2
     assert "scene 'light-panel' has no region 'caustic'; its regions: (none)" in proc.stderr
     assert not (tmp_path / "x").exists()
+
+
+def _converge(out, log, spp, seeds=1):
+    cmd = _converge_cmd(out, seeds=seeds)
+    cmd[cmd.index("--spp") + 1] = spp
+    proc = subprocess.run(cmd, cwd=ROOT, env=_env(log), capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    return pd.read_parquet(out / "results.parquet")
+
+
+def test_changed_spp_list_renders_only_the_missing_checkpoints(tmp_path):
+    """A longer spp list renders only the new spp; rows already stored are kept unchanged; a shorter list
+    renders only its new highest spp (the stored image must be at the highest), and keeps the stored rows."""
+    out, log = tmp_path / "exp", tmp_path / "renders.log"
+    first = _converge(out, log, "1,2")
+    n = len(log.read_text().splitlines())
+    longer = _converge(out, log, "1,2,4")
+    assert [line.split()[1] for line in log.read_text().splitlines()[n:]] == ["4"]
+    assert sorted(longer["spp"]) == [1, 2, 4]
+    pd.testing.assert_frame_equal(longer[longer["spp"] <= 2].reset_index(drop=True)[first.columns], first,
+                                  check_dtype=False)
+    n = len(log.read_text().splitlines())
+    shorter = _converge(out, log, "1,2")
+    assert [line.split()[1] for line in log.read_text().splitlines()[n:]] == ["2"]
+    assert sorted(shorter["spp"]) == [1, 2]
+    n = len(log.read_text().splitlines())
+    _converge(out, log, "1,2")  # nothing missing: nothing rendered
+    assert len(log.read_text().splitlines()) == n
+
+
+def test_resume_keeps_the_first_date_and_lists_each_resume(tmp_path):
+    out, log = tmp_path / "exp", tmp_path / "renders.log"
+    _converge(out, log, "1")
+    first = json.loads((out / "experiment.json").read_text())
+    assert first["resumed"] == []
+    _converge(out, log, "1,2")
+    again = json.loads((out / "experiment.json").read_text())
+    assert again["date"] == first["date"] and again["spp"] == [1, 2]
+    assert len(again["resumed"]) == 1 and "--spp 1,2 " in again["resumed"][0]["command"] + " "
+
+
+def test_second_run_on_a_locked_folder_exits_2_naming_the_holder(tmp_path):
+    from harness.store.experiments import experiment_lock
+
+    out, log = tmp_path / "exp", tmp_path / "renders.log"
+    with experiment_lock(out, "cbox converge --holder-marker"):
+        proc = subprocess.run(_converge_cmd(out, seeds=1), cwd=ROOT, env=_env(log), capture_output=True,
+                              text=True, timeout=300)
+    assert proc.returncode == 2 and not log.exists(), proc.stderr
+    (line,) = proc.stderr.strip().splitlines()
+    assert line.startswith("cbox: error:") and f"pid {os.getpid()}" in line and "--holder-marker" in line
+    # Released on exit: the same command then runs.
+    assert subprocess.run(_converge_cmd(out, seeds=1), cwd=ROOT, env=_env(log), capture_output=True,
+                          timeout=300).returncode == 0

@@ -3,26 +3,34 @@
 An experiment folder ``DIR`` holds
 
 - ``experiment.json``: what was asked (scene and its hash, renderers, spp
-  list, seeds, command, date);
+  list, seeds, command), the first run's date and each resume;
+- ``.lock``: held by the run writing the folder (:func:`experiment_lock`);
 - ``cells/<renderer>__seed<k>.parquet``: the rows of one *cell*, i.e. one
-  renderer at one seed, one row per spp checkpoint, written atomically once
-  the cell is complete;
+  renderer at one seed, one row per spp checkpoint rendered so far, written
+  atomically once the cell is complete;
 - ``images/<renderer>__seed<k>.exr``: the cell's highest-spp image (for
-  the viewer and the bias/variance split), written before the cell's rows;
+  the viewer and the bias/variance split; its header's ``cbox:spp`` says
+  which), written before the cell's rows;
 - ``results.parquet``: all rows, a tidy table with one row per (scene,
   renderer, settings, seed, spp), rewritten after each cell;
 - ``summary.csv``, ``report.html``: derived figures and the report.
 
 A run that is interrupted keeps every finished cell; running the same
-command again loads finished cells instead of rendering them.
+command again loads finished cells instead of rendering them, and a changed
+spp list renders only the spps a cell lacks (:func:`spps_to_render`).
 """
 
 from __future__ import annotations
 
+import datetime as _dt
+import fcntl
 import json
+import os
 import re
+import socket
+from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Iterator, Sequence
 
 import numpy as np
 
@@ -34,6 +42,8 @@ if TYPE_CHECKING:  # pandas is imported where it is used: the CLI must start fas
     import pandas as pd
 
 CONFIG_FILE, RESULTS_FILE, SUMMARY_FILE = "experiment.json", "results.parquet", "summary.csv"
+#: Held (flock) by the run writing the folder; its text names the holder.
+LOCK_FILE = ".lock"
 
 
 class ExperimentError(RuntimeError):
@@ -50,31 +60,83 @@ def write_parquet_atomic(frame: pd.DataFrame, path: Path) -> None:
         frame.to_parquet(tmp, index=False)
 
 
-def cell_is_done(path: Path, scene: Scene, spps: Sequence[int]) -> pd.DataFrame | None:
-    """The stored rows of a finished cell, if they match this scene and spp list."""
+def stored_cell(path: Path, scene: Scene) -> pd.DataFrame | None:
+    """The stored rows of a finished cell (every spp it has) made for this scene; None if there are none.
+
+    A damaged file, a failed cell or one made for another scene hash is not
+    trusted: the cell is rendered again.
+    """
     import pandas as pd
 
     if not path.exists():
         return None
     try:
         rows = pd.read_parquet(path)
-    except Exception:  # a damaged file is re-rendered, not trusted
+    except Exception:
         return None
-    if (rows["status"] == "ok").all() and set(rows["scene_hash"]) == {scene.content_hash()} \
-            and sorted(rows["spp"].astype(int)) == sorted(spps):
+    if (rows["status"] == "ok").all() and set(rows["scene_hash"]) == {scene.content_hash()}:
         return rows
     return None
 
 
+def spps_to_render(stored: Sequence[int], image_spp: int | None, spps: Sequence[int]) -> list[int]:
+    """The spps a cell must render to have a row at every spp of ``spps`` and its image at the highest.
+
+    Rows already stored are kept, so a longer spp list renders only what is
+    missing, and a shorter one renders nothing unless the stored image
+    (``image_spp``, None if unknown) is not at its new highest spp. A
+    progressive renderer renders them in one run up to the largest; it does
+    not resume the stored render (see docs/experiments.md).
+    """
+    have = set(int(s) for s in stored)
+    todo = {int(s) for s in spps} - have
+    if image_spp != max(spps):
+        todo.add(max(spps))
+    return sorted(todo)
+
+
+@contextmanager
+def experiment_lock(out: Path, command: str) -> Iterator[None]:
+    """Hold ``out/.lock`` for one run: a second run on the folder stops at once, naming the holder.
+
+    An advisory ``flock`` (POSIX), not a lock file's mere existence: the
+    kernel releases it when the holder exits or is killed, so a crashed run
+    never leaves the folder locked. The file's text only names the holder.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / LOCK_FILE
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = path.read_text(errors="replace").strip() or "another process"
+            raise ExperimentError(f"{out}: in use by {holder}; wait for it to finish or give another --out") from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"pid {os.getpid()} on {socket.gethostname()} since {_now()}: {command or 'cbox'}\n".encode())
+        yield
+    finally:
+        os.close(fd)  # closing releases the flock
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
 def prepare_dir(out: Path, config: dict) -> None:
+    """Write ``experiment.json`` for a run: the first run's ``date`` is kept, each later one is listed in
+    ``resumed`` (with its command); a folder holding another scene's results is refused."""
     out.mkdir(parents=True, exist_ok=True)
     path = out / CONFIG_FILE
+    config = {**config, "date": _now(), "resumed": []}
     if path.exists():
         old = json.loads(path.read_text())
         if old.get("scene_hash") != config["scene_hash"]:
             raise ExperimentError(
                 f"{path}: this folder holds results of scene hash {old.get('scene_hash')}, not "
                 f"{config['scene_hash']}; use another --out or delete the folder")
+        resumed = list(old.get("resumed", [])) + [{"date": config["date"], "command": config.get("command", "")}]
+        config.update(date=old.get("date", config["date"]), resumed=resumed)
     write_json_atomic(path, config)
 
 

@@ -74,3 +74,17 @@ def read_exr(path: str | Path) -> np.ndarray:
     if data is None:
         raise ImageFileError(f"{path}: cannot read image: {oiio.geterror()}")
     return np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, 3)
+
+
+def read_exr_metadata(path: str | Path) -> dict[str, str]:
+    """The string attributes of an EXR's header (``cbox:spp``, ``cbox:renderer``... as :func:`write_exr` stored
+    them); {} for a file that is missing or unreadable, which callers treat as "nothing recorded"."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path)) if Path(path).exists() else None
+    if inp is None:
+        return {}
+    try:
+        return {a.name: str(a.value) for a in inp.spec().extra_attribs if isinstance(a.value, str)}
+    finally:
+        inp.close()

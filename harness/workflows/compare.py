@@ -11,7 +11,7 @@ import pandas as pd
 from harness.adapters.registry import RendererEntry
 from harness.scenes.model import Scene
 from harness.store.atomic import atomic_path, write_json_atomic
-from harness.store.experiments import (CONFIG_FILE, RESULTS_FILE, ExperimentError, cell_name,
+from harness.store.experiments import (CONFIG_FILE, RESULTS_FILE, ExperimentError, cell_name, experiment_lock,
                                        write_parquet_atomic)
 from harness.store.exr import write_exr
 from harness.store.references import Reference
@@ -63,7 +63,11 @@ def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, m
 
 def store_comparison(out: Path, scene: Scene, records: Sequence[runner.RunRecord], command: str) -> None:
     """A comparison as an experiment folder: images, results table, CSV and JSON (a report can then be built)."""
-    out.mkdir(parents=True, exist_ok=True)
+    with experiment_lock(out, command):
+        _store(out, scene, records, command)
+
+
+def _store(out: Path, scene: Scene, records: Sequence[runner.RunRecord], command: str) -> None:
     for r in records:
         if r.image is not None:
             write_exr(out / "images" / f"{cell_name(r.renderer, r.seed)}.exr", r.image)

@@ -2,12 +2,12 @@
 
 The folder layout is :mod:`harness.store.experiments`. A run that is
 interrupted keeps every finished cell; running the same command again loads
-finished cells instead of rendering them.
+finished cells instead of rendering them, and a longer spp list renders only
+the checkpoints a cell lacks. One run at a time writes a folder.
 """
 
 from __future__ import annotations
 
-import datetime as _dt
 import math
 import re
 from pathlib import Path
@@ -20,8 +20,9 @@ from harness.adapters.registry import RendererEntry
 from harness.evaluate import convergence
 from harness.evaluate.regions import nested_regions, region_columns, region_masks
 from harness.scenes.model import Scene
-from harness.store.experiments import (RESULTS_FILE, cell_is_done, cell_name, prepare_dir, write_parquet_atomic)
-from harness.store.exr import write_exr
+from harness.store.experiments import (RESULTS_FILE, cell_name, experiment_lock, prepare_dir, spps_to_render,
+                                       stored_cell, write_parquet_atomic)
+from harness.store.exr import read_exr_metadata, write_exr
 from harness.store.references import Reference
 from harness.workflows import runner
 
@@ -63,36 +64,52 @@ def run_experiment(
     """
     out = Path(out)
     spps = sorted({int(s) for s in spps})
-    prepare_dir(out, {
-        "kind": kind, "scene": str(scene.path), "scene_name": scene.name, "scene_hash": scene.content_hash(),
-        "renderers": [e.name for e in entries], "spp": spps, "seeds": list(seeds), "command": command,
-        "targets": [list(t) for t in targets],
-        "deterministic": [e.name for e in entries if getattr(e.renderer, "deterministic", False)],
-        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-    })
-    frames, not_run = [], []
-    for entry in entries:
-        if (row := _not_run_row(entry, scene)) is not None:
-            not_run.append(row)
-            continue
-        for seed in (seeds[:1] if getattr(entry.renderer, "deterministic", False) else seeds):
-            name = cell_name(entry.name, seed)
-            cell_path = out / "cells" / f"{name}.parquet"
-            rows = cell_is_done(cell_path, scene, spps)
-            cached = rows is not None
-            if not cached:
-                rows_list, image = render_cell(entry, scene, spps, seed, reference)
-                rows = pd.DataFrame(rows_list)
-                if image is not None:  # image first: a cell's rows promise its image exists
-                    write_exr(out / "images" / f"{name}.exr", image)
-                    write_parquet_atomic(rows, cell_path)
-            frames.append(rows)
-            write_parquet_atomic(pd.concat(frames + [pd.DataFrame(not_run)], ignore_index=True), out / RESULTS_FILE)
-            if on_cell:
-                on_cell(name, cached)
-    results = pd.concat(frames + [pd.DataFrame(not_run)], ignore_index=True)
-    write_parquet_atomic(results, out / RESULTS_FILE)
+    with experiment_lock(out, command):
+        prepare_dir(out, {
+            "kind": kind, "scene": str(scene.path), "scene_name": scene.name, "scene_hash": scene.content_hash(),
+            "renderers": [e.name for e in entries], "spp": spps, "seeds": list(seeds), "command": command,
+            "targets": [list(t) for t in targets],
+            "deterministic": [e.name for e in entries if getattr(e.renderer, "deterministic", False)],
+        })
+        frames, not_run = [], []
+        for entry in entries:
+            if (row := _not_run_row(entry, scene)) is not None:
+                not_run.append(row)
+                continue
+            for seed in (seeds[:1] if getattr(entry.renderer, "deterministic", False) else seeds):
+                name = cell_name(entry.name, seed)
+                rows, cached = _cell(out, name, entry, scene, spps, seed, reference)
+                frames.append(rows)
+                write_parquet_atomic(pd.concat(frames + [pd.DataFrame(not_run)], ignore_index=True),
+                                     out / RESULTS_FILE)
+                if on_cell:
+                    on_cell(name, cached)
+        results = pd.concat(frames + [pd.DataFrame(not_run)], ignore_index=True)
+        write_parquet_atomic(results, out / RESULTS_FILE)
     return results
+
+
+def _cell(out: Path, name: str, entry: RendererEntry, scene: Scene, spps: list[int], seed: int,
+          reference: Reference) -> tuple[pd.DataFrame, bool]:
+    """One cell's rows at ``spps`` (rendering only the spps it lacks), and whether nothing was rendered."""
+    cell_path, image_path = out / "cells" / f"{name}.parquet", out / "images" / f"{name}.exr"
+    stored = stored_cell(cell_path, scene)
+    have = stored["spp"].astype(int).tolist() if stored is not None else []
+    image_spp = read_exr_metadata(image_path).get("cbox:spp") if stored is not None else None
+    todo = spps_to_render(have, int(image_spp) if image_spp else None, spps)
+    if not todo:
+        return stored[stored["spp"].astype(int).isin(spps)].reset_index(drop=True), True
+    rows_list, image = render_cell(entry, scene, todo, seed, reference)
+    rendered = pd.DataFrame(rows_list)
+    if image is None:  # failed: its rows are reported, nothing is stored
+        return rendered, False
+    if todo[-1] == spps[-1]:  # image first: a cell's rows promise its image exists
+        write_exr(image_path, image, {"cbox:spp": str(todo[-1])})
+    kept = stored[~stored["spp"].astype(int).isin(todo)] if stored is not None else None
+    rows = pd.concat([kept, rendered], ignore_index=True) if kept is not None and len(kept) else rendered
+    rows = rows.sort_values("spp", kind="stable").reset_index(drop=True)
+    write_parquet_atomic(rows, cell_path)
+    return rows[rows["spp"].astype(int).isin(spps)].reset_index(drop=True), False
 
 
 def summary_table(runs: pd.DataFrame, images: dict[str, list[np.ndarray]], reference: Reference, scene: Scene,
