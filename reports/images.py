@@ -12,8 +12,10 @@ The report's images are embedded as HDR data (little-endian float16, base64,
   10⁻⁶..1 (embedded as log10 so float16 keeps its precision);
 - FLIP (Andersson et al. 2020, package ``flip-evaluator``) in its **HDR
   mode on the linear images** (non-finite pixels set to 0, negatives
-  clipped to 0), magma, 0..1. HDR-FLIP picks its own exposure range from
-  the reference, so it does not depend on the harness exposure.
+  clipped to 0), magma, 0..1: :func:`harness.evaluate.flip.flip_map`, whose
+  mean is the ``flip_mean`` metric. Its exposure range comes from the
+  reference (:func:`harness.evaluate.flip.flip_parameters`), so it does not
+  depend on the harness exposure.
 
 Maps are computed from the float32 images in Python and embedded as
 float16, not recomputed from the float16 images in the browser. Colour
@@ -28,7 +30,7 @@ import io
 import numpy as np
 from PIL import Image
 
-from harness.evaluate import metrics
+from harness.evaluate import flip, metrics
 from reports.colormaps import TABLES
 
 #: Fixed ΔE00 range of every heatmap; values outside are clipped.
@@ -106,19 +108,12 @@ def rel_mse_map(img, ref, eps: float = metrics.REL_MSE_EPS) -> np.ndarray:
 
 
 def flip_map(img, ref) -> np.ndarray | None:
-    """HDR-FLIP map (H, W) of ``img`` against ``ref`` (linear radiance); None without ``flip_evaluator``."""
+    """HDR-FLIP map (H, W) of ``img`` against ``ref`` (:func:`harness.evaluate.flip.flip_map`, the metric's);
+    None without ``flip_evaluator``."""
     try:
-        import flip_evaluator
+        return flip.flip_map(img, ref)
     except ImportError:
         return None
-
-    def prep(x):
-        x = np.asarray(x, dtype=np.float32)
-        x = np.where(np.all(np.isfinite(x), axis=-1)[..., None], x, 0.0)
-        return np.ascontiguousarray(np.maximum(x, 0.0), dtype=np.float32)
-
-    fmap, _, _ = flip_evaluator.evaluate(prep(ref), prep(img), "HDR", applyMagma=False, computeMeanError=False)
-    return np.asarray(fmap, dtype=np.float64).reshape(np.shape(ref)[:2])
 
 
 def error_maps(img, ref, exposure: float) -> dict[str, np.ndarray | None]:

@@ -339,6 +339,7 @@ def test_image_metrics_keys_types_and_json():
         "delta_e2000_p95",
         "delta_e2000_max",
         "delta_e2000_frac_gt_2_3",
+        "flip_mean",
         "nan_count",
         "inf_count",
         "negative_count",

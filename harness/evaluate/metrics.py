@@ -38,6 +38,9 @@ Conventions
   visibility to structural similarity"), as implemented by
   ``skimage.metrics.structural_similarity`` with its defaults (uniform 7x7
   window), per channel, on the display-encoded images.
+- **HDR-FLIP** (Andersson et al. 2021, "Visualizing Errors in Rendered High
+  Dynamic Range Images"), its mean over pixels, on the linear images with
+  its own exposure range from the reference: :mod:`harness.evaluate.flip`.
 - **RMSE** and **relMSE** are on linear radiance, over all channels.
   relMSE = mean((img - ref)² / (ref² + ε)) with ε = 1e-2, the value used by
   Rousselle et al. 2011 and much of the denoising literature: it stops
@@ -281,9 +284,13 @@ def image_metrics(img, ref, exposure: float | None = None, quantity: str = DEFAU
     """Every metric of ``img`` against ``ref`` as one flat, JSON-serialisable dict.
 
     Of an image of another quantity than radiance (ambient occlusion: one
-    scalar per pixel, written as grey), the colour differences
+    scalar per pixel, written as grey), the colour differences and HDR-FLIP
     (:data:`harness.evaluate.registry.COLOUR_METRICS`) are left out.
+    ``flip_mean`` is :func:`harness.evaluate.flip.flip_mean`, with its own
+    exposures from the reference (``exposure`` does not apply to it).
     """
+    from harness.evaluate import flip  # it imports this module
+
     img, ref = _as_pair(img, ref)
     if exposure is None:
         exposure = display_exposure(ref, quantity)
@@ -291,7 +298,7 @@ def image_metrics(img, ref, exposure: float | None = None, quantity: str = DEFAU
     colour_stats = {}
     if has_colour(quantity):
         _, de_map = delta_e2000(clean, ref, exposure=exposure, full=True)
-        colour_stats = delta_e2000_stats(de_map)
+        colour_stats = {**delta_e2000_stats(de_map), "flip_mean": flip.flip_mean(clean, ref)}
     # Mean radiance skips broken pixels rather than zeroing them: they are
     # counted separately and should not also read as missing energy.
     mean_img = mean_radiance(img)

@@ -29,7 +29,7 @@ class Metric:
     axis_label: str | None = None
     guide_slope: float | None = None
     per_image: bool = False  # computed from one image against the reference (a gate may budget it)
-    colour: bool = False  # a colour difference: only for radiance images (an AO image is one scalar)
+    colour: bool = False  # radiance images only (a colour difference, HDR-FLIP); an AO image is one scalar
 
 
 def _m(key, label, definition, better=None, axis=None, slope=None, per_image=True, colour=False) -> Metric:
@@ -58,6 +58,11 @@ _TABLE = (
     _m("delta_e2000_max", "ΔE max", "maximum CIEDE2000", "low", colour=True),
     _m("delta_e2000_frac_gt_2_3", "ΔE > 2.3", "fraction of pixels above the just-noticeable difference", "low",
        colour=True),
+    # Radiance only: HDR-FLIP re-exposes the image over a range of stops from the reference; an AO image
+    # is a fraction shown as it is (exposure 1), which those exposures would brighten.
+    _m("flip_mean", "FLIP mean", "mean HDR-FLIP on linear radiance (Andersson et al. 2021): how visible the "
+       "difference is when flipping between the images, worst over exposures from the reference's brightest "
+       "to its median pixel; 0 none, 1 the largest", "low", "mean HDR-FLIP", colour=True),
     _m("mean_radiance_r", "mean R", "mean radiance of the red channel (broken pixels skipped)"),
     _m("mean_radiance_g", "mean G", "mean radiance of the green channel (broken pixels skipped)"),
     _m("mean_radiance_b", "mean B", "mean radiance of the blue channel (broken pixels skipped)"),
@@ -84,8 +89,8 @@ _TABLE = (
 
 #: Every known column, by key.
 METRICS: dict[str, Metric] = {m.key: m for m in _TABLE}
-#: Colour differences (CIEDE2000): computed for radiance images only; an ambient-occlusion image has one
-#: value per pixel, so its rows leave them out (RMSE, relMSE, SSIM, PSNR and the means stay).
+#: Colour differences (CIEDE2000) and HDR-FLIP: computed for radiance images only; an ambient-occlusion image
+#: has one value per pixel, so its rows leave them out (RMSE, relMSE, SSIM, PSNR and the means stay).
 COLOUR_METRICS = frozenset(k for k, m in METRICS.items() if m.colour)
 #: Metrics where larger is better; every other scored metric is an error (smaller is better).
 HIGHER_IS_BETTER = frozenset(k for k, m in METRICS.items() if m.better == "high")
