@@ -1,0 +1,246 @@
+"""Scoring images made outside the harness (``cbox compare-image``): load them, check them, score them.
+
+An idiff- or FLIP-style comparison of image files against a reference,
+with the harness's own numbers: every image metric, through the very
+functions ``cbox compare`` scores a render with
+(:func:`harness.evaluate.metrics.image_metrics`,
+:func:`harness.evaluate.noise.noise_yardsticks`,
+:func:`harness.workflows.runner.score_regions`), so a file written by
+``cbox render`` scores exactly as ``cbox compare`` scored that render.
+
+The reference is a stored scene's (:func:`load_scene_target`: its image,
+variance and noise batch, and its named regions) or an image file
+(:func:`load_file_target`: variance and noise only when they are stored
+beside it, as a reference folder holds them,
+:mod:`harness.store.references`).
+
+Inputs are checked before anything is scored, and refused with one line
+naming the file (:class:`harness.store.exr.ImageFileError`):
+
+- a display-referred file (integer pixels: PNG, JPEG, 8/16-bit TIFF) unless
+  a transfer says how to linearise it (:data:`INPUT_TRANSFERS`;
+  floating-point files are linear already and are read as they are);
+- an image whose size is not the reference's;
+- a ``cbox:spp`` header that is not a positive integer, or that contradicts
+  the spp given.
+
+NaN, Inf and negative pixels are not refused: they are counted, as for any
+render (:func:`harness.evaluate.metrics.invalid_pixel_counts`).
+
+The noise yardsticks need the image's spp (its ``cbox:spp`` header, which
+``cbox render`` writes, or one given) and a reference variance; without
+either they are skipped, and the score says why (``noise_note``). A region's
+``mean_z`` takes the image's variance from the noise model at that spp (a
+file carries no variance of its own; ``cbox compare`` uses a renderer's own
+variance when it reports one, so there ``mean_z`` may differ).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from harness.evaluate import flip, metrics
+from harness.evaluate import noise as stats
+from harness.evaluate import regions as named_regions
+from harness.scenes.model import Scene
+from harness.scenes.quantities import DEFAULT_QUANTITY
+from harness.store.exr import ImageFileError, read_exr
+from harness.store.image_files import ImageFile, read_image_file
+from harness.store.references import (NOISE_FILE, PROVENANCE_FILE, REFERENCE_FILE, VARIANCE_FILE, Reference,
+                                      ReferenceError, load_reference)
+from harness.workflows import runner
+
+#: How a display-referred (integer) file is turned into linear values, by name.
+INPUT_TRANSFERS = {
+    "srgb": "undo the sRGB transfer function (the EOTF of IEC 61966-2-1)",
+    "linear": "take the stored values as linear, scaled to [0, 1] (a linear 16-bit image)",
+}
+#: The header attribute ``cbox render`` writes the spp into.
+SPP_ATTRIBUTE = "cbox:spp"
+
+
+@dataclass
+class Target:
+    """What test images are scored against: the reference, its file, and the scene whose regions are scored."""
+
+    reference: Reference  # its variance and noise are None when none is stored
+    path: Path  # the reference image file
+    scene: Scene | None = None  # with a scene: its regions are scored
+    noise_note: str | None = None  # why this reference cannot give noise yardsticks, if it cannot
+
+    @property
+    def label(self) -> str:
+        return self.scene.name if self.scene is not None else str(self.path)
+
+
+@dataclass
+class InputImage:
+    """One test image, linear and checked against its target."""
+
+    path: Path
+    label: str  # unique among the images of one run (names output files and report entries)
+    image: np.ndarray = field(repr=False)  # (H, W, 3) float32 linear
+    spp: int | None  # from its header or given; None: unknown
+
+
+@dataclass
+class ImageScore:
+    """One test image's numbers: image metrics, noise yardsticks (or why not), region metrics."""
+
+    source: InputImage
+    metrics: dict
+    noise: dict | None
+    noise_note: str | None
+    regions: dict
+    flip_parameters: dict | None  # the HDR-FLIP viewing conditions flip_mean was computed under
+
+    def record(self, target: Target) -> dict:
+        """The score as strict-JSON-ready nested dicts (non-finite numbers as None)."""
+        return runner.json_safe({
+            "image": str(self.source.path), "label": self.source.label, "reference": str(target.path),
+            "scene": target.scene.name if target.scene is not None else None, "spp": self.source.spp,
+            "metrics": self.metrics, "noise": self.noise, "noise_note": self.noise_note, "regions": self.regions,
+            "flip_parameters": self.flip_parameters})
+
+    def row(self) -> dict:
+        """Flat: metrics, yardsticks and ``region.<name>.<metric>`` columns (a results-table row's form)."""
+        return {**self.metrics, **(self.noise or {}), **named_regions.region_columns(self.regions)}
+
+
+# --------------------------------------------------------------------------
+# Loading and checking
+# --------------------------------------------------------------------------
+
+
+def linear_pixels(image: ImageFile, transfer: str | None) -> np.ndarray:
+    """The file's pixels as linear values: floating-point files as they are, integer ones through ``transfer``.
+
+    An integer (display-referred) file without a transfer is refused: its
+    code values are not radiance, and scoring them as if they were would give
+    confident, wrong numbers.
+    """
+    if image.scene_linear:
+        return image.pixels
+    if transfer is None:
+        raise ImageFileError(f"{image.path}: {image.file_format} with {image.pixel_type} pixels is display-referred, "
+                             f"not linear; say how to linearise it with --input-transfer "
+                             f"({' or '.join(INPUT_TRANSFERS)})")
+    if transfer not in INPUT_TRANSFERS:
+        raise ValueError(f"unknown input transfer {transfer!r}; expected one of {', '.join(INPUT_TRANSFERS)}")
+    if transfer == "linear":
+        return image.pixels
+    import colour
+
+    return np.asarray(colour.models.eotf_sRGB(image.pixels), dtype=np.float32)
+
+
+def header_spp(image: ImageFile) -> int | None:
+    """The spp its ``cbox:spp`` header records; None without one."""
+    text = image.metadata.get(SPP_ATTRIBUTE)
+    if text is None:
+        return None
+    try:
+        spp = int(text)
+    except ValueError:
+        spp = 0
+    if spp < 1:
+        raise ImageFileError(f"{image.path}: header {SPP_ATTRIBUTE} = {text!r} is not a positive integer")
+    return spp
+
+
+def image_spp(image: ImageFile, given: int | None) -> int | None:
+    """The image's spp: its header's, or ``given``; a header that contradicts ``given`` is refused."""
+    recorded = header_spp(image)
+    if recorded is not None and given is not None and recorded != given:
+        raise ImageFileError(f"{image.path}: --spp {given}, but its header {SPP_ATTRIBUTE} says {recorded}")
+    return recorded if recorded is not None else given
+
+
+def unique_labels(paths: Sequence[Path]) -> list[str]:
+    """A label per path: its file stem, with ``-2``, ``-3``... where stems repeat."""
+    seen: dict[str, int] = {}
+    out = []
+    for p in paths:
+        stem = Path(p).stem or "image"
+        seen[stem] = seen.get(stem, 0) + 1
+        out.append(stem if seen[stem] == 1 else f"{stem}-{seen[stem]}")
+    return out
+
+
+def load_scene_target(scene: Scene) -> Target:
+    """A stored scene's reference (refused when stale, :func:`harness.store.references.load_reference`)."""
+    ref = load_reference(scene)
+    return Target(ref, ref.folder / REFERENCE_FILE, scene)
+
+
+def load_file_target(path: Path, transfer: str | None = None) -> Target:
+    """A reference image file; its variance and noise batch when a reference folder's files lie beside it.
+
+    That is: ``path`` is a folder's ``reference.exr`` and the folder holds
+    ``variance.exr``, ``noise.exr`` and ``provenance.json`` (with ``spp`` and
+    ``noise_spp``), as :mod:`harness.store.references` stores them. A bare
+    image is scored as radiance (a scene says otherwise: use one).
+    """
+    path = Path(path)
+    image = linear_pixels(read_image_file(path), transfer)
+    folder = path.parent
+    stored = [folder / f for f in (VARIANCE_FILE, NOISE_FILE, PROVENANCE_FILE)]
+    if path.name != REFERENCE_FILE or not all(f.is_file() for f in stored):
+        note = (f"no reference variance: {path} is not a reference folder's {REFERENCE_FILE} with "
+                f"{', '.join(f.name for f in stored)} beside it")
+        return Target(Reference(image, None, None, {}, folder, DEFAULT_QUANTITY), path, noise_note=note)
+    try:
+        provenance = json.loads((folder / PROVENANCE_FILE).read_text())
+        int(provenance["spp"]), int(provenance["noise_spp"])
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ReferenceError(f"{folder / PROVENANCE_FILE}: unreadable, or no spp and noise_spp ({e})") from None
+    variance, noise_batch = read_exr(stored[0]), read_exr(stored[1])
+    for f, a in ((stored[0], variance), (stored[1], noise_batch)):
+        if a.shape != image.shape:
+            raise ReferenceError(f"{f}: {a.shape[1]}x{a.shape[0]}, but {path} is {image.shape[1]}x{image.shape[0]}")
+    return Target(Reference(image, variance, noise_batch, provenance, folder, DEFAULT_QUANTITY), path)
+
+
+def load_images(paths: Sequence[Path], target: Target, transfer: str | None = None,
+               spp: int | None = None) -> list[InputImage]:
+    """Every test image read, linearised and checked against ``target``; the first bad one is refused."""
+    ref = target.reference.image
+    out = []
+    for path, label in zip(paths, unique_labels(paths)):
+        file = read_image_file(path)
+        pixels = linear_pixels(file, transfer)
+        if pixels.shape != ref.shape:
+            raise ImageFileError(f"{path}: image is {file.size}, but the reference {target.path} is "
+                                 f"{ref.shape[1]}x{ref.shape[0]}; images of different sizes are not compared")
+        out.append(InputImage(Path(path), label, pixels, image_spp(file, spp)))
+    return out
+
+
+# --------------------------------------------------------------------------
+# Scoring
+# --------------------------------------------------------------------------
+
+
+def noise_gap(target: Target, spp: int | None) -> str | None:
+    """Why the noise yardsticks cannot be computed for an image at ``spp`` against ``target``; None if they can."""
+    if target.noise_note is not None:
+        return target.noise_note
+    if spp is None:
+        return f"no spp: the image has no {SPP_ATTRIBUTE} header and no --spp was given"
+    return None
+
+
+def score(source: InputImage, target: Target) -> ImageScore:
+    """Every metric of one test image against the target, computed as ``cbox compare`` computes them."""
+    ref = target.reference
+    values = metrics.image_metrics(source.image, ref.image, quantity=ref.quantity)
+    note = noise_gap(target, source.spp)
+    yardsticks = stats.noise_yardsticks(source.image, ref, source.spp) if note is None else None
+    regions = runner.score_regions(target.scene, source.image, ref, source.spp) if target.scene is not None else {}
+    parameters = flip.flip_parameters(ref.image) if "flip_mean" in values else None
+    return ImageScore(source, values, yardsticks, note, regions, parameters)
