@@ -74,7 +74,7 @@ def _smaller_entry(cfg: GateConfig, i: int, exp: Expectation, entry: RendererEnt
 
 
 def _resolve(cfg: GateConfig, i: int, exp: Expectation, overrides: dict[str, RendererEntry] | None,
-             stored: dict):
+             stored: dict, scene_overrides: Sequence[str] = ()):
     """Scene, reference, renderer (with its settings) and a consistency check's smaller-budget renderer (or None)
     of an expectation; config errors name the field.
 
@@ -84,7 +84,7 @@ def _resolve(cfg: GateConfig, i: int, exp: Expectation, overrides: dict[str, Ren
     """
     try:
         if exp.scene not in stored:
-            scene = resolve_scene(exp.scene)
+            scene = resolve_scene(exp.scene, scene_overrides)
             stored[exp.scene] = scene, load_reference(scene)
         scene, ref = stored[exp.scene]
     except SceneError as e:
@@ -107,7 +107,8 @@ def _resolve(cfg: GateConfig, i: int, exp: Expectation, overrides: dict[str, Ren
 
 def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None, seed_offset: int = 0,
              on_start: Callable[[Expectation], None] | None = None,
-             on_done: Callable[[Outcome], None] | None = None, sandbox: bool = True) -> list[Outcome]:
+             on_done: Callable[[Outcome], None] | None = None, sandbox: bool = True,
+             scene_overrides: Sequence[str] = ()) -> list[Outcome]:
     """Render every expectation and check it; every scene, renderer and setting is resolved first.
 
     ``overrides`` replaces renderers by name (tests and the mutant benchmark use it); an override is
@@ -116,11 +117,14 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
     this process, for measurements that run the gate hundreds of times). ``seed_offset`` shifts
     every expectation's seed (false-alarm measurements run the same gate over many seeds).
     ``on_start(expectation)`` and ``on_done(outcome)`` report progress as expectations finish.
+    ``scene_overrides`` (``KEY=VALUE``, ``cbox gate --set``) derive every expectation's scene
+    (:mod:`harness.scenes.overrides`); each derived scene needs its own reference, and the baseline,
+    recorded on the config's own scenes, is not compared.
     """
-    baseline = load_baseline(cfg)
+    baseline = load_baseline(cfg) if not scene_overrides else {}
     metrics, seeds = baseline.get("expectations", {}), baseline.get("seeds", {})
     stored: dict = {}
-    resolved = [_resolve(cfg, i, exp, overrides, stored) for i, exp in enumerate(cfg.expectations)]
+    resolved = [_resolve(cfg, i, exp, overrides, stored, scene_overrides) for i, exp in enumerate(cfg.expectations)]
     outcomes = []
     for exp, (scene, ref, entry, small) in zip(cfg.expectations, resolved):
         if on_start:

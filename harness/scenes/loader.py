@@ -10,7 +10,6 @@ format itself (fields, units, conventions, limits) is documented in
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import math
 import re
 import tomllib
@@ -25,6 +24,7 @@ from harness.scenes.model import (_DEGENERATE_REL_AREA, FEATURES, FOV_AXES, IMAG
                                   PIXEL_FILTERS, Camera, Mesh, Region, Scene, SceneError, Sphere, extent,
                                   image_memory_bytes, object_bounds, one_line)
 from harness.scenes.quantities import DEFAULT_QUANTITY, QUANTITIES, AmbientOcclusion, parse_ambient_occlusion
+from harness.suggest import closest
 
 #: The keys each table of a scene file may have; any other is an error (with a did-you-mean).
 #: A material's keys are its type's fields (harness.scenes.materials).
@@ -69,8 +69,8 @@ class _Reader:
             if key in keys:
                 continue
             field = f"{where}.{_key(key)}" if where else _key(key)
-            close = difflib.get_close_matches(key[:100], keys, n=1)
-            hint = f"did you mean {close[0]!r}?" if close else f"known: {', '.join(keys)}"
+            close = closest(key, keys)
+            hint = f"did you mean {close!r}?" if close else f"known: {', '.join(keys)}"
             raise self.err(field, f"unknown key ({hint})")
 
     def get(self, table: dict, key: str, where: str, kind: type | tuple, default: Any = ...) -> Any:
@@ -143,6 +143,11 @@ def _read_text(path: Path, limit: int) -> str:
 
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file; raise :class:`SceneError` on bad input, and nothing else."""
+    return parse_scene(*read_scene_document(path))
+
+
+def read_scene_document(path: str | Path) -> tuple[dict, Path]:
+    """The parsed TOML of a scene file (not yet validated) and the file's path (``scene.toml`` for a folder)."""
     path = Path(path)
     try:
         if path.is_dir():
@@ -162,7 +167,7 @@ def load_scene(path: str | Path) -> Scene:
         raise _error(path, "(syntax)", "invalid TOML: arrays or tables nested too deeply") from None
     except ValueError as e:  # e.g. an integer of more than 4300 digits
         raise _error(path, "(syntax)", f"invalid TOML: {e}") from None
-    return parse_scene(doc, path)
+    return doc, path
 
 
 def parse_scene(doc: dict, path: Path) -> Scene:
@@ -306,8 +311,8 @@ def _parse_materials(r: _Reader, t: dict) -> dict:
             r.known(m, w, _ANY_MATERIAL_KEY)
         kind = r.get(m, "type", w, str)
         if kind not in MATERIAL_TYPES:
-            close = difflib.get_close_matches(kind[:100], MATERIAL_TYPES, n=1)
-            hint = f"did you mean {close[0]!r}?" if close else f"known: {', '.join(MATERIAL_TYPES)}"
+            close = closest(kind, MATERIAL_TYPES)
+            hint = f"did you mean {close!r}?" if close else f"known: {', '.join(MATERIAL_TYPES)}"
             raise r.err(f"{w}.type", f"unknown material type {one_line(kind, 60)!r}; {hint}")
         cls = MATERIAL_TYPES[kind]
         fields = material_fields(cls)
@@ -368,8 +373,8 @@ def _parse_regions(r: _Reader, t: dict, objects: list[str]) -> dict[str, Region]
             if not isinstance(o, str):
                 raise r.err(f"{w}.objects[{i}]", f"expected a string, got {type(o).__name__}")
             if o not in objects:
-                close = difflib.get_close_matches(o[:100], objects, n=1)
-                hint = f"did you mean {close[0]!r}?" if close else f"objects: {', '.join(objects)}"
+                close = closest(o, objects)
+                hint = f"did you mean {close!r}?" if close else f"objects: {', '.join(objects)}"
                 raise r.err(f"{w}.objects[{i}]", f"no object named {one_line(o, 60)!r}; {hint}")
         box = None
         if "box" in g:

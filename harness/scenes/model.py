@@ -303,6 +303,9 @@ class Scene:
     regions: dict[str, Region] = dataclasses.field(default_factory=dict)
     quantity: str = DEFAULT_QUANTITY  # what the image means (harness.scenes.quantities)
     ambient_occlusion: AmbientOcclusion | None = None  # the AO definition, for quantity ambient_occlusion
+    # KEY=VALUE a derived scene's file was overridden with (harness.scenes.overrides): where its reference is
+    # kept and how to rebuild it, not content (the hash reads the values they set).
+    overrides: tuple[str, ...] = ()
 
     @property
     def emitters(self) -> tuple[Mesh, ...]:

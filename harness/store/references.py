@@ -1,6 +1,6 @@
 """The reference store: trusted images of each scene, with their variance.
 
-``references/<scene>/`` holds
+``harness/references/<scene>/`` holds
 
 - ``scene.toml``: the scene;
 - ``reference.exr``: the reference, the mean of ``batches`` independent
@@ -14,6 +14,13 @@
 - ``provenance.json``: renderer, version, variant, spp, seeds, wall time, the
   scene's content hash, date, command line.
 
+A scene derived by ``--set`` (:mod:`harness.scenes.overrides`) keeps its
+reference in ``derived/<content hash>/`` of its file's folder
+(:func:`reference_folder`), with the same files but ``scene.toml``: its
+base's reference is never touched. A missing or stale reference is refused
+with the command that builds it and about how long that takes, scaled from
+the wall time a build recorded in provenance (:func:`build_seconds`).
+
 References are built by :mod:`harness.workflows.reference_build`, with seeds from
 :data:`REFERENCE_SEED_BASE` up, a range no user
 run uses by default, so a test render never shares samples with its reference.
@@ -22,18 +29,25 @@ run uses by default, so a test render never shares samples with its reference.
 from __future__ import annotations
 
 import json
+import shlex
+import statistics
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from harness.store.exr import ImageFileError, read_exr
+from harness.scenes.library import references_root
 from harness.scenes.model import Scene
 from harness.scenes.quantities import DEFAULT_QUANTITY
 
 REFERENCE_SEED_BASE = 1_000_000_000
 REFERENCE_FILE, VARIANCE_FILE, NOISE_FILE = "reference.exr", "variance.exr", "noise.exr"
 PROVENANCE_FILE = "provenance.json"
+#: The folder, beside a scene file, of the references of scenes derived from it by ``--set``.
+DERIVED_FOLDER = "derived"
+#: The spp ``cbox reference build`` is suggested with when no earlier build says better.
+DEFAULT_SPP = 16384
 
 
 class ReferenceError(RuntimeError):
@@ -58,34 +72,116 @@ class Reference:
         return int(self.provenance["noise_spp"])
 
 
-def rebuild_command(scene: Scene, spp: int = 16384) -> str:
-    return f"cbox reference build --scene {scene.path.parent} --spp {spp}"
+def reference_folder(scene: Scene) -> Path:
+    """Where the reference of ``scene`` is kept: its file's folder or, for a scene derived by ``--set``,
+    ``derived/<content hash>/`` in it; keyed by content, so the same overrides in any order or spelling
+    share one reference, and one made for an older version of the file is never mistaken for current."""
+    folder = scene.path.parent
+    if scene.overrides:
+        folder = folder / DERIVED_FOLDER / scene.content_hash().removeprefix("sha256:")[:16]
+    return folder
+
+
+def rebuild_command(scene: Scene, spp: int = DEFAULT_SPP, batches: int | None = None) -> str:
+    """The ``cbox reference build`` command for ``scene`` (its stored name where it has one, and its ``--set``)."""
+    stored = references_root() / scene.path.parent.name / "scene.toml"
+    named = scene.path.exists() and stored.exists() and stored.samefile(scene.path)
+    args = ["cbox", "reference", "build", "--scene", scene.path.parent.name if named else str(scene.path.parent)]
+    for override in scene.overrides:
+        args += ["--set", override]
+    args += ["--spp", str(spp)] + (["--batches", str(batches)] if batches else [])
+    return " ".join(map(shlex.quote, args))
+
+
+def build_seconds(prov: dict, width: int, height: int, spp: int) -> float | None:
+    """Seconds a build of ``width`` x ``height`` pixels at ``spp`` takes, scaled by pixels × samples from the
+    wall time, resolution and spp in a reference's provenance ``prov``; None when it lacks them."""
+    try:
+        w0, h0 = prov["resolution"]
+        return float(prov["wall_time_s"]) * width * height * spp / (int(w0) * int(h0) * int(prov["spp"]))
+    except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        return None
+
+
+def _about(seconds: float) -> str:
+    if seconds < 10:
+        return f"{seconds:.1g} s" if seconds < 1 else f"{seconds:.0f} s"
+    if seconds < 600:
+        return f"{round(seconds, -1 if seconds >= 100 else 0):.0f} s"
+    return f"{seconds / 60:.0f} min" if seconds < 7200 else f"{seconds / 3600:.1f} h"
+
+
+def _provenance_at(folder: Path) -> dict | None:
+    try:
+        prov = json.loads((folder / PROVENANCE_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    return prov if isinstance(prov, dict) else None
+
+
+def _median_cost() -> float | None:
+    """The stored references' median build cost, in seconds per pixel-sample; None when none says."""
+    stored = (_provenance_at(f.parent) for f in references_root().glob(f"*/{PROVENANCE_FILE}"))
+    costs = [c for p in stored if p and (c := build_seconds(p, 1, 1, 1)) is not None]
+    return statistics.median(costs) if costs else None
+
+
+def _build_hint(scene: Scene, folder: Path) -> str:
+    """The command that builds ``scene``'s reference into ``folder``, and about how long it takes.
+
+    The yardstick is the build this one replaces (its spp and batches are
+    kept), else, for a derived scene, its base's reference, else the median
+    cost of the stored references.
+    """
+    cam = scene.camera
+    own = _provenance_at(folder)
+    prov = own or (_provenance_at(scene.path.parent) if scene.overrides else None)
+    if prov is None:
+        if (cost := _median_cost()) is None:
+            return rebuild_command(scene)
+        return (f"{rebuild_command(scene)} (about {_about(cost * cam.width * cam.height * DEFAULT_SPP)}, from the "
+                f"stored references' median cost of {cost * 1e6:.2g} µs per pixel-sample; the scene's may differ)")
+    spp, batches = int(prov.get("spp", DEFAULT_SPP)), prov.get("batches")
+    command = rebuild_command(scene, spp, batches if isinstance(batches, int) else None)
+    if (seconds := build_seconds(prov, cam.width, cam.height, spp)) is None:
+        return command
+    source = "the last build" if own else f"the reference of {prov.get('scene') or scene.path.parent.name}"
+    w0, h0 = prov["resolution"]
+    machine = ", ".join(str(prov.get("machine", "")).split(", ")[:2])  # "x86_64, 2 CPUs"
+    notes = f"; scaled to {cam.width}x{cam.height}" if [w0, h0] != [cam.width, cam.height] else ""
+    if prov.get("max_depth", scene.max_depth) != scene.max_depth:
+        notes += (f"; max_depth {scene.max_depth} instead of {prov['max_depth']} changes the cost per sample, "
+                  "so this is only an estimate")
+    return (f"{command} (about {_about(seconds)}: {source} took {float(prov['wall_time_s']):.0f} s at {w0}x{h0}, "
+            f"{spp} spp{f' on {machine}' if machine else ''}{notes})")
 
 
 def load_reference(scene: Scene, folder: Path | None = None) -> Reference:
-    """The stored reference of ``scene``; refuse one built from different content."""
-    folder = Path(folder) if folder else scene.path.parent
+    """The stored reference of ``scene`` (in :func:`reference_folder`); refuse one built from different content."""
+    folder = Path(folder) if folder else reference_folder(scene)
     prov_path = folder / PROVENANCE_FILE
     if not prov_path.exists():
-        raise ReferenceError(f"{prov_path}: no reference for scene {scene.name!r}; build it with: {rebuild_command(scene)}")
+        derived = (f"; the stored reference of {scene.path.parent.name} is for the scene without --set"
+                   if scene.overrides else "")
+        raise ReferenceError(f"{prov_path}: no reference for scene {scene.name!r}{derived}; build it with: "
+                             f"{_build_hint(scene, folder)}")
     try:
         prov = json.loads(prov_path.read_text())
     except (OSError, json.JSONDecodeError) as e:
-        raise ReferenceError(f"{prov_path}: unreadable ({e}); rebuild with: {rebuild_command(scene)}") from None
-    spp = int(prov.get("spp", 16384))
+        raise ReferenceError(f"{prov_path}: unreadable ({e}); rebuild with: {_build_hint(scene, folder)}") from None
     if prov.get("scene_hash") != scene.content_hash():
         raise ReferenceError(
-            f"{prov_path}: reference was built for scene hash {prov.get('scene_hash')}, but {scene.path} "
-            f"now hashes to {scene.content_hash()}; rebuild it with: {rebuild_command(scene, spp)}"
+            f"{prov_path}: reference was built for scene hash {prov.get('scene_hash')}, but {scene.name} "
+            f"({scene.path}) now hashes to {scene.content_hash()}; rebuild it with: {_build_hint(scene, folder)}"
         )
     try:
         image, variance, noise = (read_exr(folder / f) for f in (REFERENCE_FILE, VARIANCE_FILE, NOISE_FILE))
     except ImageFileError as e:
-        raise ReferenceError(f"{e}; rebuild with: {rebuild_command(scene, spp)}") from None
+        raise ReferenceError(f"{e}; rebuild with: {_build_hint(scene, folder)}") from None
     shape = (scene.camera.height, scene.camera.width, 3)
     if not image.shape == variance.shape == noise.shape == shape:
         raise ReferenceError(
             f"{folder}: reference images are {image.shape[1]}x{image.shape[0]}, scene is {shape[1]}x{shape[0]}; "
-            f"rebuild with: {rebuild_command(scene, spp)}"
+            f"rebuild with: {_build_hint(scene, folder)}"
         )
     return Reference(image, variance, noise, prov, folder, scene.quantity)

@@ -25,7 +25,7 @@ from harness.scenes.model import Scene
 from harness.store.atomic import write_json_atomic
 from harness.store.exr import write_exr
 from harness.store.references import (NOISE_FILE, PROVENANCE_FILE, REFERENCE_FILE, REFERENCE_SEED_BASE, VARIANCE_FILE,
-                                      Reference)
+                                      Reference, reference_folder)
 from harness.workflows.render import render_checked
 
 
@@ -41,13 +41,14 @@ def build_reference(
     provenance. The harness's reference renderer is Mitsuba 3; the CLI names it, this module names none.
 
     ``spp`` must be a multiple of ``batches``. The files are written only when
-    every batch is done, each atomically, provenance last.
+    every batch is done, each atomically, provenance last; by default into the
+    scene's reference folder (:func:`~harness.store.references.reference_folder`).
     """
     if batches < 2:
         raise ValueError("need at least 2 batches to estimate the variance")
     if spp % batches:
         raise ValueError(f"spp ({spp}) must be a multiple of batches ({batches})")
-    folder = Path(folder) if folder else scene.path.parent
+    folder = Path(folder) if folder else reference_folder(scene)
     batch_spp = spp // batches
     seeds = [REFERENCE_SEED_BASE + b for b in range(batches)]
     shape = (scene.camera.height, scene.camera.width, 3)
@@ -71,6 +72,8 @@ def build_reference(
         progress(batches + 1, batches + 1)
     variance_of_mean = m2 / (batches - 1) / batches
     prov = _provenance(scene, entry, info, spp, batches, seeds, noise_seed, wall)
+    if scene.overrides:  # a derived scene's reference: what it was derived with (harness.scenes.overrides)
+        prov["overrides"] = list(scene.overrides)
     if scene.regions:
         prov["region_noise"] = region_noise(mean, variance_of_mean, region_masks(scene))
     meta = {"cbox:scene_hash": prov["scene_hash"], "cbox:spp": str(spp), "cbox:renderer": prov["renderer_version"]}
