@@ -1,11 +1,11 @@
-"""Write references/cornell-box/scene.toml from Mitsuba 3's ``mi.cornell_box()``.
+"""Write harness/references/cornell-box/scene.toml from Mitsuba 3's ``mi.cornell_box()``.
 
 Geometry, materials, light and camera are taken from Mitsuba's own scene
 dictionary, so the file can be cross-checked against Mitsuba directly. Two
 settings differ on purpose (see the header this writes): a box pixel filter and
 unbounded ``max_depth``. Run it only to regenerate the file:
 
-    python scripts/make_cornell_box.py > references/cornell-box/scene.toml
+    python scripts/make_cornell_box.py > harness/references/cornell-box/scene.toml
 """
 
 import mitsuba as mi

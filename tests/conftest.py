@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-CORNELL = ROOT / "references" / "cornell-box" / "scene.toml"
+CORNELL = ROOT / "harness" / "references" / "cornell-box" / "scene.toml"
 
 #: One white quad lit by a small emitter, seen by a camera: every field the format has.
 MINIMAL_SCENE = """\

@@ -23,7 +23,7 @@ from renderers.core.geometry import OFFSET_REL, sphere_hit
 
 from conftest import ROOT
 
-CAUSTICS = ROOT / "references" / "cornell-box-caustics" / "scene.toml"
+CAUSTICS = ROOT / "harness" / "references" / "cornell-box-caustics" / "scene.toml"
 ETAS = (1.5, 1 / 1.5)
 ANGLES_DEG = (0.0, 5.0, 20.0, 35.0, 40.0, 45.0, 56.31, 60.0, 75.0, 85.0, 89.5)
 #: float64 rounding of the closed forms (a few ulps of numbers of order 1, through acos/asin/tan).

@@ -13,7 +13,7 @@ the same computation (measured on this machine, 2 cores), and the tolerance is
 per check if the spread were normal; the seed-to-seed maxima seen were within
 3.5 of them), or, for the heavy-tailed image of a furnace, a quantile.
 
-The white furnace (``references/furnace``: a closed cube, albedo 0.8, every
+The white furnace (``harness/references/furnace``: a closed cube, albedo 0.8, every
 face emitting 1, radiance 5 everywhere) has a closed form for every probe
 update: the probes hold the irradiance of *reflected* light (the camera pass
 adds emission and direct light itself), so after k updates that each replace
@@ -23,7 +23,7 @@ normalised by its own sum must leave it alone: the table
 :data:`FURNACE_SWITCHES` records what each switch does (test
 :func:`test_furnace_heuristic_switches_conserve_energy`).
 
-The light-leak scene ``references/two-rooms`` has an analytic answer too: its
+The light-leak scene ``harness/references/two-rooms`` has an analytic answer too: its
 right-hand room receives no light at all (radiance exactly 0), so whatever the
 probes put there is leak (test :func:`test_two_rooms_visibility_stops_the_leak`).
 """

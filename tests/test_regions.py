@@ -23,7 +23,7 @@ from harness.scenes.model import Camera, Diffuse, Mesh, Region, Scene
 from harness.store.exr import read_exr, write_exr
 from harness.store.references import Reference
 
-CAUSTICS = ROOT / "references" / "cornell-box-caustics"
+CAUSTICS = ROOT / "harness" / "references" / "cornell-box-caustics"
 
 
 def _with_regions(scene: Scene, **regions: Region) -> Scene:

@@ -44,7 +44,7 @@ from test_pathtracer import tile_z, z_crit
 
 pytest.importorskip("embreex")
 
-CAUSTICS = ROOT / "references" / "cornell-box-caustics" / "scene.toml"
+CAUSTICS = ROOT / "harness" / "references" / "cornell-box-caustics" / "scene.toml"
 #: Russian roulette off: with walls of albedo 0 every path ends at its first wall, so each path's value is exact.
 NO_ROULETTE = {"rr_depth": 1000}
 #: float32 image of values computed in float64 (a few products of order-1 weights): a few ulps of float32.

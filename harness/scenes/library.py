@@ -1,4 +1,4 @@
-"""The stored scenes: ``references/<name>/scene.toml``, found by name.
+"""The stored scenes: ``harness/references/<name>/scene.toml``, found by name.
 
 A stored scene's folder also holds its reference (:mod:`harness.store.references`).
 """
@@ -7,15 +7,17 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Sequence
 
-from harness.scenes.loader import load_scene
 from harness.scenes.model import Scene, SceneError
+from harness.scenes.overrides import load_derived_scene
+from harness.suggest import did_you_mean
 
 
 def references_root() -> Path:
-    """Folder of stored references: ``$CBOX_REFERENCES`` or the project's ``references/``."""
+    """Folder of stored scenes and references: ``$CBOX_REFERENCES``, else ``harness/references/``, shipped in the package."""
     env = os.environ.get("CBOX_REFERENCES")
-    return Path(env) if env else Path(__file__).resolve().parents[2] / "references"
+    return Path(env) if env else Path(__file__).resolve().parents[1] / "references"
 
 
 def scene_names() -> list[str]:
@@ -23,13 +25,15 @@ def scene_names() -> list[str]:
     return sorted(p.parent.name for p in root.glob("*/scene.toml"))
 
 
-def resolve_scene(name_or_path: str) -> Scene:
-    """Load a scene by stored name (``cornell-box``) or by path to a file or folder."""
+def resolve_scene(name_or_path: str, overrides: Sequence[str] | None = ()) -> Scene:
+    """Load a scene by stored name (``cornell-box``) or by path to a file or folder; with ``overrides``
+    (``--set KEY=VALUE``), the scene derived from it (:mod:`harness.scenes.overrides`)."""
     p = Path(name_or_path)
     if p.suffix == ".toml" or p.is_dir() or os.sep in name_or_path:
-        return load_scene(p)
+        return load_derived_scene(p, overrides or ())
     stored = references_root() / name_or_path / "scene.toml"
     if not stored.exists():
-        known = ", ".join(scene_names()) or "(none)"
-        raise SceneError(name_or_path, "--scene", f"no stored scene of that name; known: {known}; or give a path")
-    return load_scene(stored)
+        names = scene_names()
+        raise SceneError(name_or_path, "--scene", f"no stored scene of that name{did_you_mean(name_or_path, names)}; "
+                         f"known: {', '.join(names) or '(none)'}; or give a path")
+    return load_derived_scene(stored, overrides or ())

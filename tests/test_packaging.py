@@ -1,0 +1,87 @@
+"""A built wheel is the product: installed into a fresh virtual environment, away from this checkout, it runs.
+
+The wheel is built from this tree (``pip wheel --no-deps``) and installed
+with ``--no-deps`` into a new venv whose only view of the dependencies is a
+``.pth`` line naming this project's venv's site-packages: a path line adds
+the folder but runs none of its ``.pth`` files, so the editable install of
+this checkout stays invisible and every ``harness``/``renderers``/``reports``
+import comes from the wheel. Commands run from an empty folder.
+"""
+
+from __future__ import annotations
+
+import os
+import site
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from conftest import ROOT
+
+
+def _run(cmd, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=kw.pop("timeout", 600), **kw)
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("wheel")
+    proc = _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(out), str(ROOT)])
+    assert proc.returncode == 0, proc.stderr
+    (path,) = out.glob("cornell_harness-*.whl")
+    return path
+
+
+@pytest.fixture(scope="module")
+def venv(tmp_path_factory, wheel) -> Path:
+    """A fresh venv with the wheel installed; the dependencies seen through a path line."""
+    root = tmp_path_factory.mktemp("venv")
+    assert _run([sys.executable, "-m", "venv", str(root)]).returncode == 0
+    py = root / "bin" / "python"
+    purelib = _run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"]).stdout.strip()
+    (Path(purelib) / "cbox_test_deps.pth").write_text("\n".join(site.getsitepackages()) + "\n")
+    proc = _run([str(py), "-m", "pip", "install", "--no-deps", "-q", str(wheel)])
+    assert proc.returncode == 0, proc.stderr
+    return root
+
+
+def _clean_env(tmp: Path) -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "CBOX_REFERENCES")}
+    env["NUMBA_CACHE_DIR"] = str(tmp / "numba-cache")  # the installed package's folder is not ours to fill
+    return env
+
+
+def test_wheel_carries_the_stored_scenes_references_and_templates(wheel):
+    names = set(zipfile.ZipFile(wheel).namelist())
+    stored = sorted(p.relative_to(ROOT / "harness").as_posix() for p in (ROOT / "harness" / "references").glob("*/*")
+                    if p.is_file())
+    assert stored and {f"harness/{p}" for p in stored} <= names
+    assert "reports/templates/report.html.j2" in names
+    meta = next(n for n in names if n.endswith(".dist-info/METADATA"))
+    text = zipfile.ZipFile(wheel).read(meta).decode()
+    assert "License-Expression: MIT" in text  # an SPDX string (PEP 639), not a TOML table
+
+
+def test_installed_wheel_lists_scenes_and_compares_from_an_empty_folder(venv, tmp_path):
+    cbox, env = venv / "bin" / "cbox", _clean_env(tmp_path)
+    where = _run([str(venv / "bin" / "python"), "-c", "import harness; print(harness.__file__)"], cwd=tmp_path,
+                 env=env)
+    assert where.stdout.startswith(str(venv)), where.stdout + where.stderr  # the wheel, not this checkout
+    scenes = _run([str(cbox), "scenes"], cwd=tmp_path, env=env)
+    assert scenes.returncode == 0 and "cornell-box " in scenes.stdout and "reference" in scenes.stdout, scenes.stderr
+    proc = _run([str(cbox), "compare", "--scene", "cornell-box", "-r", "mitsuba", "--spp", "4", "--out", "out"],
+                cwd=tmp_path, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "out" / "report.html").exists() and (tmp_path / "out" / "metrics.csv").exists()
+
+
+@pytest.mark.slow
+def test_installed_wheel_runs_the_demo_to_a_report(venv, tmp_path):
+    """The issue's promise, in full: ``pip install`` of the wheel, then ``cbox demo`` (a few minutes)."""
+    proc = _run([str(venv / "bin" / "cbox"), "demo", "--out", "out"], cwd=tmp_path, env=_clean_env(tmp_path),
+                timeout=1800)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "out" / "report.html").exists()
