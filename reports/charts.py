@@ -6,16 +6,21 @@
   renderer they are omitted with a one-line note (:data:`SINGLE_SPP_NOTE`).
 - **Speed/accuracy chart**: every (renderer, spp) point, medians over seeds
   (:func:`convergence_table`), with the Pareto frontier
-  (:func:`reports.plots.pareto_front`).
+  (:func:`reports.plotmath.pareto_front`).
 - **Bias² and variance bars** per renderer from ``summary``.
 
-The SVG is drawn by :mod:`reports.plots`.
+Each chart is a :class:`Figure`: its data bound to a :mod:`reports.plots`
+function, drawn once for the page (:data:`reports.plots.PAGE`) and once as a
+standalone file (:mod:`reports.figures`), under a file name that says what it
+shows (:data:`FIGURE_KINDS`).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from dataclasses import dataclass
+from functools import partial
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -31,6 +36,22 @@ SINGLE_SPP_NOTE = "single spp: run `cbox converge` for convergence plots"
 PLOT_METRICS: dict[str, tuple[str, float | None]] = {
     k: (registry.METRICS[k].axis_label, registry.METRICS[k].guide_slope) for k in registry.PLOT_METRICS}
 _GUIDE_LABELS = {-0.5: "slope −½ (∝ 1/√N)", -1.0: "slope −1 (∝ 1/N)"}
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One chart: the file name it is saved under (no extension) and its drawing, data bound, layout free."""
+
+    stem: str
+    draw: Callable[..., str]  # draw(layout=..., extra_attrs=...) -> SVG (or a note when there is nothing to plot)
+
+    def __html__(self) -> str:
+        """The chart as the report page shows it (markupsafe's protocol: Jinja inserts it unescaped)."""
+        return self.draw(layout=plots.PAGE)
+
+
+#: What a figure's file name starts with; a per-metric chart's goes on with the metric (convergence-spp-rmse).
+FIGURE_KINDS = ("convergence-spp", "convergence-time", "speed-accuracy", "bias-variance")
 
 
 def convergence_table(runs: pd.DataFrame, metric_keys: Sequence[str]) -> pd.DataFrame:
@@ -92,7 +113,15 @@ def _plot_metrics(conv: pd.DataFrame) -> list[str]:
     return out
 
 
-def _charts(runs, names, colors) -> dict:
+def _prefixed(prefix: str, name: str) -> str:
+    """A figure's file stem or element id in a report section (``sweep-a-convergence-spp-rmse``), so several
+    experiments' charts neither overwrite each other's files nor share ids on one page."""
+    return f"{prefix}-{name}" if prefix else name
+
+
+def _charts(runs, names, colors, prefix: str = "") -> dict:
+    """The page's charts, as :class:`Figure` objects, with what the template needs around them; ``prefix``
+    starts their file stems and element ids (:func:`_prefixed`)."""
     ok = ok_runs(runs)
     conv = convergence_table(runs, [k for k in PLOT_METRICS if k in ok.columns])
     metric_keys = _plot_metrics(conv)
@@ -104,25 +133,52 @@ def _charts(runs, names, colors) -> dict:
         attrs = f' data-metric="{k}"{hidden}'
         if charts["has_convergence"]:
             guide = _GUIDE_LABELS.get(slope, f"slope {slope:g}")
-            spp = plots.line_plot_svg(_series_for(conv, k, "spp", names, colors), uid=f"conv-spp-{k}",
-                                      xlabel="samples per pixel", ylabel=label, guide_slope=slope,
-                                      guide_label=guide, xbase2=True)
-            tim = plots.line_plot_svg(_series_for(conv, k, "time_s", names, colors), uid=f"conv-time-{k}",
-                                      xlabel="wall time (s)", ylabel=label, guide_slope=slope, guide_label=guide)
-            charts["convergence"].append({"key": k, "attrs": Markup(attrs), "spp": Markup(spp),
-                                          "time": Markup(tim)})
+            spp = Figure(_prefixed(prefix, f"convergence-spp-{k}"), partial(
+                plots.line_plot_svg, _series_for(conv, k, "spp", names, colors),
+                uid=_prefixed(prefix, f"conv-spp-{k}"),
+                xlabel="samples per pixel", ylabel=label, guide_slope=slope, guide_label=guide, xbase2=True))
+            tim = Figure(_prefixed(prefix, f"convergence-time-{k}"), partial(
+                plots.line_plot_svg, _series_for(conv, k, "time_s", names, colors),
+                uid=_prefixed(prefix, f"conv-time-{k}"),
+                xlabel="wall time (s)", ylabel=label, guide_slope=slope, guide_label=guide))
+            charts["convergence"].append({"key": k, "attrs": Markup(attrs), "spp": spp, "time": tim})
         points = [
             plots.Point(name=r["renderer"], color=colors[r["renderer"]], x=float(r["time_s"]), y=float(r[k]),
                         label=f"{r['renderer']}: {int(r['spp'])} spp, {r['time_s']:.3g} s, {k} = {r[k]:.4g}",
                         tag=f"{int(r['spp'])}")
             for _, r in conv.iterrows()
         ]
-        charts["pareto"].append({"key": k, "attrs": Markup(attrs), "svg": Markup(plots.scatter_svg(
-            points, uid=f"pareto-{k}", xlabel="wall time (s)", ylabel=label))})
+        charts["pareto"].append({"key": k, "attrs": Markup(attrs), "svg": Figure(
+            _prefixed(prefix, f"speed-accuracy-{k}"), partial(plots.scatter_svg, points,
+                                                             uid=_prefixed(prefix, f"pareto-{k}"),
+                                                             xlabel="wall time (s)", ylabel=label))})
     return charts
 
 
-def _bias_variance_chart(summary, names, colors) -> Markup | None:
+def chart_figures(charts: dict, bias_variance: Figure | None) -> list[Figure]:
+    """Every figure of the report, in page order."""
+    figures = [f for c in charts["convergence"] for f in (c["spp"], c["time"])]
+    figures += [p["svg"] for p in charts["pareto"]]
+    return figures + ([bias_variance] if bias_variance is not None else [])
+
+
+def chart_rows(charts: dict, bias_variance: Figure | None) -> list[dict]:
+    """The same charts laid out for a report section (:func:`reports.html.write_report`'s ``sections``):
+    per metric a row of (caption, figure) boxes, its convergence against spp and time and its speed/accuracy
+    chart, the rows of all but the first metric hidden (the page's metric selector switches them); then
+    the bias/variance bars. ``cls``: the row's CSS class, a grid of charts or one chart at readable width."""
+    convergence = {c["key"]: c for c in charts["convergence"]}
+    rows = []
+    for p in charts["pareto"]:  # one per plotted metric, in the selector's order
+        c = convergence.get(p["key"])
+        boxes = [("against samples per pixel", c["spp"]), ("against wall time", c["time"])] if c else []
+        rows.append({"cls": "charts", "attrs": p["attrs"], "boxes": boxes + [("speed / accuracy", p["svg"])]})
+    if bias_variance is not None:
+        rows.append({"cls": "chart-wrap", "attrs": Markup(""), "boxes": [("bias² and variance", bias_variance)]})
+    return rows
+
+
+def _bias_variance_chart(summary, names, colors, prefix: str = "") -> Figure | None:
     if summary is None or not len(summary) or "bias2" not in summary.columns or "variance" not in summary.columns:
         return None
     by_name = {str(r["renderer"]): r for r in summary.to_dict("records")}
@@ -139,5 +195,6 @@ def _bias_variance_chart(summary, names, colors) -> Markup | None:
         groups.append(plots.BarGroup(name, [b2, var], note))
     if not groups:
         return None
-    return Markup(plots.bars_svg(groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")), uid="bias-variance",
-                                 ylabel="mean over pixels and channels"))
+    return Figure(_prefixed(prefix, "bias-variance"), partial(
+        plots.bars_svg, groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")),
+        uid=_prefixed(prefix, "bias-variance"), ylabel="mean over pixels and channels"))

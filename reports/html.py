@@ -18,7 +18,10 @@ It shows
 
 This module assembles those parts into the Jinja template
 ``templates/report.html.j2``. Charts are inline SVG drawn by
-:mod:`reports.plots`. Entry point: :func:`write_report`.
+:mod:`reports.plots`; :func:`write_report` also writes each as a standalone
+SVG, PDF and PNG into ``figures/`` beside the report (:mod:`reports.figures`)
+and links them. The page follows the system's light or dark preference, has a
+toggle that overrides it, and prints light. Entry point: :func:`write_report`.
 """
 
 from __future__ import annotations
@@ -37,7 +40,8 @@ from markupsafe import Markup
 from harness.evaluate import metrics
 from harness.store.atomic import write_text_atomic
 from reports import plots
-from reports.charts import SINGLE_SPP_NOTE, _bias_variance_chart, _charts
+from reports.charts import SINGLE_SPP_NOTE, _bias_variance_chart, _charts, chart_figures
+from reports.figures import WrittenFigures, write_figures
 from reports.images import JND
 from reports.regions import bias_variance_table, region_section
 from reports.tables import _OPS, _col, _renderer_info, _summary_rows, column_label, ok_runs, renderer_order
@@ -130,7 +134,9 @@ def _harness_version() -> str:
         return "unknown"
 
 
-def _max_depth_text(max_depth: int) -> str:
+def _max_depth_text(max_depth: int | None) -> str:
+    if max_depth is None:  # a reference that is only an image file (reports.compare_image)
+        return "unknown"
     if max_depth < 0:
         return "unbounded (Russian roulette)"
     return f"{max_depth} segments"
@@ -175,7 +181,7 @@ def _scene_context(scene, scene_hash: str) -> dict:
     }
 
 
-def render_html(
+def _context(
     *,
     scene,
     reference,
@@ -186,13 +192,17 @@ def render_html(
     provenance: Mapping,
     command: str = "",
     title: str | None = None,
-    sections: Sequence[tuple[str, str, str]] = (),
-) -> str:
-    """The report's HTML text (see :func:`write_report`).
+    sections: Sequence[tuple] = (),
+    labels: Sequence[str] = (),
+) -> dict:
+    """What the template shows (see :func:`write_report`), with the charts as ``figures``; not the links to
+    figure files, which exist only once written.
 
-    ``sections`` are extra (id, title, HTML fragment) sections other parts of
-    the harness add (e.g. the gate's verdicts), placed after the summary; the
-    fragments must be built with escaping already done.
+    ``sections`` are extra (id, title, HTML fragment[, chart rows]) sections
+    other parts of the harness add (e.g. the gate's verdicts), placed after
+    the summary; the fragments must be built with escaping already done. A
+    section's chart rows (:func:`reports.charts.chart_rows`) are drawn below
+    its fragment and written to ``figures/`` with the report's own charts.
     """
     ref_img = np.asarray(reference.image, dtype=np.float32)
     exposure = metrics.display_exposure(ref_img, scene.quantity)
@@ -207,6 +217,7 @@ def render_html(
     info = _renderer_info(runs, names, colors)
     table_head, table_rows = _summary_rows(runs, summary, names, info, thresholds)
     charts = _charts(runs, names, colors)
+    bias_variance = _bias_variance_chart(summary, names, colors)
     run_seeds = provenance.get("seeds") or []
     viewer, viewer_notes = _viewer(ref_img, exposure, images, names, colors, runs, run_seeds)
     ref_prov = dict(reference.provenance or {})
@@ -214,12 +225,14 @@ def render_html(
     sections = list(sections)
     if (regions := region_section(scene, ref_img, exposure, runs, colors)) is not None:
         sections.append(("regions", "Regions", regions))
+    section_charts = {s[0]: list(s[3]) if len(s) > 3 else [] for s in sections}
 
-    env = _environment()
-    ctx = {
+    return {
         "scene": _scene_context(scene, scene_hash),
-        "sections": [(sid, stitle, markupsafe.Markup(frag)) for sid, stitle, frag in sections],
+        "sections": [(s[0], s[1], markupsafe.Markup(s[2])) for s in sections],
+        "section_charts": section_charts,
         "title": title or f"Renderer comparison — {scene.name}",
+        "labels": list(labels),
         "reference_rows": _provenance_rows(ref_prov, scene_hash),
         "reference_spp": ref_prov.get("spp", "—"),
         "run": _run_provenance(provenance),
@@ -238,7 +251,9 @@ def render_html(
         ],
         "charts": charts,
         "single_spp_note": SINGLE_SPP_NOTE,
-        "bias_variance": _bias_variance_chart(summary, names, colors),
+        "bias_variance": bias_variance,
+        "figures": chart_figures(charts, bias_variance) + [
+            figure for rows in section_charts.values() for row in rows for _, figure in row["boxes"]],
         "region_bias_variance": Markup(bias_variance_table(summary, scene, colors) or ""),
         "viewer": viewer,
         "viewer_json": _json_for_script(viewer),
@@ -246,10 +261,19 @@ def render_html(
         "legends": _legends(),
         "jnd": JND,
         "rel_mse_eps": metrics.REL_MSE_EPS,
-        "css": _asset(env, "report.css"),
-        "js": _asset(env, "report.js"),
     }
-    return env.get_template("report.html.j2").render(**ctx)
+
+
+def _render(ctx: dict, written: WrittenFigures) -> str:
+    env = _environment()
+    return env.get_template("report.html.j2").render(
+        **ctx, figure_files=written.files, figures_note=written.note,
+        css=_asset(env, "report.css"), js=_asset(env, "report.js"))
+
+
+def render_html(**kwargs) -> str:
+    """The report's HTML text, from the keywords of :func:`write_report` (but ``path``); no figure files."""
+    return _render(_context(**kwargs), WrittenFigures())
 
 
 def write_report(
@@ -264,7 +288,9 @@ def write_report(
     provenance: Mapping,
     command: str = "",
     title: str | None = None,
-    sections: Sequence[tuple[str, str, str]] = (),
+    sections: Sequence[tuple] = (),
+    labels: Sequence[str] = (),
+    figures: bool = True,
 ) -> Path:
     """Write the self-contained HTML report to ``path`` atomically; return the path.
 
@@ -281,13 +307,22 @@ def write_report(
       pass/fail colouring of the summary table;
     - ``provenance``: ``versions``, ``machine``, ``seeds``, ``date`` and any
       other key/value to show; ``command``: the command line;
-    - ``sections``: extra (id, title, escaped HTML fragment) sections, shown
-      after the summary (the gate's verdicts use this).
+    - ``sections``: extra (id, title, escaped HTML fragment[, chart rows])
+      sections, shown after the summary (the gate's verdicts, ``cbox demo``'s
+      second scene and a merged report's experiments use this);
+    - ``labels``: the names of the experiments shown, for the header
+      (``cbox report --label``).
+
+    Every chart is also written as a standalone SVG, PDF and PNG into
+    ``figures/`` beside ``path`` (:func:`reports.figures.write_figures`), and
+    the report links them; ``figures=False`` writes the page alone (a second
+    or two quicker: converting every chart to PDF and 300 dpi PNG takes that).
     """
     path = Path(path)
-    html = render_html(
+    ctx = _context(
         scene=scene, reference=reference, runs=runs, images=images, summary=summary, thresholds=thresholds,
-        provenance=provenance, command=command, title=title, sections=sections,
+        provenance=provenance, command=command, title=title, sections=sections, labels=labels,
     )
-    write_text_atomic(path, html)
+    written = write_figures(path.parent, ctx["figures"]) if figures else WrittenFigures()
+    write_text_atomic(path, _render(ctx, written))
     return path

@@ -4,13 +4,15 @@ Every chart is a string of inline SVG, drawn here from numbers so the report
 needs no plotting library and no script to show them. Classes (``series``,
 ``band``, ``guide``, ``frontier``, ``bar``...) carry the meaning, so the report's
 stylesheet themes them and tests can find them; colours of series are
-presentation attributes.
+presentation attributes. A :class:`Layout` says how big a chart is and where
+its legend goes: :data:`PAGE` for the report, styled by the page; one with a
+``style`` of its own makes a standalone SVG (:mod:`reports.figures`).
 
 - :func:`line_plot_svg`: log-log error curves, one line per renderer with a
   min–max band across seeds and an optional slope guide (convergence plots);
 - :func:`scatter_svg`: log-log speed/accuracy points with the Pareto frontier;
 - :func:`bars_svg`: grouped bars on a log axis (bias² and variance);
-- :func:`pareto_front`: the pure function behind the frontier.
+- the numbers behind them (ticks, domains, the Pareto front) are :mod:`reports.plotmath`'s.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from dataclasses import dataclass, field
 from html import escape
 from typing import Sequence
 
-import numpy as np
+from reports.plotmath import format_tick, log_domain, log_ticks, pareto_front
 
 #: Okabe & Ito (2008) colour-blind-safe palette, then Tableau's for more renderers.
 PALETTE = (
@@ -28,102 +30,33 @@ PALETTE = (
     "#9aa1ad", "#8c564b", "#bcbd22", "#17becf", "#e377c2",
 )
 
-WIDTH, HEIGHT = 640, 400
-MARGIN_LEFT, MARGIN_RIGHT, MARGIN_TOP, MARGIN_BOTTOM = 70, 180, 30, 52
+
+@dataclass(frozen=True)
+class Layout:
+    """A chart's size (viewBox units), margins, text size and legend place; with a ``style``, standalone."""
+
+    width: int = 640
+    height: int = 400  # without a legend below the plot, which adds to it
+    left: int = 70
+    right: int = 180  # the legend's column, unless it is below
+    top: int = 30
+    bottom: int = 52
+    font: float = 11.5  # size of tick and legend text: to estimate how wide a label is
+    legend_row: float = 19
+    legend_below: bool = False
+    style: str = ""  # a stylesheet to embed: the SVG then stands alone (xmlns, its own background)
+    width_in: float | None = None  # printed width of a standalone SVG
+
+
+#: The report page's charts: the page's stylesheet themes them.
+PAGE = Layout()
 
 #: The slope guide starts this factor above the highest first point.
 GUIDE_OFFSET = 1.5
 
-_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
-
 
 def color_for(index: int) -> str:
     return PALETTE[index % len(PALETTE)]
-
-
-# --------------------------------------------------------------------------
-# Pure helpers
-# --------------------------------------------------------------------------
-
-
-def pareto_front(x: Sequence[float], y: Sequence[float]) -> list[int]:
-    """Indices of the points that no other point beats in both ``x`` and ``y`` (lower is better).
-
-    A point is dominated when another is at least as good in both coordinates
-    and strictly better in one; identical points do not dominate each other,
-    so both stay on the front. Points with a NaN or infinite coordinate are
-    never on it. The result is ordered by increasing ``x`` (then ``y``).
-    """
-    xs = np.asarray(x, dtype=np.float64)
-    ys = np.asarray(y, dtype=np.float64)
-    if xs.shape != ys.shape:
-        raise ValueError(f"x and y differ in length: {xs.shape} vs {ys.shape}")
-    valid = [i for i in range(xs.size) if math.isfinite(xs[i]) and math.isfinite(ys[i])]
-    front = []
-    for i in valid:
-        dominated = any(
-            xs[j] <= xs[i] and ys[j] <= ys[i] and (xs[j] < xs[i] or ys[j] < ys[i]) for j in valid if j != i
-        )
-        if not dominated:
-            front.append(i)
-    return sorted(front, key=lambda i: (xs[i], ys[i], i))
-
-
-def format_tick(v: float) -> str:
-    """A tick label: plain for moderate values, ``2×10⁻⁵`` style otherwise."""
-    if v == 0 or not math.isfinite(v):
-        return "0" if v == 0 else str(v)
-    if 1e-3 <= abs(v) < 1e5:
-        return f"{v:g}"
-    exp = int(math.floor(math.log10(abs(v)) + 1e-9))
-    mant = v / 10**exp
-    power = "10" + str(exp).translate(_SUPERSCRIPT)
-    if abs(mant - 1) < 1e-6:
-        return power
-    return f"{mant:g}×{power}"
-
-
-def log_domain(values: Sequence[float], pad: float = 0.06) -> tuple[float, float] | None:
-    """log10 extent of the positive finite ``values``, padded; None if there are none."""
-    v = np.asarray([x for x in values if x is not None and math.isfinite(x) and x > 0], dtype=np.float64)
-    if v.size == 0:
-        return None
-    lo, hi = math.log10(v.min()), math.log10(v.max())
-    if hi - lo < 0.3:  # a nearly flat series still gets a readable axis
-        mid = 0.5 * (lo + hi)
-        lo, hi = mid - 0.15, mid + 0.15
-    span = hi - lo
-    return lo - pad * span, hi + pad * span
-
-
-def log_ticks(lo: float, hi: float, base2: bool = False, max_ticks: int = 9) -> list[float]:
-    """Tick values inside the log10 domain [lo, hi]: powers of 2 (``base2``) or 1-2-5 decades."""
-    if base2:
-        k0, k1 = math.ceil(lo / math.log10(2) - 1e-9), math.floor(hi / math.log10(2) + 1e-9)
-        ks = list(range(k0, k1 + 1))
-        step = 1
-        while len(ks[::step]) > max_ticks:
-            step += 1
-        return [2.0**k for k in ks[::step]]
-    def thin(ticks: list[float]) -> list[float]:
-        step = 1
-        while len(ticks[::step]) > max_ticks:
-            step += 1
-        return ticks[::step]
-
-    decades, one25, all9 = (
-        [m * 10.0**e for e in range(math.floor(lo) - 1, math.ceil(hi) + 1) for m in mults
-         if lo - 1e-9 <= math.log10(m * 10.0**e) <= hi + 1e-9]
-        for mults in ((1,), (1, 2, 5), (1, 2, 3, 4, 5, 6, 7, 8, 9))
-    )
-    if len(decades) >= 3:
-        return thin(decades)
-    if 2 <= len(one25) <= max_ticks:
-        return one25
-    for ticks in (decades, one25, all9):
-        if len(ticks) >= 2:
-            return thin(ticks)
-    return [10.0 ** (0.5 * (lo + hi))]
 
 
 def _f(v: float) -> str:
@@ -143,13 +76,15 @@ def _short(name: str, n: int = 20) -> str:
 class _Axes:
     xdom: tuple[float, float]
     ydom: tuple[float, float]
-    width: int = WIDTH
-    height: int = HEIGHT
-    left: int = MARGIN_LEFT
-    right: int = MARGIN_RIGHT
-    top: int = MARGIN_TOP
-    bottom: int = MARGIN_BOTTOM
+    layout: Layout = PAGE
+    extra_bottom: int = 0  # more room below the plot (the bars' names)
     parts: list[str] = field(default_factory=list)
+    legend_height: float = 0.0  # what a legend below the plot adds to the height
+
+    def __post_init__(self) -> None:
+        lay = self.layout
+        self.width, self.height = lay.width, lay.height
+        self.left, self.right, self.top, self.bottom = lay.left, lay.right, lay.top, lay.bottom + self.extra_bottom
 
     @property
     def pw(self) -> float:
@@ -170,22 +105,28 @@ class _Axes:
         self.parts.append(
             f'<clipPath id="{uid}-clip"><rect x="{l}" y="{t}" width="{_f(pw)}" height="{_f(ph)}"/></clipPath>'
         )
-        self.parts.append(f'<rect class="plot-bg" x="{l}" y="{t}" width="{_f(pw)}" height="{_f(ph)}"/>')
+        # Fallback presentation attributes (a stylesheet overrides them) so that an SVG cut out of the page
+        # shows its plot area, grid and axes without the page's stylesheet.
+        self.parts.append(f'<rect class="plot-bg" x="{l}" y="{t}" width="{_f(pw)}" height="{_f(ph)}" fill="none"/>')
         if xticks:
-            for v in log_ticks(*self.xdom, base2=xbase2):
+            # as many ticks as labels of ~3.6 characters fit side by side: 9 on the page, fewer in print
+            for v in log_ticks(*self.xdom, base2=xbase2, max_ticks=max(3, int(pw / (3.6 * self.layout.font)))):
                 px = self.x(v)
-                self.parts.append(f'<line class="grid" x1="{_f(px)}" y1="{t}" x2="{_f(px)}" y2="{_f(t + ph)}"/>')
+                self.parts.append(
+                    f'<line class="grid" x1="{_f(px)}" y1="{t}" x2="{_f(px)}" y2="{_f(t + ph)}" stroke="#bbb"/>')
                 self.parts.append(
                     f'<text class="tick x" x="{_f(px)}" y="{_f(t + ph + 16)}" text-anchor="middle">'
                     f"{escape(format_tick(v))}</text>"
                 )
         for v in log_ticks(*self.ydom, max_ticks=7):
             py = self.y(v)
-            self.parts.append(f'<line class="grid" x1="{l}" y1="{_f(py)}" x2="{_f(l + pw)}" y2="{_f(py)}"/>')
+            self.parts.append(
+                f'<line class="grid" x1="{l}" y1="{_f(py)}" x2="{_f(l + pw)}" y2="{_f(py)}" stroke="#bbb"/>')
             self.parts.append(
                 f'<text class="tick y" x="{l - 6}" y="{_f(py + 4)}" text-anchor="end">{escape(format_tick(v))}</text>'
             )
-        self.parts.append(f'<rect class="axis" x="{l}" y="{t}" width="{_f(pw)}" height="{_f(ph)}" fill="none"/>')
+        self.parts.append(
+            f'<rect class="axis" x="{l}" y="{t}" width="{_f(pw)}" height="{_f(ph)}" fill="none" stroke="#888"/>')
         self.parts.append(
             f'<text class="label x" x="{_f(l + pw / 2)}" y="{self.height - 12}" text-anchor="middle">'
             f"{escape(xlabel)}</text>"
@@ -195,43 +136,66 @@ class _Axes:
             f"{escape(ylabel)}</text>"
         )
 
-    def legend(self, entries: list[tuple[str, str, str]], y0: float | None = None) -> None:
-        """entries: (kind, colour, label); kind is 'line', 'dash', 'band', 'dot', 'ring' or 'rect'."""
-        x0 = self.width - self.right + 14
-        y = self.top + 6 if y0 is None else y0
-        for kind, color, label in entries:
+    def legend(self, entries: list[tuple[str, str, str]]) -> None:
+        """entries: (kind, colour, label); kind is 'line', 'dash', 'band', 'dot', 'ring' or 'rect'.
+
+        One per row right of the plot; or, with ``layout.legend_below``, in as many columns as fit under
+        it, the chart growing to hold them: a standalone figure's legend is inside its viewBox.
+        """
+        lay = self.layout
+        if lay.legend_below:
+            col = 28 + 0.62 * lay.font * max((len(_short(e[2], 22)) for e in entries), default=0) + 8
+            cols = max(1, int((self.width - 8) // col))
+            spots = [(8 + (i % cols) * col, self.height + 6 + (i // cols) * lay.legend_row)
+                     for i in range(len(entries))]
+            self.legend_height = spots[-1][1] + 10 - self.height if spots else 0.0
+        else:
+            spots = [(self.width - self.right + 14, self.top + 6 + i * lay.legend_row) for i in range(len(entries))]
+        for (kind, color, label), (x0, y) in zip(entries, spots):
+            x1 = _f(x0 + 22)
             if kind in ("line", "dash"):
+                # the dashed entry is the slope guide: its class lets a theme colour it as the guide
                 dash = ' stroke-dasharray="6 4"' if kind == "dash" else ""
                 self.parts.append(
-                    f'<line class="legend-mark" x1="{x0}" y1="{_f(y)}" x2="{x0 + 22}" y2="{_f(y)}" '
-                    f'stroke="{color}" stroke-width="2.5"{dash}/>'
+                    f'<line class="legend-mark{" guide-mark" if dash else ""}" x1="{_f(x0)}" y1="{_f(y)}" x2="{x1}" '
+                    f'y2="{_f(y)}" stroke="{color}" stroke-width="2.5"{dash}/>'
                 )
             elif kind == "band":
                 self.parts.append(
-                    f'<rect class="legend-mark" x="{x0}" y="{_f(y - 5)}" width="22" height="10" '
+                    f'<rect class="legend-mark" x="{_f(x0)}" y="{_f(y - 5)}" width="22" height="10" '
                     f'fill="{color}" fill-opacity="0.25"/>'
                 )
             elif kind == "rect":
                 self.parts.append(
-                    f'<rect class="legend-mark" x="{x0 + 5}" y="{_f(y - 6)}" width="12" height="12" fill="{color}"/>'
+                    f'<rect class="legend-mark" x="{_f(x0 + 5)}" y="{_f(y - 6)}" width="12" height="12" '
+                    f'fill="{color}"/>'
                 )
             elif kind == "ring":
                 self.parts.append(
-                    f'<line class="legend-mark" x1="{x0}" y1="{_f(y)}" x2="{x0 + 22}" y2="{_f(y)}" '
+                    f'<line class="legend-mark frontier-mark" x1="{_f(x0)}" y1="{_f(y)}" x2="{x1}" y2="{_f(y)}" '
                     f'stroke="{color}" stroke-width="6" stroke-opacity="0.45" stroke-linecap="round"/>'
                 )
             else:
-                self.parts.append(f'<circle class="legend-mark" cx="{x0 + 11}" cy="{_f(y)}" r="4" fill="{color}"/>')
+                self.parts.append(
+                    f'<circle class="legend-mark" cx="{_f(x0 + 11)}" cy="{_f(y)}" r="4" fill="{color}"/>')
             title = f"<title>{escape(label)}</title>" if len(label) > 22 else ""
             self.parts.append(
-                f'<text class="legend-label" x="{x0 + 28}" y="{_f(y + 4)}">{title}{escape(_short(label, 22))}</text>'
+                f'<text class="legend-label" x="{_f(x0 + 28)}" y="{_f(y + 4)}">'
+                f"{title}{escape(_short(label, 22))}</text>"
             )
-            y += 19
 
     def svg(self, uid: str, cls: str, aria: str, extra_attrs: str = "") -> str:
+        lay, h = self.layout, self.height + self.legend_height
+        own = ""
+        if lay.style:  # standalone: namespaced, sized for print, its own stylesheet and a light background
+            size = f' width="{lay.width_in:g}in" height="{lay.width_in * h / self.width:.3f}in"' if lay.width_in else ""
+            extra_attrs = f' xmlns="http://www.w3.org/2000/svg"{size}{extra_attrs}'
+            own = (f'<style>{lay.style}</style>'
+                   f'<rect class="figure-bg" width="{self.width}" height="{_f(h)}" fill="#fff"/>')
         return (
-            f'<svg id="{uid}" class="chart {cls}" viewBox="0 0 {self.width} {self.height}" role="img" '
-            f'aria-label="{escape(aria)}"{extra_attrs}>'
+            f'<svg id="{uid}" class="chart {cls}" viewBox="0 0 {self.width} {_f(h)}" role="img" '
+            f'aria-label="{escape(aria)}" font-family="sans-serif" font-size="{lay.font:g}"{extra_attrs}>'
+            + own
             + "".join(self.parts)
             + "</svg>"
         )
@@ -297,6 +261,7 @@ def line_plot_svg(
     guide_label: str = "slope −½ (∝ 1/√N)",
     xbase2: bool = False,
     extra_attrs: str = "",
+    layout: Layout = PAGE,
 ) -> str:
     """Log-log lines (one ``<path class="series">`` per series), bands and a slope guide."""
     xs = [v for s in series for v in s.x]
@@ -307,7 +272,7 @@ def line_plot_svg(
     xdom, ydom = log_domain(xs), log_domain(ys)
     if xdom is None or ydom is None:
         return f'<p class="note">No positive values to plot for {escape(ylabel)}.</p>'
-    ax = _Axes(xdom, ydom)
+    ax = _Axes(xdom, ydom, layout)
     ax.frame(uid, xlabel, ylabel, xbase2=xbase2)
     clip = f'clip-path="url(#{uid}-clip)"'
     for s in series:
@@ -320,7 +285,8 @@ def line_plot_svg(
         ax.parts.append(
             f'<path class="guide" data-slope="{guide_slope:g}" '
             f'd="M {_f(ax.x(10**lx0))} {_f(ax.y(10**ly0))} L {_f(ax.x(10**lx1))} {_f(ax.y(10**ly1))}" '
-            f'fill="none" stroke-dasharray="6 4" {clip}><title>{escape(guide_label)}</title></path>'
+            f'fill="none" stroke="#888" stroke-width="1.6" stroke-dasharray="6 4" {clip}>'
+            f"<title>{escape(guide_label)}</title></path>"
         )
     for s in series:
         pts = [(x, y, (s.labels or [None] * len(s.x))[i]) for i, (x, y) in enumerate(zip(s.x, s.y)) if _usable(x, y)]
@@ -363,19 +329,21 @@ def scatter_svg(
     xlabel: str,
     ylabel: str,
     extra_attrs: str = "",
+    layout: Layout = PAGE,
 ) -> str:
     """Log-log scatter with the Pareto frontier (lower x and lower y are better) drawn and marked."""
     pts = [p for p in points if _usable(p.x, p.y)]
     xdom, ydom = log_domain([p.x for p in pts]), log_domain([p.y for p in pts])
     if not pts or xdom is None or ydom is None:
         return f'<p class="note">No positive values to plot for {escape(ylabel)}.</p>'
-    ax = _Axes(xdom, ydom)
+    ax = _Axes(xdom, ydom, layout)
     ax.frame(uid, xlabel, ylabel)
     clip = f'clip-path="url(#{uid}-clip)"'
     front = pareto_front([p.x for p in pts], [p.y for p in pts])
     if front:
         d = " L ".join(f"{_f(ax.x(pts[i].x))} {_f(ax.y(pts[i].y))}" for i in front)
-        ax.parts.append(f'<path class="frontier" d="M {d}" fill="none" {clip}/>')
+        ax.parts.append(f'<path class="frontier" d="M {d}" fill="none" stroke="#e0a800" stroke-width="7" '
+                        f'stroke-opacity="0.35" stroke-linecap="round" stroke-linejoin="round" {clip}/>')
     on_front = set(front)
     # Lines joining each renderer's own points, faint, so its trade-off curve reads.
     by_name: dict[str, list[Point]] = {}
@@ -423,18 +391,19 @@ def bars_svg(
     uid: str,
     ylabel: str,
     extra_attrs: str = "",
+    layout: Layout = PAGE,
 ) -> str:
     """Grouped bars on a log y axis; ``kinds`` = (label, colour) of each bar in a group.
 
     A value that is not positive (a bias² estimate below zero: no measurable
-    bias) or not finite gets no bar but a small "≤ 0" or "n/a" mark.
+    bias; see :func:`reports.tables.format_value`) or not finite gets no bar but a small "≈ 0" or "n/a" mark.
     """
     vals = [v for g in groups for v in g.values]
     ydom = log_domain(vals, pad=0.1)
     if ydom is None or not groups:
         return '<p class="note">No positive values to plot.</p>'
     ydom = (ydom[0] - 0.15 * (ydom[1] - ydom[0]), ydom[1])  # room below the smallest bar
-    ax = _Axes((0.0, 1.0), ydom, bottom=70)
+    ax = _Axes((0.0, 1.0), ydom, layout, extra_bottom=18)
     ax.frame(uid, "", ylabel, xticks=False)
     n, k = len(groups), len(kinds)
     slot = ax.pw / n
@@ -455,7 +424,7 @@ def bars_svg(
                     f"<title>{escape(g.name)}: {escape(label)} = {v:.3e}</title></rect>"
                 )
             else:
-                mark = "n/a" if v is None or not math.isfinite(v) else ("0" if v == 0 else "< 0")
+                mark = "n/a" if v is None or not math.isfinite(v) else ("0" if v == 0 else "≈ 0")
                 ax.parts.append(
                     f'<text class="bar-missing" x="{_f(bx + bw / 2)}" y="{_f(base - 6)}" text-anchor="middle">'
                     f"{mark}<title>{escape(g.name)}: {escape(label)} = {escape(str(v))}</title></text>"
@@ -468,7 +437,7 @@ def bars_svg(
             )
         ax.parts.append(
             f'<text class="tick x" x="{_f(cx)}" y="{_f(base + 18)}" text-anchor="middle">'
-            f"<title>{escape(g.name)}</title>{escape(_short(g.name, max(6, int(slot / 7.5))))}</text>"
+            f"<title>{escape(g.name)}</title>{escape(_short(g.name, max(6, int(slot / (0.65 * layout.font)))))}</text>"
         )
     ax.legend([("rect", color, label) for label, color in kinds])
     return ax.svg(uid, "bar-plot", ylabel, extra_attrs)

@@ -32,7 +32,7 @@ from harness.evaluate import metrics
 from harness.evaluate.regions import REGION_METRICS, nested_regions, region_masks
 from harness.workflows.converge import REGION_SPLIT, region_split
 from reports.images import png_data_uri, to_uint8
-from reports.tables import at_max_spp, column_label, format_value
+from reports.tables import at_max_spp, column_label, format_value, value_note
 
 #: Okabe-Ito colours without black (the report is dark) and grey (the overlay's background).
 REGION_COLORS = ("#E69F00", "#56B4E9", "#009E73", "#F0E442", "#0072B2", "#D55E00", "#CC79A7")
@@ -101,6 +101,8 @@ def _table(rows, colors: Mapping[str, str], renderer_colors: Mapping[str, str], 
             finite = v is not None and not pd.isna(v)
             flag = key == "mean_z" and finite and math.isfinite(v) and abs(v) > Z_FLAG
             title = f' title="|z| &gt; {Z_FLAG:g}: the region\'s mean differs by more than noise"' if flag else ""
+            if note := (value_note(key, v) if finite else ""):
+                title = f' title="{escape(note)}"'
             cells.append(f'<td data-key="{key}" data-sort="{repr(float(v)) if finite else ""}" '
                          f'class="num{" fail" if flag else ""}"{title}>'
                          f'{escape(format_value(key, v) if finite else "—")}</td>')

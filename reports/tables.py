@@ -28,17 +28,19 @@ from harness.evaluate import registry
 METRICS: dict[str, tuple[str, str, str | None]] = {
     k: (m.label, m.definition, m.better) for k, m in registry.METRICS.items()}
 
-# Summary table: (group title, column keys); columns with no value for any renderer are dropped.
+# Summary table: (group title, column keys); columns with no value for any renderer are dropped. The
+# decisive figures come first, on screen without scrolling the table: convergence slope, time to a target
+# error, efficiency, bias share; then the run and the metrics of the final image.
 TABLE_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("", ("renderer", "status", "version")),
-    ("run", ("spp", "seeds", "time_s")),
+    ("", ("renderer", "status")),
+    ("convergence", ("slope_rmse_spp", "slope_rmse_time", "time_to_*", "efficiency")),
+    ("bias / variance", ("bias2_fraction", "bias2", "variance")),
+    ("run", ("spp", "seeds", "time_s", "version")),
     ("error against the reference", (
         "rmse", "rel_mse", "rel_mse_trimmed", "psnr", "ssim", "delta_e2000_mean", "delta_e2000_p95",
-        "delta_e2000_max", "delta_e2000_frac_gt_2_3", "mean_radiance_rel_error")),
+        "delta_e2000_max", "delta_e2000_frac_gt_2_3", "flip_mean", "mean_radiance_rel_error")),
     ("broken pixels", ("nan_count", "inf_count", "negative_count")),
     ("noise yardsticks", ("noise_*",)),
-    ("convergence", ("slope_rmse_spp", "slope_rmse_time", "efficiency", "time_to_*")),
-    ("bias / variance", ("bias2", "variance", "bias2_fraction")),
 )
 _ALWAYS = {"renderer", "status", "spp", "seeds", "time_s"}
 
@@ -111,7 +113,28 @@ def format_value(key: str, v: Any) -> str:
         return f"{v:+.2f}"
     if key.startswith("delta_e2000") or key.startswith("noise_delta_e2000"):
         return f"{v:.2f}"
+    if _is_negative_bias2(key, v):
+        return "≈ 0"  # see value_note
     return _generic(v)
+
+
+def _is_negative_bias2(key: str, v: float) -> bool:
+    return key.endswith("bias2") and v < 0
+
+
+def value_note(key: str, v: Any) -> str:
+    """A cell's tooltip when its text alone would mislead: a negative bias² estimate; else "".
+
+    bias² is estimated as the squared error of the mean over seeds less the noise that mean still
+    has (and the reference's own variance): unbiased, so for a renderer without bias it falls below
+    zero about half the time. A true bias² cannot be negative, so the cell says "≈ 0" (no bias
+    measurable above the noise) rather than "-8.6e-06", which reads as a value, or "< 0", which reads
+    as an impossibility; the tooltip keeps the raw estimate, and the column sorts on it.
+    """
+    if not _finite(v) or not _is_negative_bias2(key, float(v)):
+        return ""
+    raw = "−" + f"{-float(v):.2g}"  # a typographic minus for the sign; the exponent's stays ASCII (−8.6e-06)
+    return f"estimate {raw}: below zero by noise alone; no bias measurable above the noise"
 
 
 def parse_time_to(key: str) -> tuple[str, str, float] | None:
@@ -335,6 +358,7 @@ def _summary_rows(runs, summary, names, info, thresholds) -> tuple[list[dict], l
             elif _is_number(v) and not math.isnan(float(v)):
                 cell["sort"] = repr(float(v))
                 cell["cls"] = "num"
+                cell["title"] = value_note(key, v)
                 ci = row.get(key + "_ci")
                 if key.startswith("slope_") and _finite(ci):
                     cell["text"] += f" ± {float(ci):.2f}"

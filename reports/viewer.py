@@ -21,7 +21,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from reports import plots
+from reports import plotmath
 from reports.colormaps import table_hex
 from reports.images import (
     DELTA_E_RANGE,
@@ -115,7 +115,7 @@ def _legends() -> list[dict]:
         {"mode": "relmse", "title": "relMSE per pixel, (x−r)²/(r²+0.01), log scale, clipped to 10⁻⁶…1",
          "uri": colorbar_data_uri(MAP_COLORMAPS["relmse"]), "cmap": MAP_COLORMAPS["relmse"],
          "ticks": ticks(rl_lo, rl_hi, np.arange(rl_lo, rl_hi + 0.5),
-                        lambda v: plots.format_tick(10.0**v)),
+                        lambda v: plotmath.format_tick(10.0**v)),
          "marker": None,
          "note": "relMSE 10⁻² is a 10 % relative error, 10⁻⁴ a 1 % one."},
         {"mode": "flip", "title": "FLIP per pixel (HDR-FLIP on linear radiance)",

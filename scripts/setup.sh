@@ -25,6 +25,8 @@ say() { printf 'setup: %s\n' "$*" >&2; }
 # libllvm19: Mitsuba's fast llvm_ad_rgb variant (needs LLVM >= 17; without it
 #            Mitsuba falls back to scalar_rgb).
 # libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libosmesa6: headless OpenGL for pyrender.
+# libcairo2: cairosvg's drawing library, for the report's PDF and PNG figures (without it the
+#            report still writes its SVG figures, and says why the others are missing).
 need_pkgs=()
 have_lib() { ldconfig -p 2>/dev/null | grep -q "$1"; }
 have_llvm17() { ls /usr/lib/*/libLLVM*.so* /usr/lib/llvm-*/lib/libLLVM*.so* 2>/dev/null \
@@ -35,6 +37,7 @@ have_lib 'libGL\.so\.1' || need_pkgs+=(libgl1)
 have_lib 'libEGL_mesa\.so\.0' || need_pkgs+=(libegl-mesa0)
 ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || need_pkgs+=(libgl1-mesa-dri)
 have_lib 'libOSMesa\.so' || need_pkgs+=(libosmesa6)
+have_lib 'libcairo\.so\.2' || need_pkgs+=(libcairo2)
 # chromium: the report's browser test (Playwright drives Debian's build;
 # Playwright's own browser download is not used).
 [[ -n $TESTS ]] && ! command -v chromium >/dev/null 2>&1 && need_pkgs+=(chromium)

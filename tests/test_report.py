@@ -24,8 +24,8 @@ from reports import images as report_images
 from reports.charts import SINGLE_SPP_NOTE
 from reports.html import write_report
 from reports.images import DELTA_E_RANGE, apply_colormap, f16_base64, f16_decode, rel_mse_map
-from reports.tables import check_threshold, column_label, format_value, parse_time_to
-from reports.plots import format_tick, log_ticks, pareto_front
+from reports.tables import check_threshold, column_label, format_value, parse_time_to, value_note
+from reports.plotmath import format_tick, log_ticks, pareto_front
 
 W = H = 32
 OK_NAMES = ("alpha-tracer", "beta-photons", "gamma-raster")
@@ -113,7 +113,7 @@ def case():
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory, case):
-    path = rf.write_case(tmp_path_factory.mktemp("rep") / "sub" / "dir" / "report.html", case)
+    path = rf.write_case(tmp_path_factory.mktemp("rep") / "sub" / "dir" / "report.html", case, figures=True)
     text = path.read_text(encoding="utf-8")
     return {"path": path, "text": text, "parser": _parse(text)}
 
@@ -126,7 +126,9 @@ def report(tmp_path_factory, case):
 def test_file_written_atomically_into_new_folders(report):
     path = report["path"]
     assert isinstance(path, Path) and path.is_file() and path.name == "report.html"
-    assert [p.name for p in path.parent.iterdir()] == ["report.html"]  # no temp file left behind
+    # no temp file left behind, beside the report or among its figures
+    assert sorted(p.name for p in path.parent.iterdir()) == ["figures", "report.html"]
+    assert not [p.name for p in (path.parent / "figures").iterdir() if p.name.startswith(".")]
     assert report["text"].lstrip().lower().startswith("<!doctype html>")
 
 
@@ -140,6 +142,8 @@ def test_self_contained(report):
     for tag, a in parser.tags:
         for key in ("src", "href"):
             if key in a:
+                if tag == "a" and key == "href" and re.fullmatch(r"figures/[\w.-]+\.(svg|pdf|png)", a[key]):
+                    continue  # a download link to a figure file beside the report: nothing the page loads
                 assert a[key].startswith("data:") or a[key].startswith("#"), (tag, a[key][:60])
     for a, _ in parser.scripts:
         assert "src" not in a  # every script is inline
@@ -630,3 +634,157 @@ def test_axis_ticks():
     assert len(log_ticks(0.0, math.log10(2**20), base2=True)) <= 9
     assert log_ticks(-0.2, 0.4) == [1.0, 2.0]
     assert format_tick(1e-6) == "10⁻⁶" and format_tick(2e-5) == "2×10⁻⁵" and format_tick(0.01) == "0.01"
+
+
+# --------------------------------------------------------------------------
+# Standalone figures, table order, negative bias², title
+# --------------------------------------------------------------------------
+
+SVG_NS = "{http://www.w3.org/2000/svg}"
+FIGURE_STEMS = [f"{kind}-{metric}" for kind in ("convergence-spp", "convergence-time", "speed-accuracy")
+                for metric in ("rmse", "delta_e2000_mean", "rel_mse")] + ["bias-variance"]
+
+
+def _figure_root(report, stem: str):
+    import xml.etree.ElementTree as ET
+
+    return ET.parse(report["path"].parent / "figures" / f"{stem}.svg").getroot()  # parses as XML on its own
+
+
+def _viewbox(root) -> tuple[float, float]:
+    x0, y0, w, h = map(float, root.get("viewBox").split())
+    assert (x0, y0) == (0, 0)
+    return w, h
+
+
+def test_figures_are_written_and_linked(report):
+    from reports.figures import COLUMN_WIDTH_IN, PNG_DPI, _converter
+
+    folder, text = report["path"].parent / "figures", report["text"]
+    for stem in FIGURE_STEMS:
+        assert (folder / f"{stem}.svg").is_file(), stem
+        assert f'<a href="figures/{stem}.svg" download>SVG</a>' in text, stem
+    if _converter()[0] is None:
+        pytest.skip(f"PDF/PNG figures not checked: {_converter()[1]}")
+    for stem in FIGURE_STEMS:
+        assert (folder / f"{stem}.pdf").read_bytes().startswith(b"%PDF-"), stem
+        w, h = _viewbox(_figure_root(report, stem))
+        with Image.open(folder / f"{stem}.png") as im:
+            im.load()
+            rgb = np.asarray(im.convert("RGB"), dtype=np.float64)
+        assert rgb.shape[1] == pytest.approx(COLUMN_WIDTH_IN * PNG_DPI, abs=1), stem  # column width at print dpi
+        assert rgb.shape[1] / rgb.shape[0] == pytest.approx(w / h, rel=0.01), stem
+        luminance = rgb.mean(axis=2)
+        assert np.median(luminance) > 240 and luminance[:4, :4].min() > 250, stem  # white, not transparent/black
+        assert (luminance < 80).mean() > 0.002, stem  # dark text and lines drawn on it
+        for fmt in ("PDF", "PNG"):
+            assert f'<a href="figures/{stem}.{fmt.lower()}" download>{fmt}</a>' in text, (stem, fmt)
+    assert 'id="figures-note"' not in text
+
+
+def test_standalone_svg_styles_itself_for_print(report, case):
+    from reports.figures import COLUMN_WIDTH_IN
+
+    root = _figure_root(report, "convergence-spp-rmse")
+    assert root.tag == f"{SVG_NS}svg"
+    w, h = _viewbox(root)
+    assert root.get("width") == f"{COLUMN_WIDTH_IN:g}in"
+    assert float(root.get("height").removesuffix("in")) == pytest.approx(COLUMN_WIDTH_IN * h / w, abs=1e-3)
+    style = root.find(f"{SVG_NS}style").text
+    for cls in (".plot-bg", ".grid", ".axis", ".guide", "text"):
+        assert cls in style, cls
+    points = [float(v) * COLUMN_WIDTH_IN * 72 / w for v in re.findall(r"font-size:([\d.]+)px", style)]
+    assert points and min(points) >= 7, points  # readable in print at column width
+    first = [el for el in root if el.tag != f"{SVG_NS}style"][0]
+    assert first.get("class") == "figure-bg" and first.get("fill") == "#fff" and float(first.get("height")) == h
+    series = root.findall(f".//{SVG_NS}path[@class='series']")
+    assert [s.get("data-renderer") for s in series] == list(OK_NAMES)
+    assert len(root.findall(f".//{SVG_NS}path[@class='guide']")) == 1
+    labels = root.findall(f".//{SVG_NS}text[@class='legend-label']")
+    assert [el.text for el in labels] == [*OK_NAMES, "min–max over seeds", "slope −½ (∝ 1/√N)"]
+    plot_bottom = max(float(r.get("y")) + float(r.get("height")) for r in root.iter(f"{SVG_NS}rect")
+                      if r.get("class") == "axis")
+    for el in labels:  # below the plot, inside the viewBox, with room for the longest label's estimated width
+        x, y = float(el.get("x")), float(el.get("y"))
+        assert plot_bottom < y < h and 0 < x and x + 0.62 * 13 * len(el.text) <= w, (el.text, x, y, w, h)
+
+
+def test_figures_without_converter_are_svg_only_and_say_so_once(tmp_path, case, monkeypatch, capsys):
+    from reports import figures
+
+    monkeypatch.setattr(figures, "_converter", lambda: (None, "cairosvg is not installed (test)"))
+    monkeypatch.setattr(figures, "_said", set())
+    stale = tmp_path / "a" / "figures" / "speed-accuracy-gone.pdf"
+    mine = tmp_path / "a" / "figures" / "notes.txt"
+    stale.parent.mkdir(parents=True)
+    stale.write_bytes(b"%PDF-")
+    mine.write_text("mine")
+    paths = [rf.write_case(tmp_path / d / "report.html", case, figures=True) for d in ("a", "b")]
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("cbox: note: ") and "cairosvg is not installed (test)" in err[0]
+    written = sorted(p.name for p in (paths[0].parent / "figures").iterdir())
+    assert {n.rsplit(".", 1)[1] for n in written} == {"svg", "txt"} and "notes.txt" in written  # stale PDF gone
+    text = paths[0].read_text(encoding="utf-8")
+    assert "cairosvg is not installed (test)" in text and 'id="figures-note"' in text
+    assert 'href="figures/convergence-spp-rmse.svg"' in text and 'href="figures/convergence-spp-rmse.pdf"' not in text
+
+
+def test_summary_leads_with_the_decisive_columns(report):
+    keys = [a["data-key"] for a in report["parser"].find("th") if "data-key" in a]
+    decisive = ["slope_rmse_spp", "slope_rmse_time", "time_to_delta_e2000_mean_le_1", "time_to_rel_mse_le_0.001",
+                "efficiency", "bias2_fraction"]
+    assert keys[:2] == ["renderer", "status"] and keys[2:2 + len(decisive)] == decisive, keys
+    assert keys.index("bias2_fraction") < min(keys.index(k) for k in ("spp", "time_s", "rmse", "ssim", "version"))
+
+
+def test_negative_bias2_reads_approximately_zero(case):
+    from reports.html import render_html
+
+    assert format_value("bias2", -8.6e-06) == "≈ 0" and format_value("region.walls.bias2", -1e-9) == "≈ 0"
+    assert format_value("bias2", 8.6e-06) == "8.600e-06" and format_value("variance", -1e-4) == "-1.000e-04"
+    assert "−8.6e-06" in value_note("bias2", -8.6e-06) and "noise" in value_note("bias2", -8.6e-06)
+    assert value_note("bias2", 8.6e-06) == "" and value_note("bias2", float("nan")) == ""
+    summary = case["summary"].copy()
+    summary.loc[summary["renderer"] == "alpha-tracer", "bias2"] = -8.6e-06
+    kwargs = {k: case[k] for k in ("scene", "reference", "runs", "images", "thresholds", "provenance")}
+    text = render_html(**kwargs, summary=summary)
+    cell = _cell(text, "alpha-tracer", "bias2")
+    assert cell["text"] == "≈ 0" and float(cell["sort"]) == -8.6e-06  # sorts on the raw estimate
+    row = re.search(r'data-renderer="alpha-tracer">(.*?)</tr>', text, re.S).group(1)
+    assert re.search(r'<td data-key="bias2" [^>]*title="estimate −8.6e-06: below zero by noise', row)
+    assert "-8.600e-06" not in row  # the raw estimate is not printed as a value
+    assert _cell(text, "beta-photons", "bias2")["text"] != "≈ 0"
+
+
+def test_title_option_reaches_the_report(tmp_path, capsys, monkeypatch):
+    """`--title` of compare, converge and report is the title write_experiment_report gets (which puts it in
+    the page: test_title_names_and_json_escaped). In-process; the report writer records instead of writing,
+    and converge's experiment is stubbed: only the options' wiring is under test here."""
+    import pandas as pd
+
+    import reports.experiment
+    from harness.cli.app import main
+    from harness.workflows import converge as converge_workflow
+
+    titles = []
+
+    def record(out, scene, reference, thresholds=None, sections=(), title=None, **_):
+        titles.append(title)
+        return Path(out) / "report.html"
+
+    def cbox(*args: str) -> None:
+        with pytest.raises(SystemExit) as done:
+            main(list(args))
+        assert done.value.code == 0, capsys.readouterr().err
+
+    monkeypatch.setattr(reports.experiment, "write_experiment_report", record)
+    monkeypatch.setattr(converge_workflow, "run_experiment",
+                        lambda *a, **k: pd.DataFrame({"renderer": [], "status": [], "reason": []}))
+    out = tmp_path / "cmp"
+    cbox("compare", "--scene", "cornell-box", "-r", "user_renderers:FlatGrey", "--spp", "1", "--out", str(out),
+         "--title", "Paper <figure> 1")
+    cbox("report", str(out), "--title", "Rebuilt")
+    cbox("report", str(out))
+    cbox("converge", "--scene", "cornell-box", "-r", "user_renderers:FlatGrey", "--spp", "1,2", "--seeds", "1",
+         "--out", str(tmp_path / "conv"), "--title", "Converged")
+    assert titles == ["Paper <figure> 1", "Rebuilt", None, "Converged"]

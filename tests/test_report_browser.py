@@ -3,17 +3,21 @@
 Drives Debian's ``chromium`` with Playwright (``pip install playwright``; the
 browser comes from ``apt-get install chromium``, as ``playwright install``
 cannot download one here). Skipped, with the reason, when either is missing.
-A full-page screenshot is saved to ``test-output/report_browser.png``.
+A full-page screenshot is saved to ``test-output/report_browser.png``. Also a
+standalone figure from ``figures/`` opened by itself, the light and dark themes
+and their toggle, the print stylesheet and the navigation links.
 """
 
 from __future__ import annotations
 
+import io
 import os
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
 
 import report_fixtures as rf
 
@@ -40,7 +44,7 @@ def case():
 
 @pytest.fixture(scope="module")
 def report_url(tmp_path_factory, case):
-    path = rf.write_case(tmp_path_factory.mktemp("browser") / "report.html", case)
+    path = rf.write_case(tmp_path_factory.mktemp("browser") / "report.html", case, figures=True)
     return path.as_uri()
 
 
@@ -259,3 +263,138 @@ def test_plots_present_and_metric_selector(page, case):
     assert page.is_visible("#conv-spp-delta_e2000_mean") and not page.is_visible("#conv-spp-rmse")
     assert page.is_visible("#pareto-delta_e2000_mean") and not page.is_visible("#pareto-rmse")
     _no_errors(page)
+
+
+# --------------------------------------------------------------------------
+# Standalone figures, themes, print, navigation
+# --------------------------------------------------------------------------
+
+
+def _rgb(css: str) -> tuple[float, ...]:
+    """'rgb(1, 2, 3)' or 'rgba(1, 2, 3, 0.5)' -> (1, 2, 3)."""
+    return tuple(float(v) for v in css[css.index("(") + 1:css.index(")")].split(",")[:3])
+
+
+def _lum(css: str) -> float:
+    r, g, b = _rgb(css)
+    return 0.2126 * r + 0.7152 * g + 0.0722 * b
+
+
+def _context_page(browser, url: str, **options):
+    ctx = browser.new_context(viewport={"width": 1400, "height": 1000}, device_scale_factor=1, **options)
+    pg = ctx.new_page()
+    pg.errors = []
+    pg.on("pageerror", lambda e: pg.errors.append(f"pageerror: {e}"))
+    pg.goto(url, wait_until="load")
+    return ctx, pg
+
+
+_FIGURE_PROBE = """() => {
+  const svg = document.documentElement, vb = svg.viewBox.baseVal, r = svg.getBoundingClientRect();
+  const shown = el => { const s = getComputedStyle(el);
+    return s.display !== 'none' && s.visibility !== 'hidden' && parseFloat(s.opacity) > 0; };
+  const pick = sel => Array.from(svg.querySelectorAll(sel)).map(el => { const b = el.getBBox();
+    return {box: [b.x, b.y, b.x + b.width, b.y + b.height], shown: shown(el), stroke: getComputedStyle(el).stroke,
+            text: el.textContent}; });
+  return {tag: svg.tagName, viewBox: [vb.x, vb.y, vb.x + vb.width, vb.y + vb.height],
+          client: [r.left, r.top, r.width, r.height], series: pick('path.series'), guide: pick('path.guide'),
+          labels: pick('text.legend-label'), marks: pick('.legend-mark'),
+          plotBg: getComputedStyle(svg.querySelector('.plot-bg')).fill,
+          labelFill: getComputedStyle(svg.querySelector('text.legend-label')).fill};
+}"""
+
+
+def test_standalone_figure_renders_alone(browser, report_url, case):
+    """A figure file opened by itself (no report stylesheet; the browser set to dark) shows its lines, guide
+    and legend on a light background, all within its viewBox."""
+    url = report_url.rsplit("/", 1)[0] + "/figures/convergence-spp-rmse.svg"
+    ctx, pg = _context_page(browser, url, color_scheme="dark")
+    try:
+        f = pg.evaluate(_FIGURE_PROBE)
+        x0, y0, x1, y1 = f["viewBox"]
+
+        def meets_view(b):  # along a non-zero length (a flat series' box has no height)
+            w, h = min(b[2], x1) - max(b[0], x0), min(b[3], y1) - max(b[1], y0)
+            return w >= 0 and h >= 0 and max(w, h) > 0
+
+        assert f["tag"] == "svg" and len(f["series"]) == len(case["images"]) and len(f["guide"]) == 1, f
+        for el in f["series"] + f["guide"]:  # drawn, stroked, and (at least partly: the guide is clipped) in view
+            assert el["shown"] and el["stroke"] != "none" and meets_view(el["box"]), el
+        for el in f["series"]:
+            assert x0 <= el["box"][0] and el["box"][2] <= x1 and y0 <= el["box"][1] and el["box"][3] <= y1, el
+        assert [el["text"] for el in f["labels"]][:len(case["images"])] == list(case["images"])
+        assert len(f["marks"]) == len(f["labels"]) == len(case["images"]) + 2  # renderers, band, guide
+        for el in f["labels"] + f["marks"]:  # the whole legend inside the figure
+            b = el["box"]
+            assert el["shown"] and b[2] > b[0] and (b[3] > b[1] or not el["text"]), el  # a line mark is flat
+            assert x0 <= b[0] and b[2] <= x1 and y0 <= b[1] and b[3] <= y1, (el, f["viewBox"])
+        assert _lum(f["plotBg"]) > 250 and _lum(f["labelFill"]) < 60, (f["plotBg"], f["labelFill"])
+        left, top, width, height = f["client"]
+        shot = Image.open(io.BytesIO(pg.screenshot(clip={"x": left, "y": top, "width": width, "height": height})))
+        lum = np.asarray(shot.convert("L"), dtype=np.float64)
+        assert np.median(lum) > 240 and lum[:3, :3].min() > 250, "the figure's background should be light"
+        assert (lum < 100).mean() > 0.002, "dark text and lines on it"
+        assert pg.errors == []
+    finally:
+        ctx.close()
+
+
+def _background(pg) -> float:
+    return _lum(pg.evaluate("getComputedStyle(document.documentElement).backgroundColor"))
+
+
+@pytest.mark.parametrize("scheme", ["light", "dark"])
+def test_colour_scheme_followed_and_toggle_overrides_it(browser, report_url, scheme):
+    ctx, pg = _context_page(browser, report_url, color_scheme=scheme)
+    try:
+        light = _background(pg) > 200
+        assert light == (scheme == "light") and (_background(pg) < 60) == (scheme == "dark"), _background(pg)
+        guide = pg.evaluate("""() => { const s = el => getComputedStyle(document.querySelector(el));
+            return [s('#conv-spp-rmse .plot-bg').fill, s('#conv-spp-rmse path.guide').stroke,
+                    s('#conv-spp-rmse .guide-mark').stroke]; }""")
+        assert abs(_lum(guide[0]) - _lum(guide[1])) > 80 and guide[1] == guide[2], guide  # the guide shows
+        pg.click("#theme-toggle")
+        assert (_background(pg) > 200) == (not light) and (_background(pg) < 60) == light
+        assert pg.evaluate("document.documentElement.getAttribute('data-theme')") == ("dark" if light else "light")
+        pg.reload(wait_until="load")  # remembered
+        assert (_background(pg) > 200) == (not light)
+        assert pg.errors == []
+    finally:
+        ctx.close()
+
+
+def test_print_is_light_without_sticky_bar_or_controls(browser, report_url):
+    ctx, pg = _context_page(browser, report_url, color_scheme="dark")
+    try:
+        assert _background(pg) < 60 and pg.is_visible("nav.toc") and pg.is_visible("#theme-toggle")
+        pg.emulate_media(media="print")
+        assert _background(pg) > 240
+        for selector in ("nav.toc", "#theme-toggle", ".metric-select", "#image-viewer .controls", ".downloads"):
+            assert not pg.is_visible(selector), selector
+        assert _lum(pg.evaluate("getComputedStyle(document.querySelector('#conv-spp-rmse .plot-bg')).fill")) > 240
+        fits = pg.evaluate("""() => { const t = document.getElementById('summary-table').getBoundingClientRect();
+            return t.right <= document.body.getBoundingClientRect().right + 1; }""")
+        assert fits, "the summary table should fit the printed page's width"
+    finally:
+        ctx.close()
+
+
+def test_navigation_link_lands_below_the_sticky_bar(browser, report_url):
+    ctx, pg = _context_page(browser, report_url, reduced_motion="reduce")
+    try:
+        for target in ("convergence", "speed-accuracy", "renderers"):
+            pg.click(f'nav.toc a[href="#{target}"]')
+            nav, h2 = pg.evaluate(f"""() => [document.querySelector('nav.toc').getBoundingClientRect().bottom,
+                document.querySelector('#{target} h2').getBoundingClientRect().top]""")
+            assert nav <= h2 < nav + 80, (target, nav, h2)
+    finally:
+        ctx.close()
+
+
+def test_decisive_columns_on_screen_without_scrolling(page):
+    widths = page.evaluate("""() => { const th = k => document.querySelector(`#summary-table th[data-key="${k}"]`);
+        return {page: document.documentElement.scrollWidth, view: window.innerWidth,
+                wrap: document.querySelector('#summary .table-wrap').getBoundingClientRect().right,
+                share: th('bias2_fraction').getBoundingClientRect().right}; }""")
+    assert widths["page"] <= widths["view"], f"the page scrolls sideways: {widths}"
+    assert widths["share"] <= widths["wrap"], f"the bias share column is off screen: {widths}"

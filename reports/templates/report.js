@@ -1,6 +1,35 @@
-/* cornell-harness report: sortable table, metric selectors and the HDR image viewer. No dependencies. */
+/* cornell-harness report: theme toggle, sortable table, metric selectors and the HDR image viewer. No dependencies. */
 (function () {
   'use strict';
+
+  // ---------------------------------------------------------------- theme
+  // The stylesheet follows the system's light/dark preference; the toggle overrides it with data-theme on
+  // <html>, remembered in localStorage where the browser allows it (some refuse storage to file:// pages).
+  var root = document.documentElement, THEME_KEY = 'cbox-report-theme';
+  var prefersDark = window.matchMedia ? window.matchMedia('(prefers-color-scheme: dark)') : null;
+  function currentTheme() {
+    return root.getAttribute('data-theme') || (prefersDark && prefersDark.matches ? 'dark' : 'light');
+  }
+  function labelToggle() {
+    var b = document.getElementById('theme-toggle');
+    if (!b) return;
+    var other = currentTheme() === 'dark' ? 'light' : 'dark';
+    b.textContent = other === 'light' ? '☀ light' : '☾ dark';
+    b.title = 'switch to the ' + other + ' theme';
+  }
+  function setTheme(theme) {
+    root.setAttribute('data-theme', theme);
+    try { localStorage.setItem(THEME_KEY, theme); } catch (e) { /* storage refused: this page only */ }
+    labelToggle();
+  }
+  try {
+    var saved = localStorage.getItem(THEME_KEY);
+    if (saved === 'light' || saved === 'dark') root.setAttribute('data-theme', saved);
+  } catch (e) { /* storage refused: follow the system */ }
+  var toggle = document.getElementById('theme-toggle');
+  if (toggle) toggle.addEventListener('click', function () { setTheme(currentTheme() === 'dark' ? 'light' : 'dark'); });
+  if (prefersDark && prefersDark.addEventListener) prefersDark.addEventListener('change', labelToggle);
+  labelToggle();
 
   // ---------------------------------------------------------------- sortable table
   function sortValue(td) {
