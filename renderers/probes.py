@@ -3,7 +3,8 @@
 The renderer ``probes``: :mod:`renderers.ddgi`'s volume (Majercik et al. 2019)
 on the shared toolkit. A render is
 
-1. **probe updates** (progress on stderr when it is a terminal): each
+1. **probe updates** (no progress bar of their own: the command running
+   the renderer reports progress, and ``--quiet`` must silence it): each
    traces ``rays_per_probe`` rays from every probe, lights their hits with
    next-event estimation plus the previous update's irradiance, and blends
    them into the probes' maps (:func:`update_probes`). The first ``bounces``
@@ -43,12 +44,10 @@ per-vertex layout, so images are bit-identical for any thread count.
 from __future__ import annotations
 
 import math
-import sys
 import time
 from typing import Sequence
 
 import numpy as np
-from tqdm import tqdm
 
 from harness.adapters.registry import RenderResult
 from harness.adapters.seeds import pass_key
@@ -122,7 +121,7 @@ class IrradianceProbes(ToolkitRenderer):
         grid = grid_of(scene, s)
         geom, setup_s = warmed_geometry(scene, lambda g: _warm_up(g, scene, grid, s))
         t0 = time.perf_counter()
-        volume = update_probes(geom, grid, seed, s, threads, progress=True)
+        volume = update_probes(geom, grid, seed, s, threads)
         probes_s = time.perf_counter() - t0
         result = render_image(scene, spp, seed, CameraPass(geom, scene, volume).trace, checkpoints, threads)
         result.time_s += probes_s
@@ -168,7 +167,7 @@ def volume_of(grid: ddgi.ProbeGrid, settings: dict) -> ddgi.Volume:
 
 
 def update_probes(geom: SceneGeometry, grid: ddgi.ProbeGrid, seed: int, settings: dict, threads: int,
-                  progress: bool = False, on_update=None) -> ddgi.Volume:
+                  on_update=None) -> ddgi.Volume:
     """The volume after ``bounces`` updates without history, then ``iterations`` blended ones, from black.
 
     ``on_update(k, volume)``, if given, sees the volume after each update k = 1, 2, ...
@@ -180,8 +179,6 @@ def update_probes(geom: SceneGeometry, grid: ddgi.ProbeGrid, seed: int, settings
     per_unit = probes_per_unit(probes, n, threads)
     ni, nd = settings["irradiance_texels"], settings["depth_texels"]
     bounces, updates = settings["bounces"], settings["bounces"] + settings["iterations"]
-    bar = tqdm(total=updates, desc="probe updates", unit="update", file=sys.stderr, dynamic_ncols=True,
-               leave=False, disable=None if progress else True)
     for k in range(updates):
         key = pass_key(seed, k, PROBE_STREAM)
         rotation = random_rotation(*(uniform(key, ROTATION_PATH, d) for d in range(3)))
@@ -200,10 +197,8 @@ def update_probes(geom: SceneGeometry, grid: ddgi.ProbeGrid, seed: int, settings
 
         run_units(range(0, probes, per_unit), work, reduce, threads)
         volume = ddgi.with_maps(volume, irradiance, moments)
-        bar.update(1)
         if on_update is not None:
             on_update(k + 1, volume)
-    bar.close()
     return volume
 
 

@@ -62,11 +62,17 @@ def test_report_has_every_renderer(tmp_path):
 
 
 def test_demo_writes_report(tmp_path):
+    """A short convergence run on cornell-box (spp 1 and 4, two seeds) leads; the caustics scene is a section."""
     proc = run_cbox("demo", "--out", str(tmp_path), "--spp", "4")
     assert proc.returncode == 0, proc.stderr
-    csv = pd.read_csv(tmp_path / "metrics.csv")
-    assert {"mitsuba", "pyrender"} <= set(csv["renderer"])
+    runs = pd.read_parquet(tmp_path / "results.parquet")
+    ok = runs[runs["status"] == "ok"]
+    assert {"mitsuba", "pyrender", "pathtracer"} <= set(ok["renderer"])
+    assert set(ok.loc[ok["renderer"] == "pathtracer", "seed"]) == {0, 1} and set(ok["spp"]) == {1, 4}
+    summary = pd.read_csv(tmp_path / "summary.csv").set_index("renderer")
+    assert summary.loc["pathtracer", "slope_rmse_spp"] < 0 and summary.loc["pathtracer", "variance"] > 0
     assert "report:" in proc.stderr and (tmp_path / "report.html").exists()
+    assert (tmp_path / "figures" / "bias-variance.svg").exists()  # the report's plots, as figures too
     # The caustics scene: its own full report, and a section of the main one that links to it.
     caustics = pd.read_csv(tmp_path / "cornell-box-caustics" / "metrics.csv")
     status = dict(zip(caustics["renderer"], caustics["status"]))
@@ -103,6 +109,7 @@ def test_compare_caustics_json_has_regions_and_skips_pyrender(tmp_path):
     for name in ("pathtracer", "mitsuba"):
         rec = recs[name]
         assert rec["status"] == "ok" and rec["nan_count"] == 0
+        assert isinstance(rec["settings"], dict) and isinstance(rec["scene_settings"], dict)  # objects, not JSON text
         assert set(rec["regions"]) == {"caustic", "glass-shadow", "mirror", "glass", "walls"}
         caustic = rec["regions"]["caustic"]
         assert caustic["pixels"] > 100 and caustic["rmse"] > 0 and np.isfinite(caustic["mean_z"])

@@ -30,7 +30,6 @@ given directly as ``package.module:ClassName``.
 
 from __future__ import annotations
 
-import difflib
 import importlib
 import importlib.metadata
 import os
@@ -43,6 +42,7 @@ import numpy as np
 from harness.adapters.settings import declared, label, resolve_settings, split_spec
 from harness.scenes.model import Scene
 from harness.scenes.quantities import DEFAULT_QUANTITY
+from harness.suggest import did_you_mean
 
 ENTRY_POINT_GROUP = "cbox.renderers"
 #: What an adapter's ``estimator`` may say; the first is the default of an adapter that says nothing.
@@ -130,9 +130,7 @@ def _estimator_problem(value) -> str | None:
     """What is wrong with an ``estimator`` value, or None when it is one of :data:`ESTIMATORS`."""
     if isinstance(value, str) and value in ESTIMATORS:
         return None
-    hint = difflib.get_close_matches(str(value), ESTIMATORS, n=1)
-    return (f"estimator = {value!r} is not one of {', '.join(ESTIMATORS)}"
-            + (f" (did you mean {hint[0]!r}?)" if hint else ""))
+    return f"estimator = {value!r} is not one of {', '.join(ESTIMATORS)}" + did_you_mean(value, ESTIMATORS)
 
 
 def estimator_of(renderer) -> str:
@@ -259,9 +257,8 @@ def resolve(specs: Sequence[str] | None) -> list[RendererEntry]:
             if entry.renderer is None:
                 raise RendererError(entry.reason)
         else:
-            hint = difflib.get_close_matches(name, list(eps), n=1)
             known = ", ".join(eps) or "(none)"
-            raise RendererError(f"unknown renderer {name!r}" + (f" (did you mean {hint[0]!r}?)" if hint else "")
+            raise RendererError(f"unknown renderer {name!r}" + did_you_mean(name, eps)
                                 + f"; registered: {known}; or give package.module:ClassName")
         out.append(entry.with_settings(given) if given else entry)
     return out

@@ -15,12 +15,13 @@ gate config as ``settings = { rr_depth = 3 }``, and sweep one with
 
 from __future__ import annotations
 
-import difflib
 import json
 import math
 import re
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
+
+from harness.suggest import did_you_mean
 
 
 class SettingsError(ValueError):
@@ -102,10 +103,9 @@ def resolve_settings(renderer, given: Mapping[str, Any], name: str | None = None
     out = {s.name: s.default for s in known.values()}
     for key, value in given.items():
         if key not in known:
-            hint = difflib.get_close_matches(key, known, n=1)
             allowed = ", ".join(known) or "none"
-            raise SettingsError(f"renderer {name!r}: unknown setting {key!r}"
-                                + (f" (did you mean {hint[0]!r}?)" if hint else "") + f"; its settings: {allowed}")
+            raise SettingsError(f"renderer {name!r}: unknown setting {key!r}" + did_you_mean(key, known)
+                                + f"; its settings: {allowed}")
         out[key] = known[key].coerce(value, name)
     return out
 

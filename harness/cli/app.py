@@ -9,28 +9,28 @@ from __future__ import annotations
 
 import sys
 
-import typer
-
 # Importing a command module registers its commands, in this order in `cbox --help` (so not sorted).
-from harness.cli import listing, run, experiment, gate, stress, reference  # isort: skip
-from harness.cli.common import (PATH_ERRORS, USER_ERRORS, ClickException, NoArgsIsHelpError, UsageError, app,
-                                check_environment, fail, usage_message)
+from harness.cli import listing, run, compare_image, experiment, gate, stress, reference  # isort: skip
+from harness.cli.common import (PATH_ERRORS, USER_ERRORS, ClickException, NoArgsIsHelpError, UsageError, Verbosity,
+                                check_environment, close_progress_bars, command_tree, fail, set_verbosity,
+                                usage_message)
 
 
 #: The command modules, registered on the app by their import above.
-COMMAND_MODULES = (listing, run, experiment, gate, stress, reference)
+COMMAND_MODULES = (listing, run, compare_image, experiment, gate, stress, reference)
 
 
-def main() -> None:
+def main(args: list[str] | None = None) -> None:
     """Console entry point: bad input of any kind becomes one line on stderr and exit code 2.
 
     Typer runs in non-standalone mode so that its usage errors (``--spp 0``)
     come here instead of being drawn as a multi-line box; ``--help`` and a
     command's own exit code pass through unchanged.
     """
+    set_verbosity(Verbosity.NORMAL)  # until --quiet or --verbose says otherwise (tests call main() again and again)
     try:
         check_environment()
-        rv = typer.main.get_command(app).main(prog_name="cbox", standalone_mode=False)
+        rv = command_tree().main(args=args, prog_name="cbox", standalone_mode=False)
     except NoArgsIsHelpError as e:  # `cbox` or `cbox reference` alone: the help, as typer shows it
         e.show()
         sys.exit(e.exit_code)
@@ -43,6 +43,7 @@ def main() -> None:
     except PATH_ERRORS as e:  # an output path that went bad during the run (checked beforehand where possible)
         fail(f"{e.filename}: {e.strerror}" if e.filename else str(e))
     except KeyboardInterrupt:
+        close_progress_bars()
         print("cbox: interrupted", file=sys.stderr)
         sys.exit(130)
     sys.exit(rv if isinstance(rv, int) else 0)

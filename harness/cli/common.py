@@ -10,17 +10,32 @@ Outputs are checked before any rendering: :func:`check_output_file` for
 ``cbox render --out`` (an ``.exr`` path that is not a folder, in a writable
 place) and :func:`check_output_folder` for every folder ``--out``
 (:func:`out_folder_option`: a folder, or a path one can create, not a file).
+
+What a command says besides its results goes through here too: a long
+command reports progress with :class:`Progress` (a bar only when stderr is a
+terminal, else one plain line per finished unit of work, so a CI log gets no
+carriage returns), other remarks with :func:`info`; ``--quiet`` silences both,
+``--verbose`` adds per-unit lines under the bar and INFO logging
+(:func:`set_verbosity`). Errors close any bar first, so they start a line.
 """
 
 from __future__ import annotations
 
+import copy
+import enum
+import json
+import logging
+import math
 import os
+import re
 import shlex
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import Any, NoReturn
 
+import numpy as np
 import typer
 from tqdm import tqdm
 
@@ -31,14 +46,17 @@ from harness.scenes.model import SceneError, one_line
 from harness.store.experiments import ExperimentError
 from harness.store.exr import ImageFileError
 from harness.store.references import ReferenceError
+from harness.suggest import did_you_mean
 
 #: The harness's reference renderer: references are built with it.
 REFERENCE_RENDERER = "mitsuba"
 
 app = typer.Typer(
-    help="Validation harness for renderers on the Cornell box: render, score against a trusted reference, report.",
+    help="Validation harness for renderers on the Cornell box: render, score against a trusted reference, report."
+         "\n\nLong commands show progress as a bar when stderr is a terminal, else (a CI log) as one plain line "
+         "per finished run, without carriage returns, so TQDM_DISABLE is not needed; -q hides it.",
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,  # --install-completion / --show-completion; typer builds them without slow imports
     pretty_exceptions_enable=False,
 )
 reference_app = typer.Typer(help="Build and inspect stored reference images.", no_args_is_help=True)
@@ -55,6 +73,11 @@ SppOpt = typer.Option(64, "--spp", min=1, help="Samples per pixel.")
 RenderersOpt = typer.Option(None, "--renderer", "-r", help="Renderer to run (repeatable), with settings as "
                             "NAME\\[setting=value,...]; default: every registered renderer.")
 SeedOpt = typer.Option(0, "--seed", min=0, help="Random seed; the same seed gives the same image.")
+TitleOpt = typer.Option(None, "--title", help="Title of the report (default: \"Renderer comparison — SCENE\").")
+SetOpt = typer.Option(None, "--set", metavar="KEY=VALUE", help=(
+    "Override a value of the scene file (repeatable), by its TOML path: --set render.max_depth=3 --set "
+    "camera.resolution=64,64 (a comma list is an array). The result is a derived scene, named after its "
+    "overrides, with its own content hash and its own reference (cbox reference build ... --set ...)."))
 
 #: File extensions ``cbox render --out`` accepts: the image is written as OpenEXR (float32
 #: linear sRGB); any other extension (.png, .jpg) is refused, not written as EXR bytes under it.
@@ -71,8 +94,20 @@ UsageError = _click_exceptions.UsageError
 NoArgsIsHelpError: Any = getattr(_click_exceptions, "NoArgsIsHelpError", ())
 
 
+_NO_SUCH_COMMAND = re.compile(r"No such command (?P<name>.+?)\.(?: Did you mean .*)?$")
+
+
 def usage_message(e: Any) -> str:
-    """One line for a typer/click usage error: ``--spp: Input should be ...``, naming the option."""
+    """One line for a typer/click usage error: ``--spp: Input should be ...``, naming the option; a misspelt
+    option or sub-command gets its did-you-mean (:mod:`harness.suggest`, as every other misspelt name)."""
+    ctx = getattr(e, "ctx", None)
+    if isinstance(e, _click_exceptions.NoSuchOption) and ctx is not None:
+        known = [o for p in ctx.command.get_params(ctx) for o in (*p.opts, *p.secondary_opts)]
+        return f"no such option: {e.option_name}" + did_you_mean(e.option_name, known)
+    if (m := _NO_SUCH_COMMAND.match(e.message)) and ctx is not None and hasattr(ctx.command, "list_commands"):
+        name = m.group("name").strip("'\"")
+        commands = ctx.command.list_commands(ctx)
+        return f"no such command {name!r}" + did_you_mean(name, commands) + f"; commands: {', '.join(commands)}"
     param, hint = getattr(e, "param", None), getattr(e, "param_hint", None)
     if isinstance(e, _click_exceptions.MissingParameter) or not (param is not None or hint):
         return e.format_message()
@@ -130,7 +165,9 @@ def _checked_folder(ctx: Any, value: Path | None) -> Path | None:
 
 
 def fail(message: str, code: int = 2) -> NoReturn:
-    """Print ``cbox: error: MESSAGE`` (one line) on stderr and exit with ``code``."""
+    """Print ``cbox: error: MESSAGE`` (one line, on a line of its own: any progress bar is closed first) on
+    stderr and exit with ``code``."""
+    close_progress_bars()
     print(f"cbox: error: {one_line(message, limit=None)}", file=sys.stderr)
     sys.exit(code)
 
@@ -147,5 +184,234 @@ def _command_line() -> str:
     return " ".join(shlex.quote(a) for a in ["cbox", *sys.argv[1:]])
 
 
-def _progress(total: int, desc: str) -> tqdm:
-    return tqdm(total=total, desc=desc, unit="run", file=sys.stderr, dynamic_ncols=True, leave=False)
+# --- What a command says besides its results: verbosity, remarks, progress ---------------------------
+
+
+class Verbosity(enum.IntEnum):
+    QUIET = 0  # results and errors only
+    NORMAL = 1  # and progress, and remarks such as "report: out/report.html"
+    VERBOSE = 2  # and a line per finished unit even under a bar, and INFO logging
+
+
+_verbosity = Verbosity.NORMAL
+_live_bars: list["Progress"] = []
+
+
+_log_handlers: list[logging.Handler] = []  # ours on the root logger, while verbose
+
+
+def set_verbosity(level: Verbosity) -> None:
+    """Set how much commands say (``--quiet``, ``--verbose``); logging follows: INFO and up on stderr when
+    verbose, ERROR and up when quiet, else Python's default (warnings, through its last-resort handler)."""
+    global _verbosity
+    _verbosity = level
+    root = logging.getLogger()
+    root.setLevel({Verbosity.QUIET: logging.ERROR, Verbosity.NORMAL: logging.WARNING,
+                   Verbosity.VERBOSE: logging.INFO}[level])
+    while _log_handlers:
+        root.removeHandler(_log_handlers.pop())
+    if level >= Verbosity.VERBOSE:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("cbox: %(name)s: %(levelname)s: %(message)s"))
+        root.addHandler(handler)
+        _log_handlers.append(handler)
+
+
+def _flag(level: Verbosity):
+    def callback(ctx: typer.Context, value: bool) -> None:
+        if not value or ctx.resilient_parsing:
+            return
+        if _verbosity not in (Verbosity.NORMAL, level):
+            raise typer.BadParameter("give --quiet or --verbose, not both")
+        set_verbosity(level)
+    return callback
+
+
+# Global (`cbox -q converge ...`) on the app's callback below, and copied onto every command by
+# command_tree (`cbox converge ... -q`), where one looks for it; neither edits a command's signature.
+QuietOpt = typer.Option(False, "--quiet", "-q", callback=_flag(Verbosity.QUIET), expose_value=False,
+                        help="Print only results and errors: no progress, no remarks.")
+VerboseOpt = typer.Option(False, "--verbose", "-v", callback=_flag(Verbosity.VERBOSE), expose_value=False,
+                          help="Also print a line per finished run under the progress bar, and INFO logging.")
+
+#: The versions that decide what a run computes, for ``cbox --version`` (read from package metadata:
+#: importing Mitsuba or Numba to ask would take seconds).
+KEY_DISTRIBUTIONS = (("Mitsuba", "mitsuba"), ("NumPy", "numpy"), ("Embree", "embreex"), ("Numba", "numba"),
+                     ("typer", "typer"))
+
+
+def version_line() -> str:
+    """``cbox 0.1.0 (Python 3.11.9, Mitsuba 3.9.1, NumPy 2.2.6, ...)``: one line."""
+    import platform
+    from importlib.metadata import PackageNotFoundError, version
+
+    def of(dist: str) -> str:
+        try:
+            return version(dist)
+        except PackageNotFoundError:
+            return "not installed"
+
+    keys = ", ".join(f"{name} {of(dist)}" for name, dist in KEY_DISTRIBUTIONS)
+    return f"cbox {of('cornell-harness')} (Python {platform.python_version()}, {keys})"
+
+
+def _show_version(ctx: typer.Context, value: bool) -> None:
+    if value and not ctx.resilient_parsing:
+        typer.echo(version_line())
+        raise typer.Exit()
+
+
+@app.callback()
+def _everywhere(
+    quiet: bool = QuietOpt,
+    verbose: bool = VerboseOpt,
+    version: bool = typer.Option(False, "--version", callback=_show_version, is_eager=True, expose_value=False,
+                                 help="Print the version of cbox and of the packages that decide its results."),
+) -> None:
+    """The options before any command: ``cbox -q converge ...``, ``cbox --version``."""
+
+
+def command_tree() -> Any:
+    """The app as a click command, every sub-command also taking the app's ``--quiet/-q`` and ``--verbose/-v``.
+
+    Copied here rather than declared in each command's signature: one definition, every command (those
+    added later too) takes them, and ``cbox converge -q`` works as well as ``cbox -q converge``. A short
+    flag a command already uses for something else stays that (``cbox stress -v`` is ``--variant``).
+    """
+    root = typer.main.get_command(app)
+    shared = [p for p in root.params if p.name in ("quiet", "verbose")]
+
+    def visit(group: Any) -> None:
+        for command in group.commands.values():
+            if hasattr(command, "commands"):
+                visit(command)
+            taken = {o for p in command.params for o in (*p.opts, *p.secondary_opts)}
+            for p in shared:
+                if (opts := [o for o in p.opts if o not in taken]) and p.name not in {q.name for q in command.params}:
+                    own = copy.copy(p)
+                    own.opts = opts
+                    command.params.append(own)
+
+    visit(root)
+    return root
+
+
+def info(message: str) -> None:
+    """A remark on stderr (``report: PATH``, ``wrote FILE``): not a result, so ``--quiet`` drops it."""
+    if _verbosity > Verbosity.QUIET:
+        tqdm.write(message, file=sys.stderr)  # above a live bar, if there is one
+
+
+def _stderr_is_terminal() -> bool:
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):  # replaced or closed
+        return False
+
+
+def _clock(seconds: float) -> str:
+    return tqdm.format_interval(seconds)
+
+
+class Progress:
+    """Progress of a long command through ``total`` units of work (runs, cells, batches, expectations).
+
+    On a terminal, a bar on stderr; anywhere else (a CI log, a pipe), one plain
+    line per finished unit, ``converge cornell-box: 3/8 cells, pathtracer seed 2
+    (12.3 s), 01:02 left``, and never a carriage return. ``--quiet``: nothing.
+    The time left is the mean time of the units that did work times the units
+    to go: stored (resumed) units take no time and do not count.
+    """
+
+    def __init__(self, total: int, desc: str, unit: str = "run"):
+        self.total, self.desc, self.unit = total, desc, unit
+        self.done = self.stored = 0
+        self.work_s = 0.0
+        self._since = time.perf_counter()
+        self._bar = None
+        if _verbosity > Verbosity.QUIET and _stderr_is_terminal():
+            self._bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True, leave=False,
+                             bar_format="{desc}: {n_fmt}/{total_fmt} {unit}s |{bar}| {elapsed}{postfix}")
+        _live_bars.append(self)
+
+    def left_s(self) -> float | None:
+        """Seconds to go, from the units that did work; None before the first of them."""
+        worked = self.done - self.stored
+        if not worked or self.done >= self.total:
+            return None
+        return self.work_s / worked * (self.total - self.done)
+
+    def start(self, label: str) -> None:
+        """Name the unit now running (on the bar only: a log gets a line when it finishes)."""
+        if self._bar is not None:
+            self._bar.set_postfix_str(self._postfix(label))
+
+    def advance(self, label: str, stored: bool = False) -> None:
+        """One more unit finished (``stored``: loaded from an earlier run, not worked on)."""
+        now = time.perf_counter()
+        took, self._since = now - self._since, now
+        self.done += 1
+        if stored:
+            self.stored += 1
+        else:
+            self.work_s += took
+        left = self.left_s()
+        line = (f"{self.desc}: {self.done}/{self.total} {self.unit}s, {label} "
+                f"({'stored' if stored else f'{took:.1f} s'})" + (f", {_clock(left)} left" if left else ""))
+        if self._bar is not None:
+            if _verbosity >= Verbosity.VERBOSE:
+                self._bar.write(line, file=sys.stderr)
+            self._bar.set_postfix_str(self._postfix(""), refresh=False)
+            self._bar.update(1)
+        elif _verbosity > Verbosity.QUIET:
+            print(line, file=sys.stderr, flush=True)
+
+    def write(self, line: str) -> None:
+        """A result line on stdout while the bar is up (the bar is redrawn under it)."""
+        if self._bar is not None:
+            self._bar.write(line, file=sys.stdout)
+        else:
+            typer.echo(line)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()  # leave=False: the line is cleared and the cursor is back at its start
+            self._bar = None
+        if self in _live_bars:
+            _live_bars.remove(self)
+
+    def __enter__(self) -> "Progress":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _postfix(self, label: str) -> str:
+        left = self.left_s()
+        return ", ".join(filter(None, [label, f"{_clock(left)} left" if left else ""]))
+
+
+def close_progress_bars() -> None:
+    """Close every live progress bar: what is printed next starts a fresh line."""
+    for bar in list(_live_bars):
+        bar.close()
+
+
+def print_json(value: Any) -> None:
+    """``value`` as strict JSON on stdout, the ``--json`` of a command: nested objects, never JSON inside a string;
+    NaN and infinities (a PSNR of identical images) as null."""
+    typer.echo(json.dumps(_strict(value), indent=1, allow_nan=False))
+
+
+def _strict(value: Any) -> Any:
+    if isinstance(value, np.generic):  # a value read back from a results table
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {str(k): _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    if isinstance(value, Path):
+        return str(value)
+    return value

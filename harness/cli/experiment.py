@@ -2,29 +2,35 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import List, Optional
 
 import typer
-from tqdm import tqdm
 
 from harness.adapters.registry import missing_features, resolve
-from harness.cli.common import RenderersOpt, SceneOpt, _command_line, app, out_folder_option
+from harness.cli.common import (Progress, RenderersOpt, SceneOpt, SetOpt, TitleOpt, _command_line, app, info,
+                                out_folder_option, print_json)
 from harness.scenes.library import resolve_scene
 from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results
 from harness.store.references import load_reference
+from harness.suggest import did_you_mean
 # Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
 # a misspelt config, or `cbox --help`, must answer in a second.
+
+#: The grammar of converge --spp, exactly as harness.workflows.converge.parse_spp_list reads it.
+SPP_HELP = ("spp checkpoints, as a list: exactly those spp, in any order (1,4,16 or 1,3,5); a sequence: the "
+            "numbers before '...' continued by their one constant ratio or difference to the last number, "
+            "which it must reach exactly (1,2,4,...,256 or 10,20,...,50; 1,2,...,8 fits both ×2 and +1 and is "
+            "refused: give a third number); or a range A-B: the powers of two from A to B, which must both be "
+            "powers of two (1-256). Progressive renderers give them all from one render.")
 
 
 @app.command()
 def converge(
     scene: str = SceneOpt,
+    overrides: Optional[List[str]] = SetOpt,
     renderer: Optional[List[str]] = RenderersOpt,
-    spp: str = typer.Option("1,2,4,...,256", "--spp", help="spp checkpoints: 1,2,4,...,256 or 1,4,16 or 1-256 "
-                                                         "(powers of two). Progressive renderers give them all "
-                                                         "from one render."),
+    spp: str = typer.Option("1,2,4,...,256", "--spp", help=SPP_HELP),
     seeds: int = typer.Option(4, "--seeds", min=1, help="Number of seeds (0 .. N-1); bias and variance need 2 or more."),
     out: Path = out_folder_option(Path("out/converge"), "Experiment folder: results.parquet, "
                                                                       "summary.csv, report.html, cells/, images/."),
@@ -36,6 +42,10 @@ def converge(
         None, "--sweep", help="Sweep one renderer setting, RENDERER.SETTING=V1,V2,... (e.g. "
                               "pathtracer.rr_depth=3,5,8): each value is its own series in the table and report. "
                               "See `cbox renderers --settings`."),
+    as_json: bool = typer.Option(False, "--json", help="Print the results on stdout as one JSON object: folder, "
+                                                       "report, runs (one per renderer, seed and spp) and summary "
+                                                       "(one per renderer), settings and regions as objects."),
+    title: Optional[str] = TitleOpt,
 ) -> None:
     """Convergence experiment: every metric at every spp checkpoint, per renderer and seed.
 
@@ -47,41 +57,70 @@ def converge(
     from harness.adapters.registry import sweep as sweep_entries
     from harness.adapters.settings import parse_sweep
     from harness.evaluate.convergence import DEFAULT_TARGETS, parse_target, unknown_target_regions
-    from harness.workflows.converge import parse_spp_list, run_experiment
-    from reports.experiment import write_experiment_report
+    from harness.workflows.converge import parse_spp_list
 
     try:
         spps = parse_spp_list(spp)
+    except ValueError as e:
+        raise typer.BadParameter(str(e), param_hint="--spp") from None
+    try:
         targets = [parse_target(t) for t in target] if target else DEFAULT_TARGETS
     except ValueError as e:
-        raise typer.BadParameter(str(e)) from None
-    sc = resolve_scene(scene)
+        raise typer.BadParameter(str(e), param_hint="--target") from None
+    sc = resolve_scene(scene, overrides)
     if unknown := unknown_target_regions(targets, sc.regions):
-        raise typer.BadParameter(f"--target: scene {sc.name!r} has no region {', '.join(map(repr, unknown))}; "
-                                 f"its regions: {', '.join(sc.regions) or '(none)'}")
+        raise typer.BadParameter(f"scene {sc.name!r} has no region {', '.join(map(repr, unknown))}"
+                                 f"{did_you_mean(unknown[0], sc.regions)}; "
+                                 f"its regions: {', '.join(sc.regions) or '(none)'}", param_hint="--target")
     ref = load_reference(sc)
     entries = resolve(renderer)
     if sweep:
         entries = sweep_entries(entries, *parse_sweep(sweep))
+    runs, report = run_convergence(out, sc, ref, entries, spps, seeds, targets, title=title)
+    if as_json:
+        _print_json(out, report, runs)
+    else:
+        print_summary(out, runs)
+    info(f"report: {report}")
+    raise typer.Exit(1 if (runs["status"] == "failed").any() else 0)
+
+
+def run_convergence(out: Path, sc, ref, entries, spps: list[int], seeds: int, targets=None, title: str | None = None,
+                    sections=()):
+    """Run (or resume) a convergence experiment with progress, then write its report: (runs, report path)."""
+    from harness.evaluate.convergence import DEFAULT_TARGETS
+    from harness.workflows.converge import run_experiment
+    from reports.experiment import write_experiment_report
+
     runnable = [e for e in entries if e.available and not missing_features(e.renderer, sc)]
     cells = sum(1 if getattr(e.renderer, "deterministic", False) else seeds for e in runnable)
-    bar = tqdm(total=cells, desc=f"converge {sc.name}", unit="cell", file=sys.stderr,
-               dynamic_ncols=True)
+    with Progress(cells, f"converge {sc.name}", "cell") as bar:
+        def on_cell(name: str, cached: bool) -> None:  # name: a cell's file stem, pathtracer__seed2
+            bar.advance(name.replace("__seed", " seed "), stored=cached)
 
-    def on_cell(name: str, cached: bool) -> None:
-        bar.set_postfix_str(f"{name}{' (stored)' if cached else ''}")
-        bar.update(1)
+        runs = run_experiment(out, sc, ref, entries, spps, list(range(seeds)), _command_line(), on_cell=on_cell,
+                              targets=targets or DEFAULT_TARGETS)
+    return runs, write_experiment_report(out, sc, ref, title=title, sections=sections)
 
-    runs = run_experiment(out, sc, ref, entries, spps, list(range(seeds)), _command_line(), on_cell=on_cell,
-                          targets=targets)
-    bar.close()
-    report = write_experiment_report(out, sc, ref)
+
+def print_summary(out: Path, runs) -> None:
+    """The summary table (and the per-region split), then a line per renderer that did not run."""
     if (out / SUMMARY_FILE).exists():
         _print_summary(out / SUMMARY_FILE)
     for _, r in runs[runs["status"] != "ok"].iterrows():
         typer.echo(f"{r['renderer']}: {r['status']}: {r['reason']}")
-    typer.echo(f"report: {report}", err=True)
-    raise typer.Exit(1 if (runs["status"] == "failed").any() else 0)
+
+
+def _print_json(out: Path, report: Path, runs) -> None:
+    """``cbox converge --json``: every run and the summary, rows as objects (:func:`runner.json_row`)."""
+    import pandas as pd
+
+    from harness.workflows.runner import json_row
+
+    summary = pd.read_csv(out / SUMMARY_FILE) if (out / SUMMARY_FILE).exists() else pd.DataFrame()
+    print_json({"folder": out, "report": report,
+                "runs": [json_row(r) for r in runs.to_dict("records")],
+                "summary": [json_row(r) for r in summary.to_dict("records")]})
 
 
 def _print_summary(path: Path) -> None:
@@ -98,17 +137,73 @@ def _print_summary(path: Path) -> None:
         typer.echo("\nbias² and variance per region:\n" + split.to_string(**fmt))
 
 
-@app.command()
-def report(
-    folder: Path = typer.Argument(..., help="Folder written by cbox converge or cbox compare."),
-) -> None:
-    """Rebuild FOLDER/report.html (and summary.csv) from stored results, without rendering."""
-    from reports.experiment import write_experiment_report
-
+def _checked_scene(folder: Path, overrides: Optional[List[str]]):
+    """The scene the experiment in ``folder`` was made for, as it is now: refused if it no longer hashes the same."""
     config, _ = load_results(folder)
-    sc = resolve_scene(config["scene"])
+    sc = resolve_scene(config["scene"], overrides)
     if sc.content_hash() != config["scene_hash"]:
         raise ExperimentError(
             f"{folder / CONFIG_FILE}: results were made for scene hash {config['scene_hash']}, but "
-            f"{config['scene']} now hashes to {sc.content_hash()}; rerun the experiment")
-    typer.echo(f"report: {write_experiment_report(folder, sc, load_reference(sc))}", err=True)
+            f"{config['scene']} now hashes to {sc.content_hash()}; rerun the experiment"
+            + (f" or give the --set it was run with ({config['scene_name']})"
+               if "[" in config.get("scene_name", "") and config["scene_name"] != sc.name else ""))
+    return sc
+
+
+def _report_labels(folders: List[Path], labels: Optional[List[str]], out: Optional[Path]) -> list[str]:
+    """One label per folder (given, or the folder's name), distinct; the usage errors of several folders."""
+    n = len(folders)
+    if n > 1 and out is None:
+        raise typer.BadParameter(f"{n} folders make one merged report: give --out FOLDER for it",
+                                 param_hint="--out")
+    if labels and len(labels) != n:
+        raise typer.BadParameter(f"{len(labels)} label{'s' if len(labels) > 1 else ''} for {n} folder"
+                                 f"{'s' if n > 1 else ''}: give one --label per folder, in order",
+                                 param_hint="--label")
+    names = list(labels) if labels else [f.resolve().name for f in folders]
+    if "" in (name.strip() for name in names):
+        raise typer.BadParameter("a label cannot be empty", param_hint="--label")
+    if (dup := next((x for i, x in enumerate(names) if x in names[:i]), None)) is not None:
+        raise typer.BadParameter(f"{dup!r} names two experiments; labels must differ (default: the folder's name)",
+                                 param_hint="--label")
+    if n > 1 and any(out.resolve() == f.resolve() for f in folders):
+        raise typer.BadParameter(f"{out} is one of the experiment folders; the merged report needs a folder of "
+                                 "its own", param_hint="--out")
+    return names
+
+
+@app.command()
+def report(
+    folders: List[Path] = typer.Argument(..., metavar="DIR", help="Folder written by cbox converge or cbox "
+                                                                  "compare; several: one merged report in --out."),
+    overrides: Optional[List[str]] = typer.Option(None, "--set", metavar="KEY=VALUE",
+                                                  help="The --set the experiments were run with (repeatable); "
+                                                       "applies to every DIR."),
+    out: Optional[Path] = out_folder_option(None, "Folder of report.html and figures/ (default: DIR); required "
+                                                  "with several DIRs, for the merged report."),
+    title: Optional[str] = TitleOpt,
+    label: Optional[List[str]] = typer.Option(None, "--label", help="Name of each experiment in the report, one "
+                                                                    "per DIR in order (default: the folder's name); "
+                                                                    "a renderer name two DIRs share gets it too."),
+) -> None:
+    """Rebuild a report from stored results, without rendering: DIR/report.html (and summary.csv).
+
+    Several DIRs make one report in --out: each experiment a section (scene,
+    images, table, charts, a link to its own report), led by the experiments
+    of the first DIR's scene combined in one summary table, image viewer and
+    set of convergence charts.
+    """
+    from reports.experiment import write_experiment_report
+
+    labels = _report_labels(folders, label, out)
+    checked = [(folder, _checked_scene(folder, overrides)) for folder in folders]
+    if len(folders) == 1:
+        sc = checked[0][1]
+        path = write_experiment_report(folders[0], sc, load_reference(sc), title=title, labels=label or (),
+                                       report_dir=out)
+    else:
+        from reports.merge import write_merged_report
+
+        path = write_merged_report(out, [(name, folder, sc, load_reference(sc))
+                                         for name, (folder, sc) in zip(labels, checked)], title=title)
+    info(f"report: {path}")

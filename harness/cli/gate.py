@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import sys
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
-from tqdm import tqdm
 
-from harness.cli.common import USER_ERRORS, _command_line, app, out_folder_option
+from harness.cli.common import USER_ERRORS, Progress, _command_line, app, info, out_folder_option, print_json
 from harness.cli.run import _write_compare_outputs
 from harness.gate.config import GateConfigError, load_config
 from harness.scenes.library import resolve_scene
@@ -39,6 +37,14 @@ def gate(
                                                                           "check fails."),
     force: bool = typer.Option(False, "--force", help="With --update-baseline: record the baseline even though "
                                                       "checks failed."),
+    overrides: Optional[List[str]] = typer.Option(
+        None, "--set", metavar="KEY=VALUE", help="Override a value of every scene of the run (repeatable), as in "
+                                                 "cbox compare --set: each derived scene needs its own reference. "
+                                                 "The baseline, recorded on the config's scenes, is not compared, "
+                                                 "and --update-baseline is refused."),
+    as_json: bool = typer.Option(False, "--json", help="Print the verdict on stdout as one JSON object (each "
+                                                       "expectation with its checks and its run) instead of the "
+                                                       "PASS/FAIL lines."),
 ) -> None:
     """CI quality gate: exit 0 if every expectation holds, 1 if one fails, 2 for a bad config or input.
 
@@ -53,11 +59,14 @@ def gate(
     process killed at its time limit. JUnit and Markdown are written for every
     run, a config error included.
     """
+    if overrides and update_baseline:
+        raise typer.BadParameter("--update-baseline records the config's own scenes; not with --set", param_hint="--set")
     try:
         cfg = load_config(config)
         if update_baseline and cfg.baseline is None:
             raise GateConfigError(cfg.path, "baseline", "--update-baseline needs baseline = \"FILE.json\"")
-        outcomes = _run_with_progress(cfg, skip_baseline=update_baseline)
+        outcomes = _run_with_progress(cfg, skip_baseline=update_baseline, scene_overrides=overrides or (),
+                                      check_lines=not as_json)
     except USER_ERRORS as e:
         _write_ci_files([], 0.0, out, junit, markdown, config_error=str(e))
         raise
@@ -65,16 +74,31 @@ def gate(
     if update_baseline:
         code = max(code, _update_baseline(cfg, outcomes, force))
     _write_ci_files(outcomes, cfg.alpha, out, junit, markdown)
-    _write_reports(outcomes, cfg.alpha, out)
+    _write_reports(outcomes, cfg.alpha, out, overrides)
     failed = sum(not c.passed for o in outcomes for c in o.checks)
-    typer.echo(f"gate {'passed' if not failed else f'failed: {failed} check(s)'}")
+    if as_json:
+        print_json(_verdict(cfg, outcomes, failed))
+    else:
+        typer.echo(f"gate {'passed' if not failed else f'failed: {failed} check(s)'}")
     raise typer.Exit(code)
 
 
-def _run_with_progress(cfg, skip_baseline: bool):
-    """Run the gate; a PASS or FAIL line per check as each expectation finishes, and a moving bar.
+def _verdict(cfg, outcomes, failed: int) -> dict:
+    """``cbox gate --json``: the verdict, then each expectation with its checks and its run."""
+    from harness.workflows.runner import json_record
 
-    The bar starts with the first render, so a config error found while resolving is a clean line.
+    return {"passed": not failed, "failed_checks": failed, "config": cfg.path, "alpha": cfg.alpha,
+            "expectations": [{"name": o.expectation.name, "scene": o.expectation.scene,
+                              "renderer": o.expectation.renderer, "passed": o.passed,
+                              "checks": [{"name": c.name, "passed": c.passed, "error": c.error, "message": c.message,
+                                          "value": c.value, "limit": c.limit} for c in o.checks],
+                              "run": json_record(o.record)} for o in outcomes]}
+
+
+def _run_with_progress(cfg, skip_baseline: bool, scene_overrides=(), check_lines: bool = True):
+    """Run the gate; a PASS or FAIL line per check as each expectation finishes (``check_lines``), and progress.
+
+    The progress starts with the first render, so a config error found while resolving is a clean line.
     """
     from harness.gate import run as gate_run
 
@@ -82,19 +106,18 @@ def _run_with_progress(cfg, skip_baseline: bool):
 
     def start(exp) -> None:
         if not bars:
-            bars.append(tqdm(total=len(cfg.expectations), desc="gate", unit="expectation", file=sys.stderr,
-                             dynamic_ncols=True))
-        bars[0].set_postfix_str(exp.name)
+            bars.append(Progress(len(cfg.expectations), "gate", "expectation"))
+        bars[0].start(exp.name)
 
     def done(o) -> None:
         for c in o.checks:
-            if not (skip_baseline and c.name.startswith("baseline.")):
+            if check_lines and not (skip_baseline and c.name.startswith("baseline.")):
                 word = "PASS" if c.passed else "ERROR" if c.error else "FAIL"
-                tqdm.write(f"{word}  {o.expectation.name}  {c.name}: {c.message}", file=sys.stdout)
-        bars[0].update(1)
+                bars[0].write(f"{word}  {o.expectation.name}  {c.name}: {c.message}")
+        bars[0].advance(f"{o.expectation.name} {'passed' if o.passed else 'failed'}")
 
     try:
-        outcomes = gate_run.run_gate(cfg, on_start=start, on_done=done)
+        outcomes = gate_run.run_gate(cfg, on_start=start, on_done=done, scene_overrides=scene_overrides)
     finally:
         if bars:
             bars[0].close()
@@ -115,8 +138,8 @@ def _update_baseline(cfg, outcomes, force: bool) -> int:
         return 1
     path, changes = gate_run.write_baseline(cfg, outcomes)
     for line in changes:
-        typer.echo(f"baseline: {line}", err=True)
-    typer.echo(f"baseline: wrote {path}" + (" (forced past failing checks)" if refusal else ""), err=True)
+        info(f"baseline: {line}")
+    info(f"baseline: wrote {path}" + (" (forced past failing checks)" if refusal else ""))
     return 0
 
 
@@ -138,7 +161,7 @@ def _write_ci_files(outcomes, alpha: float, out: Path, junit: Path | None, markd
             f.write(md)
 
 
-def _write_reports(outcomes, alpha: float, out: Path) -> None:
+def _write_reports(outcomes, alpha: float, out: Path, overrides=None) -> None:
     """One report per scene; with several scenes, OUT/index.html links them."""
     from reports.gate import gate_index_html, gate_section
 
@@ -147,7 +170,7 @@ def _write_reports(outcomes, alpha: float, out: Path) -> None:
     for scene_name in scenes:
         mine = [o for o in outcomes if o.expectation.scene == scene_name]
         folder = out if len(scenes) == 1 else out / Path(scene_name).stem
-        sc = resolve_scene(scene_name)
+        sc = resolve_scene(scene_name, overrides)
         report = _write_compare_outputs(folder, sc, load_reference(sc), [o.record for o in mine], _command_line(),
                                         sections=[("gate", "Gate", gate_section(mine, alpha))],
                                         title=f"cbox gate — {sc.name}")
@@ -155,6 +178,6 @@ def _write_reports(outcomes, alpha: float, out: Path) -> None:
                       all(o.passed for o in mine)))
     if len(scenes) > 1:
         write_text_atomic(out / "index.html", gate_index_html(links))
-        typer.echo(f"report: {out / 'index.html'}", err=True)
+        info(f"report: {out / 'index.html'}")
     elif links:
-        typer.echo(f"report: {out / links[0][1]}", err=True)
+        info(f"report: {out / links[0][1]}")

@@ -2,68 +2,122 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
 
 from harness.adapters.registry import quantities_of, resolve
 from harness.adapters.settings import declared, describe
-from harness.cli.common import app
-from harness.scenes.library import resolve_scene, scene_names
+from harness.cli.common import app, print_json
+from harness.scenes.library import references_root, resolve_scene, scene_names
 from harness.scenes.model import FEATURES, SceneError
 from harness.store.references import ReferenceError, load_reference
 
 
+JsonOpt = typer.Option(False, "--json", help="Print a JSON array of objects on stdout instead of the text.")
+
+
 @app.command()
-def scenes() -> None:
-    """List the stored scenes, with the features each uses, its named regions and whether it has a reference."""
-    names = scene_names()
-    w = max((len(n) for n in names), default=0)
-    for name in names:
-        try:
-            scene = resolve_scene(name)
-        except SceneError as e:
-            typer.echo(f"{name:{w}s} INVALID: {e}")
+def scenes(as_json: bool = JsonOpt) -> None:
+    """List the stored scenes: file, size, what is computed, features, named regions and reference."""
+    listing = [_scene_entry(name) for name in scene_names()]
+    if as_json:
+        print_json(listing)
+        return
+    w = max((len(s["name"]) for s in listing), default=0)
+    for s in listing:
+        if s["error"]:
+            typer.echo(f"{s['name']:{w}s} INVALID: {s['error']}")
+            typer.echo(f"{'':{w}s} file: {s['path']}")
             continue
-        try:
-            ref = load_reference(scene)
-            status = f"reference {ref.spp} spp"
-        except ReferenceError as e:
-            status = f"no usable reference ({str(e).split(';')[0].split(': ', 1)[-1]})"
-        cam = scene.camera
-        ao = scene.ambient_occlusion
+        ao = s["ambient_occlusion"]
         # max_depth means nothing to an AO image; its definition does.
-        what = (f"max_depth={scene.max_depth}" if ao is None else
-                f"ambient_occlusion ({ao.weighting}, max_distance={ao.max_distance:g}, {ao.normal} normal, "
-                f"miss={ao.miss_value:g})")
-        typer.echo(f"{name:{w}s} {cam.width}x{cam.height}  {what}  {status}")
-        typer.echo(f"{'':{w}s} features: {', '.join(sorted(scene.features))}")
-        if scene.regions:
-            typer.echo(f"{'':{w}s} regions: {', '.join(scene.regions)}")
+        what = (f"max_depth={s['max_depth']}" if ao is None else
+                f"ambient_occlusion ({ao['weighting']}, max_distance={ao['max_distance']:g}, {ao['normal']} normal, "
+                f"miss={ao['miss_value']:g})")
+        ref = s["reference"]
+        status = f"reference {ref['spp']} spp" if ref else f"no usable reference ({s['reference_problem']})"
+        typer.echo(f"{s['name']:{w}s} {s['width']}x{s['height']}  {what}  {status}")
+        typer.echo(f"{'':{w}s} features: {', '.join(s['features'])}")
+        if s["regions"]:
+            typer.echo(f"{'':{w}s} regions: {', '.join(s['regions'])}")
+        typer.echo(f"{'':{w}s} file: {s['path']}")
+
+
+def _scene_entry(name: str) -> dict:
+    """What ``cbox scenes`` says of one stored scene, as plain data (its text and its JSON)."""
+    entry: dict = {"name": name, "path": _shown(references_root() / name / "scene.toml"), "error": None}
+    try:
+        scene = resolve_scene(name)
+    except SceneError as e:
+        return {**entry, "error": str(e)}
+    try:
+        ref = load_reference(scene)
+        reference, problem = {"spp": ref.spp, "renderer_version": ref.provenance.get("renderer_version")}, None
+    except ReferenceError as e:
+        reference, problem = None, str(e).split(";")[0].split(": ", 1)[-1]
+    ao = scene.ambient_occlusion
+    return {**entry, "path": _shown(scene.path), "width": scene.camera.width, "height": scene.camera.height,
+            "max_depth": scene.max_depth,
+            "ambient_occlusion": None if ao is None else {"weighting": ao.weighting, "max_distance": ao.max_distance,
+                                                          "normal": ao.normal, "miss_value": ao.miss_value},
+            "features": sorted(scene.features), "regions": list(scene.regions),
+            "reference": reference, "reference_problem": problem}
+
+
+def _shown(path: Path) -> str:
+    """A path as a user would type it here: relative to the working folder when under it."""
+    path = Path(path).resolve()
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
 
 
 @app.command()
 def renderers(
     settings: bool = typer.Option(False, "--settings", help="Also list each renderer's settings: name, default, "
                                                             "allowed values and what it does."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON array of objects on stdout instead of the "
+                                                       "text, settings always included."),
 ) -> None:
     """List the registered renderers, whether each can run here, and why not."""
-    for entry in resolve(None):
-        r = entry.renderer
-        if entry.available:
-            try:
-                version = r.version()
-            except Exception as e:  # a version probe must not break the listing
-                version = f"version unknown ({type(e).__name__})"
-            typer.echo(f"{entry.name:12s} available    {version}")
+    entries = resolve(None)
+    listing = [_renderer_entry(entry) for entry in entries]
+    if as_json:
+        print_json(listing)
+        return
+    for entry, r in zip(entries, listing):
+        if r["available"]:
+            typer.echo(f"{r['name']:12s} available    {r['version']}")
         else:
-            typer.echo(f"{entry.name:12s} unavailable  {entry.reason}")
-        if r is not None:
-            typer.echo(f"{'':12s} models: {', '.join(sorted(r.features))}")
-            typer.echo(f"{'':12s} computes: {', '.join(quantities_of(r))}")
-            for a in getattr(r, "approximations", ()):
+            typer.echo(f"{r['name']:12s} unavailable  {r['reason']}")
+        if r["loaded"]:
+            typer.echo(f"{'':12s} models: {', '.join(r['models'])}")
+            typer.echo(f"{'':12s} computes: {', '.join(r['computes'])}")
+            for a in r["approximations"]:
                 typer.echo(f"{'':12s} approximates: {a}")
             if settings:
-                for line in describe(declared(r)) or ["(no settings)"]:
+                for line in describe(declared(entry.renderer)) or ["(no settings)"]:
                     typer.echo(f"{'':12s} setting: {line}")
+
+
+def _renderer_entry(entry) -> dict:
+    """What ``cbox renderers`` says of one registered renderer, as plain data (its text and its JSON)."""
+    r = entry.renderer
+    out: dict = {"name": entry.name, "available": entry.available, "version": None,
+                 "reason": None if entry.available else entry.reason, "loaded": r is not None}
+    if entry.available:
+        try:
+            out["version"] = r.version()
+        except Exception as e:  # a version probe must not break the listing
+            out["version"] = f"version unknown ({type(e).__name__})"
+    if r is not None:
+        out.update(models=sorted(r.features), computes=list(quantities_of(r)),
+                   approximations=list(getattr(r, "approximations", ())),
+                   settings=[{"name": s.name, "type": s.kind.__name__, "default": s.default, "allowed": s.allowed(),
+                              "doc": s.doc} for s in declared(r)])
+    return out
 
 
 @app.command()

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import json
-import sys
+from typing import List, Optional
 
 import typer
-from tqdm import tqdm
 
 from harness.adapters.registry import RendererError, resolve
-from harness.cli.common import REFERENCE_RENDERER, SceneOpt, reference_app
+from harness.cli.common import REFERENCE_RENDERER, Progress, SceneOpt, SetOpt, reference_app
 from harness.scenes.library import resolve_scene
 from harness.store.references import load_reference
 # Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
@@ -19,11 +18,16 @@ from harness.store.references import load_reference
 @reference_app.command("build")
 def reference_build(
     scene: str = SceneOpt,
+    overrides: Optional[List[str]] = SetOpt,
     spp: int = typer.Option(16384, "--spp", min=2, help="Total samples per pixel of the reference."),
     batches: int = typer.Option(128, "--batches", min=2, help="Independent batches; their spread gives the variance image."),
 ) -> None:
-    """Render the scene's reference with Mitsuba and store image, variance and provenance beside the scene."""
-    sc = resolve_scene(scene)
+    """Render the scene's reference with Mitsuba and store image, variance and provenance beside the scene.
+
+    With --set, the derived scene's reference goes to derived/<content hash>/ beside the scene; the
+    scene's own reference is left as it is.
+    """
+    sc = resolve_scene(scene, overrides)
     if spp % batches:
         raise typer.BadParameter(f"--spp ({spp}) must be a multiple of --batches ({batches})")
     from harness.workflows.reference_build import build_reference
@@ -31,14 +35,14 @@ def reference_build(
     (entry,) = resolve([REFERENCE_RENDERER])
     if not entry.available:
         raise RendererError(f"renderer {entry.name!r} builds references but is unavailable: {entry.reason}")
-    bar = tqdm(total=batches + 1, desc=f"reference {sc.name}", unit="batch", file=sys.stderr, dynamic_ncols=True)
-    ref = build_reference(sc, spp, batches, entry, progress=lambda b, n: bar.update(1))
-    bar.close()
+    with Progress(batches + 1, f"reference {sc.name}", "batch") as bar:  # the last batch is the noise image
+        ref = build_reference(sc, spp, batches, entry,
+                              progress=lambda b, n: bar.advance(f"batch {b}" if b <= batches else "noise image"))
     typer.echo(f"wrote {ref.folder} ({spp} spp in {ref.provenance['wall_time_s']:.0f} s, {ref.provenance['renderer_version']})")
 
 
 @reference_app.command("show")
-def reference_show(scene: str = SceneOpt) -> None:
+def reference_show(scene: str = SceneOpt, overrides: Optional[List[str]] = SetOpt) -> None:
     """Print the provenance of a scene's stored reference (refused if the scene changed)."""
-    ref = load_reference(resolve_scene(scene))
+    ref = load_reference(resolve_scene(scene, overrides))
     typer.echo(json.dumps(ref.provenance, indent=1))

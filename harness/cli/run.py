@@ -10,18 +10,23 @@ import typer
 
 from harness.adapters.registry import RendererError, missing_features, resolve
 from harness.adapters.settings import canonical
-from harness.cli.common import (RenderersOpt, SceneOpt, SeedOpt, SppOpt, _command_line, _progress, app,
-                                check_output_file, out_folder_option)
+from harness.cli.common import (Progress, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt, TitleOpt, _command_line,
+                                app, check_output_file, info, out_folder_option)
 from harness.scenes.library import resolve_scene
 from harness.store.exr import write_exr
 from harness.store.references import load_reference
 # Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
 # a misspelt config, or `cbox --help`, must answer in a second.
 
+#: The metrics of the table `cbox compare` (and `cbox compare-image`) prints, those a row has.
+TABLE_METRICS = ("delta_e2000_mean", "noise_delta_e2000_mean", "flip_mean", "ssim", "rel_mse",
+                 "mean_radiance_rel_error", "nan_count")
+
 
 @app.command()
 def render(
     scene: str = SceneOpt,
+    overrides: Optional[List[str]] = SetOpt,
     renderer: str = typer.Option(..., "--renderer", "-r", help="Registered renderer name or package.module:ClassName, "
                                                              "with settings as NAME\\[setting=value,...]."),
     spp: int = SppOpt,
@@ -31,7 +36,7 @@ def render(
 ) -> None:
     """Render one scene with one renderer and write the HDR image."""
     check_output_file(out)  # before any rendering: .exr, not a folder, writable
-    sc = resolve_scene(scene)
+    sc = resolve_scene(scene, overrides)
     (entry,) = resolve([renderer])
     if not entry.available:
         raise RendererError(f"renderer {entry.name!r} is unavailable: {entry.reason}")
@@ -42,7 +47,7 @@ def render(
     result = render_checked(entry, sc, spp, seed)
     write_exr(out, result.image, {"cbox:renderer": entry.name, "cbox:settings": canonical(entry.settings), "cbox:spp": str(spp), "cbox:seed": str(seed),
                                   "cbox:scene_hash": sc.content_hash()})
-    typer.echo(f"wrote {out} ({sc.camera.width}x{sc.camera.height}, {spp} spp, {result.time_s:.2f} s)", err=True)
+    info(f"wrote {out} ({sc.camera.width}x{sc.camera.height}, {spp} spp, {result.time_s:.2f} s)")
 
 
 def _write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(), title=None) -> Path:
@@ -56,7 +61,8 @@ def _write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(
 
 def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool,
                  time_budget: Optional[str] = None, target_error: Optional[str] = None, max_spp: int = 4096,
-                 sections=()) -> tuple[int, list, object, object]:
+                 sections=(), overrides: Optional[List[str]] = None,
+                 title: Optional[str] = None) -> tuple[int, list, object, object]:
     """Compare renderers on one scene, write its folder and report; (exit code, run records, scene, reference)."""
     from harness.evaluate.convergence import parse_target
     from harness.workflows import compare as cmp
@@ -68,14 +74,14 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
         target = parse_target(target_error) if target_error else None
     except ValueError as e:
         raise typer.BadParameter(str(e)) from None
-    sc = resolve_scene(scene)
+    sc = resolve_scene(scene, overrides)
     ref = load_reference(sc)
     entries = resolve(renderer)
     mode = f"{budget:g} s each" if budget else f"to {target[0]}<={target[1]:g}" if target else f"{spp} spp"
-    bar = _progress(len(entries), f"{sc.name} @ {mode}")
+    bar = Progress(len(entries), f"{sc.name} @ {mode}", "run")
     records = []
     for entry in entries:
-        bar.set_postfix_str(entry.name)
+        bar.start(entry.name)
         runnable = entry.available and not missing_features(entry.renderer, sc)
         if budget and runnable:
             rec = runner.run_one(entry, sc, cmp.spp_for_time_budget(entry, sc, budget, seed), seed, ref)
@@ -85,29 +91,29 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
         else:
             rec = runner.run_one(entry, sc, spp, seed, ref)
         records.append(rec)
-        bar.update(1)
+        bar.advance(f"{rec.renderer} {rec.status}")
         if as_json:
-            typer.echo(json.dumps(runner.json_record(rec), allow_nan=False))
+            bar.write(json.dumps(runner.json_record(rec), allow_nan=False))
     bar.close()
-    report = _write_compare_outputs(out, sc, ref, records, _command_line(), sections=sections)
+    report = _write_compare_outputs(out, sc, ref, records, _command_line(), sections=sections, title=title)
     if not as_json:
         import pandas as pd
 
         frame = pd.DataFrame([r.row() for r in records])
-        cols = [c for c in ("renderer", "status", "spp", "time_s", "delta_e2000_mean", "noise_delta_e2000_mean",
-                            "ssim", "rel_mse", "mean_radiance_rel_error", "nan_count", "info_target_reached")
+        cols = [c for c in ("renderer", "status", "spp", "time_s", *TABLE_METRICS, "info_target_reached")
                 if c in frame]
         typer.echo(frame[cols].to_string(index=False))
         for r in records:
             if r.status != "ok":
                 typer.echo(f"{r.renderer}: {r.status}: {r.reason}")
-    typer.echo(f"report: {report}", err=True)
+    info(f"report: {report}")
     return (1 if any(r.status == "failed" for r in records) else 0), records, sc, ref
 
 
 @app.command()
 def compare(
     scene: str = SceneOpt,
+    overrides: Optional[List[str]] = SetOpt,
     renderer: Optional[List[str]] = RenderersOpt,
     spp: int = SppOpt,
     seed: int = SeedOpt,
@@ -123,6 +129,7 @@ def compare(
                                      "a bare number means ΔE mean). Each renderer renders at 1, 2, 4, ... spp "
                                      "until the metric is at most VALUE and reports the time it needed."),
     max_spp: int = typer.Option(4096, "--max-spp", min=1, help="Upper spp limit of --target-error."),
+    title: Optional[str] = TitleOpt,
 ) -> None:
     """Render with each renderer, score against the scene's reference, write a report.
 
@@ -131,31 +138,48 @@ def compare(
     """
     if time_budget and target_error:
         raise typer.BadParameter("give --time-budget or --target-error, not both")
-    raise typer.Exit(_run_compare(scene, renderer, spp, seed, out, as_json, time_budget, target_error, max_spp)[0])
+    raise typer.Exit(_run_compare(scene, renderer, spp, seed, out, as_json, time_budget, target_error, max_spp,
+                                  overrides=overrides, title=title)[0])
 
 
-#: The scenes of ``cbox demo``: the report leads with the first; each other one is a section of it
-#: (with its own full report in a subfolder).
+#: The scenes of ``cbox demo``: a convergence run on the first, whose report leads; each other one is a
+#: comparison at the highest spp, a section of that report (in full in a subfolder).
 DEMO_SCENES = ("cornell-box", "cornell-box-caustics")
+
+
+def demo_checkpoints(spp: int) -> list[int]:
+    """1, 4, 16, ... up to ``spp`` (and ``spp`` itself): powers of 4 give a slope from a few points, and a
+    renderer that is not progressive renders 1.33x its top spp in all instead of 2x with powers of 2."""
+    out = [1]
+    while out[-1] * 4 <= spp:
+        out.append(out[-1] * 4)
+    return out if out[-1] == spp else out + [spp]
 
 
 @app.command()
 def demo(
-    out: Path = out_folder_option(Path("out"), "Folder for report.html and metrics.csv (other scenes in "
-                                               "subfolders named after them)."),
-    spp: int = typer.Option(64, "--spp", min=1, help="Samples per pixel for every renderer."),
-    seed: int = SeedOpt,
+    out: Path = out_folder_option(Path("out"), "Folder for report.html, results.parquet and summary.csv (the "
+                                               "caustics comparison in a subfolder named after its scene)."),
+    spp: int = typer.Option(64, "--spp", min=1, help="Highest spp: cornell-box converges at 1, 4, 16, ... up to "
+                                                   "it, and cornell-box-caustics is compared at it."),
+    seeds: int = typer.Option(2, "--seeds", min=1, help="Seeds of the convergence run (bias and variance need 2)."),
 ) -> None:
-    """The main job: every available renderer on cornell-box and cornell-box-caustics against the stored
-    references → out/report.html (cornell-box-caustics as a section, and in full in out/cornell-box-caustics/)."""
+    """What the tool is for, in about three minutes on 2 cores: every available renderer converging on
+    cornell-box (error against spp and time, speed/accuracy, bias and variance) and compared on
+    cornell-box-caustics (mirror and glass) → out/report.html, the caustics as a section of it."""
+    from harness.cli.experiment import print_summary, run_convergence
     from reports.scenes import scene_section
 
     sections, code = [], 0
     for name in DEMO_SCENES[1:]:
-        sub_code, records, sc, ref = _run_compare(name, None, spp, seed, out / name, False)
+        sub_code, records, sc, ref = _run_compare(name, None, spp, 0, out / name, False)
         code = max(code, sub_code)
         images = {r.renderer: r.image for r in records if r.status == "ok" and r.image is not None}
         sections.append((name, sc.name, scene_section(sc, ref.image, [r.row() for r in records], images,
                                                       f"{name}/report.html")))
-    main_code = _run_compare(DEMO_SCENES[0], None, spp, seed, out, False, sections=sections)[0]
-    raise typer.Exit(max(code, main_code))
+    sc = resolve_scene(DEMO_SCENES[0])
+    runs, report = run_convergence(out, sc, load_reference(sc), resolve(None), demo_checkpoints(spp), seeds,
+                                   sections=sections)
+    print_summary(out, runs)
+    info(f"report: {report}")
+    raise typer.Exit(max(code, 1 if (runs["status"] == "failed").any() else 0))

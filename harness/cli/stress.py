@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.common import _command_line, app, out_folder_option
+from harness.cli.common import Progress, _command_line, app, out_folder_option
 
 
 @app.command()
@@ -27,9 +27,19 @@ def stress(
     from harness.stress.suite import print_summary, run_suite
     from reports.stress import write_stress_report
 
+    bars: list[Progress] = []  # made at the first finished run, when the count of runs is known
+
+    def progress(done: int, total: int, label: str) -> None:
+        if not bars:
+            bars.append(Progress(total, "stress", "run"))
+        bars[0].advance(label)
+
     try:
-        run = run_suite(renderer, variant, out)
+        run = run_suite(renderer, variant, out, progress)
     except ValueError as e:
         raise typer.BadParameter(str(e), param_hint="--variant") from None
+    finally:
+        for bar in bars:
+            bar.close()
     report = write_stress_report(Path(out) / "stress.html", run.table, run.provenance, _command_line())
     raise typer.Exit(print_summary(run, report))

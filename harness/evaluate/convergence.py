@@ -36,6 +36,7 @@ import pandas as pd
 from scipy import stats as _st
 
 from harness.evaluate.registry import IMAGE_METRICS, REGION_CHECK_METRICS, region_metric
+from harness.suggest import closest
 
 #: Targets of ``time_to_*`` columns by default: (metric, value).
 DEFAULT_TARGETS = (("delta_e2000_mean", 2.0), ("delta_e2000_mean", 1.0), ("rel_mse", 1e-2), ("rel_mse", 1e-3))
@@ -107,7 +108,12 @@ def parse_target(text: str) -> tuple[str, float]:
     parts = region_metric(metric)
     known = IMAGE_METRICS if parts is None else REGION_CHECK_METRICS
     if (parts[1] if parts else metric) not in known or (parts is not None and not parts[0]):
-        raise ValueError(f"target error {text!r}: unknown metric {metric!r}; use one of {', '.join(known)}"
+        hint = closest(parts[1] if parts else metric, known)
+        if parts and hint:
+            hint = f"region.{parts[0] or '<region>'}.{hint}"
+        raise ValueError(f"target error {text!r}: unknown metric {metric!r}"
+                         + (f" (did you mean {hint!r}?)" if hint and hint != metric else "")
+                         + f"; use one of {', '.join(known)}"
                          + ("" if parts else ", or region.<region>.<metric>"))
     try:
         value = float(m.group(2))

@@ -92,13 +92,13 @@ report say which expectation failed, by how much, and where in the image.
 
 from __future__ import annotations
 
-import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from harness.evaluate.registry import HIGHER_IS_BETTER, IMAGE_METRICS, REGION_CHECK_METRICS, region_metric
+from harness.suggest import closest
 from harness.workflows.budgets import parse_duration
 
 DEFAULT_REGRESSION_METRICS = ("delta_e2000_mean", "rel_mse_trimmed", "ssim")
@@ -176,9 +176,9 @@ def _check_keys(path: Path, table: dict, allowed, where: str, what: str = "key")
     """Refuse any key not in ``allowed``, naming it and the closest allowed one."""
     for key in table:
         if key not in allowed:
-            hint = difflib.get_close_matches(str(key), list(allowed), n=1)
+            hint = closest(key, allowed)
             raise GateConfigError(path, f"{where}{key}", f"unknown {what}"
-                                  + (f" (did you mean {hint[0]!r}?)" if hint else f"; known: {', '.join(allowed)}"))
+                                  + (f" (did you mean {hint!r}?)" if hint else f"; known: {', '.join(allowed)}"))
 
 
 def _check_metrics(path: Path, names, allowed, where: str) -> None:
@@ -190,10 +190,10 @@ def _check_metrics(path: Path, names, allowed, where: str) -> None:
             continue
         region, metric = parts
         if not region or metric not in REGION_CHECK_METRICS:
-            hint = difflib.get_close_matches(metric, REGION_CHECK_METRICS, n=1) if region else []
+            hint = closest(metric, REGION_CHECK_METRICS) if region else None
             raise GateConfigError(path, f"{where}{key}", "unknown region metric: expected region.<region>.<metric> "
                                   "with <metric> one of " + ", ".join(REGION_CHECK_METRICS)
-                                  + (f" (did you mean 'region.{region}.{hint[0]}'?)" if hint else ""))
+                                  + (f" (did you mean 'region.{region}.{hint}'?)" if hint else ""))
 
 
 def _band(path: Path, value, field: str) -> tuple[float, float]:

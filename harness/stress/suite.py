@@ -23,14 +23,13 @@ this module returns.
 
 The suite for our path tracer and Mitsuba takes 1.5-2 minutes on a 2-core
 machine. Entry points: :func:`run_stress` (the table), :func:`run_suite`
-(``cbox stress``: progress bar, ``stress.csv``, provenance) and
+(``cbox stress``: ``stress.csv``, provenance) and
 :func:`print_summary` (the table as text, the exit code).
 """
 
 from __future__ import annotations
 
 import math
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -221,8 +220,10 @@ class StressRun:
         return 1 if self.table["status"].isin(["fail", "error"]).any() else 0
 
 
-def run_suite(renderer_specs: list[str] | None, variants: list[str] | None, out_dir: Path) -> StressRun:
-    """``cbox stress``: run the suite with a progress bar on stderr and write ``out_dir/stress.csv`` atomically.
+def run_suite(renderer_specs: list[str] | None, variants: list[str] | None, out_dir: Path,
+              progress: Progress | None = None) -> StressRun:
+    """``cbox stress``: run the suite (``progress`` as in :func:`run_stress`) and write ``out_dir/stress.csv``
+    atomically.
 
     Unknown variant names raise ValueError before anything runs or is
     written, unknown renderers RendererError, a stale reference
@@ -232,26 +233,14 @@ def run_suite(renderer_specs: list[str] | None, variants: list[str] | None, out_
     """
     import datetime as _dt
 
-    from tqdm import tqdm
-
     from harness.store.atomic import atomic_path
     from harness.store.provenance import provenance
 
     select_variants(variants)  # fail on a bad name before anything runs
     out_dir = Path(out_dir)
     date = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-    bar = tqdm(total=0, desc="stress", unit="run", file=sys.stderr, dynamic_ncols=True, leave=False)
-
-    def progress(done: int, total: int, label: str) -> None:
-        bar.total = total
-        bar.set_postfix_str(label, refresh=False)
-        bar.update(done - bar.n)
-
     t0 = time.perf_counter()
-    try:
-        table = run_stress(renderer_specs, variants, progress)
-    finally:
-        bar.close()
+    table = run_stress(renderer_specs, variants, progress)
     wall = time.perf_counter() - t0
     out_dir.mkdir(parents=True, exist_ok=True)
     with atomic_path(out_dir / "stress.csv") as tmp:

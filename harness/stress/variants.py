@@ -70,6 +70,7 @@ import numpy as np
 
 from harness.scenes.analytic import furnace_radiance, furnace_scene
 from harness.scenes.model import Scene
+from harness.suggest import did_you_mean
 from harness.scenes.transforms import (GRAZING_ANGLE_DEG, GRAZING_DISTANCE, emitter_footprint, grazing_camera,
                                        scale_geometry, scale_radiance, shrink_lights)
 
@@ -232,6 +233,7 @@ def select_variants(names: Sequence[str] | None) -> list[Variant]:
         return list(VARIANTS)
     unknown = [n for n in names if n not in table]
     if unknown:
-        raise ValueError(f"unknown stress variant(s) {', '.join(map(repr, unknown))}; known: {', '.join(table)}")
+        raise ValueError(f"unknown stress variant(s) {', '.join(map(repr, unknown))}"
+                         + did_you_mean(unknown[0], table) + f"; known: {', '.join(table)}")
     wanted = set(names)
     return [v for v in VARIANTS if v.name in wanted]

@@ -120,12 +120,28 @@ def json_safe(row: dict) -> dict:
             (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
 
 
+#: Fields a results row holds as JSON text (a table cell is a scalar); objects again in JSON output.
+JSON_TEXT_FIELDS = ("settings", "scene_settings", "approximations")
+
+
+def json_row(row: dict) -> dict:
+    """A results row as strict JSON (``--json``): region metrics nested under "regions", the
+    :data:`JSON_TEXT_FIELDS` as the objects they hold (never JSON inside a string), non-finite floats None."""
+    out = {k: v for k, v in row.items() if not (isinstance(k, str) and k.startswith(named_regions.REGION_PREFIX))}
+    for key in JSON_TEXT_FIELDS:
+        if isinstance(out.get(key), str):
+            try:
+                out[key] = json.loads(out[key])
+            except ValueError:  # not written by this version: left as it is
+                pass
+    if regions := named_regions.nested_regions(row):
+        out["regions"] = regions
+    return json_safe(out)
+
+
 def json_record(rec: "RunRecord") -> dict:
-    """One run as strict JSON (``cbox compare --json``): the row, with region metrics nested under "regions"."""
-    row = {k: v for k, v in rec.row().items() if not k.startswith(named_regions.REGION_PREFIX)}
-    if rec.regions:
-        row["regions"] = rec.regions
-    return json_safe(row)
+    """One run as strict JSON (``cbox compare --json``): :func:`json_row` of its row."""
+    return json_row(rec.row())
 
 
 def render_sandboxed(entry: RendererEntry, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int],
