@@ -55,36 +55,18 @@ def write_exr(path: str | Path, image: np.ndarray, metadata: dict[str, str] | No
 
 
 def read_exr(path: str | Path) -> np.ndarray:
-    """Read an RGB image as float32 (H, W, 3)."""
-    import OpenImageIO as oiio
+    """Read an RGB image as float32 (H, W, 3) (:func:`harness.store.image_files.read_image_file`'s pixels)."""
+    from harness.store.image_files import read_image_file  # it imports this module's ImageFileError
 
-    path = Path(path)
-    if not path.exists():
-        raise ImageFileError(f"{path}: no such file")
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise ImageFileError(f"{path}: cannot read image: {oiio.geterror()}")
-    try:
-        spec = inp.spec()
-        if spec.nchannels < 3:
-            raise ImageFileError(f"{path}: expected 3 channels (RGB), found {spec.nchannels}")
-        data = inp.read_image(0, 0, 0, 3, oiio.FLOAT)
-    finally:
-        inp.close()
-    if data is None:
-        raise ImageFileError(f"{path}: cannot read image: {oiio.geterror()}")
-    return np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, 3)
+    return read_image_file(path).pixels
 
 
 def read_exr_metadata(path: str | Path) -> dict[str, str]:
     """The string attributes of an EXR's header (``cbox:spp``, ``cbox:renderer``... as :func:`write_exr` stored
     them); {} for a file that is missing or unreadable, which callers treat as "nothing recorded"."""
-    import OpenImageIO as oiio
+    from harness.store.image_files import read_image_file
 
-    inp = oiio.ImageInput.open(str(path)) if Path(path).exists() else None
-    if inp is None:
-        return {}
     try:
-        return {a.name: str(a.value) for a in inp.spec().extra_attribs if isinstance(a.value, str)}
-    finally:
-        inp.close()
+        return read_image_file(path).metadata
+    except ImageFileError:
+        return {}
