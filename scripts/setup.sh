@@ -69,10 +69,15 @@ have=$(cat "$stamp" 2>/dev/null || true)
 # A test install is a superset of the plain one: it satisfies both.
 if [[ $have != "$want" && $have != "${want%\[test\]}[test]" ]]; then
   say "installing Python packages into .venv (first run takes a minute)"
-  .venv/bin/python -m pip install -q --upgrade pip 2>&1 | grep -v "is ignored" >&2 || true
-  .venv/bin/python -m pip install -q -e ".$extras" 2>&1 | grep -v "is ignored" >&2 || true
-  .venv/bin/python -c 'import harness.cli.app, renderers.mitsuba3' \
-    || { say "installation failed"; exit 1; }
+  # pip's and setuptools' own chatter (build-backend warnings) goes to a log shown only if something fails,
+  # so this script prints only its own lines.
+  log=.venv/.cbox-pip.log
+  if ! { .venv/bin/python -m pip install -q --upgrade pip && .venv/bin/python -m pip install -q -e ".$extras"; } \
+      >"$log" 2>&1 || ! .venv/bin/python -c 'import harness.cli.app, renderers.mitsuba3' 2>>"$log"; then
+    cat "$log" >&2
+    say "installation failed (pip's output above, also in $log)"
+    exit 1
+  fi
   echo "$want" > "$stamp"
 fi
 say "ready: .venv/bin/cbox --help"
