@@ -140,55 +140,65 @@ def test_converge_region_target_must_name_a_region_of_the_scene(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
-def _converge(out, log, spp, seeds=1):
-    cmd = _converge_cmd(out, seeds=seeds)
-    cmd[cmd.index("--spp") + 1] = spp
-    proc = subprocess.run(cmd, cwd=ROOT, env=_env(log), capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    return pd.read_parquet(out / "results.parquet")
+def _converge(out, log, spp, monkeypatch, command=None):
+    """``cbox converge`` of CountingNoise on cornell-box, seed 0, in this process (the workflow the command
+    runs, without a second interpreter's start-up): the results table."""
+    from harness.adapters.registry import resolve
+    from harness.scenes.library import resolve_scene
+    from harness.store.references import load_reference
+    from harness.workflows.converge import parse_spp_list, run_experiment
+
+    monkeypatch.setenv("CBOX_TEST_RENDER_LOG", str(log))
+    scene = resolve_scene("cornell-box")
+    return run_experiment(out, scene, load_reference(scene), resolve(["user_renderers:CountingNoise"]),
+                          parse_spp_list(spp), [0], command or f"cbox converge --spp {spp}")
 
 
-def test_changed_spp_list_renders_only_the_missing_checkpoints(tmp_path):
+def _rendered_spps(log, since):
+    return [line.split()[1] for line in log.read_text().splitlines()[since:]] if log.exists() else []
+
+
+def test_changed_spp_list_renders_only_the_missing_checkpoints(tmp_path, monkeypatch):
     """A longer spp list renders only the new spp; rows already stored are kept unchanged; a shorter list
     renders only its new highest spp (the stored image must be at the highest), and keeps the stored rows."""
     out, log = tmp_path / "exp", tmp_path / "renders.log"
-    first = _converge(out, log, "1,2")
+    first = _converge(out, log, "1,2", monkeypatch)
     n = len(log.read_text().splitlines())
-    longer = _converge(out, log, "1,2,4")
-    assert [line.split()[1] for line in log.read_text().splitlines()[n:]] == ["4"]
+    longer = _converge(out, log, "1,2,4", monkeypatch)
+    assert _rendered_spps(log, n) == ["4"]
     assert sorted(longer["spp"]) == [1, 2, 4]
     pd.testing.assert_frame_equal(longer[longer["spp"] <= 2].reset_index(drop=True)[first.columns], first,
                                   check_dtype=False)
     n = len(log.read_text().splitlines())
-    shorter = _converge(out, log, "1,2")
-    assert [line.split()[1] for line in log.read_text().splitlines()[n:]] == ["2"]
+    shorter = _converge(out, log, "1,2", monkeypatch)
+    assert _rendered_spps(log, n) == ["2"]
     assert sorted(shorter["spp"]) == [1, 2]
     n = len(log.read_text().splitlines())
-    _converge(out, log, "1,2")  # nothing missing: nothing rendered
-    assert len(log.read_text().splitlines()) == n
+    _converge(out, log, "1,2", monkeypatch)  # nothing missing: nothing rendered
+    assert _rendered_spps(log, n) == []
 
 
-def test_resume_keeps_the_first_date_and_lists_each_resume(tmp_path):
+def test_resume_keeps_the_first_date_and_lists_each_resume(tmp_path, monkeypatch):
     out, log = tmp_path / "exp", tmp_path / "renders.log"
-    _converge(out, log, "1")
+    _converge(out, log, "1", monkeypatch)
     first = json.loads((out / "experiment.json").read_text())
     assert first["resumed"] == []
-    _converge(out, log, "1,2")
+    _converge(out, log, "1,2", monkeypatch)
     again = json.loads((out / "experiment.json").read_text())
     assert again["date"] == first["date"] and again["spp"] == [1, 2]
-    assert len(again["resumed"]) == 1 and "--spp 1,2 " in again["resumed"][0]["command"] + " "
+    assert len(again["resumed"]) == 1 and again["resumed"][0]["command"] == "cbox converge --spp 1,2"
 
 
-def test_second_run_on_a_locked_folder_exits_2_naming_the_holder(tmp_path):
-    from harness.store.experiments import experiment_lock
+def test_second_run_on_a_locked_folder_stops_naming_the_holder(tmp_path, monkeypatch):
+    """flock conflicts between two opens of the file even in one process, so one process can play both runs;
+    the CLI prints an ExperimentError as its one line with exit code 2, as for every user error."""
+    from harness.store.experiments import ExperimentError, experiment_lock
 
     out, log = tmp_path / "exp", tmp_path / "renders.log"
     with experiment_lock(out, "cbox converge --holder-marker"):
-        proc = subprocess.run(_converge_cmd(out, seeds=1), cwd=ROOT, env=_env(log), capture_output=True,
-                              text=True, timeout=300)
-    assert proc.returncode == 2 and not log.exists(), proc.stderr
-    (line,) = proc.stderr.strip().splitlines()
-    assert line.startswith("cbox: error:") and f"pid {os.getpid()}" in line and "--holder-marker" in line
-    # Released on exit: the same command then runs.
-    assert subprocess.run(_converge_cmd(out, seeds=1), cwd=ROOT, env=_env(log), capture_output=True,
-                          timeout=300).returncode == 0
+        with pytest.raises(ExperimentError) as err:
+            _converge(out, log, "1", monkeypatch)
+    assert not log.exists()  # stopped before any rendering
+    assert f"pid {os.getpid()}" in str(err.value) and "--holder-marker" in str(err.value)
+    assert "\n" not in str(err.value)
+    _converge(out, log, "1", monkeypatch)  # released on exit: the same run then goes ahead
