@@ -61,30 +61,45 @@ def test_report_has_every_renderer(tmp_path):
     assert "does not model area_light, box_filter, diffuse" in html and "no CUDA device found" in html
 
 
-def test_demo_writes_report(tmp_path):
-    """A short convergence run on cornell-box (spp 1 and 4, two seeds) leads; the caustics scene is a section."""
-    proc = run_cbox("demo", "--out", str(tmp_path), "--spp", "4")
+def _demo(tmp_path, *renderers):
+    proc = run_cbox("demo", "--out", str(tmp_path), "--spp", "4", *[a for r in renderers for a in ("-r", r)])
     assert proc.returncode == 0, proc.stderr
-    runs = pd.read_parquet(tmp_path / "results.parquet")
+    assert "report:" in proc.stderr and (tmp_path / "report.html").exists()
+    return pd.read_parquet(tmp_path / "results.parquet"), pd.read_csv(tmp_path / "cornell-box-caustics" / "metrics.csv")
+
+
+def test_demo_writes_report(tmp_path):
+    """A short convergence run on cornell-box (spp 1 and 4, two seeds) leads; the caustics scene is a section.
+
+    Three renderers, so CI stays short; every renderer runs in the slow test below (and from a wheel)."""
+    runs, caustics = _demo(tmp_path, "mitsuba", "pathtracer", "pyrender")
     ok = runs[runs["status"] == "ok"]
-    assert {"mitsuba", "pyrender", "pathtracer"} <= set(ok["renderer"])
+    assert set(ok["renderer"]) == {"mitsuba", "pyrender", "pathtracer"}
     assert set(ok.loc[ok["renderer"] == "pathtracer", "seed"]) == {0, 1} and set(ok["spp"]) == {1, 4}
     summary = pd.read_csv(tmp_path / "summary.csv").set_index("renderer")
     assert summary.loc["pathtracer", "slope_rmse_spp"] < 0 and summary.loc["pathtracer", "variance"] > 0
-    assert "report:" in proc.stderr and (tmp_path / "report.html").exists()
     assert (tmp_path / "figures" / "bias-variance.svg").exists()  # the report's plots, as figures too
     # The caustics scene: its own full report, and a section of the main one that links to it.
-    caustics = pd.read_csv(tmp_path / "cornell-box-caustics" / "metrics.csv")
+    status = dict(zip(caustics["renderer"], caustics["status"]))
+    assert status == {"mitsuba": "ok", "pathtracer": "ok", "pyrender": "skipped"}
+    assert caustics.set_index("renderer").loc["pathtracer", "region.caustic.rel_mse"] > 0
+    html = (tmp_path / "report.html").read_text()
+    assert 'href="cornell-box-caustics/report.html"' in html and "ΔE caustic" in html
+    assert (tmp_path / "cornell-box-caustics" / "report.html").exists()
+
+
+@pytest.mark.slow
+def test_demo_runs_every_renderer(tmp_path):
+    runs, caustics = _demo(tmp_path)
+    assert {"mitsuba", "pyrender", "pathtracer", "photonmap", "sppm", "probes", "ambient"} <= \
+        set(runs.loc[runs["status"] == "ok", "renderer"])
+    # Every renderer of ours runs on the caustics scene, the photon mappers recorded as consistent, with regions.
     status = dict(zip(caustics["renderer"], caustics["status"]))
     assert status["mitsuba"] == "ok" and status["pyrender"] == "skipped"
-    # Every renderer of ours runs on it, the photon mappers recorded as consistent, with region metrics.
     rows = caustics.set_index("renderer")
     for name, estimator in (("pathtracer", "unbiased"), ("photonmap", "consistent"), ("sppm", "consistent")):
         assert (status[name], rows.loc[name, "estimator"]) == ("ok", estimator)
         assert rows.loc[name, "region.caustic.rel_mse"] > 0
-    html = (tmp_path / "report.html").read_text()
-    assert 'href="cornell-box-caustics/report.html"' in html and "ΔE caustic" in html
-    assert (tmp_path / "cornell-box-caustics" / "report.html").exists()
 
 
 def test_scenes_lists_features_regions_and_references():

@@ -163,6 +163,7 @@ def demo(
     spp: int = typer.Option(64, "--spp", min=1, help="Highest spp: cornell-box converges at 1, 4, 16, ... up to "
                                                    "it, and cornell-box-caustics is compared at it."),
     seeds: int = typer.Option(2, "--seeds", min=1, help="Seeds of the convergence run (bias and variance need 2)."),
+    renderer: Optional[List[str]] = RenderersOpt,
 ) -> None:
     """What the tool is for, in about three minutes on 2 cores: every available renderer converging on
     cornell-box (error against spp and time, speed/accuracy, bias and variance) and compared on
@@ -172,13 +173,13 @@ def demo(
 
     sections, code = [], 0
     for name in DEMO_SCENES[1:]:
-        sub_code, records, sc, ref = _run_compare(name, None, spp, 0, out / name, False)
+        sub_code, records, sc, ref = _run_compare(name, renderer, spp, 0, out / name, False)
         code = max(code, sub_code)
         images = {r.renderer: r.image for r in records if r.status == "ok" and r.image is not None}
         sections.append((name, sc.name, scene_section(sc, ref.image, [r.row() for r in records], images,
                                                       f"{name}/report.html")))
     sc = resolve_scene(DEMO_SCENES[0])
-    runs, report = run_convergence(out, sc, load_reference(sc), resolve(None), demo_checkpoints(spp), seeds,
+    runs, report = run_convergence(out, sc, load_reference(sc), resolve(renderer), demo_checkpoints(spp), seeds,
                                    sections=sections)
     print_summary(out, runs)
     info(f"report: {report}")
