@@ -13,7 +13,8 @@ from harness.adapters.registry import resolve
 from harness.scenes.loader import load_scene
 from harness.scenes.model import SceneError
 from harness.scenes.overrides import format_value, load_derived_scene, parse_value
-from harness.store.exr import read_exr, read_exr_metadata
+from harness.store.exr import read_exr
+from harness.store.image_files import read_image_file
 from harness.store.references import (DERIVED_FOLDER, PROVENANCE_FILE, ReferenceError, build_seconds,
                                       load_reference, reference_folder)
 from harness.workflows.reference_build import build_reference
@@ -140,7 +141,7 @@ def test_render_with_set_resolution_writes_that_size(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert read_exr(out).shape == (12, 16, 3)
     derived = load_derived_scene(CORNELL, ["camera.resolution=16,12"])
-    assert read_exr_metadata(out)["cbox:scene_hash"] == derived.content_hash() != load_scene(CORNELL).content_hash()
+    assert read_image_file(out).metadata["cbox:scene_hash"] == derived.content_hash() != load_scene(CORNELL).content_hash()
 
 
 @pytest.fixture

@@ -14,6 +14,7 @@ from harness.cli.common import (Progress, RenderersOpt, SceneOpt, SeedOpt, SetOp
                                 app, check_output_file, info, out_folder_option)
 from harness.scenes.library import resolve_scene
 from harness.store.exr import write_exr
+from harness.store.image_files import SPP_ATTRIBUTE
 from harness.store.references import load_reference
 # Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
 # a misspelt config, or `cbox --help`, must answer in a second.
@@ -45,7 +46,7 @@ def render(
     from harness.workflows.render import render_checked
 
     result = render_checked(entry, sc, spp, seed)
-    write_exr(out, result.image, {"cbox:renderer": entry.name, "cbox:settings": canonical(entry.settings), "cbox:spp": str(spp), "cbox:seed": str(seed),
+    write_exr(out, result.image, {"cbox:renderer": entry.name, "cbox:settings": canonical(entry.settings), SPP_ATTRIBUTE: str(spp), "cbox:seed": str(seed),
                                   "cbox:scene_hash": sc.content_hash()})
     info(f"wrote {out} ({sc.camera.width}x{sc.camera.height}, {spp} spp, {result.time_s:.2f} s)")
 

@@ -60,13 +60,3 @@ def read_exr(path: str | Path) -> np.ndarray:
 
     return read_image_file(path).pixels
 
-
-def read_exr_metadata(path: str | Path) -> dict[str, str]:
-    """The string attributes of an EXR's header (``cbox:spp``, ``cbox:renderer``... as :func:`write_exr` stored
-    them); {} for a file that is missing or unreadable, which callers treat as "nothing recorded"."""
-    from harness.store.image_files import read_image_file
-
-    try:
-        return read_image_file(path).metadata
-    except ImageFileError:
-        return {}

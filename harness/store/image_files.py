@@ -18,6 +18,9 @@ import numpy as np
 
 from harness.store.exr import ImageFileError
 
+#: The header attribute the spp of an image is written into (``cbox render``, experiment folders, references).
+SPP_ATTRIBUTE = "cbox:spp"
+
 #: OpenImageIO's names of the floating-point pixel types.
 FLOAT_PIXEL_TYPES = ("half", "float", "double")
 
@@ -69,3 +72,17 @@ def read_image_file(path: str | Path) -> ImageFile:
         raise ImageFileError(f"{path}: cannot read image: {oiio.geterror().strip()}")
     pixels = np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, 3)
     return ImageFile(path, pixels, str(spec.format), file_format, metadata)
+
+
+def header_spp(image: ImageFile) -> int | None:
+    """The spp its ``cbox:spp`` header records; None without one."""
+    text = image.metadata.get(SPP_ATTRIBUTE)
+    if text is None:
+        return None
+    try:
+        spp = int(text)
+    except ValueError:
+        spp = 0
+    if spp < 1:
+        raise ImageFileError(f"{image.path}: header {SPP_ATTRIBUTE} = {text!r} is not a positive integer")
+    return spp

@@ -50,7 +50,7 @@ from harness.evaluate import regions as named_regions
 from harness.scenes.model import Scene
 from harness.scenes.quantities import DEFAULT_QUANTITY
 from harness.store.exr import ImageFileError, read_exr
-from harness.store.image_files import ImageFile, read_image_file
+from harness.store.image_files import SPP_ATTRIBUTE, ImageFile, header_spp, read_image_file
 from harness.store.references import (NOISE_FILE, PROVENANCE_FILE, REFERENCE_FILE, VARIANCE_FILE, Reference,
                                       ReferenceError, load_reference)
 from harness.workflows import runner
@@ -60,8 +60,6 @@ INPUT_TRANSFERS = {
     "srgb": "undo the sRGB transfer function (the EOTF of IEC 61966-2-1)",
     "linear": "take the stored values as linear, scaled to [0, 1] (a linear 16-bit image)",
 }
-#: The header attribute ``cbox render`` writes the spp into.
-SPP_ATTRIBUTE = "cbox:spp"
 
 
 @dataclass
@@ -137,20 +135,6 @@ def linear_pixels(image: ImageFile, transfer: str | None) -> np.ndarray:
     import colour
 
     return np.asarray(colour.models.eotf_sRGB(image.pixels), dtype=np.float32)
-
-
-def header_spp(image: ImageFile) -> int | None:
-    """The spp its ``cbox:spp`` header records; None without one."""
-    text = image.metadata.get(SPP_ATTRIBUTE)
-    if text is None:
-        return None
-    try:
-        spp = int(text)
-    except ValueError:
-        spp = 0
-    if spp < 1:
-        raise ImageFileError(f"{image.path}: header {SPP_ATTRIBUTE} = {text!r} is not a positive integer")
-    return spp
 
 
 def image_spp(image: ImageFile, given: int | None) -> int | None:

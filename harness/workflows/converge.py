@@ -22,7 +22,8 @@ from harness.evaluate.regions import nested_regions, region_columns, region_mask
 from harness.scenes.model import Scene
 from harness.store.experiments import (RESULTS_FILE, cell_name, experiment_lock, prepare_dir, spps_to_render,
                                        stored_cell, write_parquet_atomic)
-from harness.store.exr import read_exr_metadata, write_exr
+from harness.store.exr import ImageFileError, write_exr
+from harness.store.image_files import SPP_ATTRIBUTE, header_spp, read_image_file
 from harness.store.references import Reference
 from harness.workflows import runner
 
@@ -95,8 +96,7 @@ def _cell(out: Path, name: str, entry: RendererEntry, scene: Scene, spps: list[i
     cell_path, image_path = out / "cells" / f"{name}.parquet", out / "images" / f"{name}.exr"
     stored = stored_cell(cell_path, scene)
     have = stored["spp"].astype(int).tolist() if stored is not None else []
-    image_spp = read_exr_metadata(image_path).get("cbox:spp") if stored is not None else None
-    todo = spps_to_render(have, int(image_spp) if image_spp else None, spps)
+    todo = spps_to_render(have, _image_spp(image_path) if stored is not None else None, spps)
     if not todo:
         return stored[stored["spp"].astype(int).isin(spps)].reset_index(drop=True), True
     rows_list, image = render_cell(entry, scene, todo, seed, reference)
@@ -104,12 +104,20 @@ def _cell(out: Path, name: str, entry: RendererEntry, scene: Scene, spps: list[i
     if image is None:  # failed: its rows are reported, nothing is stored
         return rendered, False
     if todo[-1] == spps[-1]:  # image first: a cell's rows promise its image exists
-        write_exr(image_path, image, {"cbox:spp": str(todo[-1])})
+        write_exr(image_path, image, {SPP_ATTRIBUTE: str(todo[-1])})
     kept = stored[~stored["spp"].astype(int).isin(todo)] if stored is not None else None
     rows = pd.concat([kept, rendered], ignore_index=True) if kept is not None and len(kept) else rendered
     rows = rows.sort_values("spp", kind="stable").reset_index(drop=True)
     write_parquet_atomic(rows, cell_path)
     return rows[rows["spp"].astype(int).isin(spps)].reset_index(drop=True), False
+
+
+def _image_spp(path: Path) -> int | None:
+    """The spp a cell's stored image was rendered at (its header), None if unknown: then it is rendered again."""
+    try:
+        return header_spp(read_image_file(path))
+    except ImageFileError:
+        return None
 
 
 def summary_table(runs: pd.DataFrame, images: dict[str, list[np.ndarray]], reference: Reference, scene: Scene,

@@ -24,6 +24,7 @@ from harness.evaluate.regions import region_masks, region_noise
 from harness.scenes.model import Scene
 from harness.store.atomic import write_json_atomic
 from harness.store.exr import write_exr
+from harness.store.image_files import SPP_ATTRIBUTE
 from harness.store.references import (NOISE_FILE, PROVENANCE_FILE, REFERENCE_FILE, REFERENCE_SEED_BASE, VARIANCE_FILE,
                                       Reference, reference_folder)
 from harness.workflows.render import render_checked
@@ -76,7 +77,7 @@ def build_reference(
         prov["overrides"] = list(scene.overrides)
     if scene.regions:
         prov["region_noise"] = region_noise(mean, variance_of_mean, region_masks(scene))
-    meta = {"cbox:scene_hash": prov["scene_hash"], "cbox:spp": str(spp), "cbox:renderer": prov["renderer_version"]}
+    meta = {"cbox:scene_hash": prov["scene_hash"], SPP_ATTRIBUTE: str(spp), "cbox:renderer": prov["renderer_version"]}
     write_exr(folder / REFERENCE_FILE, mean, meta)
     write_exr(folder / VARIANCE_FILE, variance_of_mean, meta)
     write_exr(folder / NOISE_FILE, noise, meta)
