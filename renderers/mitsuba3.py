@@ -14,6 +14,13 @@ Renders are split into passes of at most :data:`MAX_SAMPLES_PER_PASS` samples
 so memory stays bounded at any spp (the LLVM variant keeps a whole wavefront
 in memory); each pass has its own seed, derived from the user's seed.
 
+Auxiliary images (albedo, normal: :data:`harness.adapters.registry.AOVS`)
+come from Mitsuba's ``aov`` integrator wrapped around ``path``, in the same
+render: same samples, same box filter. They are Mitsuba's definition, the
+first surface hit (mirrors and glass not followed, unlike our path tracer's;
+Open Image Denoise accepts either), and its normals are not turned towards
+the camera.
+
 Scenes of quantity ``ambient_occlusion`` are rendered by a Python AO
 integrator on the same scene, passes and seeds (:mod:`renderers.mitsuba_ao`;
 Mitsuba 3.9 has none of its own), in the LLVM variant only.
@@ -31,7 +38,7 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.registry import Checkpoint, RenderResult
+from harness.adapters.registry import AOVS, Checkpoint, RenderResult
 from harness.adapters.seeds import pass_seed, spp_passes
 from harness.scenes.materials import Dielectric, Diffuse, Mirror
 from harness.scenes.model import Scene
@@ -112,7 +119,7 @@ def unit_frame(scene: Scene) -> tuple[np.ndarray, float]:
     return (lo + hi) / 2.0, 1.0 / scene.extent()
 
 
-def scene_dict(scene: Scene, spp: int, sampler: str = "independent") -> dict:
+def scene_dict(scene: Scene, spp: int, sampler: str = "independent", aovs: bool = False) -> dict:
     """The scene as a ``mi.load_dict`` dictionary (Mitsuba must be imported).
 
     ``sampler`` is a Mitsuba sampler plugin (the adapter renders with
@@ -120,7 +127,8 @@ def scene_dict(scene: Scene, spp: int, sampler: str = "independent") -> dict:
     ``ldsampler``, which round spp up to a square or a power of two).
 
     Geometry and camera are first moved and scaled so the scene's bounding
-    box is centred on the origin with a diagonal of 1. Mitsuba offsets new
+    box is centred on the origin with a diagonal of 1. With ``aovs`` the
+    integrator is wrapped in ``aov`` (albedo, then shading normal, after RGB). Mitsuba offsets new
     rays by about 1e-4·(1 + |p|) scene units whatever the scene's size, which
     lets light leak through the walls of a box 1e-3 units wide (cbox stress
     found this: +1.2% mean, +60% in some tiles). A uniform change of units
@@ -157,6 +165,8 @@ def scene_dict(scene: Scene, spp: int, sampler: str = "independent") -> dict:
             },
         },
     }
+    if aovs:
+        d["integrator"] = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": d["integrator"]}
     bsdfs = {name: mi.load_dict(bsdf_dict(m)) for name, m in scene.materials.items()}
     for i, s in enumerate(scene.spheres):
         d[f"sphere_{i}"] = {"type": "sphere", "center": point(s.center), "radius": s.radius * k,
@@ -189,11 +199,11 @@ def bsdf_dict(material) -> dict:
     raise ValueError(f"material {material.name!r}: {type(material).__name__} has no Mitsuba translation")
 
 
-def run_passes(spp: int, seed: int, per_pass: int, checkpoints: Sequence[int], sums, image):
+def run_passes(spp: int, seed: int, per_pass: int, checkpoints: Sequence[int], sums, image, aovs=None):
     """Accumulate ``sums(n, pass_seed)`` (a tuple of per-pixel sums over n samples) over the passes of a render.
 
     Returns (sums over all spp, ``image(sums, spp)``, checkpoints, seconds spent in ``sums``); a checkpoint's
-    image is ``image(sums so far, done)``.
+    image is ``image(sums so far, done)``, its auxiliary images ``aovs(sums so far, done)`` (none if None).
     """
     acc, done, elapsed, shots = None, 0, 0.0, []
     for k, n in enumerate(spp_passes(spp, per_pass, checkpoints)):
@@ -203,10 +213,10 @@ def run_passes(spp: int, seed: int, per_pass: int, checkpoints: Sequence[int], s
         acc = part if acc is None else tuple(a + p for a, p in zip(acc, part))
         done += n
         if done in checkpoints and done < spp:
-            shots.append(Checkpoint(done, image(acc, done), elapsed))
+            shots.append(Checkpoint(done, image(acc, done), elapsed, aovs(acc, done) if aovs else {}))
     final = image(acc, spp)
     if spp in checkpoints:
-        shots.append(Checkpoint(spp, final, elapsed))
+        shots.append(Checkpoint(spp, final, elapsed, aovs(acc, spp) if aovs else {}))
     return acc, final, shots, elapsed
 
 
@@ -218,6 +228,7 @@ class Mitsuba3:
                           "pinhole_camera", "box_filter"})
     quantities = ("radiance", "ambient_occlusion")
     approximations: tuple[str, ...] = ()
+    aovs = AOVS
 
     def unavailable_reason(self) -> str | None:
         try:
@@ -235,23 +246,32 @@ class Mitsuba3:
 
         return f"{mi.__version__} ({self.variant()[0]})"
 
-    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = ()) -> RenderResult:
+    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
+               aovs: Sequence[str] = ()) -> RenderResult:
         variant, note = self.variant()
         import mitsuba as mi
 
         info = {"variant": variant, "variant_note": note}
         cam = scene.camera
         per_pass = max(1, MAX_SAMPLES_PER_PASS // (cam.width * cam.height))
-        mi_scene = mi.load_dict(scene_dict(scene, per_pass))
+        if unknown := set(aovs) - set(AOVS):
+            raise ValueError(f"unknown AOVs {sorted(unknown)}; this renderer gives {', '.join(AOVS)}")
+        if aovs and scene.quantity != "radiance":
+            raise ValueError(f"AOVs are for radiance images; scene {scene.name!r} is {scene.quantity}")
+        mi_scene = mi.load_dict(scene_dict(scene, per_pass, aovs=bool(aovs)))
         if scene.quantity == "ambient_occlusion":
             return self._render_ao(mi_scene, scene, spp, seed, checkpoints, per_pass, info)
 
         def sums(n: int, s: int) -> tuple[np.ndarray]:
             return (np.asarray(mi.render(mi_scene, spp=n, seed=s), dtype=np.float64) * n,)
 
-        _, image, shots, elapsed = run_passes(spp, seed, per_pass, checkpoints, sums,
-                                              lambda acc, n: (acc[0] / n).astype(np.float32))
-        return RenderResult(image, elapsed, spp, seed, shots, info)
+        def aux(acc, n: int) -> dict:
+            return {name: (acc[0][..., 3 + 3 * j:6 + 3 * j] / n).astype(np.float32) for j, name in enumerate(AOVS)}
+
+        acc, image, shots, elapsed = run_passes(spp, seed, per_pass, checkpoints, sums,
+                                                lambda acc, n: (acc[0][..., :3] / n).astype(np.float32),
+                                                aux if aovs else None)
+        return RenderResult(image, elapsed, spp, seed, shots, info, aovs=aux(acc, spp) if aovs else {})
 
     def _render_ao(self, mi_scene, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int], per_pass: int,
                    info: dict) -> RenderResult:

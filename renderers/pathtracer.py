@@ -27,6 +27,12 @@ the film are the shared toolkit's (``renderers/core/``).
   :data:`RR_DEPTH`), by the toolkit's rule
   (:func:`renderers.core.roulette.continue_path`): unbiased, ends every path,
   and discounts the refraction scaling that β contains.
+- **AOVs** (``render(..., aovs=AOVS)``, for the denoisers of
+  :mod:`renderers.oidn`): each path writes the albedo and normal of its first
+  non-delta hit, following mirrors and glass, as Open Image Denoise's
+  documentation recommends; the film averages them like the image. They
+  come from the paths already traced (no extra rays) and do not change the
+  image by a bit.
 - ``max_depth`` is the harness's convention (segments from the camera;
   -1 unbounded): emission at vertex k counts if k ≤ max_depth, NEE at vertex
   k adds a segment and counts if k + 1 ≤ max_depth.
@@ -47,7 +53,7 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.registry import RenderResult
+from harness.adapters.registry import AOVS, RenderResult
 from harness.adapters.settings import Setting
 from harness.scenes.model import Scene
 from renderers.core.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, refraction_scale, two_sided
@@ -91,11 +97,21 @@ def _light_sample(x, n, mat, y, ny, pe):
     return cos_x, g
 
 
+@jit
+def _write_aovs(aux, q, geo, p, beta, scale, n):
+    """Path ``q``'s albedo (the surface's reflectance times the delta chain's tint) and normal (on the side the
+    ray came from) into ``aux[q]``. The tint is β without refraction's radiance scaling, capped at 1: Russian
+    roulette's 1/q on a surviving path is a Monte Carlo weight, not a colour, and OIDN wants albedo in [0, 1]."""
+    for c in range(3):
+        aux[q, c] = geo.reflectance[p, c] * min(beta[c] / scale, 1.0)
+        aux[q, 3 + c] = n[c]
+
+
 # The kernel is the algorithm of one bounce (emission, NEE, continuation) and
 # reads/writes the buffers itself: helpers that take arrays and branch cost
 # reference counting and inlining (renderers/core/rays.py), so they stay here.
 @jit
-def _shade(prim, t_sphere, rays, stream, first, depth, extend, roulette, geo, L, shadow, nxt):
+def _shade(prim, t_sphere, rays, stream, first, depth, extend, roulette, geo, L, shadow, nxt, aux, aux_open):
     """Shade one bounce of a wavefront: ray i of ``rays`` hit primitive ``prim[i]`` (-1: missed).
 
     ``t_sphere`` holds the distances of sphere hits (:meth:`SceneGeometry.closest_hits`).
@@ -104,7 +120,9 @@ def _shade(prim, t_sphere, rays, stream, first, depth, extend, roulette, geo, L,
     continuation ray into ``nxt`` per path, with Russian roulette if
     ``roulette``. Ray paths are indices local to the unit; random numbers are
     drawn from ``stream`` for path ``first + path``, its index in the pass. Returns (shadow
-    segments, next rays).
+    segments, next rays). When ``aux`` has rows, a path whose ``aux_open`` is
+    set and that reaches a non-delta surface writes its albedo and normal
+    there (:data:`harness.adapters.registry.AOVS`) and closes.
     """
     ns = 0
     nn = 0
@@ -120,6 +138,9 @@ def _shade(prim, t_sphere, rays, stream, first, depth, extend, roulette, geo, L,
             continue  # back side (or grazing): one-sided emitters and BSDFs give nothing, the path ends
         q = rays.path[i]
         beta = (rays.beta[i, 0], rays.beta[i, 1], rays.beta[i, 2])
+        if aux.shape[0] > 0 and aux_open[q] and not is_delta(mat):
+            _write_aovs(aux, q, geo, p, beta, rays.scale[i], n)
+            aux_open[q] = False
         pa = geo.light_pdf_area[p]
         if pa > 0.0 and cos_o > 0.0:
             w = _emission_weight(rays.pdf[i], pa, t, cos_o)
@@ -156,13 +177,16 @@ def _shade(prim, t_sphere, rays, stream, first, depth, extend, roulette, geo, L,
 
 
 def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: int, stream: Stream,
-                rr_depth: int = RR_DEPTH) -> np.ndarray:
-    """Radiance estimates (m, 3) for paths ``first .. stop-1`` (path j sees pixel j mod ``pixels``)."""
+                rr_depth: int = RR_DEPTH, aovs: bool = False):
+    """Radiance estimates (m, 3) for paths ``first .. stop-1`` (path j sees pixel j mod ``pixels``);
+    with ``aovs``, (estimates, aux): aux (m, 6) holds each path's albedo and normal (:func:`_write_aovs`)."""
     m = stop - first
     cam = scene.camera
     unbounded = scene.max_depth < 0
     geo = geom.tables()
     L = np.zeros((m, 3))
+    aux = np.zeros((m if aovs else 0, 6))
+    aux_open = np.ones(aux.shape[0], dtype=np.bool_)
     cur, nxt = ray_buffer(m), ray_buffer(m)  # double buffer: shade reads one wavefront, writes the next
     shadow = shadow_buffer(m)
     camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, cur)
@@ -171,28 +195,33 @@ def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels
         rays = head(cur, n)
         prim, t_sphere = geom.closest_hits(rays)
         extend = unbounded or depth + 1 <= scene.max_depth
-        ns, n = _shade(prim, t_sphere, rays, stream, first, depth, extend, depth >= rr_depth, geo, L, shadow, nxt)
+        ns, n = _shade(prim, t_sphere, rays, stream, first, depth, extend, depth >= rr_depth, geo, L, shadow, nxt,
+                       aux, aux_open)
         if ns:
             seg = head(shadow, ns)
             add_unoccluded(L, seg, geom.unoccluded(seg.o, seg.d, seg.t))
         cur, nxt = nxt, cur
         depth += 1
-    return L
+    return (L, aux) if aovs else L
 
 
 class PathTracer(ToolkitRenderer):
     """Our path tracer (Embree, vectorised wavefront, multithreaded)."""
 
     name = "pathtracer"
+    aovs = AOVS
     settings = (Setting("rr_depth", int, RR_DEPTH, "path vertex from which Russian roulette may end a path",
                         low=1, high=1000), SAMPLER_SETTING)
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
-               settings: dict | None = None) -> RenderResult:
+               settings: dict | None = None, aovs: Sequence[str] = ()) -> RenderResult:
         rr_depth = (settings or {}).get("rr_depth", RR_DEPTH)
         sampler = (settings or {}).get("sampler", SAMPLER_SETTING.default)
+        if unknown := set(aovs) - set(AOVS):
+            raise ValueError(f"unknown AOVs {sorted(unknown)}; this renderer gives {', '.join(AOVS)}")
+        aovs = AOVS if aovs else ()  # both come from one pass
         geom, setup_s = warmed_geometry(scene, lambda g: trace_paths(g, scene, 0, 1, 1, independent(0), rr_depth))
-        result = render_image(scene, spp, seed, lambda *unit: trace_paths(geom, scene, *unit, rr_depth),
-                              checkpoints, self.threads, {"rr_depth": rr_depth, "rr_q_max": Q_MAX}, sampler)
+        result = render_image(scene, spp, seed, lambda *unit: trace_paths(geom, scene, *unit, rr_depth, bool(aovs)),
+                              checkpoints, self.threads, {"rr_depth": rr_depth, "rr_q_max": Q_MAX}, sampler, aovs)
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
         return result

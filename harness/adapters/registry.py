@@ -10,6 +10,9 @@ An adapter is a small class (state: the renderer's own handles) with
 - ``unavailable_reason()``: ``None`` if it can run here, else why not;
 - ``version()``: the renderer's version string (only called when available);
 - ``render(scene, spp, seed, checkpoints=())``: a :class:`RenderResult`;
+- optionally ``aovs``, the auxiliary images (:data:`AOVS`) it can return
+  alongside its image when ``render`` is called with ``aovs=(...)``; the
+  denoisers (:mod:`renderers.oidn`) ask for them;
 - optionally ``deterministic = True`` for a renderer whose image does not
   depend on the seed (a rasteriser): experiments then run it for one seed only;
 - optionally ``estimator``, what kind of estimate its image is (:data:`ESTIMATORS`,
@@ -45,6 +48,12 @@ from harness.scenes.quantities import DEFAULT_QUANTITY
 from harness.suggest import did_you_mean
 
 ENTRY_POINT_GROUP = "cbox.renderers"
+#: Auxiliary images (AOVs) a renderer may return, defined as Intel Open Image Denoise expects them (its
+#: documentation, "RT" filter): the surface seen through each pixel at the first non-delta hit, following
+#: mirrors and glass, averaged over the pixel's samples like the image; (H, W, 3) float32.
+#: ``albedo``: its reflectance times the specular chain's tint, in [0, 1]; ``normal``: its unit normal
+#: (world space) on the side the ray arrives from, in [-1, 1]; both 0 where the path leaves the scene.
+AOVS = ("albedo", "normal")
 #: What an adapter's ``estimator`` may say; the first is the default of an adapter that says nothing.
 ESTIMATORS = ("unbiased", "consistent", "biased")
 
@@ -56,6 +65,7 @@ class Checkpoint:
     spp: int
     image: np.ndarray
     time_s: float
+    aovs: dict = field(default_factory=dict)  # name (AOVS) -> (H, W, 3) float32, when asked for
 
 
 @dataclass
@@ -68,6 +78,7 @@ class RenderResult:
     ``info`` carries adapter details worth recording (e.g. Mitsuba's variant).
     ``variance``, when the renderer can give it, is the per-pixel variance of
     ``image`` (of the mean, not of one sample), float32 (height, width, 3).
+    ``aovs`` holds the auxiliary images (:data:`AOVS`) the caller asked for.
     """
 
     image: np.ndarray
@@ -77,6 +88,7 @@ class RenderResult:
     checkpoints: list[Checkpoint] = field(default_factory=list)
     info: dict = field(default_factory=dict)
     variance: np.ndarray | None = None
+    aovs: dict = field(default_factory=dict)
 
 
 @runtime_checkable

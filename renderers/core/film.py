@@ -19,6 +19,10 @@ independent replicates of randomised QMC: L'Ecuyer & Lemieux 2002, "Recent
 advances in randomized quasi-Monte Carlo methods"); unbiased when K divides
 n, as at every power-of-two checkpoint ≥ K.
 
+Auxiliary images (AOVs: :data:`harness.adapters.registry.AOVS`) are summed
+the same way, path by path, and averaged like the image; nobody asks for
+their variance, so no squares are kept.
+
 A box filter is the only pixel filter (each path belongs to exactly one
 pixel), as in the references; a filter with wider support would splat.
 """
@@ -53,22 +57,42 @@ def accumulate_batches(acc_b, first, first_sample, values):
             acc_b[b, (first + i) % p, c] += values[i, c]
 
 
-class Film:
-    """Sums over the samples of a (height, width) image, three channels, float64; per batch if ``batches`` > 1."""
+@jit
+def accumulate_sums(acc, first, values):
+    """acc[(first + i) mod P] += values[i], i in order."""
+    p = acc.shape[0]
+    for i in range(values.shape[0]):
+        k = (first + i) % p
+        for c in range(values.shape[1]):
+            acc[k, c] += values[i, c]
 
-    def __init__(self, width: int, height: int, batches: int = 1):
+
+class Film:
+    """Sums over the samples of a (height, width) image, three channels, float64; per batch if ``batches`` > 1;
+    and of the auxiliary images named ``aovs``, three channels each."""
+
+    def __init__(self, width: int, height: int, batches: int = 1, aovs: tuple[str, ...] = ()):
         self.shape = (height, width, 3)
         self.pixels = width * height
         self.acc = np.zeros((self.pixels, 3))
         self.acc2 = np.zeros((self.pixels, 3))  # sums of squares, for the variance
         self.acc_b = np.zeros((batches, self.pixels, 3)) if batches > 1 else None
+        self.aov_names = tuple(aovs)
+        self.acc_aov = np.zeros((self.pixels, 3 * len(aovs))) if aovs else None
 
-    def add(self, first: int, values: np.ndarray, first_sample: int = 0) -> None:
+    def add(self, first: int, values: np.ndarray, first_sample: int = 0, aux: np.ndarray | None = None) -> None:
         """Estimates (m, 3) of paths first .. first + m - 1 of a pass (in order, after the paths before them)
-        whose first sample per pixel is ``first_sample``."""
+        whose first sample per pixel is ``first_sample``; ``aux`` (m, 3·len(aovs)): their auxiliary values."""
         accumulate(self.acc, self.acc2, first, values)
         if self.acc_b is not None:
             accumulate_batches(self.acc_b, first, first_sample, values)
+        if self.acc_aov is not None:
+            accumulate_sums(self.acc_aov, first, aux)
+
+    def aovs(self, n: int) -> dict:
+        """The auxiliary images' means after ``n`` samples per pixel, by name, float32 (height, width, 3)."""
+        return {name: (self.acc_aov[:, 3 * j:3 * j + 3] / n).reshape(self.shape).astype(np.float32)
+                for j, name in enumerate(self.aov_names)}
 
     def image(self, n: int) -> np.ndarray:
         """The mean after ``n`` samples per pixel, float32 (height, width, 3)."""
@@ -92,4 +116,4 @@ class Film:
         return spread.reshape(self.shape).astype(np.float32)
 
     def checkpoint(self, n: int, time_s: float) -> Checkpoint:
-        return Checkpoint(n, self.image(n), time_s)
+        return Checkpoint(n, self.image(n), time_s, self.aovs(n))

@@ -52,6 +52,7 @@ _NO_CAP = 1 << 40
 #: trace(first, stop, pixels, stream) -> radiance estimates (stop - first, 3) float64
 #: for the paths first..stop-1 of a pass; path j looks through pixel j mod pixels
 #: and draws its numbers from the pass's sampler stream (renderers.core.sampler.Stream).
+#: A render that asks for auxiliary images gets (estimates, aux) instead, aux (stop - first, 3·k).
 TraceFn = Callable[[int, int, int, Stream], np.ndarray]
 
 J = TypeVar("J")
@@ -128,11 +129,14 @@ def render_image(
     threads: int | None = None,
     info: dict | None = None,
     sampler: str = "independent",
+    aovs: Sequence[str] = (),
 ) -> RenderResult:
     """Run ``trace`` over every (pixel, sample) and average into an image, with its variance and checkpoints.
 
     ``sampler`` names one of :data:`renderers.core.sampler.SAMPLERS`; a
-    low-discrepancy one gets its variance from independent batches.
+    low-discrepancy one gets its variance from independent batches. With
+    ``aovs`` (names, :data:`harness.adapters.registry.AOVS`), ``trace`` returns
+    (estimates, aux) and the result and its checkpoints carry those images.
     """
     if spp < 1:
         raise ValueError(f"spp must be >= 1, got {spp}")
@@ -142,7 +146,7 @@ def render_image(
     starts = np.concatenate([[0], np.cumsum(passes)[:-1]]).astype(int)
     streams = [pass_stream(sampler, seed, k, pixels, int(starts[k])) for k in range(len(passes))]
     batches = streams[0].batches
-    film = Film(cam.width, cam.height, batches)
+    film = Film(cam.width, cam.height, batches, tuple(aovs))
     threads = threads or default_threads()
     done, shots = 0, []
     t0 = time.perf_counter()
@@ -150,9 +154,10 @@ def render_image(
     def work(unit: Unit) -> np.ndarray:
         return trace(unit.first, unit.stop, film.pixels, streams[unit.index])
 
-    def reduce(unit: Unit, values: np.ndarray) -> None:
+    def reduce(unit: Unit, values) -> None:
         nonlocal done
-        film.add(unit.first, values, streams[unit.index].first_sample)
+        values, aux = values if aovs else (values, None)
+        film.add(unit.first, values, streams[unit.index].first_sample, aux)
         if unit.last:
             done += passes[unit.index]
             if done in checkpoints and done < spp:
@@ -161,7 +166,8 @@ def render_image(
     run_units(pass_units(passes, film.pixels, threads), work, reduce, threads)
     elapsed = time.perf_counter() - t0
     image = film.image(spp)
+    aux = film.aovs(spp)
     if spp in checkpoints:
-        shots.append(Checkpoint(spp, image, elapsed))
+        shots.append(Checkpoint(spp, image, elapsed, aux))
     meta = {"threads": threads, "sampler": sampler, **({"batches": batches} if batches > 1 else {}), **(info or {})}
-    return RenderResult(image, elapsed, spp, seed, shots, meta, film.variance(spp))
+    return RenderResult(image, elapsed, spp, seed, shots, meta, film.variance(spp), aux)
