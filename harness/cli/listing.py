@@ -87,19 +87,20 @@ def renderers(
     if as_json:
         print_json(listing)
         return
+    w = max([12, *(len(r["name"]) for r in listing)])  # the names' column
     for entry, r in zip(entries, listing):
         if r["available"]:
-            typer.echo(f"{r['name']:12s} available    {r['version']}")
+            typer.echo(f"{r['name']:{w}s} available    {r['version']}")
         else:
-            typer.echo(f"{r['name']:12s} unavailable  {r['reason']}")
+            typer.echo(f"{r['name']:{w}s} unavailable  {r['reason']}")
         if r["loaded"]:
-            typer.echo(f"{'':12s} models: {', '.join(r['models'])}")
-            typer.echo(f"{'':12s} computes: {', '.join(r['computes'])}")
+            typer.echo(f"{'':{w}s} models: {', '.join(r['models'])}")
+            typer.echo(f"{'':{w}s} computes: {', '.join(r['computes'])}")
             for a in r["approximations"]:
-                typer.echo(f"{'':12s} approximates: {a}")
+                typer.echo(f"{'':{w}s} approximates: {a}")
             if settings:
                 for line in describe(declared(entry.renderer)) or ["(no settings)"]:
-                    typer.echo(f"{'':12s} setting: {line}")
+                    typer.echo(f"{'':{w}s} setting: {line}")
 
 
 def _renderer_entry(entry) -> dict:
