@@ -23,12 +23,13 @@ AO = "renderers/ao.py"
 AMBIENT = "renderers/ambient.py"
 PROBES = "renderers/probes.py"
 DDGI = "renderers/ddgi.py"  # the probes' algorithm (not an integrator: its mutants get a copy, as core modules do)
+OIDN = "renderers/oidn.py"  # the denoise stage; its PathTracerOIDN wraps the unmutated path tracer
 SOURCE = ROOT / PATHTRACER
 CORE = "renderers/core"
 #: The renderers mutants are made of: registered name -> (integrator module, adapter class).
 INTEGRATORS = {"pathtracer": (PATHTRACER, "PathTracer"), "photonmap": (PHOTONMAP, "PhotonMapper"),
                "sppm": (SPPM, "SPPM"), "ao": (AO, "AORenderer"), "ambient": (AMBIENT, "AOAmbient"),
-               "probes": (PROBES, "IrradianceProbes")}
+               "probes": (PROBES, "IrradianceProbes"), "pathtracer+oidn": (OIDN, "PathTracerOIDN")}
 
 
 class Patch(NamedTuple):
@@ -307,6 +308,31 @@ MUTANTS: tuple[Mutant, ...] = (
         (("    gx = min(max(int(math.floor((bx - vol.origin[0]) / vol.spacing[0])), 0), nx - 1)\n",
           "    gx = min(max(int(math.floor((bx - vol.origin[0]) / vol.spacing[0])) + 1, 0), nx - 1)\n", DDGI),),
         "probes",
+    ),
+    # -- denoised path tracing (pathtracer+oidn; renderers/oidn.py) ------------------------------------------
+    Mutant(
+        "oidn_ldr",
+        "the beauty filtered as LDR (hdr off: pyoidn.denoise's default), so radiance above 1 is clipped",
+        (('    _filter(device, images, quality, hdr=True, cleanAux=aux == "prefiltered")\n',
+          '    _filter(device, images, quality, hdr=False, cleanAux=aux == "prefiltered")\n', OIDN),),
+        "pathtracer+oidn",
+    ),
+    Mutant(
+        "oidn_aux_not_prefiltered",
+        "albedo and normal flagged clean (cleanAux) but passed as rendered, never prefiltered: what "
+        "pyoidn.denoise(clean_aux=True) does; the glass sphere's noisy auxiliary images are kept as detail",
+        (('            _filter(device, {"albedo": albedo, "output": albedo}, quality)\n'
+          '            _filter(device, {"normal": normal, "output": normal}, quality)\n',
+          '            pass  # the auxiliary images as rendered\n', OIDN),),
+        "pathtracer+oidn",
+    ),
+    Mutant(
+        "oidn_checkpoints_not_denoised",
+        "only the final image denoised: the checkpoints below it keep the path tracer's noisy image",
+        (("            shots.append(Checkpoint(c.spp, image, c.time_s + dt, c.aovs))\n",
+          "            shots.append(Checkpoint(c.spp, image if c.spp == spp else c.image, c.time_s + dt, c.aovs))\n",
+          OIDN),),
+        "pathtracer+oidn",
     ),
 )
 

@@ -130,7 +130,11 @@ SLOW_MUTANTS = {"fresnel_schlick": "tests/test_bsdf.py", "mirror_reflectance_ign
                 # tests/test_pathtracer.py::test_white_furnace when patched in (checked: NaN, and the albedo 0.5
                 # furnace off by 7% and 5%).
                 "nan_throughput": "tests/test_pathtracer.py", "cosine_pdf_mismatch": "tests/test_pathtracer.py",
-                "rr_no_compensation": "tests/test_pathtracer.py"}
+                "rr_no_compensation": "tests/test_pathtracer.py",
+                # Denoiser mutants: 12-20 s each in the gate (measured 2026-12-02); oidn_aux_not_prefiltered runs
+                # by default; each of these fails tests/test_oidn.py when patched in (checked): the flat HDR image
+                # and every checkpoint denoised.
+                "oidn_ldr": "tests/test_oidn.py", "oidn_checkpoints_not_denoised": "tests/test_oidn.py"}
 
 
 def _params() -> list:
