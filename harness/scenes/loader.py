@@ -28,7 +28,7 @@ from harness.suggest import closest
 
 #: The keys each table of a scene file may have; any other is an error (with a did-you-mean).
 #: A material's keys are its type's fields (harness.scenes.materials).
-_KEYS = {
+SCENE_KEYS = {
     "": ("format", "name", "description", "quantity", "features", "camera", "render", "materials", "meshes",
          "spheres", "regions", "ambient_occlusion"),
     "camera": ("type", "position", "look_at", "up", "fov_deg", "fov_axis", "resolution"),
@@ -173,7 +173,7 @@ def read_scene_document(path: str | Path) -> tuple[dict, Path]:
 def parse_scene(doc: dict, path: Path) -> Scene:
     """Validate a parsed scene document (see :func:`load_scene`)."""
     r = _Reader(path)
-    r.known(doc, "", _KEYS[""])
+    r.known(doc, "", SCENE_KEYS[""])
     fmt = r.get(doc, "format", "", int)
     if fmt != 1:
         raise r.err("format", f"unsupported scene format {fmt}; this harness reads format 1")
@@ -182,7 +182,7 @@ def parse_scene(doc: dict, path: Path) -> Scene:
 
     camera = _parse_camera(r, r.get(doc, "camera", "", dict))
     render = r.get(doc, "render", "", dict)
-    r.known(render, "render", _KEYS["render"])
+    r.known(render, "render", SCENE_KEYS["render"])
     max_depth = r.get(render, "max_depth", "render", int)
     if max_depth == 0 or max_depth < -1:
         raise r.err("render.max_depth", f"must be -1 (unbounded) or >= 1, got {max_depth}")
@@ -268,7 +268,7 @@ def _features_used(meshes: tuple[Mesh, ...], spheres: tuple[Sphere, ...], materi
 
 def _parse_camera(r: _Reader, t: dict) -> Camera:
     w = "camera"
-    r.known(t, w, _KEYS["camera"])
+    r.known(t, w, SCENE_KEYS["camera"])
     kind = r.get(t, "type", w, str)
     if kind != "pinhole":
         raise r.err("camera.type", f"unknown camera {kind!r}; known: pinhole")
@@ -353,7 +353,7 @@ def _object_header(r: _Reader, t: Any, where: str, keys: tuple[str, ...], materi
 
 
 def _parse_sphere(r: _Reader, t: Any, i: int, materials: dict) -> Sphere:
-    w, name, material = _object_header(r, t, f"spheres[{i}]", _KEYS["sphere"], materials)
+    w, name, material = _object_header(r, t, f"spheres[{i}]", SCENE_KEYS["sphere"], materials)
     center = r.vec(t, "center", w, bound=MAX_COORDINATE)
     radius = r.get(t, "radius", w, float)
     if not 0.0 < radius <= MAX_COORDINATE:
@@ -367,7 +367,7 @@ def _parse_regions(r: _Reader, t: dict, objects: list[str]) -> dict[str, Region]
         w = f"regions.{_key(name)}"
         if not isinstance(g, dict):
             raise r.err(w, f"expected a table, got {type(g).__name__}")
-        r.known(g, w, _KEYS["region"])
+        r.known(g, w, SCENE_KEYS["region"])
         raw = r.get(g, "objects", w, list, [])
         for i, o in enumerate(raw):
             if not isinstance(o, str):
@@ -379,7 +379,7 @@ def _parse_regions(r: _Reader, t: dict, objects: list[str]) -> dict[str, Region]
         box = None
         if "box" in g:
             b = r.get(g, "box", w, dict)
-            r.known(b, f"{w}.box", _KEYS["box"])
+            r.known(b, f"{w}.box", SCENE_KEYS["box"])
             lo = r.vec(b, "min", f"{w}.box", bound=MAX_COORDINATE)
             hi = r.vec(b, "max", f"{w}.box", bound=MAX_COORDINATE)
             if not all(a < z for a, z in zip(lo, hi)):
@@ -392,7 +392,7 @@ def _parse_regions(r: _Reader, t: dict, objects: list[str]) -> dict[str, Region]
 
 
 def _parse_mesh(r: _Reader, t: Any, i: int, materials: dict, base: Path) -> Mesh:
-    w, name, material = _object_header(r, t, f"meshes[{i}]", _KEYS["mesh"], materials)
+    w, name, material = _object_header(r, t, f"meshes[{i}]", SCENE_KEYS["mesh"], materials)
     if "obj" in t and ("vertices" in t or "faces" in t):
         raise r.err(w, "give either obj or vertices/faces, not both")
     if "obj" in t:
@@ -421,7 +421,7 @@ def _parse_mesh(r: _Reader, t: Any, i: int, materials: dict, base: Path) -> Mesh
     radiance = None
     if "emitter" in t:
         e = r.get(t, "emitter", w, dict)
-        r.known(e, f"{w}.emitter", _KEYS["emitter"])
+        r.known(e, f"{w}.emitter", SCENE_KEYS["emitter"])
         radiance = r.vec(e, "radiance", f"{w}.emitter", bound=MAX_RADIANCE)
         if min(radiance) < 0.0:
             raise r.err(f"{w}.emitter.radiance", f"must be non-negative, got {list(radiance)}")

@@ -27,10 +27,10 @@ import tomllib
 from pathlib import Path
 from typing import Any, Sequence
 
-from harness.scenes.loader import _KEYS, parse_scene, read_scene_document
+from harness.scenes.loader import SCENE_KEYS, parse_scene, read_scene_document
 from harness.scenes.materials import MATERIAL_TYPES, material_fields
 from harness.scenes.model import Scene, SceneError, one_line
-from harness.scenes.quantities import _AO_KEYS
+from harness.scenes.quantities import AO_KEYS
 from harness.suggest import did_you_mean
 
 OPTION = "--set"
@@ -79,14 +79,14 @@ def parse_assignment(text: str) -> tuple[str, Any]:
 
 def override_keys(doc: dict) -> tuple[str, ...]:
     """The keys a scene document can be overridden at: camera, render, its materials' fields, its AO table."""
-    keys = [f"camera.{k}" for k in _KEYS["camera"]] + [f"render.{k}" for k in _KEYS["render"]]
+    keys = [f"camera.{k}" for k in SCENE_KEYS["camera"]] + [f"render.{k}" for k in SCENE_KEYS["render"]]
     for name, table in (doc.get("materials") or {}).items():
         kind = table.get("type") if isinstance(table, dict) else None
         cls = MATERIAL_TYPES.get(kind) if isinstance(kind, str) else None
         if cls is not None and _BARE_WORD.fullmatch(name):
             keys += [f"materials.{name}.{f.name}" for f in material_fields(cls)]
     if isinstance(doc.get("ambient_occlusion"), dict):
-        keys += [f"ambient_occlusion.{k}" for k in _AO_KEYS]
+        keys += [f"ambient_occlusion.{k}" for k in AO_KEYS]
     return tuple(keys)
 
 

@@ -58,7 +58,10 @@ def has_colour(quantity: str) -> bool:
     """Whether images of ``quantity`` are colours (radiance): then colour differences (ΔE) and a key-value
     exposure apply; an ambient-occlusion image is one value per pixel, written as grey."""
     return quantity == "radiance"
-_AO_KEYS = ("max_distance", "max_distance_relative", "weighting", "normal", "miss_value")
+
+
+#: The keys of a scene's [ambient_occlusion] table; any other is an error.
+AO_KEYS = ("max_distance", "max_distance_relative", "weighting", "normal", "miss_value")
 
 
 @dataclass(frozen=True)
@@ -80,7 +83,7 @@ class AmbientOcclusion:
 def parse_ambient_occlusion(r, table: dict, size: float) -> AmbientOcclusion:
     """The ``[ambient_occlusion]`` table, validated with the loader's reader ``r``; ``size`` is the scene's."""
     w = "ambient_occlusion"
-    r.known(table, w, _AO_KEYS)
+    r.known(table, w, AO_KEYS)
     given = [k for k in ("max_distance", "max_distance_relative") if k in table]
     if len(given) != 1:
         raise r.err(w, "give exactly one of max_distance (scene units) and max_distance_relative "
