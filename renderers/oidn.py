@@ -43,6 +43,7 @@ import numpy as np
 from harness.adapters.registry import AOVS, Checkpoint, RenderResult
 from harness.adapters.settings import Setting, declared
 from harness.scenes.model import Scene
+from renderers.core.schedule import default_threads
 
 QUALITIES = ("high", "balanced", "fast")
 AUX_MODES = ("prefiltered", "noisy", "none")
@@ -175,8 +176,6 @@ class Denoised:
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
-        from renderers.core.schedule import default_threads
-
         settings = dict(settings or {})
         quality = settings.pop("quality", OWN_SETTINGS[0].default)
         aux = settings.pop("aux", OWN_SETTINGS[1].default)
