@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import re
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -166,3 +167,19 @@ def test_compare_runs_denoised_and_plain_and_shows_the_denoised_image(tmp_path):
     assert viewer, "the denoised image is not in the report's viewer"
     for key in ("img", "de", "relmse", "flip"):
         assert re.search(rf'"{key}":\s*"[A-Za-z0-9+/=]{{1000,}}"', viewer.group(0)), key
+
+
+def test_denoised_passes_its_gate_expectation():
+    """The unmutated pathtracer+oidn passes the project gate's expectation (budgets, consistency, baseline): the
+    budgets are 1.2x the worst of seeds 0-4, and the render and the denoise are pure functions of the seed
+    (measured: OIDN bit-identical across runs and threads), so a failure is a change, not chance. The denoiser
+    mutants fail it (tests/test_gate_power.py)."""
+    from harness.gate.config import load_config
+    from harness.gate.run import run_gate
+
+    cfg = load_config(Path(__file__).resolve().parents[1] / "gate.toml")
+    cfg.expectations = [e for e in cfg.expectations if e.renderer == "pathtracer+oidn"]
+    assert len(cfg.expectations) == 1
+    outcome, = run_gate(cfg, sandbox=False)
+    assert outcome.passed, [c.message for c in outcome.checks if not c.passed]
+    assert {c.name for c in outcome.checks} >= {"consistency.delta_e2000_mean", "baseline.delta_e2000_mean"}
