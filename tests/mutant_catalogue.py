@@ -83,7 +83,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "swap_rb",
         "radiance returned in BGR order (as OpenCV wants) instead of RGB: red and blue swapped",
-        (("        depth += 1\n    return L\n", "        depth += 1\n    return L[:, ::-1].copy()\n"),),
+        (("        depth += 1\n    return (L, aux) if aovs else L\n",
+          "        depth += 1\n    L = L[:, ::-1].copy()\n    return (L, aux) if aovs else L\n"),),
     ),
     Mutant(
         "energy_loss_1pct",
@@ -96,13 +97,14 @@ MUTANTS: tuple[Mutant, ...] = (
         "nan_one_pixel",
         "lens-distortion weight r'/r applied to each path's radiance, from the pixel's offset to the principal "
         "point: 0/0 = NaN at that one pixel",
-        (("        depth += 1\n    return L\n",
+        (("        depth += 1\n    return (L, aux) if aovs else L\n",
           "        depth += 1\n"
           "    # Lens-distortion weight r'/r of each path's pixel, r its offset from the principal point.\n"
           "    pix = (first + np.arange(m)) % pixels\n"
           "    r = np.hypot(pix % cam.width - cam.width // 2, pix // cam.width - cam.height // 2)\n"
           "    k1 = 0.0  # no radial distortion\n"
-          "    return L * (r * (1.0 + k1 * r * r) / r)[:, None]\n"),),
+          "    L = L * (r * (1.0 + k1 * r * r) / r)[:, None]\n"
+          "    return (L, aux) if aovs else L\n"),),
     ),
     Mutant(
         "nan_throughput",

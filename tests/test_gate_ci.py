@@ -84,7 +84,8 @@ def test_unknown_renderer_is_found_before_anything_renders(tmp_path):
     assert proc.returncode == 2 and time.perf_counter() - t0 < 60  # Slow would sleep 120 s
     assert proc.stderr.strip().splitlines()[-1].endswith(
         "expect[1].renderer: unknown renderer 'pathtracr' (did you mean 'pathtracer'?); registered: ambient, ao, "
-        "mitsuba, pathtracer, photonmap, probes, pyrender, sppm, ssao; or give package.module:ClassName")
+        "mitsuba, mitsuba+oidn, pathtracer, pathtracer+oidn, photonmap, probes, pyrender, sppm, ssao; or give "
+        "package.module:ClassName")
     assert len(proc.stderr.strip().splitlines()) == 1
     assert (out / "gate-junit.xml").exists() and (out / "gate-summary.md").exists()
 
