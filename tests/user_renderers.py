@@ -246,3 +246,23 @@ class BadEstimator(FlatGrey):
 
     name = "bad-estimator"
     estimator = "unbaised"
+
+
+class LoggedNoise(SeededNoise):
+    """Seeded noise that logs ``start PID SEED`` and ``end PID SEED`` to $CBOX_TEST_RENDER_LOG around a sleep of
+    $CBOX_TEST_RENDER_SLEEP seconds: a test can kill the process rendering a cell while it renders."""
+
+    name = "logged-noise"
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        import os
+        import time
+
+        def log(what):
+            with open(os.environ["CBOX_TEST_RENDER_LOG"], "a") as f:
+                f.write(f"{what} {os.getpid()} {seed}\n")
+
+        log("start")
+        time.sleep(float(os.environ.get("CBOX_TEST_RENDER_SLEEP", "0")))
+        log("end")
+        return super().render(scene, spp, seed, checkpoints)

@@ -21,6 +21,7 @@ carriage returns), other remarks with :func:`info`; ``--quiet`` silences both,
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import enum
 import json
@@ -33,7 +34,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, Iterator, NoReturn
 
 import numpy as np
 import typer
@@ -47,6 +48,7 @@ from harness.store.experiments import ExperimentError
 from harness.store.exr import ImageFileError
 from harness.store.references import ReferenceError
 from harness.suggest import did_you_mean
+from harness.workflows.executor import ExecutorError
 
 #: The harness's reference renderer: references are built with it.
 REFERENCE_RENDERER = "mitsuba"
@@ -63,7 +65,7 @@ reference_app = typer.Typer(help="Build and inspect stored reference images.", n
 app.add_typer(reference_app, name="reference")
 
 USER_ERRORS = (SceneError, ReferenceError, RendererError, ImageFileError, ExperimentError, GateConfigError,
-               SettingsError)
+               SettingsError, ExecutorError)
 #: OS errors about a path the user named (an output folder that is a file, no permission), reported as one
 #: line; outputs are checked before a command runs, so these are for what changes during the run.
 PATH_ERRORS = (PermissionError, NotADirectoryError, IsADirectoryError, FileExistsError)
@@ -78,6 +80,39 @@ SetOpt = typer.Option(None, "--set", metavar="KEY=VALUE", help=(
     "Override a value of the scene file (repeatable), by its TOML path: --set render.max_depth=3 --set "
     "camera.resolution=64,64 (a comma list is an array). The result is a derived scene, named after its "
     "overrides, with its own content hash and its own reference (cbox reference build ... --set ...)."))
+
+# Where a command's independent units of work run (harness.workflows.executor): here by default.
+WorkersOpt = typer.Option(None, "--workers", min=1, metavar="N",
+                          help="Run the work on a Dask LocalCluster of N worker processes on this machine, each "
+                               "one task at a time on its share of the cores (CBOX_THREADS). Default: in this "
+                               "process.")
+SchedulerOpt = typer.Option(None, "--scheduler", metavar="tcp://HOST:PORT",
+                            help="Run the work on the existing Dask cluster of this scheduler (the same dask "
+                                 "version and cbox on every worker; no shared filesystem needed).")
+DashboardOpt = typer.Option(None, "--dashboard", metavar="ADDRESS",
+                            help="With --workers: serve Dask's dashboard at ADDRESS (e.g. :8787); none by default.")
+_SCHEDULER_ADDRESS = re.compile(r"(tcp|tls|ws|wss)://(\[[0-9A-Fa-f:.]+\]|[^\s/:\[\]]+)(:\d+)?/?")
+
+
+@contextlib.contextmanager
+def executor_for(workers: int | None, scheduler: str | None, dashboard: str | None) -> Iterator[Any]:
+    """The backend of ``--workers`` / ``--scheduler`` / ``--dashboard`` (:func:`open_executor`), options checked."""
+    from harness.workflows.executor import open_executor
+
+    if workers is not None and scheduler is not None:
+        raise typer.BadParameter("give --workers N (a cluster on this machine) or --scheduler (an existing one), "
+                                 "not both", param_hint="--scheduler")
+    if dashboard is not None and workers is None:
+        raise typer.BadParameter("the dashboard of an existing cluster is its scheduler's; --dashboard goes "
+                                 "with --workers", param_hint="--dashboard")
+    if scheduler is not None and not _SCHEDULER_ADDRESS.fullmatch(scheduler):
+        raise typer.BadParameter(f"{scheduler!r} is not a scheduler address; give tcp://HOST:PORT",
+                                 param_hint="--scheduler")
+    with open_executor(workers, scheduler, dashboard) as executor:
+        if executor.name != "in-process":
+            info(f"running on {executor.name} ({executor.slots} worker thread{'s' if executor.slots > 1 else ''})")
+        yield executor
+
 
 #: File extensions ``cbox render --out`` accepts: the image is written as OpenEXR (float32
 #: linear sRGB); any other extension (.png, .jpg) is refused, not written as EXR bytes under it.
@@ -320,12 +355,14 @@ class Progress:
     line per finished unit, ``converge cornell-box: 3/8 cells, pathtracer seed 2
     (12.3 s), 01:02 left``, and never a carriage return. ``--quiet``: nothing.
     The time left is the mean time of the units that did work times the units
-    to go: stored (resumed) units take no time and do not count.
+    to go: stored (resumed) units take no time and do not count. With
+    ``slots`` > 1 (units running at once, on several workers) it also says how
+    many are running; it says how many failed once one has.
     """
 
-    def __init__(self, total: int, desc: str, unit: str = "run"):
-        self.total, self.desc, self.unit = total, desc, unit
-        self.done = self.stored = 0
+    def __init__(self, total: int, desc: str, unit: str = "run", slots: int = 1):
+        self.total, self.desc, self.unit, self.slots = total, desc, unit, slots
+        self.done = self.stored = self.failed = 0
         self.work_s = 0.0
         self._since = time.perf_counter()
         self._bar = None
@@ -346,18 +383,24 @@ class Progress:
         if self._bar is not None:
             self._bar.set_postfix_str(self._postfix(label))
 
-    def advance(self, label: str, stored: bool = False) -> None:
-        """One more unit finished (``stored``: loaded from an earlier run, not worked on)."""
+    def running(self) -> int:
+        """Units running now: as many as there are slots, while that many are left."""
+        return min(self.slots, self.total - self.done)
+
+    def advance(self, label: str, stored: bool = False, failed: bool = False) -> None:
+        """One more unit finished (``stored``: loaded from an earlier run, not worked on; ``failed``: it failed)."""
         now = time.perf_counter()
         took, self._since = now - self._since, now
         self.done += 1
+        self.failed += bool(failed)
         if stored:
             self.stored += 1
         else:
             self.work_s += took
         left = self.left_s()
         line = (f"{self.desc}: {self.done}/{self.total} {self.unit}s, {label} "
-                f"({'stored' if stored else f'{took:.1f} s'})" + (f", {_clock(left)} left" if left else ""))
+                f"({'stored' if stored else f'{took:.1f} s'}{', failed' if failed else ''})"
+                + "".join(f", {part}" for part in self._counts()) + (f", {_clock(left)} left" if left else ""))
         if self._bar is not None:
             if _verbosity >= Verbosity.VERBOSE:
                 self._bar.write(line, file=sys.stderr)
@@ -386,9 +429,14 @@ class Progress:
     def __exit__(self, *exc) -> None:
         self.close()
 
+    def _counts(self) -> list[str]:
+        """``2 running``, ``1 failed``: what a bar or a line adds when there is something to say."""
+        return ([f"{self.running()} running"] if self.slots > 1 and self.running() else []) + \
+            ([f"{self.failed} failed"] if self.failed else [])
+
     def _postfix(self, label: str) -> str:
         left = self.left_s()
-        return ", ".join(filter(None, [label, f"{_clock(left)} left" if left else ""]))
+        return ", ".join(filter(None, [label, *self._counts(), f"{_clock(left)} left" if left else ""]))
 
 
 def close_progress_bars() -> None:

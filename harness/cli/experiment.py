@@ -8,8 +8,8 @@ from typing import List, Optional
 import typer
 
 from harness.adapters.registry import missing_features, resolve
-from harness.cli.common import (Progress, RenderersOpt, SceneOpt, SetOpt, TitleOpt, _command_line, app, info,
-                                out_folder_option, print_json)
+from harness.cli.common import (DashboardOpt, Progress, RenderersOpt, SceneOpt, SchedulerOpt, SetOpt, TitleOpt,
+                                WorkersOpt, _command_line, app, executor_for, info, out_folder_option, print_json)
 from harness.scenes.library import resolve_scene
 from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results
 from harness.store.references import load_reference
@@ -46,13 +46,18 @@ def converge(
                                                        "report, runs (one per renderer, seed and spp) and summary "
                                                        "(one per renderer), settings and regions as objects."),
     title: Optional[str] = TitleOpt,
+    workers: Optional[int] = WorkersOpt,
+    scheduler: Optional[str] = SchedulerOpt,
+    dashboard: Optional[str] = DashboardOpt,
 ) -> None:
     """Convergence experiment: every metric at every spp checkpoint, per renderer and seed.
 
     Results are a tidy table (one row per scene, renderer, settings, seed and
     spp) in OUT/results.parquet. The run is resumable: finished (renderer,
     seed) cells are written atomically, and running the same command again
-    renders only the cells that are missing.
+    renders only the cells that are missing. With --workers or --scheduler
+    the cells render on a Dask cluster; this process alone writes OUT, and
+    the table is the same as in-process.
     """
     from harness.adapters.registry import sweep as sweep_entries
     from harness.adapters.settings import parse_sweep
@@ -76,7 +81,8 @@ def converge(
     entries = resolve(renderer)
     if sweep:
         entries = sweep_entries(entries, *parse_sweep(sweep))
-    runs, report = run_convergence(out, sc, ref, entries, spps, seeds, targets, title=title)
+    with executor_for(workers, scheduler, dashboard) as executor:
+        runs, report = run_convergence(out, sc, ref, entries, spps, seeds, targets, title=title, executor=executor)
     if as_json:
         _print_json(out, report, runs)
     else:
@@ -86,20 +92,24 @@ def converge(
 
 
 def run_convergence(out: Path, sc, ref, entries, spps: list[int], seeds: int, targets=None, title: str | None = None,
-                    sections=()):
-    """Run (or resume) a convergence experiment with progress, then write its report: (runs, report path)."""
+                    sections=(), executor=None):
+    """Run (or resume) a convergence experiment with progress, then write its report: (runs, report path).
+
+    ``executor``: where the cells render (:mod:`harness.workflows.executor`; default in this process)."""
     from harness.evaluate.convergence import DEFAULT_TARGETS
     from harness.workflows.converge import run_experiment
     from reports.experiment import write_experiment_report
 
     runnable = [e for e in entries if e.available and not missing_features(e.renderer, sc)]
     cells = sum(1 if getattr(e.renderer, "deterministic", False) else seeds for e in runnable)
-    with Progress(cells, f"converge {sc.name}", "cell") as bar:
+    failed: set[str] = set()
+    with Progress(cells, f"converge {sc.name}", "cell", slots=getattr(executor, "slots", 1)) as bar:
         def on_cell(name: str, cached: bool) -> None:  # name: a cell's file stem, pathtracer__seed2
-            bar.advance(name.replace("__seed", " seed "), stored=cached)
+            bar.advance(name.replace("__seed", " seed "), stored=cached, failed=name in failed)
 
         runs = run_experiment(out, sc, ref, entries, spps, list(range(seeds)), _command_line(), on_cell=on_cell,
-                              targets=targets or DEFAULT_TARGETS)
+                              targets=targets or DEFAULT_TARGETS, executor=executor,
+                              on_failed=lambda name, reason: failed.add(name))
     return runs, write_experiment_report(out, sc, ref, title=title, sections=sections)
 
 

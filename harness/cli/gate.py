@@ -9,7 +9,8 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.common import USER_ERRORS, Progress, _command_line, app, info, out_folder_option, print_json
+from harness.cli.common import (USER_ERRORS, DashboardOpt, Progress, SchedulerOpt, WorkersOpt, _command_line, app,
+                                executor_for, info, out_folder_option, print_json)
 from harness.cli.run import _write_compare_outputs
 from harness.gate.config import GateConfigError, load_config
 from harness.scenes.library import resolve_scene
@@ -45,6 +46,9 @@ def gate(
     as_json: bool = typer.Option(False, "--json", help="Print the verdict on stdout as one JSON object (each "
                                                        "expectation with its checks and its run) instead of the "
                                                        "PASS/FAIL lines."),
+    workers: Optional[int] = WorkersOpt,
+    scheduler: Optional[str] = SchedulerOpt,
+    dashboard: Optional[str] = DashboardOpt,
 ) -> None:
     """CI quality gate: exit 0 if every expectation holds, 1 if one fails, 2 for a bad config or input.
 
@@ -56,7 +60,8 @@ def gate(
     (photon mapping, SPPM), a check that their error falls as the budget grows;
     all must have zero NaN/Inf pixels; optionally, convergence slopes
     and regressions against a recorded baseline. Each render runs in a child
-    process killed at its time limit. JUnit and Markdown are written for every
+    process killed at its time limit (with --workers or --scheduler, on a Dask
+    worker; the checks run here). JUnit and Markdown are written for every
     run, a config error included.
     """
     if overrides and update_baseline:
@@ -65,8 +70,9 @@ def gate(
         cfg = load_config(config)
         if update_baseline and cfg.baseline is None:
             raise GateConfigError(cfg.path, "baseline", "--update-baseline needs baseline = \"FILE.json\"")
-        outcomes = _run_with_progress(cfg, skip_baseline=update_baseline, scene_overrides=overrides or (),
-                                      check_lines=not as_json)
+        with executor_for(workers, scheduler, dashboard) as executor:
+            outcomes = _run_with_progress(cfg, skip_baseline=update_baseline, scene_overrides=overrides or (),
+                                          check_lines=not as_json, executor=executor)
     except USER_ERRORS as e:
         _write_ci_files([], 0.0, out, junit, markdown, config_error=str(e))
         raise
@@ -95,7 +101,7 @@ def _verdict(cfg, outcomes, failed: int) -> dict:
                               "run": json_record(o.record)} for o in outcomes]}
 
 
-def _run_with_progress(cfg, skip_baseline: bool, scene_overrides=(), check_lines: bool = True):
+def _run_with_progress(cfg, skip_baseline: bool, scene_overrides=(), check_lines: bool = True, executor=None):
     """Run the gate; a PASS or FAIL line per check as each expectation finishes (``check_lines``), and progress.
 
     The progress starts with the first render, so a config error found while resolving is a clean line.
@@ -106,7 +112,7 @@ def _run_with_progress(cfg, skip_baseline: bool, scene_overrides=(), check_lines
 
     def start(exp) -> None:
         if not bars:
-            bars.append(Progress(len(cfg.expectations), "gate", "expectation"))
+            bars.append(Progress(len(cfg.expectations), "gate", "expectation", slots=getattr(executor, "slots", 1)))
         bars[0].start(exp.name)
 
     def done(o) -> None:
@@ -114,10 +120,12 @@ def _run_with_progress(cfg, skip_baseline: bool, scene_overrides=(), check_lines
             if check_lines and not (skip_baseline and c.name.startswith("baseline.")):
                 word = "PASS" if c.passed else "ERROR" if c.error else "FAIL"
                 bars[0].write(f"{word}  {o.expectation.name}  {c.name}: {c.message}")
-        bars[0].advance(f"{o.expectation.name} {'passed' if o.passed else 'failed'}")
+        bars[0].advance(f"{o.expectation.name} {'passed' if o.passed else 'failed'}",
+                        failed=o.record.status == "failed")
 
     try:
-        outcomes = gate_run.run_gate(cfg, on_start=start, on_done=done, scene_overrides=scene_overrides)
+        outcomes = gate_run.run_gate(cfg, on_start=start, on_done=done, scene_overrides=scene_overrides,
+                                     executor=executor)
     finally:
         if bars:
             bars[0].close()

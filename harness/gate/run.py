@@ -4,12 +4,15 @@ Everything an expectation names is resolved first, for every expectation,
 before anything renders (:func:`_resolve`): its scene and reference, the
 regions its region metrics name, its renderer with its settings, the
 renderer's estimator against ``unbiased = true``, and the settings of a
-consistency check's smaller budget.
+consistency check's smaller budget. The expectations then render wherever
+the executor puts them (:func:`render_expectation`, in this process by
+default) and are checked here.
 """
 
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -24,7 +27,9 @@ from harness.scenes.model import SceneError
 from harness.store.atomic import write_json_atomic
 from harness.store.references import ReferenceError, load_reference
 from harness.workflows import runner
+from harness.workflows.cells import entry_for
 from harness.workflows.compare import spp_for_time_budget
+from harness.workflows.executor import DaskExecutor, InProcess, Task, task_key
 
 
 def _checkpoints(exp: Expectation, spp: int) -> list[int]:
@@ -105,10 +110,46 @@ def _resolve(cfg: GateConfig, i: int, exp: Expectation, overrides: dict[str, Ren
     return scene, ref, entry, _smaller_entry(cfg, i, exp, entry)
 
 
+@dataclass(frozen=True)
+class GateJob:
+    """One expectation's renders as plain data for whichever process renders them: the renderer as its spec
+    and settings (and a consistency check's smaller-budget settings), the seed, the time limit."""
+
+    expectation: Expectation
+    spec: str
+    settings: dict
+    smaller_settings: dict | None
+    seed: int
+    time_limit_s: float | None
+
+
+def render_expectation(job: GateJob, scene, ref, entry: RendererEntry | None = None,
+                       small: RendererEntry | None = None) -> tuple[runner.RunRecord, runner.RunRecord | None]:
+    """The expectation's run (and its smaller-budget run), scored: the task a backend runs.
+
+    In-process the caller's ``entry`` and ``small`` render it (a test's override among them); on a worker
+    the job's spec is loaded there. A time budget is turned into spp here, on the machine that renders.
+    """
+    exp, seed = job.expectation, job.seed
+    entry = entry or entry_for(job.spec, job.settings)
+    if small is None and job.smaller_settings is not None:
+        small = entry_for(job.spec, job.smaller_settings)
+    spp = exp.spp
+    if spp is None:
+        spp = spp_for_time_budget(entry, scene, exp.time_s, seed) if entry.available else 1
+    rec = runner.run_one(entry, scene, spp, seed, ref, checkpoints=_checkpoints(exp, spp),
+                         time_limit_s=job.time_limit_s)
+    smaller = None
+    if small is not None and rec.status == "ok":  # the same renderer and seed at the smaller budget
+        smaller = runner.run_one(small, scene, exp.consistency.smaller_spp or spp, seed, ref,
+                                 time_limit_s=job.time_limit_s)
+    return rec, smaller
+
+
 def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None, seed_offset: int = 0,
              on_start: Callable[[Expectation], None] | None = None,
              on_done: Callable[[Outcome], None] | None = None, sandbox: bool = True,
-             scene_overrides: Sequence[str] = ()) -> list[Outcome]:
+             scene_overrides: Sequence[str] = (), executor: InProcess | DaskExecutor | None = None) -> list[Outcome]:
     """Render every expectation and check it; every scene, renderer and setting is resolved first.
 
     ``overrides`` replaces renderers by name (tests and the mutant benchmark use it); an override is
@@ -119,32 +160,50 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
     ``on_start(expectation)`` and ``on_done(outcome)`` report progress as expectations finish.
     ``scene_overrides`` (``KEY=VALUE``, ``cbox gate --set``) derive every expectation's scene
     (:mod:`harness.scenes.overrides`); each derived scene needs its own reference, and the baseline,
-    recorded on the config's own scenes, is not compared.
+    recorded on the config's own scenes, is not compared. The expectations render on ``executor``
+    (default: here, in order; :mod:`harness.workflows.executor`) and are checked here as they finish;
+    the outcomes come back in the config's order.
     """
+    executor = executor or InProcess()
+    if overrides and not executor.local:
+        raise ValueError("renderer overrides are objects of this process: run them with the in-process executor")
     baseline = load_baseline(cfg) if not scene_overrides else {}
     metrics, seeds = baseline.get("expectations", {}), baseline.get("seeds", {})
     stored: dict = {}
     resolved = [_resolve(cfg, i, exp, overrides, stored, scene_overrides) for i, exp in enumerate(cfg.expectations)]
-    outcomes = []
-    for exp, (scene, ref, entry, small) in zip(cfg.expectations, resolved):
-        if on_start:
-            on_start(exp)
+    shared: dict = {}  # scene name -> the executor's handles on its scene and reference, sent once
+    tasks = []
+    for i, (exp, (scene, ref, entry, small)) in enumerate(zip(cfg.expectations, resolved)):
         seed = exp.seed + seed_offset
-        spp = exp.spp
-        if spp is None:
-            spp = spp_for_time_budget(entry, scene, exp.time_s, seed) if entry.available else 1
         limit = exp.time_limit_s if sandbox and exp.renderer not in (overrides or {}) else None
-        rec = runner.run_one(entry, scene, spp, seed, ref, checkpoints=_checkpoints(exp, spp), time_limit_s=limit)
-        smaller = None
-        if small is not None and rec.status == "ok":  # the same renderer and seed at the smaller budget
-            smaller = runner.run_one(small, scene, exp.consistency.smaller_spp or spp, seed, ref, time_limit_s=limit)
+        job = GateJob(exp, entry.spec, dict(entry.settings), None if small is None else dict(small.settings),
+                      seed, limit)
+        if exp.scene not in shared:
+            shared[exp.scene] = executor.share(scene), executor.share(ref)
+        local = (entry, small) if executor.local else (None, None)
+        tasks.append(Task(task_key("expectation", str(cfg.path), i, repr(exp), seed, limit), exp.name,
+                          render_expectation, (job, *shared[exp.scene], *local)))
+    index = {t.key: i for i, t in enumerate(tasks)}
+    outcomes: list[Outcome | None] = [None] * len(tasks)
+    if on_start and tasks:
+        on_start(cfg.expectations[0])
+    for result in executor.run(tasks):
+        i = index[result.task.key]
+        exp, (scene, ref, entry, _) = cfg.expectations[i], resolved[i]
+        if result.error is None:
+            rec, smaller = result.value
+        else:  # its worker died or it raised, past its retries: a failed run, checked as one
+            rec, smaller = runner.RunRecord.new(scene, entry, exp.spp or 0, tasks[i].args[0].seed), None
+            rec.status, rec.reason = "failed", f"not rendered: {result.error}"
         masks = region_masks(scene) if exp.region_metrics() else None
         # A baseline compares like with like: the same seed, so the same noise. Runs at other seeds
         # (false-alarm measurements) are not compared: a metric's spread between seeds can exceed the margin.
-        same_seed = seeds.get(exp.name, seed) == seed
-        outcomes.append(evaluate(exp, rec, ref, cfg, metrics.get(exp.name) if same_seed else None, smaller, masks))
+        same_seed = seeds.get(exp.name, rec.seed) == rec.seed
+        outcomes[i] = evaluate(exp, rec, ref, cfg, metrics.get(exp.name) if same_seed else None, smaller, masks)
         if on_done:
-            on_done(outcomes[-1])
+            on_done(outcomes[i])
+        if on_start and (following := next((j for j in range(len(tasks)) if outcomes[j] is None), None)) is not None:
+            on_start(cfg.expectations[following])
     return outcomes
 
 

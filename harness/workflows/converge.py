@@ -3,13 +3,16 @@
 The folder layout is :mod:`harness.store.experiments`. A run that is
 interrupted keeps every finished cell; running the same command again loads
 finished cells instead of rendering them, and a longer spp list renders only
-the checkpoints a cell lacks. One run at a time writes a folder.
+the checkpoints a cell lacks. One run at a time writes a folder. Cells
+(:mod:`harness.workflows.cells`) render wherever the executor puts them
+(:mod:`harness.workflows.executor`); the folder is written here only.
 """
 
 from __future__ import annotations
 
 import math
 import re
+import time
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -26,6 +29,8 @@ from harness.store.exr import ImageFileError, write_exr
 from harness.store.image_files import SPP_ATTRIBUTE, header_spp, read_image_file
 from harness.store.references import Reference
 from harness.workflows import runner
+from harness.workflows.cells import Cell, failed_rows, render_cell_task
+from harness.workflows.executor import DaskExecutor, InProcess, Task
 
 
 def _not_run_row(entry: RendererEntry, scene: Scene) -> dict | None:
@@ -38,13 +43,8 @@ def _not_run_row(entry: RendererEntry, scene: Scene) -> dict | None:
     return row
 
 
-def render_cell(entry: RendererEntry, scene: Scene, spps: Sequence[int], seed: int,
-                reference: Reference) -> tuple[list[dict], np.ndarray | None]:
-    """Rows for every spp of one (renderer, seed), and its highest-spp image (None if it failed)."""
-    records = runner.run_checkpoints(entry, scene, spps, seed, reference)
-    if records[-1].status != "ok":
-        return [r.row() for r in records], None
-    return [r.row() for r in records], records[-1].image
+#: Seconds at least between rewrites of results.parquet while cells finish (always written at the end).
+RESULTS_EVERY_S = 1.0
 
 
 def run_experiment(
@@ -58,13 +58,21 @@ def run_experiment(
     kind: str = "converge",
     on_cell: Callable[[str, bool], None] | None = None,
     targets=convergence.DEFAULT_TARGETS,
+    executor: InProcess | DaskExecutor | None = None,
+    on_failed: Callable[[str, str], None] | None = None,
 ) -> pd.DataFrame:
     """Run (or resume) every (renderer, seed) cell; return the tidy results table.
 
-    ``on_cell(name, cached)`` is called after each cell (for progress bars).
+    Cells run on ``executor`` (default: in this process, in order;
+    :mod:`harness.workflows.executor`), finished ones in any order; this
+    process alone writes the folder, each cell as it arrives, and the table
+    in the cells' planned order, so every backend writes the same table.
+    ``on_cell(name, cached)`` is called after each cell (for progress bars),
+    ``on_failed(name, reason)`` before it for a cell that failed.
     """
     out = Path(out)
     spps = sorted({int(s) for s in spps})
+    executor = executor or InProcess()
     with experiment_lock(out, command):
         prepare_dir(out, {
             "kind": kind, "scene": str(scene.path), "scene_name": scene.name, "scene_hash": scene.content_hash(),
@@ -72,44 +80,95 @@ def run_experiment(
             "targets": [list(t) for t in targets],
             "deterministic": [e.name for e in entries if getattr(e.renderer, "deterministic", False)],
         })
-        frames, not_run = [], []
+        table = _Table(out / RESULTS_FILE)
+        pending: dict[str, tuple[list[int], Cell, RendererEntry, pd.DataFrame | None]] = {}
         for entry in entries:
             if (row := _not_run_row(entry, scene)) is not None:
-                not_run.append(row)
+                table.not_run.append(row)
                 continue
             for seed in (seeds[:1] if getattr(entry.renderer, "deterministic", False) else seeds):
                 name = cell_name(entry.name, seed)
-                rows, cached = _cell(out, name, entry, scene, spps, seed, reference)
-                frames.append(rows)
-                write_parquet_atomic(pd.concat(frames + [pd.DataFrame(not_run)], ignore_index=True),
-                                     out / RESULTS_FILE)
-                if on_cell:
-                    on_cell(name, cached)
-        results = pd.concat(frames + [pd.DataFrame(not_run)], ignore_index=True)
-        write_parquet_atomic(results, out / RESULTS_FILE)
+                stored, todo = _plan(out, name, scene, spps)
+                if not todo:  # finished before: loaded, never rendered again
+                    table.frames.append(stored[stored["spp"].astype(int).isin(spps)].reset_index(drop=True))
+                    table.write(now=False)
+                    if on_cell:
+                        on_cell(name, True)
+                    continue
+                cell = Cell(name, entry.spec, dict(entry.settings), seed, tuple(todo), scene.content_hash())
+                # The same work twice (a renderer named twice) renders once and fills both places.
+                pending.setdefault(cell.key, ([], cell, entry, stored))[0].append(len(table.frames))
+                table.frames.append(None)
+        if pending:
+            shared = executor.share(scene), executor.share(reference)
+            tasks = [Task(key, cell.label, render_cell_task, (cell, *shared, entry if executor.local else None))
+                     for key, (_, cell, entry, _) in pending.items()]
+            for outcome in executor.run(tasks):
+                slots, cell, entry, stored = pending[outcome.task.key]
+                if outcome.error is None:
+                    rows = _store_cell(out, cell, stored, *outcome.value, spps)
+                else:  # recorded, not stored: a rerun renders it again
+                    rows = pd.DataFrame(failed_rows(cell, entry, scene, outcome.error))
+                for slot in slots:
+                    table.frames[slot] = rows
+                table.write(now=False)
+                for _ in slots:
+                    if on_failed and (rows["status"] == "failed").any():
+                        on_failed(cell.name, str(rows["reason"].iloc[-1]))
+                    if on_cell:
+                        on_cell(cell.name, False)
+        results = table.write()
     return results
 
 
-def _cell(out: Path, name: str, entry: RendererEntry, scene: Scene, spps: list[int], seed: int,
-          reference: Reference) -> tuple[pd.DataFrame, bool]:
-    """One cell's rows at ``spps`` (rendering only the spps it lacks), and whether nothing was rendered."""
-    cell_path, image_path = out / "cells" / f"{name}.parquet", out / "images" / f"{name}.exr"
-    stored = stored_cell(cell_path, scene)
+class _Table:
+    """``results.parquet`` of a run: the cells' rows in planned order (whatever order they finish in), then the
+    renderers that did not run; rewritten as cells finish, but not after every one of thousands of quick cells:
+    the cells are the record (a rerun rebuilds the table from them)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.frames: list[pd.DataFrame | None] = []  # per planned cell, None until it is done
+        self.not_run: list[dict] = []
+        self._last, self._cost = -math.inf, 0.0  # when it was last written, and how long that took
+
+    def write(self, now: bool = True) -> pd.DataFrame | None:
+        """The table so far, written; unless ``now``, only once the last write is RESULTS_EVERY_S old and ten
+        times its own duration (a client writing a large table spends at most a tenth of its time on it)."""
+        if not now and time.monotonic() - self._last < max(RESULTS_EVERY_S, 10 * self._cost):
+            return None
+        start = time.monotonic()
+        table = pd.concat([f for f in self.frames if f is not None] + [pd.DataFrame(self.not_run)],
+                          ignore_index=True)
+        write_parquet_atomic(table, self.path)
+        self._last = time.monotonic()
+        self._cost = self._last - start
+        return table
+
+
+def _plan(out: Path, name: str, scene: Scene, spps: list[int]) -> tuple[pd.DataFrame | None, list[int]]:
+    """A cell's stored rows (None if none) and the spps it must still render (:func:`spps_to_render`)."""
+    stored = stored_cell(out / "cells" / f"{name}.parquet", scene)
     have = stored["spp"].astype(int).tolist() if stored is not None else []
-    todo = spps_to_render(have, _image_spp(image_path) if stored is not None else None, spps)
-    if not todo:
-        return stored[stored["spp"].astype(int).isin(spps)].reset_index(drop=True), True
-    rows_list, image = render_cell(entry, scene, todo, seed, reference)
+    image_spp = _image_spp(out / "images" / f"{name}.exr") if stored is not None else None
+    return stored, spps_to_render(have, image_spp, spps)
+
+
+def _store_cell(out: Path, cell: Cell, stored: pd.DataFrame | None, rows_list: list[dict],
+                image: np.ndarray | None, spps: list[int]) -> pd.DataFrame:
+    """Write a rendered cell (image first, then its rows, each atomically); its rows at ``spps``."""
+    cell_path, image_path = out / "cells" / f"{cell.name}.parquet", out / "images" / f"{cell.name}.exr"
+    todo = list(cell.spps)
     rendered = pd.DataFrame(rows_list)
     if image is None:  # failed: its rows are reported, nothing is stored
-        return rendered, False
+        return rendered
     if todo[-1] == spps[-1]:  # image first: a cell's rows promise its image exists
         write_exr(image_path, image, {SPP_ATTRIBUTE: str(todo[-1])})
     kept = stored[~stored["spp"].astype(int).isin(todo)] if stored is not None else None
     rows = pd.concat([kept, rendered], ignore_index=True) if kept is not None and len(kept) else rendered
     rows = rows.sort_values("spp", kind="stable").reset_index(drop=True)
     write_parquet_atomic(rows, cell_path)
-    return rows[rows["spp"].astype(int).isin(spps)].reset_index(drop=True), False
+    return rows[rows["spp"].astype(int).isin(spps)].reset_index(drop=True)
 
 
 def _image_spp(path: Path) -> int | None:

@@ -20,6 +20,7 @@ from typing import Callable
 import numpy as np
 
 from harness.adapters.registry import RendererEntry
+from harness.adapters.settings import canonical
 from harness.evaluate.regions import region_masks, region_noise
 from harness.scenes.model import Scene
 from harness.store.atomic import write_json_atomic
@@ -27,6 +28,8 @@ from harness.store.exr import write_exr
 from harness.store.image_files import SPP_ATTRIBUTE
 from harness.store.references import (NOISE_FILE, PROVENANCE_FILE, REFERENCE_FILE, REFERENCE_SEED_BASE, VARIANCE_FILE,
                                       Reference, reference_folder)
+from harness.workflows.cells import entry_for
+from harness.workflows.executor import DaskExecutor, ExecutorError, InProcess, Task, task_key
 from harness.workflows.render import render_checked
 
 
@@ -36,7 +39,8 @@ def build_reference(
     batches: int,
     entry: RendererEntry,
     folder: Path | None = None,
-    progress: Callable[[int, int], None] | None = None,
+    progress: Callable[[int, int, str], None] | None = None,
+    executor: InProcess | DaskExecutor | None = None,
 ) -> Reference:
     """Render ``batches`` independent batches (and the noise batch) with ``entry``; store mean, variance, noise,
     provenance. The harness's reference renderer is Mitsuba 3; the CLI names it, this module names none.
@@ -44,6 +48,11 @@ def build_reference(
     ``spp`` must be a multiple of ``batches``. The files are written only when
     every batch is done, each atomically, provenance last; by default into the
     scene's reference folder (:func:`~harness.store.references.reference_folder`).
+
+    The batches render on ``executor`` (default: in this process, in order), finished ones in any order;
+    they are combined here in batch order, so every backend gives the same reference, bit for bit, for
+    a renderer whose image depends only on its seed. ``progress(done, total, label)`` follows finished
+    batches (``batch 3``, ``noise image``).
     """
     if batches < 2:
         raise ValueError("need at least 2 batches to estimate the variance")
@@ -52,25 +61,43 @@ def build_reference(
     folder = Path(folder) if folder else reference_folder(scene)
     batch_spp = spp // batches
     seeds = [REFERENCE_SEED_BASE + b for b in range(batches)]
+    noise_seed = REFERENCE_SEED_BASE + batches
+    executor = executor or InProcess()
+    shared = executor.share(scene)
+    tasks = [Task(task_key("batch", scene.content_hash(), entry.spec, canonical(entry.settings), batch_spp, seed),
+                  f"batch {b + 1}" if b < batches else "noise image", render_batch,
+                  (entry.spec, dict(entry.settings), shared, batch_spp, seed, entry if executor.local else None))
+             for b, seed in enumerate(seeds + [noise_seed])]
+    index = {t.key: b for b, t in enumerate(tasks)}
     shape = (scene.camera.height, scene.camera.width, 3)
     mean, m2 = np.zeros(shape), np.zeros(shape)  # Welford's running mean and sum of squares
     wall = 0.0
     info: dict = {}
-    for b, seed in enumerate(seeds):
-        t0 = time.perf_counter()
-        result = render_checked(entry, scene, batch_spp, seed)
-        wall += time.perf_counter() - t0
-        info = result.info
-        x = result.image.astype(np.float64)
-        delta = x - mean
-        mean += delta / (b + 1)
-        m2 += delta * (x - mean)
+    noise = None
+    waiting: dict[int, np.ndarray] = {}  # batches that finished before one ahead of them: folded in order
+    folded = done = 0
+    for outcome in executor.run(tasks):
+        b = index[outcome.task.key]
+        if outcome.error is not None:
+            raise ExecutorError(f"reference batch {b + 1} of {batches + 1} (seed {tasks[b].args[4]}) failed: "
+                                f"{outcome.error}")
+        image, time_s, batch_info = outcome.value
+        wall += time_s
+        if b == batches:
+            noise = image
+        else:
+            waiting[b] = image
+            if b == batches - 1:
+                info = batch_info
+        while folded in waiting:  # the same sums in the same order on every backend: the same bits
+            x = waiting.pop(folded).astype(np.float64)
+            delta = x - mean
+            mean += delta / (folded + 1)
+            m2 += delta * (x - mean)
+            folded += 1
+        done += 1
         if progress:
-            progress(b + 1, batches + 1)
-    noise_seed = REFERENCE_SEED_BASE + batches
-    noise = render_checked(entry, scene, batch_spp, noise_seed).image
-    if progress:
-        progress(batches + 1, batches + 1)
+            progress(done, batches + 1, outcome.task.label)
     variance_of_mean = m2 / (batches - 1) / batches
     prov = _provenance(scene, entry, info, spp, batches, seeds, noise_seed, wall)
     if scene.overrides:  # a derived scene's reference: what it was derived with (harness.scenes.overrides)
@@ -83,6 +110,16 @@ def build_reference(
     write_exr(folder / NOISE_FILE, noise, meta)
     write_json_atomic(folder / PROVENANCE_FILE, prov)
     return Reference(mean.astype(np.float32), variance_of_mean.astype(np.float32), noise, prov, folder)
+
+
+def render_batch(spec: str, settings: dict, scene: Scene, spp: int, seed: int,
+                 entry: RendererEntry | None = None) -> tuple[np.ndarray, float, dict]:
+    """One batch, in whatever process runs it: its image (float32), render time and the renderer's info.
+    In-process the caller's ``entry`` renders it; on a worker, ``spec`` with ``settings`` loaded there."""
+    entry = entry or entry_for(spec, settings)
+    t0 = time.perf_counter()
+    result = render_checked(entry, scene, spp, seed)
+    return result.image, time.perf_counter() - t0, dict(result.info)
 
 
 def _provenance(scene: Scene, entry: RendererEntry, info: dict, spp: int, batches: int, seeds: list[int],
