@@ -361,14 +361,16 @@ class Progress:
     """
 
     def __init__(self, total: int, desc: str, unit: str = "run", slots: int = 1):
-        self.total, self.desc, self.unit, self.slots = total, desc, unit, slots
+        # English plurals of the units we count: runs, cells, expectations, batches.
+        self.units = unit + ("es" if unit.endswith(("s", "x", "ch", "sh")) else "s")
+        self.total, self.desc, self.slots = total, desc, slots
         self.done = self.stored = self.failed = 0
         self.work_s = 0.0
         self._since = time.perf_counter()
         self._bar = None
         if _verbosity > Verbosity.QUIET and _stderr_is_terminal():
             self._bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True, leave=False,
-                             bar_format="{desc}: {n_fmt}/{total_fmt} {unit}s |{bar}| {elapsed}{postfix}")
+                             bar_format="{desc}: {n_fmt}/{total_fmt} " + self.units + " |{bar}| {elapsed}{postfix}")
         _live_bars.append(self)
 
     def left_s(self) -> float | None:
@@ -398,7 +400,7 @@ class Progress:
         else:
             self.work_s += took
         left = self.left_s()
-        line = (f"{self.desc}: {self.done}/{self.total} {self.unit}s, {label} "
+        line = (f"{self.desc}: {self.done}/{self.total} {self.units}, {label} "
                 f"({'stored' if stored else f'{took:.1f} s'}{', failed' if failed else ''})"
                 + "".join(f", {part}" for part in self._counts()) + (f", {_clock(left)} left" if left else ""))
         if self._bar is not None:
