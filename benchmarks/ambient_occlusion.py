@@ -67,7 +67,7 @@ from harness.workflows.compare import spp_for_time_budget
 from harness.workflows.converge import parse_spp_list, run_experiment
 from renderers.core.gbuffer import gbuffer, view_space
 from renderers.core.geometry import SceneGeometry
-from renderers.core.schedule import default_threads
+from harness.adapters.api import default_threads
 from renderers.ssao import SSAO, resolved_radius, screen_space_pass
 
 AO_SCENE, GI_SCENE = "cornell-box-ao", "cornell-box"

@@ -54,7 +54,7 @@ from harness.workflows.converge import parse_spp_list
 from irradiance_probes import COLOURS, PT_COLOUR, bias_figure, experiment, fmt, write_svg
 from reports.charts import convergence_table
 from reports.plots import Series, line_plot_svg
-from renderers.core.schedule import default_threads
+from harness.adapters.api import default_threads
 from renderers.oidn import denoise
 
 SCENES = {"cornell-box": ("walls", "boxes", "floor", "back-edge", "light"),

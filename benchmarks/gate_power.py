@@ -54,7 +54,7 @@ from harness.evaluate.registry import HIGHER_IS_BETTER  # noqa: E402
 from harness.gate.run import load_baseline, run_gate  # noqa: E402
 from harness.store.references import load_reference
 from harness.scenes.library import resolve_scene  # noqa: E402
-from renderers.core.schedule import default_threads  # noqa: E402
+from harness.adapters.api import default_threads  # noqa: E402
 
 POWER = 0.99
 #: The checks with a stated false-alarm rate: agreement, variance and outliers share the expectation's alpha.

@@ -42,7 +42,7 @@ from harness.scenes.library import resolve_scene
 from harness.scenes.model import Scene, triangle_arrays
 from harness.store.references import load_reference
 from renderers.core.sampler import SAMPLERS
-from renderers.core.schedule import default_threads
+from harness.adapters.api import default_threads
 from renderers.mitsuba3 import Mitsuba3, scene_dict
 from renderers.pathtracer import PathTracer
 

@@ -41,7 +41,7 @@ from harness.store.references import load_reference
 from harness.workflows.converge import parse_spp_list, run_experiment
 from renderers.core.geometry import SceneGeometry
 from renderers.core.photons import STORE_ALL, shoot
-from renderers.core.schedule import default_threads
+from harness.adapters.api import default_threads
 from renderers.pathtracer import PathTracer
 
 TARGETS = (("region.caustic.rel_mse", 0.05), ("region.caustic.rel_mse", 0.01), ("delta_e2000_mean", 2.0))

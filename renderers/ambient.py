@@ -103,7 +103,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from harness.adapters.registry import Checkpoint, RenderResult
+from harness.adapters.api import Checkpoint, RenderResult
 from harness.adapters.settings import Setting, resolve_settings
 from harness.scenes.model import Scene
 from harness.store.references import load_reference
@@ -114,7 +114,8 @@ from renderers.core.rays import add_unoccluded, head, shadow_buffer
 from renderers.core.rng import uniform
 from renderers.core.sampler import Stream, independent
 from renderers.core.sampling import jit
-from renderers.core.schedule import default_threads, render_image
+from renderers.core.schedule import render_image
+from harness.adapters.api import default_threads
 from renderers.core.visible_points import camera_visible_points
 
 #: Ways of choosing La (module docstring).

@@ -60,7 +60,7 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.registry import RenderResult
+from harness.adapters.api import RenderResult
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.camera import camera_basis, camera_rays

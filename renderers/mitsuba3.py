@@ -38,8 +38,7 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.registry import AOVS, Checkpoint, RenderResult
-from harness.adapters.seeds import pass_seed, spp_passes
+from harness.adapters.api import AOVS, Checkpoint, RenderResult, pass_seed, spp_passes
 from harness.scenes.materials import Dielectric, Diffuse, Mirror
 from harness.scenes.model import Scene
 from renderers import mitsuba_ao

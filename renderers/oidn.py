@@ -40,10 +40,10 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.registry import AOVS, Checkpoint, RenderResult
+from harness.adapters.api import AOVS, Checkpoint, RenderResult
 from harness.adapters.settings import Setting, declared
 from harness.scenes.model import Scene
-from renderers.core.schedule import default_threads
+from harness.adapters.api import default_threads
 
 QUALITIES = ("high", "balanced", "fast")
 AUX_MODES = ("prefiltered", "noisy", "none")

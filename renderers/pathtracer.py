@@ -53,8 +53,7 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.registry import AOVS, RenderResult
-from harness.adapters.settings import Setting
+from harness.adapters.api import AOVS, RenderResult, Setting
 from harness.scenes.model import Scene
 from renderers.core.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, refraction_scale, two_sided
 from renderers.core.camera import camera_basis, camera_rays

@@ -55,8 +55,7 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.registry import RenderResult
-from harness.adapters.seeds import pass_key
+from harness.adapters.api import RenderResult, pass_key
 from harness.adapters.settings import Setting, resolve_settings
 from harness.scenes.model import Scene
 from renderers.core.bsdf import LAMBERT
@@ -66,7 +65,8 @@ from renderers.core.photon_map import KERNELS, UNBOUNDED, PhotonMap, Precomputed
 from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, empty_photons, shoot, subset
 from renderers.core.rays import head, ray_buffer
 from renderers.core.sampler import Stream, independent
-from renderers.core.schedule import default_threads, render_image
+from renderers.core.schedule import render_image
+from harness.adapters.api import default_threads
 from renderers.core.visible_points import camera_visible_points, gather_rays, walk_to_diffuse
 
 GLOBAL_STREAM, CAUSTIC_STREAM = 1, 2

@@ -49,8 +49,7 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.registry import RenderResult
-from harness.adapters.seeds import pass_key
+from harness.adapters.api import RenderResult, pass_key
 from harness.adapters.settings import Setting, SettingsError, resolve_settings
 from harness.scenes.model import Scene
 from renderers import ddgi
@@ -59,7 +58,8 @@ from renderers.core.geometry import SceneGeometry
 from renderers.core.rng import uniform
 from renderers.core.sampler import Stream, independent
 from renderers.core.sampling import INV_PI, jit, random_rotation, spherical_fibonacci
-from renderers.core.schedule import default_threads, render_image, run_units
+from renderers.core.schedule import render_image, run_units
+from harness.adapters.api import default_threads
 from renderers.core.visible_points import camera_visible_points
 
 PROBE_STREAM = 3

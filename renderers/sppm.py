@@ -53,15 +53,15 @@ from typing import Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
-from harness.adapters.registry import Checkpoint, RenderResult
-from harness.adapters.seeds import pass_key
+from harness.adapters.api import Checkpoint, RenderResult, pass_key
 from harness.adapters.settings import Setting, resolve_settings
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.geometry import SceneGeometry
 from renderers.core.photon_map import depth_budget, pairs_that_count
 from renderers.core.photons import BATCH, STORE_INDIRECT, trace_photons
-from renderers.core.schedule import default_threads, pass_units, run_units
+from renderers.core.schedule import pass_units, run_units
+from harness.adapters.api import default_threads
 from renderers.core.visible_points import VisiblePoints, camera_visible_points, visible_buffer
 
 PHOTON_STREAM = 1

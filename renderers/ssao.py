@@ -117,7 +117,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from harness.adapters.registry import RenderResult
+from harness.adapters.api import RenderResult
 from harness.adapters.settings import Setting, resolve_settings
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer
@@ -125,7 +125,7 @@ from renderers.core.gbuffer import gbuffer, view_space
 from renderers.core.geometry import SceneGeometry
 from renderers.core.sampling import jit, orthonormal_basis
 from renderers.core.screen_space import on_screen, plane_depth, project, ray_through, to_edge
-from renderers.core.schedule import default_threads
+from harness.adapters.api import default_threads
 
 VARIANTS = ("crytek", "hemisphere", "gtao")
 #: Defaults of the cost settings. At 256² on cornell-box-ao (2 CPU cores, numba, float64) a frame takes

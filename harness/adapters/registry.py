@@ -38,70 +38,15 @@ import importlib.metadata
 import os
 import sys
 from dataclasses import dataclass, field
-from typing import Protocol, Sequence, runtime_checkable
+from typing import Sequence
 
-import numpy as np
-
+from harness.adapters.api import AOVS, ESTIMATORS, Checkpoint, Renderer, RenderResult  # noqa: F401 (re-exported)
 from harness.adapters.settings import declared, label, resolve_settings, split_spec
 from harness.scenes.model import Scene
 from harness.scenes.quantities import DEFAULT_QUANTITY
 from harness.suggest import did_you_mean
 
 ENTRY_POINT_GROUP = "cbox.renderers"
-#: Auxiliary images (AOVs) a renderer may return, defined as Intel Open Image Denoise expects them (its
-#: documentation, "RT" filter): the surface seen through each pixel at the first non-delta hit, following
-#: mirrors and glass, averaged over the pixel's samples like the image; (H, W, 3) float32.
-#: ``albedo``: its reflectance times the specular chain's tint, in [0, 1]; ``normal``: its unit normal
-#: (world space) on the side the ray arrives from, in [-1, 1]; both 0 where the path leaves the scene.
-AOVS = ("albedo", "normal")
-#: What an adapter's ``estimator`` may say; the first is the default of an adapter that says nothing.
-ESTIMATORS = ("unbiased", "consistent", "biased")
-
-
-@dataclass
-class Checkpoint:
-    """The image after the first ``spp`` samples per pixel, and the time to get there."""
-
-    spp: int
-    image: np.ndarray
-    time_s: float
-    aovs: dict = field(default_factory=dict)  # name (AOVS) -> (H, W, 3) float32, when asked for
-
-
-@dataclass
-class RenderResult:
-    """What a render returns.
-
-    ``image`` is linear-sRGB radiance, float32, shape (height, width, 3).
-    ``time_s`` is wall time of the render proper (scene set-up excluded,
-    JIT compilation included unless the adapter warmed up beforehand).
-    ``info`` carries adapter details worth recording (e.g. Mitsuba's variant).
-    ``variance``, when the renderer can give it, is the per-pixel variance of
-    ``image`` (of the mean, not of one sample), float32 (height, width, 3).
-    ``aovs`` holds the auxiliary images (:data:`AOVS`) the caller asked for.
-    """
-
-    image: np.ndarray
-    time_s: float
-    spp: int
-    seed: int
-    checkpoints: list[Checkpoint] = field(default_factory=list)
-    info: dict = field(default_factory=dict)
-    variance: np.ndarray | None = None
-    aovs: dict = field(default_factory=dict)
-
-
-@runtime_checkable
-class Renderer(Protocol):
-    name: str
-    features: frozenset[str]
-    approximations: tuple[str, ...]
-
-    def unavailable_reason(self) -> str | None: ...
-
-    def version(self) -> str: ...
-
-    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = ()) -> RenderResult: ...
 
 
 class RendererError(RuntimeError):

@@ -210,7 +210,7 @@ def fail(message: str, code: int = 2) -> NoReturn:
 def check_environment() -> None:
     """Refuse a bad ``$CBOX_THREADS`` up front; renderers read it mid-run, where it would be a failed row."""
     if os.environ.get("CBOX_THREADS"):
-        from renderers.core.schedule import default_threads
+        from harness.adapters.api import default_threads
 
         default_threads()
 

@@ -19,7 +19,7 @@ TOOLKIT_FEATURES = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "d
 
 
 class ToolkitRenderer:
-    """Base of our adapters: ``threads`` worker threads (None: :func:`renderers.core.schedule.default_threads`)."""
+    """Base of our adapters: ``threads`` worker threads (None: :func:`harness.adapters.api.default_threads`)."""
 
     features = TOOLKIT_FEATURES
     approximations: tuple[str, ...] = ()

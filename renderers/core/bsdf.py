@@ -182,6 +182,13 @@ def two_sided(material) -> bool:
 
 
 @jit
+def faces(material, cos_o) -> bool:
+    """Whether a surface hit at ``cos_o`` (negative: from behind) can reflect or emit: its front side, or
+    either side of a two-sided one. One-sided emitters and BSDFs give nothing on their back (or grazing)."""
+    return cos_o > 0.0 or (cos_o < 0.0 and two_sided(material))
+
+
+@jit
 def bsdf_eval(material, rho, cos) -> float:
     """f of one channel with reflectance ``rho`` (or β·ρ, see :func:`lambert_eval`); 0 for delta BSDFs."""
     if material == LAMBERT:

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.adapters.registry import Checkpoint
+from harness.adapters.api import Checkpoint
 from renderers.core.sampling import jit
 
 

@@ -276,3 +276,18 @@ def surface_point(g, p, o, d, t_sphere):
 def offset_origin(x, n, eps):
     """``x + eps·n``: where a ray leaving the surface at ``x`` on the side of ``n`` starts (no tnear)."""
     return x[0] + eps * n[0], x[1] + eps * n[1], x[2] + eps * n[2]
+
+
+@jit
+def ray_hit(g, rays, i, p, t_sphere):
+    """Ray ``i`` of wavefront ``rays`` (:class:`renderers.core.rays.RayBuffer`) hit primitive ``p`` ≥ 0:
+    (d, x, n, cos_o, t, material), as :func:`surface_point` gives them, with the ray's direction ``d`` and
+    the material id of ``p``. ``t_sphere`` is :meth:`SceneGeometry.closest_hits`' sphere distances.
+
+    The prologue of every shading kernel. Whether the side hit can scatter is
+    :func:`renderers.core.bsdf.faces`.
+    """
+    d = (rays.d[i, 0], rays.d[i, 1], rays.d[i, 2])
+    o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
+    x, n, cos_o, t = surface_point(g, p, o, d, t_sphere[i] if p >= g.n_triangles else 0.0)
+    return d, x, n, cos_o, t, g.material[p]

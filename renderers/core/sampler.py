@@ -45,8 +45,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from harness.adapters.seeds import pass_key
-from harness.adapters.settings import Setting
+from harness.adapters.api import Setting, pass_key
 from renderers.core.rng import mix64, uniform
 from renderers.core.sampling import jit
 from renderers.core.sobol import SOBOL_MATRICES, padded_1d, padded_2d, pixel_seed, sobol_1d

@@ -29,7 +29,6 @@ and the ray queries hold no GIL (:mod:`renderers.core.embree`).
 
 from __future__ import annotations
 
-import os
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
@@ -37,9 +36,7 @@ from typing import Callable, Iterable, Iterator, NamedTuple, Sequence, TypeVar
 
 import numpy as np
 
-from harness.adapters.registry import Checkpoint, RenderResult
-from harness.adapters.seeds import spp_passes
-from harness.adapters.settings import SettingsError
+from harness.adapters.api import Checkpoint, RenderResult, default_threads, spp_passes
 from harness.scenes.model import Scene
 from renderers.core.film import Film
 from renderers.core.sampler import Stream, pass_stream
@@ -57,24 +54,6 @@ TraceFn = Callable[[int, int, int, Stream], np.ndarray]
 
 J = TypeVar("J")
 R = TypeVar("R")
-
-
-def default_threads() -> int:
-    """Worker threads: ``$CBOX_THREADS`` (a positive integer) or the machine's CPU count.
-
-    Raises :class:`~harness.adapters.settings.SettingsError` (one of the CLI's
-    user errors) naming ``CBOX_THREADS`` if it is set to anything else.
-    """
-    env = os.environ.get("CBOX_THREADS")
-    if env:
-        try:
-            threads = int(env)
-        except ValueError:
-            threads = 0
-        if threads < 1:
-            raise SettingsError(f"CBOX_THREADS: expected a positive integer (worker threads), got {env!r}")
-        return threads
-    return os.cpu_count() or 1
 
 
 def run_units(jobs: Iterable[J], work_fn: Callable[[J], R], reduce_fn: Callable[[J, R], None],

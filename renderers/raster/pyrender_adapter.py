@@ -112,7 +112,7 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.registry import RenderResult
+from harness.adapters.api import RenderResult
 from harness.scenes.model import Scene
 from renderers.raster.framebuffer import BACK_SIDE_ATTR, MSAA_SAMPLES, float_renderer
 from renderers.raster.glsl import write_direct_lighting_shaders
