@@ -39,7 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from harness.adapters.registry import RendererEntry
-from mutant_catalogue import (BY_NAME, CORE, DDGI, INTEGRATORS, ISOLATED, LOW_POWER, MUTANTS,  # noqa: F401
+from tests.mutant_catalogue import (BY_NAME, CORE, DDGI, INTEGRATORS, ISOLATED, LOW_POWER, MUTANTS,  # noqa: F401
                               PATHTRACER, PHOTONMAP, PROBES, ROOT, SOURCE, SPPM, Mutant, Patch)
 
 #: Core modules every mutant shares with the real renderer: scalar helpers, no types of their own.
@@ -291,7 +291,7 @@ def run_until_failure(cfg, overrides=None, seed_offset: int = 0) -> list:
 _CHILD = """
 import dataclasses, json, sys
 sys.path.insert(0, sys.argv[1])
-import mutants
+from tests import mutants
 from harness.gate.run import run_gate
 name, gate, work, until = sys.argv[2:6]
 renderer = mutants.BY_NAME[name].renderer
@@ -309,7 +309,7 @@ def run_isolated(name: str, work: str | Path, timeout_s: float, gate: str | Path
     import json
     import subprocess
 
-    cmd = [sys.executable, "-c", _CHILD, str(Path(__file__).resolve().parent), name, str(gate), str(work),
+    cmd = [sys.executable, "-c", _CHILD, str(Path(__file__).resolve().parents[1]), name, str(gate), str(work),
            "1" if until_failure else "0"]
     try:
         out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, cwd=SOURCE.parent.parent)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import ROOT
+from tests.conftest import ROOT
 
 
 def _run(cmd, **kw) -> subprocess.CompletedProcess:

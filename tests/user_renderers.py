@@ -1,4 +1,4 @@
-"""Renderers a user might write, loaded by the tests as ``user_renderers:ClassName``.
+"""Renderers a user might write, loaded by the tests as ``tests.user_renderers:ClassName``.
 
 They implement the adapter interface without importing anything from the
 harness but its result type, exactly as a third-party package would.

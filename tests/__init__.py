@@ -1,0 +1,2 @@
+"""The test suite: one package per package of the code (tests/evaluate/ tests harness/evaluate/, ...);
+shared helpers (user renderers, report fixtures, the mutant catalogue) at this level, imported as ``tests.*``."""
