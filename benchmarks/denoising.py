@@ -24,7 +24,8 @@ Everything runs through the harness's converge workflow in-process
 (:func:`harness.workflows.converge.run_experiment`, what ``cbox converge`` runs; ``cbox report OUT/<scene>`` gives
 the HTML report of either experiment). Results are cached in ``--out``: running again renders only what is missing.
 
-Run: ``.venv/bin/python benchmarks/denoising.py``: writes docs/denoising.md (``--markdown``) and its figures
+Run: ``.venv/bin/python benchmarks/denoising.py``: writes docs/denoising.md whole (``--markdown``; its first line
+names the command, ``benchmarks/markdown_blocks.py``) and its figures
 (``--images``); ``--quick`` for a check of the script (2 seeds, spp <= 4, into ``OUT-quick``).
 """
 
@@ -48,9 +49,9 @@ from harness.adapters.registry import resolve
 from harness.evaluate import metrics
 from harness.evaluate.convergence import time_to_target
 from harness.scenes.library import resolve_scene
-from harness.store.atomic import atomic_path
 from harness.store.references import load_reference
 from harness.workflows.converge import parse_spp_list
+import markdown_blocks
 from irradiance_probes import COLOURS, PT_COLOUR, bias_figure, experiment, fmt, write_svg
 from reports.charts import convergence_table
 from reports.plots import Series, line_plot_svg
@@ -260,12 +261,6 @@ def findings(bias: dict, quality_rows: list, cost: dict, regions, spps, pt_top: 
           f"prefiltered, {cost['denoise'][('high', 'noisy')]:.2f} s with the auxiliary images as rendered.\n")
 
 
-def write_page(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=Path("out/bench-denoising"), help="experiment folders (cached)")
@@ -288,9 +283,9 @@ def main() -> None:
     body = io.StringIO()
     with redirect_stdout(body):
         run(out, images, page, seeds, spps, pt_spps, command, a.quick)
-    text = PAGE_HEAD.format(command=".venv/bin/python " + command.strip(), max_spp=spps[-1],
+    text = PAGE_HEAD.format(command=markdown_blocks.command_line(), max_spp=spps[-1],
                             pt_max_spp=pt_spps[-1], last_seed=seeds - 1) + body.getvalue()
-    write_page(page, text)
+    markdown_blocks.write_page(page, text)  # its first line names the command
     print(text)
     print(f"(all of it: {time.perf_counter() - t0:.0f} s; the page: {page})", file=sys.stderr)
 

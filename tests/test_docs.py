@@ -1,0 +1,131 @@
+"""The docs' generated parts are written one way: between markers that name the command writing them.
+
+The convention and the writer are ``benchmarks/markdown_blocks.py``. For every marker in ``docs/*.md``,
+``BENCHMARKS.md`` and ``README.md``: it parses, begin and end pair up, the command is
+``.venv/bin/python benchmarks/<script>.py ...`` with a script that exists, writes through ``markdown_blocks``
+and names the block, and a block's command writes this very file (``--markdown <file>``).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import shlex
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PAGES = sorted((ROOT / "docs").glob("*.md")) + [ROOT / "BENCHMARKS.md", ROOT / "README.md"]
+
+_spec = importlib.util.spec_from_file_location("markdown_blocks", ROOT / "benchmarks" / "markdown_blocks.py")
+markdown_blocks = importlib.util.module_from_spec(_spec)
+sys.modules["markdown_blocks"] = markdown_blocks  # the module's dataclass looks itself up there
+_spec.loader.exec_module(markdown_blocks)
+
+
+def command_problems(rel: str, name: str | None, command: str, root: Path = ROOT) -> list[str]:
+    """What is wrong with the command a marker names (``name`` None: a whole page's)."""
+    what = f"{rel}: block {name!r}" if name else f"{rel}: page"
+    words = shlex.split(command)
+    if len(words) < 2 or words[0] != ".venv/bin/python" or not words[1].startswith("benchmarks/"):
+        return [f"{what} names no script (want `.venv/bin/python benchmarks/<script>.py ...`): {command!r}"]
+    script = root / words[1]
+    if not script.is_file():
+        return [f"{what}: its script {words[1]} does not exist"]
+    source = script.read_text(encoding="utf-8")
+    problems = []
+    if "markdown_blocks" not in source:
+        problems.append(f"{what}: {words[1]} does not write through markdown_blocks")
+    if name is None:
+        if "write_page" not in source:
+            problems.append(f"{what}: {words[1]} writes no page (markdown_blocks.write_page)")
+    else:
+        if f'"{name}"' not in source:
+            problems.append(f"{what}: {words[1]} has no block named \"{name}\"")
+        targets = {words[i + 1] for i, w in enumerate(words[:-1]) if w == "--markdown"}
+        if rel not in targets:
+            problems.append(f"{what}: its command does not write this file (no `--markdown {rel}`)")
+    return problems
+
+
+def page_problems(rel: str, text: str, root: Path = ROOT) -> list[str]:
+    try:
+        page, blocks = markdown_blocks.parse(text)
+    except markdown_blocks.MarkerError as e:
+        return [f"{rel}: {e}"]
+    problems = command_problems(rel, None, page, root) if page is not None else []
+    for b in blocks:
+        problems += command_problems(rel, b.name, b.command, root)
+    return problems
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_marked_block_names_the_command_that_writes_it(page):
+    rel = str(page.relative_to(ROOT))
+    assert page_problems(rel, page.read_text(encoding="utf-8")) == []
+
+
+def test_the_generated_pages_and_blocks_are_marked():
+    """The pages and blocks that scripts write today carry their markers (a marker lost in an edit is caught)."""
+    found = {}
+    for page in PAGES:
+        head, blocks = markdown_blocks.parse(page.read_text(encoding="utf-8"))
+        found[str(page.relative_to(ROOT))] = ({"page"} if head else set()) | {b.name for b in blocks}
+    assert "page" in found["docs/denoising.md"]
+    assert {"gate_power.py", "gate_checks.py"} <= found["docs/gate-detection.md"]
+
+
+GOOD = "benchmarks/gate_power.py"
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("<!-- : begin, written by .venv/bin/python benchmarks/gate_power.py -->\nx\n<!-- : end -->\n",
+     "not a marker"),  # no name
+    ("<!-- gate_power.py: begin -->\nx\n<!-- gate_power.py: end -->\n", "not a marker"),  # no command
+    (f"<!-- gate_power.py: begin, written by .venv/bin/python {GOOD} --markdown docs/x.md -->\nx\n",
+     "no end marker"),
+    ("x\n<!-- gate_power.py: end -->\n", "without its begin"),
+    ("<!-- a: begin, written by .venv/bin/python benchmarks/a.py --markdown docs/x.md -->\n"
+     "<!-- b: begin, written by .venv/bin/python benchmarks/a.py --markdown docs/x.md -->\n", "begins inside"),
+    ("<!-- gate_power.py: begin, written by cbox converge --markdown docs/x.md -->\n<!-- gate_power.py: end -->\n",
+     "names no script"),
+    ("<!-- gate_power.py: begin, written by .venv/bin/python benchmarks/nothing.py --markdown docs/x.md -->\n"
+     "<!-- gate_power.py: end -->\n", "does not exist"),
+    (f"<!-- no-such-block: begin, written by .venv/bin/python {GOOD} --markdown docs/x.md -->\n"
+     "<!-- no-such-block: end -->\n", "has no block named"),
+    (f"<!-- gate_power.py: begin, written by .venv/bin/python {GOOD} --markdown docs/other.md -->\n"
+     "<!-- gate_power.py: end -->\n", "does not write this file"),
+    ("# title\n<!-- page, written by .venv/bin/python benchmarks/denoising.py -->\n", "first line"),
+])
+def test_a_nameless_unpaired_or_orphaned_block_fails(text, problem):
+    problems = page_problems("docs/x.md", text)
+    assert len(problems) == 1 and problem in problems[0], problems
+
+
+def test_writing_a_block_keeps_everything_outside_it(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("# Title\n\nProse.\n<!-- a: begin, written by OLD -->\nold a\n<!-- a: end -->\n\nMore prose.\n"
+                    "<!-- b: begin, written by OLD -->\nold b\n<!-- b: end -->\n", encoding="utf-8")
+    other = tmp_path / "other.md"
+    markdown_blocks.write_blocks([page, other], {"a": "| new | a |\n|---|---|\n", "c": "new c"}, "NEW")
+    assert page.read_text(encoding="utf-8") == (
+        "# Title\n\nProse.\n<!-- a: begin, written by NEW -->\n| new | a |\n|---|---|\n<!-- a: end -->\n\n"
+        "More prose.\n<!-- b: begin, written by OLD -->\nold b\n<!-- b: end -->\n\n"
+        "<!-- c: begin, written by NEW -->\nnew c\n<!-- c: end -->\n")
+    assert not other.exists()  # it holds none of the blocks: not written
+    assert markdown_blocks.parse(page.read_text(encoding="utf-8"))[1][0].command == "NEW"
+
+
+def test_a_page_names_its_command_on_its_first_line(tmp_path):
+    page = tmp_path / "page.md"
+    markdown_blocks.write_page(page, "# Title\n\nBody.\n", ".venv/bin/python benchmarks/denoising.py")
+    head, blocks = markdown_blocks.parse(page.read_text(encoding="utf-8"))
+    assert head == ".venv/bin/python benchmarks/denoising.py" and blocks == []
+    assert page.read_text(encoding="utf-8").splitlines()[1] == "# Title"
+
+
+def test_command_line_names_the_script_from_the_repository_root():
+    argv = [str(ROOT / "benchmarks" / "caustics.py"), "--seeds", "5", "--markdown", "BENCHMARKS.md"]
+    assert markdown_blocks.command_line(argv) == (
+        ".venv/bin/python benchmarks/caustics.py --seeds 5 --markdown BENCHMARKS.md")
