@@ -67,6 +67,15 @@ def command_line(argv: list[str] | None = None) -> str:
     return " ".join([".venv/bin/python", shlex.quote(str(script))] + [shlex.quote(a) for a in argv[1:]])
 
 
+def minus(text: str) -> str:
+    """A table cell with the docs' minus sign (U+2212) for Python's hyphen."""
+    return text.replace("-", "\u2212")
+
+
+def bold(text: str, on: bool = True) -> str:
+    return f"**{text}**" if on else text
+
+
 def parse(text: str) -> tuple[str | None, list[Block]]:
     """The page's command (its first line's page marker, else None) and its blocks, in order.
 
@@ -121,20 +130,22 @@ def write_blocks(paths: list[Path], bodies: dict[str, str], command: str | None 
     A block that no file holds yet is appended to the first file (created if missing), so that a first run
     leaves it where prose can be written around it.
     """
+    if not paths:
+        return
     command = command or command_line()
-    left = dict(bodies)
-    for n, path in enumerate(paths):
-        old = path.read_text(encoding="utf-8") if path.exists() else ""
-        text, done = replace_blocks(old, left, command)
+    old = {path: path.read_text(encoding="utf-8") if path.exists() else "" for path in paths}
+    new, left = {}, dict(bodies)
+    for path in paths:
+        new[path], done = replace_blocks(old[path], left, command)
         for name in done:
             del left[name]
-        if n == 0:
-            for name, body in list(left.items()):
-                text = (text.rstrip("\n") + "\n\n" if text.strip() else "") + "\n".join(
-                    [begin_marker(name, command), body.strip("\n"), end_marker(name)]) + "\n"
-                del left[name]
-        if text != old:
-            write_text_atomic(path, text)
+    first = paths[0]
+    for name, body in left.items():
+        new[first] = (new[first].rstrip("\n") + "\n\n" if new[first].strip() else "") + "\n".join(
+            [begin_marker(name, command), body.strip("\n"), end_marker(name)]) + "\n"
+    for path in paths:
+        if new[path] != old[path]:
+            write_text_atomic(path, new[path])
 
 
 def write_page(path: Path, body: str, command: str | None = None) -> None:

@@ -117,6 +117,15 @@ def test_writing_a_block_keeps_everything_outside_it(tmp_path):
     assert markdown_blocks.parse(page.read_text(encoding="utf-8"))[1][0].command == "NEW"
 
 
+def test_a_block_is_written_in_the_file_that_holds_it(tmp_path):
+    first, second = tmp_path / "first.md", tmp_path / "second.md"
+    first.write_text("# First\n", encoding="utf-8")
+    second.write_text("<!-- b: begin, written by OLD -->\nold\n<!-- b: end -->\n", encoding="utf-8")
+    markdown_blocks.write_blocks([first, second], {"b": "new"}, "NEW")
+    assert first.read_text(encoding="utf-8") == "# First\n"
+    assert second.read_text(encoding="utf-8") == "<!-- b: begin, written by NEW -->\nnew\n<!-- b: end -->\n"
+
+
 def test_a_page_names_its_command_on_its_first_line(tmp_path):
     page = tmp_path / "page.md"
     markdown_blocks.write_page(page, "# Title\n\nBody.\n", ".venv/bin/python benchmarks/denoising.py")
