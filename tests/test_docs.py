@@ -1,14 +1,17 @@
-"""The docs' generated parts are written one way: between markers that name the command writing them.
+"""The docs' generated parts are written one way, between markers that name the command writing them; and
+every file and module the docs name exists.
 
 The convention and the writer are ``benchmarks/markdown_blocks.py``. For every marker in ``docs/*.md``,
 ``BENCHMARKS.md`` and ``README.md``: it parses, begin and end pair up, the command is
 ``.venv/bin/python benchmarks/<script>.py ...`` with a script that exists, writes through ``markdown_blocks``
-and names the block, and a block's command writes this very file (``--markdown <file>``).
+and names the block, and a block's command names this very file (``--markdown <file>``).
 """
 
 from __future__ import annotations
 
+import ast
 import importlib.util
+import re
 import shlex
 import sys
 from pathlib import Path
@@ -43,8 +46,7 @@ def command_problems(rel: str, name: str | None, command: str, root: Path = ROOT
     else:
         if f'"{name}"' not in source:
             problems.append(f"{what}: {words[1]} has no block named \"{name}\"")
-        targets = {words[i + 1] for i, w in enumerate(words[:-1]) if w == "--markdown"}
-        if rel not in targets:
+        if rel not in words[2:]:  # --markdown FILE, or another option naming the file (denoising.py --summary)
             problems.append(f"{what}: its command does not write this file (no `--markdown {rel}`)")
     return problems
 
@@ -138,3 +140,70 @@ def test_command_line_names_the_script_from_the_repository_root():
     argv = [str(ROOT / "benchmarks" / "caustics.py"), "--seeds", "5", "--markdown", "BENCHMARKS.md"]
     assert markdown_blocks.command_line(argv) == (
         ".venv/bin/python benchmarks/caustics.py --seeds 5 --markdown BENCHMARKS.md")
+
+
+#: A repository path in the docs (``harness/workflows/converge.py``, ``renderers/core/``).
+_FILE = re.compile(r"(?<![\w/.])(?:harness|renderers|reports|tests|benchmarks|scripts|docs)/[\w./*{},-]*")
+
+
+def file_paths(text: str) -> list[str]:
+    """The repository paths ``text`` names, globs (``probes-*``, ``{a,b}``) left out."""
+    paths = (m.rstrip(".,") for m in _FILE.findall(text))
+    return [p for p in paths if not set("*{}") & set(p)]
+#: A dotted name in our packages (``harness.workflows.converge.run_experiment``).
+DOTTED = re.compile(r"(?<![\w/.])((?:harness|renderers|reports)(?:\.\w+)+)")
+
+
+def _names(tree) -> dict[str, ast.AST]:
+    """A module's or class's own names: functions, classes, assignments, imports."""
+    out = {}
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            out[node.name] = node
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            for t in node.targets if isinstance(node, ast.Assign) else [node.target]:
+                for n in ast.walk(t):
+                    if isinstance(n, ast.Name):
+                        out[n.id] = node
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            for a in node.names:
+                out[(a.asname or a.name).split(".")[0]] = node
+    return out
+
+
+def missing_name(dotted: str, root: Path = ROOT) -> str | None:
+    """Why ``dotted`` names nothing in the tree (None if it does): the longest prefix that is a module or package,
+    then its attribute (and a class's attribute) by the module's source."""
+    parts = dotted.split(".")
+    for k in range(len(parts), 0, -1):
+        base = root.joinpath(*parts[:k])
+        source = base.with_suffix(".py") if base.with_suffix(".py").is_file() else base / "__init__.py"
+        if source.is_file():
+            rest = parts[k:]
+            scope = ast.parse(source.read_text(encoding="utf-8"))
+            for depth, name in enumerate(rest[:2]):
+                found = _names(scope).get(name)
+                if found is None:
+                    return f"{'.'.join(parts[:k + depth])} has no {name!r}"
+                if not isinstance(found, ast.ClassDef):
+                    break
+                scope = found
+            return None
+    return f"no module {parts[0]}"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_file_and_module_the_docs_name_exists(page):
+    text = page.read_text(encoding="utf-8")
+    missing = [p for p in file_paths(text) if not (ROOT / p).exists()]
+    missing += [f"{d}: {why}" for d in sorted(set(DOTTED.findall(text))) if (why := missing_name(d))]
+    assert missing == []
+
+
+def test_a_moved_module_or_name_is_caught():
+    assert missing_name("harness.workflows.converge.run_experiment") is None
+    assert missing_name("harness.workflows.executor.DaskExecutor.run") is None
+    assert "has no 'summary'" in missing_name("harness.workflows.converge.summary")
+    assert "has no 'no_such_method'" in missing_name("harness.workflows.executor.DaskExecutor.no_such_method")
+    assert file_paths("see `harness/nothing.py`, docs/images/probes-* and docs/images/probes-{a,b}.svg.") == [
+        "harness/nothing.py"]
