@@ -67,9 +67,9 @@ def command_line(argv: list[str] | None = None) -> str:
     return " ".join([".venv/bin/python", shlex.quote(str(script))] + [shlex.quote(a) for a in argv[1:]])
 
 
-def minus(text: str) -> str:
-    """A table cell with the docs' minus sign (U+2212) for Python's hyphen."""
-    return text.replace("-", "\u2212")
+def minus(number: str) -> str:
+    """A formatted number with the docs' minus sign (U+2212) for Python's leading hyphen (an exponent's stays)."""
+    return "\u2212" + number[1:] if number.startswith("-") else number
 
 
 def bold(text: str, on: bool = True) -> str:
