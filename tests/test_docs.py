@@ -78,6 +78,22 @@ def test_the_generated_pages_and_blocks_are_marked():
     assert {"gate_power.py", "gate_checks.py"} <= found["docs/gate-detection.md"]
 
 
+#: Scripts a page names whose output is not written into it, and why.
+WRITES_NO_BLOCK = {"benchmarks/embree_direct.py": "BENCHMARKS.md keeps its first run, of a kernel since replaced, "
+                                                  "as a record; the script prints the current kernel's table"}
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_a_page_that_names_a_benchmark_holds_what_it_writes(page):
+    """A page that says `.venv/bin/python benchmarks/x.py` holds a block (or is the page) that x.py writes: a
+    benchmark's figures pasted by hand, with no marker at all, fail here."""
+    text = page.read_text(encoding="utf-8")
+    head, blocks = markdown_blocks.parse(text)
+    writers = {shlex.split(c)[1] for c in [head, *(b.command for b in blocks)] if c}
+    named = set(re.findall(r"\.venv/bin/python (benchmarks/\w+\.py)", text)) - set(WRITES_NO_BLOCK)
+    assert named <= writers, f"named but writing no block here: {sorted(named - writers)}"
+
+
 GOOD = "benchmarks/gate_power.py"
 
 
