@@ -35,7 +35,12 @@ Results are cached in ``--out`` (JSON per measured setting, parquet cells for
 the ``ao`` experiment): running the command again recomputes only what is
 missing; delete the folder (or a file in it) to measure again.
 
-Run: ``.venv/bin/python benchmarks/ambient_occlusion.py`` (about 2 minutes on 2 cores from an empty ``--out``).
+``--markdown FILE`` (repeatable) writes the tables into the file's blocks (``benchmarks/markdown_blocks.py``):
+docs/ambient-occlusion.md holds ``ambient_occlusion.py#ssao``, ``#ao``, ``#crossover``, ``#ambient`` and
+``#haloes``; BENCHMARKS.md the summaries ``#summary-ssao`` and ``#summary-ambient``.
+
+Run: ``.venv/bin/python benchmarks/ambient_occlusion.py --markdown docs/ambient-occlusion.md --markdown
+BENCHMARKS.md`` (about 2 minutes on 2 cores from an empty ``--out``).
 """
 
 from __future__ import annotations
@@ -54,6 +59,8 @@ from PIL import Image, ImageDraw, ImageFont
 from scipy.ndimage import binary_dilation
 from scipy.spatial import cKDTree
 
+import markdown_blocks
+from markdown_blocks import bold, minus
 from harness.adapters.registry import resolve
 from harness.adapters.settings import resolve_settings
 from harness.evaluate.convergence import slope_over_seeds, time_to_target
@@ -96,6 +103,20 @@ CROP, BAND = 192, 16
 THICKNESS, RING = 0.1, 24
 #: Signed error maps show ±this (SSAO − reference); beyond it the colour saturates.
 ERROR_RANGE = 0.5
+#: How the docs' tables name part 4's renderers, and the notes on their spp and time.
+AMBIENT_LABELS = {"ambient": ("`ambient` (radiosity ambient)", "", ""),
+                  "ambient[ambient=oracle]": ("`ambient[ambient=oracle]`", "", " (2 renders)"),
+                  "ambient[ambient=none]": ("`ambient[ambient=none]` (direct only)", "", ""),
+                  "pyrender": ("`pyrender` (direct only, raster)", " (8×8 supersampling)", "")}
+#: How the docs name the halo experiment's settings.
+HALO_LABELS = {"ssao[variant=crytek]": "crytek 16", f"ssao[variant=crytek,thickness={THICKNESS}]":
+               f"crytek 16, thickness {THICKNESS}", "ssao[variant=hemisphere]": "hemisphere 16",
+               f"ssao[variant=hemisphere,thickness={THICKNESS}]": f"hemisphere 16, thickness {THICKNESS}",
+               "ssao": "gtao 4×8", f"ssao[variant=gtao,thickness={THICKNESS}]": f"gtao 4×8, thickness {THICKNESS}"}
+#: BENCHMARKS.md's summary of part 1: (label, spec); the best setting by RMSE is added.
+SUMMARY_SSAO = (("ssao crytek, 16 samples", "ssao[variant=crytek,samples=16]"),
+                ("ssao hemisphere, 16 samples", "ssao[variant=hemisphere,samples=16]"),
+                ("ssao gtao 4×8 (default)", "ssao"))
 
 
 # -- small helpers ------------------------------------------------------------------------------------------
@@ -158,17 +179,47 @@ def ssao_table(scene, reference, frames: int, threads: int, out: Path) -> list[d
                     **{k: rec.metrics[k] for k in ("rmse", "rel_mse", "ssim", "psnr")},
                     "regions": {r: v["rmse"] for r, v in rec.regions.items()}}
         rows.append(cached(out / "ssao" / f"{slug(spec)}.json", measure))
-    regions = list(rows[0]["regions"])
     print(f"## 1. SSAO on {scene.name} ({scene.camera.width}², {threads} threads): error against ms per frame\n")
-    print(f"ms per frame: median of {frames} frames after one warm-up (min-max in brackets); RMSE per region.\n")
-    print("| variant | ms/frame | RMSE | relMSE | SSIM | " + " | ".join(regions) + " |")
-    print("|---|---|---|---|---|" + "---|" * len(regions))
-    for r in rows:
-        ms = r["ms"]
-        print(f"| {r['label']} | {statistics.median(ms):.1f} ({min(ms):.1f}-{max(ms):.1f}) | {r['rmse']:.4f} | "
-              f"{r['rel_mse']:.4f} | {r['ssim']:.3f} | " + " | ".join(f"{r['regions'][k]:.4f}" for k in regions) + " |")
-    print()
+    print(f"ms per frame: median of {frames} frames after one warm-up; RMSE per region.\n")
+    print("\n".join(ssao_markdown(rows)) + "\n")
     return rows
+
+
+def ssao_markdown(rows: list[dict]) -> list[str]:
+    """Part 1's table; the default and the best setting (by RMSE) in bold."""
+    regions = list(rows[0]["regions"])
+    best = min(rows, key=lambda r: r["rmse"])
+    lines = ["| variant | ms/frame | RMSE | relMSE | SSIM | " + " | ".join(regions) + " |",
+             "|---|---|---|---|---|" + "---|" * len(regions)]
+    for r in rows:
+        b = r is best or r["spec"] == "ssao"
+        ms, rmse, ssim = format(statistics.median(r["ms"]), ".1f"), format(r["rmse"], ".4f"), format(r["ssim"], ".3f")
+        lines.append(f"| {bold(r['label'], b)} | {bold(ms, b)} | {bold(rmse, b)} | {r['rel_mse']:.4f} | "
+                     f"{bold(ssim, b)} | " + " | ".join(f"{r['regions'][k]:.4f}" for k in regions) + " |")
+    return lines
+
+
+def summary_ssao_markdown(rows: list[dict], ao: dict) -> list[str]:
+    """BENCHMARKS.md's summary of parts 1 and 2: a few SSAO settings, and ao at 16 spp and the top spp."""
+    by_spec = {r["spec"]: r for r in rows}
+    best = min(rows, key=lambda r: r["rmse"])
+    picked = [(label, by_spec[spec]) for label, spec in SUMMARY_SSAO]
+    picked.append((f"ssao {best['label'].replace(' (default)', '')} (best)", best))
+
+    def ms(r):
+        m = statistics.median(r["ms"])
+        return f"{m:.1f}" if m < 50 else f"{m:.0f}"
+
+    lines = ["| `cornell-box-ao`, 256² | ms/frame | RMSE | SSIM |", "|---|---|---|---|"]
+    lines += [f"| {label} | {ms(r)} | {r['rmse']:.3g} | {r['ssim']:.3f} |" for label, r in picked]
+    by_spp = {int(k): v for k, v in ao["by_spp"].items()}
+    hi = max(by_spp)
+    lo = min(16, hi)
+    a, b = by_spp[lo], by_spp[hi]
+    lines.append(f"| `ao`, {lo} spp / {hi} spp (median of seeds 0-{ao['seeds'] - 1}; render time) | "
+                 f"{1e3 * a['time_s']:.0f} / {1e3 * b['time_s']:.0f} | {a['rmse']:.3g} / {b['rmse']:.3g} | "
+                 f"{a['ssim']:.3f} / {b['ssim']:.3f} |")
+    return lines
 
 
 # -- 2. ao against spp and time; 3. the crossover -------------------------------------------------------------
@@ -179,16 +230,21 @@ def ao_experiment(scene, reference, seeds: int, max_spp: int, out: Path):
                            command=f"benchmarks/ambient_occlusion.py (seeds {seeds}, spp 1..{max_spp})")
     g = table[(table["status"] == "ok") & (table["renderer"] == "ao")].copy()
     print(f"## 2. ao on {scene.name}: error against spp and time (median over seeds 0-{seeds - 1})\n")
-    print("| spp | time (s) | RMSE | SSIM | relMSE |\n|---|---|---|---|---|")
     med = g.groupby("spp")[["time_s", "rmse", "ssim", "rel_mse"]].median()
-    for spp, r in med.iterrows():
-        print(f"| {spp} | {r['time_s']:.3f} | {r['rmse']:.4f} | {r['ssim']:.3f} | {r['rel_mse']:.5f} |")
+    print("\n".join(ao_markdown(med.to_dict("index"))))
     s_spp, ci_spp = slope_over_seeds(g, "rmse", "spp")
     s_t, ci_t = slope_over_seeds(g, "rmse", "time_s")
     print(f"\nlog-log slope of RMSE: against spp {s_spp:.3f} ± {ci_spp:.3f}, against time {s_t:.3f} ± {ci_t:.3f} "
           f"(mean over seeds, 95% CI; unbiased: -0.5)\n")
     return g, {"slope_spp": s_spp, "slope_spp_ci": ci_spp, "slope_time": s_t, "slope_time_ci": ci_t,
-               "by_spp": {int(k): v for k, v in med.to_dict("index").items()}}
+               "seeds": seeds, "by_spp": {int(k): v for k, v in med.to_dict("index").items()}}
+
+
+def ao_markdown(by_spp: dict) -> list[str]:
+    """Part 2's table: medians over seeds per spp."""
+    return ["| spp | time (s) | RMSE | SSIM | relMSE |", "|---|---|---|---|---|"] + [
+        f"| {spp} | {r['time_s']:.3f} | {r['rmse']:.4f} | {r['ssim']:.3f} | {r['rel_mse']:.5f} |"
+        for spp, r in sorted(by_spp.items(), key=lambda kv: int(kv[0]))]
 
 
 def crossover(g, ssao_rows: list[dict]) -> dict:
@@ -201,19 +257,31 @@ def crossover(g, ssao_rows: list[dict]) -> dict:
              ("rmse", "default", default), ("ssim", "default", default))
     out = {}
     print("## 3. Crossover: where ao (ray traced) becomes more accurate than SSAO\n")
-    print("| figure | SSAO setting | its value | its ms/frame | ao reaches it at spp | at time (s) |")
-    print("|---|---|---|---|---|---|")
     for key, which, row in cases:
         value = row[key]
         metric, target = ("rmse", value) if key == "rmse" else ("one_minus_ssim", 1.0 - value)
         spp, t = time_to_target(by_spp, metric, target), time_to_target(g, metric, target)
         ms = statistics.median(row["ms"])
         out[f"{key}_{which}"] = {"ssao": row["label"], "value": value, "ms": ms, "spp": spp, "time_s": t}
-        reached = math.isfinite(spp)
-        print(f"| {key.upper()} | {which}: {row['label']} | {value:.4f} | {ms:.1f} | "
-              f"{fmt(spp, 3) if reached else 'not reached'} | {fmt(t, 3) if reached else 'not reached'} |")
+    print("\n".join(crossover_markdown(out)))
     print("\n(interpolated log-log between the checkpoints around the crossing, per seed; median over seeds)\n")
     return out
+
+
+def crossover_markdown(cross: dict) -> list[str]:
+    """Part 3's table (``crossover``'s result); the crossings of the best setting in bold."""
+    lines = ["| figure | SSAO setting | its value | its ms/frame | `ao` reaches it at spp | at time |",
+             "|---|---|---|---|---|---|"]
+    for case, c in cross.items():
+        key, which = case.split("_")
+        spp, t = c["spp"], c["time_s"]
+        reached = spp is not None and math.isfinite(spp)
+        at_spp = bold(fmt(spp, 3), which == "best") if reached else "not reached"
+        at_t = bold(f"{t:.2f} s" if t < 1 else f"{t:.1f} s", which == "best") if reached else "not reached"
+        value = f"{c['value']:.4f}" if key == "rmse" else f"{c['value']:.3f}"
+        lines.append(f"| {key.upper()} | {which}: {c['ssao'].replace(' (default)', '')} | {value} | {c['ms']:.0f} | "
+                     f"{at_spp} | {at_t} |")
+    return lines
 
 
 # -- 4. ambient against full GI ----------------------------------------------------------------------------
@@ -240,17 +308,42 @@ def ambient_table(spp: int, out: Path) -> list[dict]:
         return record("pathtracer", n, {"budget_s": budget})
 
     rows.append(cached(out / "ambient" / f"pathtracer_equal_time_{spp}.json", equal_time))
-    regions = list(rows[0]["regions"])
     print(f"## 4. ambient against full GI on {GI_SCENE} (ΔE2000 mean, seed 0)\n")
-    print("| renderer | spp | time (s) | ΔE mean | " + " | ".join(regions) + " | mean radiance rel. error |")
-    print("|---|---|---|---|" + "---|" * len(regions) + "---|")
-    for r in rows:
-        name = r["renderer"] + (" (equal time)" if "budget_s" in r else "")
-        print(f"| {name} | {r['spp']} | {r['time_s']:.2f} | {r['delta_e']:.2f} | "
-              + " | ".join(f"{r['regions'][k]:.2f}" for k in regions) + f" | {r['mean_err']:+.3f} |")
+    print("\n".join(ambient_markdown(rows)))
     print(f"\nThe path tracer's spp is the one `cbox compare --time-budget {budget:.2f}s` picks "
           f"(two calibration renders, not counted) for ambient's {budget:.2f} s.\n")
     return rows
+
+
+def ambient_markdown(rows: list[dict]) -> list[str]:
+    """Part 4's table: ΔE mean image-wide and per region, and the mean radiance's relative error."""
+    regions = list(rows[0]["regions"])
+    lines = ["| renderer | spp | time | ΔE mean | " + " | ".join(regions) + " | mean radiance error |",
+             "|---|---|---|---|" + "---|" * len(regions) + "---|"]
+    for r in rows:
+        pt = "budget_s" in r
+        name, spp_note, time_note = (("**`pathtracer`, equal time**", "", "") if pt
+                                     else AMBIENT_LABELS.get(r["renderer"], (f"`{r['renderer']}`", "", "")))
+        de, err = format(r["delta_e"], ".2f"), minus(format(r["mean_err"], "+.1%"))
+        lines.append(f"| {name} | {r['spp']}{spp_note} | {r['time_s']:.2f} s{time_note} | {bold(de, pt)} | "
+                     + " | ".join(f"{r['regions'][k]:.2f}" for k in regions) + f" | {err} |")
+    return lines
+
+
+def summary_ambient_markdown(rows: list[dict]) -> list[str]:
+    """BENCHMARKS.md's summary of part 4."""
+    by = {r["renderer"]: r for r in rows if "budget_s" not in r}
+    pt = next(r for r in rows if "budget_s" in r)
+    a, o, n, p = by["ambient"], by["ambient[ambient=oracle]"], by["ambient[ambient=none]"], by["pyrender"]
+    return ["| `cornell-box`, seed 0 | spp | time | ΔE mean |", "|---|---|---|---|",
+            f"| `ambient` (direct light + radiosity ambient × AO) | {a['spp']} | {a['time_s']:.2f} s | "
+            f"{a['delta_e']:.2f} |",
+            f"| `ambient[ambient=oracle]` (best constant ambient) | {o['spp']} | {o['time_s']:.2f} s | "
+            f"{o['delta_e']:.2f} |",
+            f"| `ambient[ambient=none]` / `pyrender` (direct only) | {n['spp']} | {n['time_s']:.2f} s / "
+            f"{p['time_s']:.2f} s | {n['delta_e']:.2f} / {p['delta_e']:.2f} |",
+            f"| **`pathtracer` at equal time** (`spp_for_time_budget`, as `cbox compare --time-budget "
+            f"{pt['budget_s']:.1f}s`) | {pt['spp']} | {pt['time_s']:.2f} s | **{pt['delta_e']:.2f}** |"]
 
 
 # -- 5. artefacts ------------------------------------------------------------------------------------------
@@ -407,14 +500,20 @@ def haloes(scene, ref: np.ndarray, threads: int, images: Path | None) -> dict:
                  "them); yellow dots: the ring scored, > the radius from both boxes, where the truth's effect is 0")
     print(f"### Haloes: what the boxes change where they cannot occlude ({out['pixels']} pixels: within {RING} px "
           f"of their silhouettes, > {radius:g} from both)\n")
-    print("| setting | mean change | most darkened | share darkened > 0.05 | share lightened > 0.05 | image RMSE |")
-    print("|---|---|---|---|---|---|")
-    for spec, s in out.items():
-        if isinstance(s, dict):
-            print(f"| {spec} | {s['halo_mean']:+.4f} | {s['halo_min']:+.3f} | {s['darkened_frac']:.1%} | "
-                  f"{s['lightened_frac']:.1%} | {s['image_rmse']:.4f} |")
-    print()
+    print("\n".join(haloes_markdown(out)) + "\n")
     return out
+
+
+def haloes_markdown(res: dict) -> list[str]:
+    """The halo experiment's table (``haloes``'s result)."""
+    lines = ["| setting | mean change | most darkened | darkened > 0.05 | lightened > 0.05 | image RMSE |",
+             "|---|---|---|---|---|---|"]
+    for spec, s in res.items():
+        if isinstance(s, dict):
+            mean, darkest = minus(format(s["halo_mean"], "+.3f")), minus(format(s["halo_min"] + 0.0, ".3f"))
+            lines.append(f"| {HALO_LABELS.get(spec, spec)} | {mean} | {darkest} | {s['darkened_frac']:.1%} | "
+                         f"{s['lightened_frac']:.1%} | {s['image_rmse']:.3g} |")
+    return lines
 
 
 def thin_geometry(scene, ref: np.ndarray, threads: int, images: Path | None) -> dict:
@@ -507,6 +606,8 @@ def main() -> None:
     ap.add_argument("--no-images", action="store_true", help="measure the artefacts, write no figures")
     ap.add_argument("--skip", action="append", default=[], choices=["ssao", "ao", "ambient", "artefacts"],
                     help="leave a part out (repeatable); the crossover needs both ssao and ao")
+    ap.add_argument("--markdown", type=Path, action="append", default=[],
+                    help="write the tables of the parts run into this file's blocks (repeatable)")
     args = ap.parse_args()
     if args.max_spp < 1 or args.max_spp & (args.max_spp - 1) or args.frames < 1 or args.seeds < 1:
         ap.error("--max-spp must be a power of two; --frames and --seeds at least 1")
@@ -518,15 +619,25 @@ def main() -> None:
     summary_path = args.out / "summary.json"  # parts left out keep their last figures
     summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
     rows = ssao_table(scene, reference, args.frames, threads, args.out) if "ssao" not in args.skip else None
+    blocks = {}  # the docs' tables of the parts that ran (markdown_blocks)
+    if rows:
+        blocks["ambient_occlusion.py#ssao"] = ssao_markdown(rows)
     if "ao" not in args.skip:
         g, summary["ao"] = ao_experiment(scene, reference, args.seeds, args.max_spp, args.out)
+        blocks["ambient_occlusion.py#ao"] = ao_markdown(summary["ao"]["by_spp"])
         if rows:
             summary["crossover"] = crossover(g, rows)
+            blocks["ambient_occlusion.py#crossover"] = crossover_markdown(summary["crossover"])
+            blocks["ambient_occlusion.py#summary-ssao"] = summary_ssao_markdown(rows, summary["ao"])
     if "ambient" not in args.skip:
         summary["ambient"] = ambient_table(args.ambient_spp, args.out)
+        blocks["ambient_occlusion.py#ambient"] = ambient_markdown(summary["ambient"])
+        blocks["ambient_occlusion.py#summary-ambient"] = summary_ambient_markdown(summary["ambient"])
     if "artefacts" not in args.skip:
-        artefacts(scene, reference, threads, None if args.no_images else args.images, args.out)
+        res = artefacts(scene, reference, threads, None if args.no_images else args.images, args.out)
+        blocks["ambient_occlusion.py#haloes"] = haloes_markdown(res["haloes"])
     write_json_atomic(summary_path, json.loads(json.dumps(summary, default=float).replace("NaN", "null")))
+    markdown_blocks.write_blocks(args.markdown, {k: "\n".join(v) for k, v in blocks.items()})
     print(f"Total wall time of this run: {time.perf_counter() - t0:.0f} s (cached results are not re-measured).")
 
 

@@ -16,7 +16,10 @@ overhead per task, what a cell ships back, and what the client spends per cell.
 4. **Client per cell**: unpacking a result and writing the cell (image, rows) and ``results.parquet``, the
    work only the client does, at the sweep's table size.
 
-Run: ``.venv/bin/python benchmarks/dask_scaling.py`` (not ``distributed.py``: a script of that name would
+``--markdown FILE`` (repeatable) writes part 1-3's table into the file's block ``dask_scaling.py#scaling``
+(``benchmarks/markdown_blocks.py``).
+
+Run: ``.venv/bin/python benchmarks/dask_scaling.py --markdown BENCHMARKS.md`` (not ``distributed.py``: a script of that name would
 shadow the ``distributed`` package it measures); ``--seeds 4 --repeats 3``: about 8 minutes on 2 cores.
 """
 
@@ -30,6 +33,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import markdown_blocks
+from harness.adapters.api import default_threads
 from harness.adapters.registry import resolve
 from harness.scenes.library import resolve_scene
 from harness.store.references import load_reference
@@ -100,11 +105,39 @@ def client_cost(scene, ref, cells: int, table_cells: int) -> tuple[float, float]
         return store, time.perf_counter() - t
 
 
+def scaling_markdown(names: list[str], runs: dict, threads: dict, per_task: dict, seeds: int,
+                     load: tuple[float, float]) -> list[str]:
+    """Parts 1-3 as BENCHMARKS.md tabulates them: per backend the median wall time (each run's in brackets),
+    cells per minute, speed against in-process, render time per cell, ms per no-op task, kB shipped per cell."""
+    base = statistics.median(r[0] for r in runs["in-process"])
+    lines = [f"| run (load {load[0]:.1f} → {load[1]:.1f}) | wall s | cells/min | vs in-process | render s/cell | "
+             "ms/task | kB/cell back |", "|---|---|---|---|---|---|---|"]
+    for name in names:
+        walls = [r[0] for r in runs[name]]
+        wall = statistics.median(walls)
+        sizes = [size for r in runs[name] for size in r[2]]
+        if name == "in-process":
+            label = f"in-process (`CBOX_THREADS` {default_threads()})"
+        else:
+            per = threads[name].split(",")
+            label = f"`{name}` (`CBOX_THREADS` {per[0]}{' each' if len(per) > 1 else ''})"
+        ratio = base / wall
+        lines.append(
+            f"| {label} | {wall:.1f} ({', '.join(f'{w:.1f}' for w in walls)}) | {seeds / wall * 60:.1f} | "
+            f"{markdown_blocks.bold(f'{ratio:.2f}', name != 'in-process' and ratio > 1)} | "
+            f"{statistics.median(r[1] for r in runs[name]):.2f} | "
+            f"{f'{per_task[name] * 1e3:.1f}' if name in per_task else '—'} | "
+            f"{f'{statistics.median(sizes) / 1e3:.0f}' if sizes else '—'} |")
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=8, help="cells in the sweep")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--tasks", type=int, default=400, help="no-op tasks per overhead round")
+    ap.add_argument("--markdown", type=Path, action="append", default=[],
+                    help="write the table into this file's block dask_scaling.py#scaling (repeatable)")
     args = ap.parse_args()
     scene = resolve_scene("cornell-box")
     ref = load_reference(scene)
@@ -116,6 +149,7 @@ def main() -> None:
 
     # Every backend open at once (idle workers cost nothing) and the runs interleaved, round by round:
     # whatever else the machine does is spread over all three, not charged to one.
+    load_start = os.getloadavg()[0]
     names = ["in-process"] + [f"--workers {n}" for n in (1, 2)]
     runs: dict[str, list[tuple[float, float, list[int]]]] = {name: [] for name in names}
     with open_executor() as here, open_executor(workers=1) as one, open_executor(workers=2) as two:
@@ -139,9 +173,13 @@ def main() -> None:
               f"{f'{per_task[name] * 1e3:.2f}' if name in per_task else '':>8} "
               f"{f'{statistics.median(sizes) / 1e3:.0f}' if sizes else '':>8}")
         print(f"{'':<32} walls: {', '.join(f'{r[0]:.1f}' for r in runs[name])}")
+    table = scaling_markdown(names, runs, threads, per_task, args.seeds, (load_start, os.getloadavg()[0]))
+    print("\n" + "\n".join(table) + "\n")
     store, results_s = client_cost(scene, ref, args.seeds, 10_000)
     print(f"client per cell: {store * 1e3:.1f} ms to unpack and store it (image, rows); results.parquet of "
           f"10,000 cells ({10_000 * len(SPPS)} rows): {results_s * 1e3:.0f} ms per write")
+    markdown_blocks.write_blocks(args.markdown, {"dask_scaling.py#scaling": "\n".join(table)})
+
 
 if __name__ == "__main__":
     main()

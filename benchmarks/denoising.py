@@ -24,8 +24,10 @@ Everything runs through the harness's converge workflow in-process
 (:func:`harness.workflows.converge.run_experiment`, what ``cbox converge`` runs; ``cbox report OUT/<scene>`` gives
 the HTML report of either experiment). Results are cached in ``--out``: running again renders only what is missing.
 
-Run: ``.venv/bin/python benchmarks/denoising.py``: writes docs/denoising.md (``--markdown``) and its figures
-(``--images``); ``--quick`` for a check of the script (2 seeds, spp <= 4, into ``OUT-quick``).
+Run: ``.venv/bin/python benchmarks/denoising.py --summary BENCHMARKS.md``: writes docs/denoising.md whole
+(``--markdown``; its first line names the command, ``benchmarks/markdown_blocks.py``), its figures, and the
+summary table into BENCHMARKS.md's block ``denoising.py#summary`` (``--summary``); figures go to ``--images``;
+``--quick`` for a check of the script (2 seeds, spp <= 4, into ``OUT-quick``).
 """
 
 from __future__ import annotations
@@ -48,9 +50,9 @@ from harness.adapters.registry import resolve
 from harness.evaluate import metrics
 from harness.evaluate.convergence import time_to_target
 from harness.scenes.library import resolve_scene
-from harness.store.atomic import atomic_path
 from harness.store.references import load_reference
 from harness.workflows.converge import parse_spp_list
+import markdown_blocks
 from irradiance_probes import COLOURS, PT_COLOUR, bias_figure, experiment, fmt, write_svg
 from reports.charts import convergence_table
 from reports.plots import Series, line_plot_svg
@@ -202,7 +204,7 @@ def costs(scene, spp: int, repeats: int) -> dict:
             print(f"| {quality} | {aux} | {denoise_s[(quality, aux)]:.3f} |")
     print(f"\nMedians of {repeats} runs each; {scene.camera.width}x{scene.camera.height} pixels, "
           f"{default_threads()} threads.\n")
-    return {"per_spp": plain / spp, "aov_ratio": aovs / plain, "denoise": denoise_s}
+    return {"per_spp": plain / spp, "aov_ratio": aovs / plain, "denoise": denoise_s, "spp": spp, "repeats": repeats}
 
 
 PAGE_HEAD = """# Denoised path tracing (OIDN): what it buys, what it costs, the bias it keeps
@@ -260,12 +262,6 @@ def findings(bias: dict, quality_rows: list, cost: dict, regions, spps, pt_top: 
           f"prefiltered, {cost['denoise'][('high', 'noisy')]:.2f} s with the auxiliary images as rendered.\n")
 
 
-def write_page(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=Path("out/bench-denoising"), help="experiment folders (cached)")
@@ -275,6 +271,8 @@ def main() -> None:
     ap.add_argument("--pt-max-spp", type=int, default=1024,
                     help="the path tracer's spp go up to this (so that it reaches the equal-quality targets)")
     ap.add_argument("--markdown", type=Path, default=Path("docs/denoising.md"), help="the page this writes")
+    ap.add_argument("--summary", type=Path, action="append", default=[],
+                    help="write the summary table into this file's block denoising.py#summary (BENCHMARKS.md)")
     ap.add_argument("--quick", action="store_true", help="2 seeds, spp <= 4, into OUT-quick (page and figures "
                                                          "too): a check of the script")
     a = ap.parse_args()
@@ -287,12 +285,39 @@ def main() -> None:
     t0 = time.perf_counter()
     body = io.StringIO()
     with redirect_stdout(body):
-        run(out, images, page, seeds, spps, pt_spps, command, a.quick)
-    text = PAGE_HEAD.format(command=".venv/bin/python " + command.strip(), max_spp=spps[-1],
+        per_scene = run(out, images, page, seeds, spps, pt_spps, command, a.quick)
+    text = PAGE_HEAD.format(command=markdown_blocks.command_line(), max_spp=spps[-1],
                             pt_max_spp=pt_spps[-1], last_seed=seeds - 1) + body.getvalue()
-    write_page(page, text)
+    markdown_blocks.write_page(page, text)  # its first line names the command
+    markdown_blocks.write_blocks(a.summary, {"denoising.py#summary": "\n".join(
+        summary_markdown(per_scene, pt_spps[-1], spps[-1]))})
     print(text)
     print(f"(all of it: {time.perf_counter() - t0:.0f} s; the page: {page})", file=sys.stderr)
+
+
+def summary_markdown(per_scene: dict, pt_top: int, dn_top: int) -> list[str]:
+    """BENCHMARKS.md's summary, a column per scene: the AOVs' cost, one denoise per aux mode, and for each target
+    the spp the path tracer and the denoiser (prefiltered) need with the ratio of their modelled times."""
+    scenes = list(per_scene)
+    first = next(iter(per_scene.values()))[0]
+    lines = ["| | " + " | ".join(scenes) + " |", "|---|" + "---|" * len(scenes),
+             f"| path tracer with AOVs / without, {first['spp']} spp (median of {first['repeats']}, interleaved) | "
+             + " | ".join(f"{cost['aov_ratio']:.3f}" for cost, _ in per_scene.values()) + " |",
+             "| one denoise, quality high: prefiltered / noisy aux / no aux (s) | "
+             + " | ".join(" / ".join(f"{cost['denoise'][('high', aux)]:.2f}" for aux in ("prefiltered", "noisy", "none"))
+                          for cost, _ in per_scene.values()) + " |"]
+    for k, (metric, value) in enumerate(TARGETS):
+        label = f"{'ΔE mean' if metric.startswith('delta') else 'relMSE'} <= {value:g}"
+        cells = []
+        for _, rows in per_scene.values():
+            by = {r[1]: r for r in rows if r[0] == label}
+            pt, dn = by["pathtracer"][2], by[DENOISED][2]
+            cell = (f"{pt:.0f}" if math.isfinite(pt) else f"not by {pt_top}") + " / " + (
+                f"{dn:.1f}" if math.isfinite(dn) else f"not by {dn_top}")
+            cells.append(cell + (f"; **{by[DENOISED][5]:.2g}x**" if math.isfinite(pt) and math.isfinite(dn) else ""))
+        head = f"{label}: spp path tracer / denoised; time ratio" if k == 0 else label
+        lines.append(f"| {head} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def figure_links(page: Path, images: Path, name: str) -> None:
@@ -305,8 +330,10 @@ def figure_links(page: Path, images: Path, name: str) -> None:
           f"({rel}/denoising-{name}-side.png)\n")
 
 
-def run(out: Path, images: Path, page: Path, seeds: int, spps, pt_spps, command: str, quick: bool) -> None:
+def run(out: Path, images: Path, page: Path, seeds: int, spps, pt_spps, command: str, quick: bool) -> dict:
+    """Print the page's sections; return {scene: (cost model, equal-quality rows)} for the summary."""
     max_spp = spps[-1]
+    per_scene = {}
     for name, regions in SCENES.items():
         scene = resolve_scene(name)
         ref = load_reference(scene)
@@ -331,6 +358,8 @@ def run(out: Path, images: Path, page: Path, seeds: int, spps, pt_spps, command:
         print("### Equal quality\n")
         rows = equal_quality(runs, names, cost)
         findings(bias, rows, cost, regions, spps, pt_spps[-1])
+        per_scene[name] = (cost, rows)
+    return per_scene
 
 
 if __name__ == "__main__":

@@ -25,9 +25,9 @@ Run (13 minutes on the shared 2-core machine, most of it the 20 clean runs of th
 Tests (1)-(2) and (4) call ``runner.run_one`` and ``harness.gate.checks.evaluate``
 directly (``run_gate`` minus the image metrics, which these checks do not
 use); (3) is ``run_gate`` itself, in this process (``sandbox=False``: the
-same images as the CLI's child processes). With ``--markdown``, an existing
-file keeps everything outside the generated block (between the
-``gate_checks.py: begin/end`` markers); a file without them gets the block
+same images as the CLI's child processes). With ``--markdown``, the file
+keeps everything outside the generated block ``gate_checks.py`` (between its
+markers; ``benchmarks/markdown_blocks.py``); a file without it gets the block
 appended.
 """
 
@@ -48,6 +48,7 @@ from scipy.stats import binom
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 
+import markdown_blocks  # noqa: E402
 from harness.adapters.registry import resolve  # noqa: E402
 from harness.evaluate import outliers, variance_check  # noqa: E402
 from harness.gate.checks import STATISTICAL_TESTS, evaluate, statistical_alpha  # noqa: E402
@@ -57,7 +58,7 @@ from harness.scenes.library import resolve_scene  # noqa: E402
 from harness.store.references import load_reference  # noqa: E402
 from harness.workflows import runner  # noqa: E402
 
-BEGIN, END = "<!-- gate_checks.py: begin -->", "<!-- gate_checks.py: end -->"
+BLOCK = "gate_checks.py"  # the block of docs/gate-detection.md this writes (benchmarks/markdown_blocks.py)
 GATE = ROOT / "gate.toml"
 SPP = 256
 FACTORS = (100.0, 10.0, 2.0)
@@ -229,15 +230,7 @@ def main(argv=None) -> int:
     lines += ["", f"Command: `.venv/bin/python benchmarks/gate_checks.py --seeds {args.seeds} --markdown "
                   f"docs/gate-detection.md` ({(time.perf_counter() - t0) / 60:.0f} min)."]
     if args.markdown:
-        block = BEGIN + "\n" + "\n".join(lines) + "\n" + END
-        path = args.markdown
-        text = path.read_text(encoding="utf-8") if path.exists() else ""
-        if BEGIN in text and END in text:
-            head, rest = text.split(BEGIN, 1)
-            text = head + block + rest.split(END, 1)[1]
-        else:
-            text = text.rstrip("\n") + "\n\n" + block + "\n"
-        path.write_text(text, encoding="utf-8")
+        markdown_blocks.write_blocks([args.markdown], {BLOCK: "\n".join(lines)})
     return 0
 
 

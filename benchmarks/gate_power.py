@@ -25,8 +25,8 @@ Run (about 8 minutes on an idle 2-core machine)::
 
     .venv/bin/python benchmarks/gate_power.py --seeds 20 --markdown docs/gate-detection.md
 
-With ``--markdown``, an existing file keeps everything outside the generated
-block (between the ``gate_power.py: begin/end`` markers).
+With ``--markdown``, the file keeps everything outside the generated block
+``gate_power.py`` (between its markers; ``benchmarks/markdown_blocks.py``).
 """
 
 from __future__ import annotations
@@ -48,6 +48,7 @@ from scipy.stats import binom, norm
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 
+import markdown_blocks  # noqa: E402
 import mutants  # noqa: E402
 from harness.evaluate.agreement import tile_sums  # noqa: E402
 from harness.evaluate.registry import HIGHER_IS_BETTER  # noqa: E402
@@ -62,7 +63,7 @@ STATISTICAL = {"agreement", "variance", "outliers", "finite"}
 HANG_TIMEOUT_S = 120  # ~10 gate runs: a mutant of mutants.ISOLATED that has not ended by then never will
 MULTIPLES = [2.0 ** k for k in range(-8, 17)]  # budget multiples searched for 99% power
 
-BEGIN, END = "<!-- gate_power.py: begin -->", "<!-- gate_power.py: end -->"
+BLOCK = "gate_power.py"  # the block of docs/gate-detection.md this writes (benchmarks/markdown_blocks.py)
 
 
 @dataclass
@@ -149,19 +150,6 @@ def _multiple(m: float | None, spp: dict) -> str:
 
 def _rel(rel: float) -> str:
     return "reference 0 there" if math.isnan(rel) else f"{rel:+.2%}"
-
-
-def write_markdown(path: Path, generated: str) -> None:
-    """Write the generated block; in an existing file, replace only what lies between the markers."""
-    block = f"{BEGIN}\n{generated}{END}"
-    old = path.read_text(encoding="utf-8") if path.exists() else ""
-    if BEGIN in old and END in old:
-        head, rest = old.split(BEGIN, 1)
-        text = head + block + rest.split(END, 1)[1]
-    else:
-        text = "# Gate detection: power and false alarms\n\n" + block + "\n"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text, encoding="utf-8")
 
 
 def main(argv=None) -> int:
@@ -342,7 +330,7 @@ def main(argv=None) -> int:
             f"Command: `{cmd}`",
             "",
         ]
-        write_markdown(Path(args.markdown), "\n".join(body))
+        markdown_blocks.write_blocks([Path(args.markdown)], {BLOCK: "\n".join(body)}, cmd)
         print(f"wrote {args.markdown}")
     return 0 if detected == len(rows) and p_tail > 1e-3 else 1
 

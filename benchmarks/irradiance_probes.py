@@ -33,7 +33,13 @@ Results are cached in ``--out`` (the experiments' parquet cells and EXR images):
 only what is missing. ``--quick`` runs a tiny version (grid 4 and 6, 2+2 updates, spp <= 8) into ``OUT-quick``
 (figures in ``OUT-quick/images``).
 
-Run: ``.venv/bin/python benchmarks/irradiance_probes.py`` (13 minutes on 2 quiet cores from an empty ``--out``: 763 s
+``--markdown FILE`` (repeatable) writes the tables into the file's blocks (``benchmarks/markdown_blocks.py``):
+docs/irradiance-probes.md holds ``irradiance_probes.py#plateau``, ``#equal-time``, ``#heuristics-error``,
+``#heuristics-bias`` and ``#light-leak``; BENCHMARKS.md the summary ``#summary``. (The page's table of the budgets
+where probes win sets two runs side by side by hand.)
+
+Run: ``.venv/bin/python benchmarks/irradiance_probes.py --markdown docs/irradiance-probes.md --markdown
+BENCHMARKS.md`` (13 minutes on 2 quiet cores from an empty ``--out``: 763 s
 and 792 s in two runs; 2 seeds, the fewest a bias/variance split allows, to stay near the 15-minute budget).
 """
 
@@ -52,6 +58,8 @@ import pandas as pd
 from PIL import Image, ImageDraw
 from scipy.ndimage import gaussian_filter
 
+import markdown_blocks
+from markdown_blocks import bold, minus
 from harness.adapters.registry import resolve, sweep
 from harness.adapters.settings import parse_sweep
 from harness.evaluate import metrics
@@ -97,8 +105,25 @@ def label(entry, default) -> str:
         "{rays_per_probe} (default)".format(**default.settings)
 
 
-def fmt(x, spec: str = ".3g") -> str:
-    return "n/a" if x is None or not math.isfinite(x) else format(x, spec)
+def fmt(x, spec: str = ".3g", missing: str = "n/a") -> str:
+    return missing if x is None or not math.isfinite(x) else format(x, spec)
+
+
+def spacing(runs, name: str) -> float:
+    """The smallest probe spacing of configuration ``name`` (its renders' info)."""
+    return min(json.loads(runs.loc[runs["renderer"] == name, "info_probe_spacing"].iloc[0]))
+
+
+def doc_label(name: str, configs: dict, runs, default, grid_names: list[str]) -> str:
+    """How the page names a configuration: grids with their spacing, the default with its settings, in bold."""
+    s = default.settings
+    if name == default.name:
+        return bold(f"grid {s['grid']} ({spacing(runs, name):.2f}), rays {s['rays_per_probe']}, "
+                    f"iterations {s['iterations']}: default")
+    if name in grid_names:
+        first = name == grid_names[0]
+        return f"{configs[name]} ({'spacing ' if first else ''}{spacing(runs, name):.2f})"
+    return configs[name]
 
 
 def write_svg(path: Path, svg: str) -> None:
@@ -181,9 +206,6 @@ def plateau_table(runs, summary, configs: dict, max_spp: int, out: Path, ref) ->
     rows = []
     seeds = sorted(runs["seed"].dropna().astype(int).unique())
     print("## 1. Error against spp and time, and the plateau (medians over seeds; ΔE = ΔE2000 mean)\n")
-    print("| configuration | probe updates (s) | time at max spp (s) | ΔE 1 spp | ΔE 16 spp | ΔE max spp "
-          "| plateau from spp (s) | ΔE slope, last 2 octaves | ΔE of the seeds' mean | mean radiance | walls ΔE "
-          "| boxes ΔE | walls bias² / variance | boxes bias² / variance |\n|" + "---|" * 14)
     for name, lab in configs.items():
         g = runs[runs["renderer"] == name]
         med = g.groupby("spp").median(numeric_only=True)
@@ -200,10 +222,6 @@ def plateau_table(runs, summary, configs: dict, max_spp: int, out: Path, ref) ->
              **{f"{k}.{x}": float(sm[f"region.{k}.{x}"]) for k in ("walls", "boxes") for x in ("bias2", "variance")},
              **{k: float(med[f"region.{k}.{DE}"].iloc[-1]) for k in ("walls", "boxes")}}
         rows.append(r)
-        print(f"| {lab} | {r['probes_s']:.2f} | {r['time_max']:.1f} | {r['de1']:.2f} | {fmt(r['de16'], '.2f')} | "
-              f"**{final:.2f}** | {fmt(onset, '.0f')} ({fmt(onset_t, '.1f')}) | {fmt(slope, '+.3f')} | "
-              f"{r['de_mean_image']:.2f} | {r['mean_err']:+.1%} | {r['walls']:.2f} | {r['boxes']:.2f} | "
-              + " | ".join(f"{r[k + '.bias2']:.1e} / {r[k + '.variance']:.1e}" for k in ("walls", "boxes")) + " |")
     print(f"\nplateau from: the spp (and time) at which ΔE mean first comes within {PLATEAU - 1:.0%} of its value "
           f"at {max_spp} spp (per seed, interpolated log-log; median). ΔE slope: log-log against spp from "
           f"{max_spp // 4} spp, mean over seeds (an unbiased renderer: about -0.5; a plateau: 0). ΔE of the seeds' "
@@ -211,6 +229,53 @@ def plateau_table(runs, summary, configs: dict, max_spp: int, out: Path, ref) ->
           "seeds. Mean radiance: signed relative error, mean over seeds. bias², variance: converge's summary "
           f"at {max_spp} spp (variance: between seeds, the camera's and the probes' noise).\n")
     return rows
+
+
+def scale_row(pt_runs, max_spp: int) -> dict:
+    """The path tracer's figures of part 1's table, up to the probes' top spp (for scale)."""
+    g = pt_runs[pt_runs["spp"] <= max_spp]
+    med = g.groupby("spp").median(numeric_only=True)
+    return {"time_max": float(med["time_s"].iloc[-1]), "de1": float(med[DE].iloc[0]),
+            "de16": float(med[DE].get(16, math.nan)), "de_max": float(med[DE].iloc[-1]),
+            "slope": slope_over_seeds(g[g["spp"] >= max_spp / 4], DE, "spp")[0],
+            "mean_err": float(g[g["spp"] == max_spp]["mean_radiance_rel_error"].mean()),
+            **{k: float(med[f"region.{k}.{DE}"].iloc[-1]) for k in ("walls", "boxes")}}
+
+
+def plateau_markdown(rows: list[dict], labels: dict, pt: dict, max_spp: int) -> list[str]:
+    """Part 1's table (``plateau_table``'s rows, page labels by name), the path tracer last for scale."""
+    lines = [f"| configuration | probe updates (s) | time at {max_spp} spp (s) | ΔE 1 spp | ΔE 16 spp | ΔE {max_spp} spp "
+             f"| within {PLATEAU - 1:.0%} of it from spp (s) | ΔE slope, {max_spp // 4}-{max_spp} spp | ΔE of the "
+             "seeds' mean | mean radiance | walls ΔE | boxes ΔE | walls bias² / variance | boxes bias² / variance |",
+             "|" + "---|" * 14]
+    for r in rows:
+        lines.append(
+            f"| {labels[r['name']]} | {r['probes_s']:.2f} | {r['time_max']:.1f} | {r['de1']:.2f} | "
+            f"{fmt(r['de16'], '.2f')} | **{r['de_max']:.2f}** | {fmt(r['onset_spp'], '.0f')} "
+            f"({fmt(r['onset_s'], '.1f')}) | {minus(fmt(r['slope'], '+.3f'))} | {r['de_mean_image']:.2f} | "
+            f"{minus(format(r['mean_err'], '+.1%'))} | {r['walls']:.2f} | {r['boxes']:.2f} | "
+            + " | ".join(f"{r[k + '.bias2']:.1e} / {r[k + '.variance']:.1e}" for k in ("walls", "boxes")) + " |")
+    lines.append(f"| *path tracer (for scale)* | — | {pt['time_max']:.1f} | {pt['de1']:.1f} | {fmt(pt['de16'], '.2f')} | "
+                 f"{pt['de_max']:.2f} | — | {minus(fmt(pt['slope'], '+.2f'))} | — | "
+                 f"{minus(format(pt['mean_err'], '+.1%'))} | {pt['walls']:.2f} | {pt['boxes']:.2f} | — | — |")
+    return lines
+
+
+def summary_markdown(rows: list[dict], pt: dict, default, grid_names: list[str], max_spp: int) -> list[str]:
+    """BENCHMARKS.md's summary of part 1: the coarsest and finest grid, the default, the path tracer."""
+    by = {r["name"]: r for r in rows}
+    s = default.settings
+    picked = [(f"`{grid_names[0]}`", by[grid_names[0]]),
+              (f"`{default.name}` (default: grid {s['grid']}, {s['rays_per_probe']} rays, {s['bounces']} bounces "
+               f"+ {s['iterations']} blended updates)", by[default.name]),
+              (f"`{grid_names[-1]}`", by[grid_names[-1]])]
+    lines = [f"| `{SCENE}`, 256² | probe updates | ΔE mean at 16 / {max_spp} spp (plateau) | time at {max_spp} spp |",
+             "|---|---|---|---|"]
+    lines += [f"| {lab} | {r['probes_s']:#.3g} s | {fmt(r['de16'], '.2f')} / {r['de_max']:.2f} | "
+              f"{r['time_max']:.1f} s |" for lab, r in picked]
+    lines.append(f"| `pathtracer` (for scale) | — | {fmt(pt['de16'], '.2f')} / {pt['de_max']:.2f} | "
+                 f"{pt['time_max']:.1f} s |")
+    return lines
 
 
 def time_figures(conv, configs: dict, groups: dict, images: Path, metric: str = DE) -> None:
@@ -242,17 +307,13 @@ def equal_time(conv, pt_runs, plateau_rows, configs: dict, regions: list[str], i
     out = {"budgets": {}, "windows": {}, "pt_to_plateau": {}}
     print("## 2. Probes against the path tracer at equal time (ΔE2000 mean; medians over seeds)\n")
     print("Best probes configuration within each budget (of part 1's) against the path tracer:\n")
-    print("| budget (s) | best probes | its ΔE | path tracer ΔE | ratio | walls: probes / PT | boxes: probes / PT |"
-          "\n|---|---|---|---|---|---|---|")
     for b in BUDGETS:
         if b > t1 * 1.01:
             break
         row = {k: (best_at(cv, names, k, b), at_time(cv, "pathtracer", k, b)) for k in keys}
         (e, who), p = row[DE]
         out["budgets"][b] = {k: {"probes": v[0][0], "config": v[0][1], "pathtracer": v[1]} for k, v in row.items()}
-        w, x = row[f"region.walls.{DE}"], row[f"region.boxes.{DE}"]
-        print(f"| {b:g} | {configs.get(who, '(none yet)')} | {fmt(e, '.2f')} | {p:.2f} | {fmt(e / p, '.2f')} | "
-              f"{fmt(w[0][0], '.2f')} / {w[1]:.2f} | {fmt(x[0][0], '.2f')} / {x[1]:.2f} |")
+    print("\n".join(equal_time_markdown(out["budgets"], configs)))
     cam = np.median([(r["time_max"] - r["probes_s"]) / conv.loc[conv["renderer"] == r["name"], "spp"].max()
                      for r in plateau_rows])
     pt_cost = float(pt["time_s"].max() / pt["spp"].max())
@@ -288,6 +349,24 @@ def equal_time(conv, pt_runs, plateau_rows, configs: dict, regions: list[str], i
     return out
 
 
+def equal_time_markdown(budgets: dict, configs: dict) -> list[str]:
+    """Part 2's table of budgets (``equal_time``'s ``budgets``): the best probes configuration against the path
+    tracer, image-wide and on the walls and boxes."""
+    lines = ["| budget | best probes configuration | its ΔE | path tracer ΔE | ratio | walls: probes / PT | "
+             "boxes: probes / PT |", "|---|---|---|---|---|---|---|"]
+    for b, row in budgets.items():
+        e, p = row[DE]["probes"], row[DE]["pathtracer"]
+        who = row[DE]["config"]
+        lab = configs.get(who, "none has an image yet")
+        if lab.endswith(" (default)"):
+            lab = f"default ({lab.removesuffix(' (default)')})"
+        w, x = row[f"region.walls.{DE}"], row[f"region.boxes.{DE}"]
+        lines.append(f"| {b:g} s | {lab} | {fmt(e, '.2f', '—')} | {p:.2f} | {fmt(e / p, '.2f', '—')} | "
+                     f"{fmt(w['probes'], '.2f', '—')} / {w['pathtracer']:.2f} | "
+                     f"{fmt(x['probes'], '.2f', '—')} / {x['pathtracer']:.2f} |")
+    return lines
+
+
 # -- 3. heuristics -----------------------------------------------------------------------------------------------
 
 def heuristics(runs, summary, base: str, heur: dict, regions: list[str], images: Path) -> dict:
@@ -300,23 +379,14 @@ def heuristics(runs, summary, base: str, heur: dict, regions: list[str], images:
                      **{f"{r}.err": float(g[f"region.{r}.mean_radiance_rel_error"].mean()) for r in regions},
                      **{f"{r}.de": float(g[f"region.{r}.{DE}"].median()) for r in regions},
                      **{f"{r}.bias2": float(summary.loc[name, f"region.{r}.bias2"]) for r in regions}}
-    d0 = res[base]["de"]
     print(f"## 3. Each heuristic off, one at a time (the rest as `{base}`, {int(top['spp'].max())} spp)\n")
     print("Signed error of the mean radiance (mean over seeds: the mean image's), image-wide and per region; ΔE "
           "mean median over seeds:\n")
-    print("| setting | ΔE mean | change | mean radiance | " + " | ".join(regions) + " |\n|---|---|---|---|"
-          + "---|" * len(regions))
-    for r in res.values():
-        print(f"| {r['label']} | {r['de']:.2f} | {r['de'] - d0:+.2f} | {r['mean_err']:+.1%} | "
-              + " | ".join(f"{r[f'{k}.err']:+.1%}" for k in regions) + " |")
+    error, bias = heuristics_markdown(res, base, regions)
+    print("\n".join(error))
     print("\nbias² per region (converge's summary: squared error of the seeds' mean image, less its noise and "
           "the reference's), and ΔE mean per region:\n")
-    print("| setting | bias² image | " + " | ".join(f"{k} bias² (ΔE)" for k in regions) + " |\n|---|---|"
-          + "---|" * len(regions))
-    for r in res.values():
-        print(f"| {r['label']} | {r['bias2']:.2e} | "
-              + " | ".join(f"{r[f'{k}.bias2']:.2e} ({r[f'{k}.de']:.2f})" for k in regions) + " |")
-    print()
+    print("\n".join(bias) + "\n")
     shown = [r for r in regions if r != "light"]
     write_svg(images / "probes-heuristics.svg", bars_svg(
         [BarGroup("image", [r["bias2"] for r in res.values()])]
@@ -324,6 +394,23 @@ def heuristics(runs, summary, base: str, heur: dict, regions: list[str], images:
         [(r["label"], c) for r, c in zip(res.values(), ("#000000",) + COLOURS)], uid="probes-heuristics",
         ylabel="bias² (RGB radiance²)"))
     return res
+
+
+def heuristics_markdown(res: dict, base: str, regions: list[str]) -> tuple[list[str], list[str]]:
+    """Part 3's two tables (``heuristics``'s result): the signed errors with ΔE mean, and bias² (ΔE) per region."""
+    d0 = res[base]["de"]
+    error = ["| setting | ΔE mean | change | mean radiance | " + " | ".join(regions) + " |",
+             "|---|---|---|---|" + "---|" * len(regions)]
+    bias = ["| setting | bias² image | " + " | ".join(regions) + " |", "|---|---|" + "---|" * len(regions)]
+    for name, r in res.items():
+        is_base = name == base
+        change = "" if is_base else minus(format(r["de"] - d0, "+.2f"))
+        error.append(f"| {bold(r['label'], is_base)} | {bold(format(r['de'], '.2f'), is_base)} | {change} | "
+                     f"{minus(format(r['mean_err'], '+.1%'))} | "
+                     + " | ".join(minus(format(r[f"{k}.err"], "+.1%")) for k in regions) + " |")
+        bias.append(f"| {bold(r['label'], is_base)} | {r['bias2']:.2e} | "
+                    + " | ".join(f"{r[f'{k}.bias2']:.2e} ({r[f'{k}.de']:.2f})" for k in regions) + " |")
+    return error, bias
 
 
 def bias_figure(out: Path, ref, runs, names: dict, path: Path, lim: float = 0.25, size: int = 192) -> None:
@@ -372,11 +459,8 @@ def light_leak(out: Path, images: Path, seeds, spp: int, command: str) -> list[d
         lit, dark = (float(metrics.luminance(mean)[masks[r]].mean()) for r in ("lit-floor", "dark-floor"))
         rows.append({"label": lab, "lit_floor": lit, "dark_floor": dark, "dark_over_lit": dark / lit})
         shown.append((lab, mean))
-    print(f"\n## 4. Light leaks on {LEAK_SCENE} ({spp} spp, seeds' mean)\n\n"
-          "| probes | lit floor (mean luminance) | dark floor | dark / lit |\n|---|---|---|---|")
-    for r in rows:
-        print(f"| {r['label']} | {fmt(r['lit_floor'], '.4f')} | {fmt(r['dark_floor'], '.2e')} | "
-              f"{fmt(r['dark_over_lit'], '.2e')} |")
+    print(f"\n## 4. Light leaks on {LEAK_SCENE} ({spp} spp, seeds' mean)\n")
+    print("\n".join(leak_markdown(rows)))
     # The dark half would drive an image-wide exposure to saturate the lit room: expose for the lit floor instead.
     k, zoom = 0.18 / rows[0]["lit_floor"], 2
     h, w = (zoom * n for n in ref.image.shape[:2])
@@ -394,6 +478,15 @@ def light_leak(out: Path, images: Path, seeds, spp: int, command: str) -> list[d
     return rows
 
 
+def leak_markdown(rows: list[dict]) -> list[str]:
+    """Part 4's table (``light_leak``'s rows); an exact 0 is written 0."""
+    def small(x):
+        return "0" if x == 0 else fmt(x, ".2e")
+    return ["| probes | lit floor (mean luminance) | dark floor | dark / lit |", "|---|---|---|---|"] + [
+        f"| {r['label']} | {fmt(r['lit_floor'], '.4f')} | {small(r['dark_floor'])} | {small(r['dark_over_lit'])} |"
+        for r in rows]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=Path("out/bench-probes"))
@@ -402,6 +495,8 @@ def main() -> None:
     ap.add_argument("--max-spp", type=int, default=256)
     ap.add_argument("--pt-max-spp", type=int, default=1024)
     ap.add_argument("--quick", action="store_true", help="tiny settings, to check the script (OUT-quick)")
+    ap.add_argument("--markdown", type=Path, action="append", default=[],
+                    help="write the tables into this file's blocks irradiance_probes.py#... (repeatable)")
     a = ap.parse_args()
     base, sweeps, heur = QUICK if a.quick else FULL
     out, max_spp, pt_max = a.out, a.max_spp, a.pt_max_spp
@@ -430,6 +525,10 @@ def main() -> None:
     keys = [DE, "mse"] + [f"region.{r}.{DE}" for r in regions]
     conv = convergence_table(pd.concat([runs, pt_runs], ignore_index=True), keys)
     plateau = plateau_table(runs, summary, configs, max_spp, out / "probes", ref)
+    grid_names = [e.name for e in swept["grid"]]
+    labels = {name: doc_label(name, configs, runs, default, grid_names) for name in configs}
+    pt_row = scale_row(pt_runs, max_spp)
+    print("\n".join(plateau_markdown(plateau, labels, pt_row, max_spp)) + "\n")
     time_figures(conv, configs, {k: [e.name for e in es] for k, es in swept.items()}, images)
     crossing = equal_time(conv, pt_runs, plateau, configs, regions, images)
     heur_res = heuristics(runs, summary, default.name, heur_names, regions, images)
@@ -440,6 +539,13 @@ def main() -> None:
     total = time.perf_counter() - t_start
     (out / "summary.json").write_text(json.dumps({"plateau": plateau, "equal_time": crossing, "heuristics": heur_res,
                                                   "light_leak": leak, "wall_s": total}, indent=1, default=str))
+    blocks = {"irradiance_probes.py#plateau": plateau_markdown(plateau, labels, pt_row, max_spp),
+              "irradiance_probes.py#equal-time": equal_time_markdown(crossing["budgets"], configs),
+              "irradiance_probes.py#heuristics-error": heuristics_markdown(heur_res, default.name, regions)[0],
+              "irradiance_probes.py#heuristics-bias": heuristics_markdown(heur_res, default.name, regions)[1],
+              "irradiance_probes.py#light-leak": leak_markdown(leak),
+              "irradiance_probes.py#summary": summary_markdown(plateau, pt_row, default, grid_names, max_spp)}
+    markdown_blocks.write_blocks(a.markdown, {k: "\n".join(v) for k, v in blocks.items()})
     print(f"Total wall time {total:.0f} s ({CELLS['done']} cells rendered, {CELLS['stored']} stored); results in "
           f"{out} (`cbox report {out}/probes` builds that experiment's HTML report).")
 

@@ -18,9 +18,11 @@ On ``cornell-box`` at the same resolution, spp and max_depth for both:
 
 Each throughput figure is the median of ``--repeats`` timed runs; the ratios
 printed are ours/Mitsuba (paths/s, efficiency, time to target) and our rays/s
-over raw rays/s. Run (about 15 minutes on 2 cores):
+over raw rays/s. ``--markdown FILE`` (repeatable) writes (a)-(c), (d) and (e) into the file's blocks
+``pathtracer.py#throughput``, ``#efficiency`` and ``#time-to-target`` (``benchmarks/markdown_blocks.py``).
+Run (about 15 minutes on 2 cores):
 
-    .venv/bin/python benchmarks/pathtracer.py --spp 64 --repeats 5
+    .venv/bin/python benchmarks/pathtracer.py --spp 64 --repeats 5 --json --markdown BENCHMARKS.md
 """
 
 from __future__ import annotations
@@ -31,17 +33,20 @@ import os
 import statistics
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 
 import pandas as pd
+
+import markdown_blocks
 
 from harness.evaluate import metrics
 from harness.evaluate.convergence import time_to_target
 from harness.scenes.library import resolve_scene
 from harness.scenes.model import Scene, triangle_arrays
 from harness.store.references import load_reference
-from renderers.core.sampler import SAMPLERS
+from renderers.core.sampler import SAMPLER_SETTING, SAMPLERS
 from harness.adapters.api import default_threads
 from renderers.mitsuba3 import Mitsuba3, scene_dict
 from renderers.pathtracer import PathTracer
@@ -157,6 +162,36 @@ def time_to_delta_e(scene: Scene, ref: np.ndarray, ours_sampler: str, mitsuba_sa
     return tuple(time_to_target(df[df.who == who], "delta_e", target) for who in ("ours", "mitsuba"))
 
 
+def throughput_markdown(results: dict) -> list[str]:
+    """(a)-(c) as BENCHMARKS.md tabulates them: per depth, Mitsuba's paths/s and ours per sampler (ratio to it)."""
+    depths = results["depths"]
+    variant = next(iter(depths.values()))["mitsuba"]["variant"]
+    lines = ["| | " + " | ".join(depths) + " |", "| --- |" + " --- |" * len(depths),
+             f"| (a) raw embreex closest-hit rays/s | {results['raw_embree_rays_per_s'] / 1e6:.2f} M |"
+             + " same run |" * (len(depths) - 1),
+             f"| (c) Mitsuba `{variant}` paths/s | "
+             + " | ".join(f"{d['mitsuba']['paths_per_s'] / 1e6:.3f} M" for d in depths.values()) + " |"]
+    for sampler in ("independent", "pmj02"):
+        note = " (default)" if sampler == SAMPLER_SETTING.default else ""
+        lines.append(f"| (b) ours `{sampler}`{note} paths/s | " + " | ".join(
+            f"{d[f'ours {sampler}']['paths_per_s'] / 1e6:.3f} M (**{d[f'ours {sampler}']['ours_over_mitsuba']:.2f}×**)"
+            for d in depths.values()) + " |")
+    return lines
+
+
+def efficiency_markdown(eff: dict) -> list[str]:
+    """(d): RMSE, time and 1/(MSE·time) per sampler, against Mitsuba's multijitter (ours' default in bold)."""
+    baseline = eff["mitsuba multijitter"][2]
+    lines = ["| | RMSE | time (s) | efficiency | / Mitsuba multijitter |", "|---|---|---|---|---|"]
+    for label, (mse, t, e) in eff.items():
+        who, sampler = label.split()
+        default = who == "ours" and sampler == SAMPLER_SETTING.default
+        name = f"{'ours' if who == 'ours' else 'Mitsuba'} `{sampler}`" + (" (default)" if default else "")
+        lines.append(f"| {name} | {mse ** 0.5:.5f} | {t:.2f} | {e:.1f} | "
+                     f"{markdown_blocks.bold(f'{e / baseline:.2f}', default)} |")
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", default="cornell-box")
@@ -169,6 +204,8 @@ def main() -> None:
     ap.add_argument("--parts", default="abc,d,e", help="which parts to run, comma-separated: abc (throughput), "
                     "d (efficiency), e (time to target, which needs d's ranking); default all")
     ap.add_argument("--json", action="store_true", help="print the results as JSON too")
+    ap.add_argument("--markdown", type=Path, action="append", default=[],
+                    help="write the parts run into this file's blocks pathtracer.py#... (repeatable)")
     args = ap.parse_args()
     base = resolve_scene(args.scene)
     threads = default_threads()
@@ -193,9 +230,11 @@ def main() -> None:
                   f"{o['paths_per_s'] / m['paths_per_s']:.2f}, our rays / raw rays = {o['rays_per_s'] / raw:.2f}")
             results["depths"][label][f"ours {sampler}"] = {**o, "ours_over_mitsuba": o["paths_per_s"] / m["paths_per_s"],
                                                           "our_rays_over_raw": o["rays_per_s"] / raw}
+    blocks = {"pathtracer.py#throughput": throughput_markdown(results)} if "abc" in parts else {}
     if not {"d", "e"} & parts:
         if args.json:
             print(json.dumps(results, indent=1))
+        markdown_blocks.write_blocks(args.markdown, {k: "\n".join(v) for k, v in blocks.items()})
         return
     ref = np.asarray(load_reference(base).image, dtype=np.float64)
     eff = efficiency(base, ref, args.efficiency_spp, args.seeds)  # (e) picks each side's best sampler from it
@@ -212,8 +251,13 @@ def main() -> None:
     results.update(efficiency={k: dict(zip(("mse", "time_s", "efficiency"), v)) for k, v in eff.items()},
                    time_to_delta_e={"target": args.target, "ours": [best_ours, ours_t],
                                     "mitsuba": [best_mi, mi_t], "ours_over_mitsuba": ours_t / mi_t})
+    blocks["pathtracer.py#efficiency"] = efficiency_markdown(eff)
+    blocks["pathtracer.py#time-to-target"] = [
+        f"**(e) Time to ΔE mean ≤ {args.target:g}**: ours (`{best_ours}`) **{ours_t:.2f} s**, Mitsuba (`{best_mi}`) "
+        f"**{mi_t:.2f} s**: **ours / Mitsuba {ours_t / mi_t:.2f}**."]
     if args.json:
         print(json.dumps(results, indent=1))
+    markdown_blocks.write_blocks(args.markdown, {k: "\n".join(v) for k, v in blocks.items()})
 
 
 if __name__ == "__main__":

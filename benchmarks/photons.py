@@ -20,7 +20,10 @@ not single times):
    stored photons per map; SPPM also from a larger initial radius, with 1
    and 4 photons per pixel per iteration.
 
-Run: ``.venv/bin/python benchmarks/photons.py --seeds 3`` (about 25 minutes on 2 cores).
+Each table is printed, and with ``--markdown BENCHMARKS.md`` written into that file's blocks
+``photons.py#throughput``, ``photons.py#kd-tree`` and ``photons.py#time-to-error`` (``benchmarks/markdown_blocks.py``).
+
+Run: ``.venv/bin/python benchmarks/photons.py --seeds 3 --markdown BENCHMARKS.md`` (about 25 minutes on 2 cores).
 """
 
 from __future__ import annotations
@@ -32,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
+
+import markdown_blocks
 
 from harness.adapters.registry import resolve
 from harness.adapters.seeds import pass_key
@@ -45,9 +50,17 @@ from harness.adapters.api import default_threads
 from renderers.pathtracer import PathTracer
 
 TARGETS = (("region.caustic.rel_mse", 0.05), ("region.caustic.rel_mse", 0.01), ("delta_e2000_mean", 2.0))
+METRIC_LABELS = {"region.caustic.rel_mse": "caustic relMSE", "delta_e2000_mean": "ΔE mean"}
+#: How the time-to-error table names each run (by the renderer's canonical name).
+LABELS = {"sppm": "**sppm** (initial radius 2 footprints, the default)",
+          "sppm[initial_radius=4.0]": "sppm, initial radius 4",
+          "sppm[initial_radius=4.0,photons_per_iteration=262144]":
+              "sppm, initial radius 4, 4 photons per pixel per iteration",
+          "photonmap": "photonmap (250k + 250k photons)",
+          "photonmap[caustic_photons=1000000,global_photons=1000000]": "photonmap (1M + 1M photons)"}
 
 
-def throughput(scene, repeats: int, threads: int) -> None:
+def throughput(scene, repeats: int, threads: int) -> list[str]:
     geom = SceneGeometry(scene)
     shoot(geom, scene, pass_key(0, 0, 1), 1 << 14, STORE_ALL, threads)  # compile
     rates, ray_rates, stored = [], [], 0
@@ -64,16 +77,18 @@ def throughput(scene, repeats: int, threads: int) -> None:
     paths = statistics.median(16 * pixels / p.time_s for p in pt)
     pt_rays = statistics.median(p.info["rays"] / p.time_s for p in pt)
     print(f"## Throughput ({threads} threads, median of {repeats})\n")
-    print("| | per second | ratio to the path tracer |\n|---|---|---|")
-    print(f"| photons emitted (1 M; {stored / 1e6:.2f} M stored) | {statistics.median(rates) / 1e6:.2f} M | "
-          f"{statistics.median(rates) / paths:.2f} (per camera path) |")
-    print(f"| photon rays (Embree queries) | {statistics.median(ray_rates) / 1e6:.2f} M | "
-          f"{statistics.median(ray_rates) / pt_rays:.2f} |")
-    print(f"| path tracer camera paths (16 spp) | {paths / 1e6:.2f} M | 1 |")
-    print(f"| path tracer rays | {pt_rays / 1e6:.2f} M | 1 |\n")
+    table = ["| | per second | ratio to the path tracer |", "|---|---|---|",
+             f"| photons emitted (1 M; {stored / 1e6:.2f} M stored: every diffuse hit) | "
+             f"{statistics.median(rates) / 1e6:.2f} M | {statistics.median(rates) / paths:.2f} (per camera path) |",
+             f"| photon rays (Embree queries) | {statistics.median(ray_rates) / 1e6:.2f} M | "
+             f"{statistics.median(ray_rates) / pt_rays:.2f} (per ray) |",
+             f"| path tracer camera paths (16 spp) | {paths / 1e6:.2f} M | 1 |",
+             f"| path tracer rays (closest-hit and shadow) | {pt_rays / 1e6:.2f} M | 1 |"]
+    print("\n".join(table) + "\n")
+    return table
 
 
-def kd_tree(scene, repeats: int, threads: int) -> None:
+def kd_tree(scene, repeats: int, threads: int) -> list[str]:
     geom = SceneGeometry(scene)
     builds, queries, traced = [], [], []
     for r in range(repeats):
@@ -89,21 +104,24 @@ def kd_tree(scene, repeats: int, threads: int) -> None:
         tree.query(pts, k=30, distance_upper_bound=0.1, workers=threads)
         queries.append((time.perf_counter() - t) / len(pts))
     print(f"## kd-tree over 1 M stored photons ({threads} threads, median of {repeats})\n")
-    print("| | time |\n|---|---|")
-    print(f"| trace until 1 M stored, then build the tree | {statistics.median(traced):.2f} s (target ≤ 2 s) |")
-    print(f"| cKDTree build | {statistics.median(builds):.3f} s |")
-    print(f"| k = 30 query, per point ({threads} workers) | {statistics.median(queries) * 1e6:.1f} µs |\n")
+    table = ["| | time |", "|---|---|",
+             f"| trace until 1 M are stored, then build the tree | **{statistics.median(traced):.2f} s** "
+             f"(target ≤ 2 s) |",
+             f"| cKDTree build | {statistics.median(builds):.2f} s |",
+             f"| k = 30 query, per point ({threads} workers) | {statistics.median(queries) * 1e6:.1f} µs |"]
+    print("\n".join(table) + "\n")
+    return table
 
 
-def time_to_error(scene, seeds: int, out: Path) -> None:
+def time_to_error(scene, seeds: int, out: Path) -> list[str]:
     reference = load_reference(scene)
     runs = [(["pathtracer"], "1,2,4,...,1024"), (["sppm"], "1,2,4,...,256"),
             (["sppm[initial_radius=4]"], "1,2,4,...,256"),
             (["sppm[initial_radius=4,photons_per_iteration=262144]"], "1,2,4,...,64"),
             (["photonmap", "photonmap[global_photons=1000000,caustic_photons=1000000]"], "1,2,4,...,64")]
     print(f"## Time to error on cornell-box-caustics (median over seeds 0-{seeds - 1})\n")
-    print("| renderer | " + " | ".join(f"{m} ≤ {v:g}" for m, v in TARGETS) + " | best caustic relMSE |")
-    print("|---|" + "---|" * (len(TARGETS) + 1))
+    lines = ["| renderer | " + " | ".join(f"{METRIC_LABELS[m]} ≤ {v:g}" for m, v in TARGETS)
+             + " | best caustic relMSE (time) |", "|---|" + "---|" * (len(TARGETS) + 1)]
     times = {}
     for specs, spp in runs:
         entries = resolve(specs)
@@ -113,14 +131,20 @@ def time_to_error(scene, seeds: int, out: Path) -> None:
         for name, g in table[table["status"] == "ok"].groupby("renderer", sort=False):
             t = [time_to_target(g, m, v) for m, v in TARGETS]
             times[name] = t
-            best = g.groupby("spp")["region.caustic.rel_mse"].median().min()
-            print(f"| {name} | " + " | ".join(f"{x:.1f} s" if np.isfinite(x) else "not reached" for x in t)
-                  + f" | {best:.4f} |")
-    if "pathtracer" in times and "sppm" in times:
-        ratios = [a / b if np.isfinite(a) and np.isfinite(b) else float("nan")
-                  for a, b in zip(times["pathtracer"], times["sppm"])]
-        print("| **pathtracer / sppm** | " + " | ".join(f"**{r:.1f}×**" for r in ratios) + " | |")
-    print()
+            per_spp = g.groupby("spp")[["region.caustic.rel_mse", "time_s"]].median()
+            best = per_spp["region.caustic.rel_mse"].idxmin()
+            lines.append(f"| {LABELS.get(name, name)} | "
+                         + " | ".join(f"{x:.1f} s" if np.isfinite(x) else "not reached" for x in t)
+                         + f" | {per_spp.loc[best, 'region.caustic.rel_mse']:.4f} "
+                           f"({per_spp.loc[best, 'time_s']:.0f} s) |")
+    for other, bold in (("sppm", True), ("photonmap", False)):
+        if "pathtracer" in times and other in times:
+            ratios = [a / b if np.isfinite(a) and np.isfinite(b) else float("nan")
+                      for a, b in zip(times["pathtracer"], times[other])]
+            b = "**" if bold else ""
+            lines.append(f"| {b}pathtracer / {other}{b} | " + " | ".join(f"{b}{r:.1f}×{b}" for r in ratios) + " | |")
+    print("\n".join(lines) + "\n")
+    return lines
 
 
 def main() -> None:
@@ -129,13 +153,16 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=3, help="seeds of the time-to-error runs")
     ap.add_argument("--out", type=Path, default=Path("out/bench-photons"), help="experiment folders (resumable)")
     ap.add_argument("--skip-time-to-error", action="store_true", help="only the throughput and kd-tree figures")
+    ap.add_argument("--markdown", type=Path, action="append", default=[],
+                    help="write the tables into this file's blocks photons.py#... (repeatable)")
     args = ap.parse_args()
     scene = resolve_scene("cornell-box-caustics")
     threads = default_threads()
-    throughput(scene, args.repeats, threads)
-    kd_tree(scene, args.repeats, threads)
+    blocks = {"photons.py#throughput": "\n".join(throughput(scene, args.repeats, threads)),
+              "photons.py#kd-tree": "\n".join(kd_tree(scene, args.repeats, threads))}
     if not args.skip_time_to_error:
-        time_to_error(scene, args.seeds, args.out)
+        blocks["photons.py#time-to-error"] = "\n".join(time_to_error(scene, args.seeds, args.out))
+    markdown_blocks.write_blocks(args.markdown, blocks)
 
 
 if __name__ == "__main__":

@@ -2,15 +2,16 @@
 
 Each :class:`Mutant` is a realistic bug in one of our renderers
 (:data:`INTEGRATORS`: the path tracer, the photon mapper, SPPM, ao, ambient,
-probes), written as exact source patches: an ``old`` snippet replaced by
-``new`` in the renderer's module (the integrator, e.g.
-``renderers/pathtracer.py``), in a module of the toolkit it is built on
-(``renderers/core/``) or in another module of ``renderers/`` it imports (the
-probes' algorithm, ``renderers/ddgi.py``), wherever the line now lives.
-:func:`load_mutant` writes the patched sources to real files (so numba's
-``cache=True`` has a locator) as uniquely named modules, imports them, and
-returns a :class:`harness.adapters.registry.RendererEntry` named
-after the renderer, which :func:`harness.gate.checks.run_gate` takes as an override.
+probes and the denoised path tracer ``pathtracer+oidn``), written as exact
+source patches: an ``old`` snippet replaced by ``new`` in the renderer's
+module (the integrator, e.g. ``renderers/pathtracer.py``), in a module of the
+toolkit it is built on (``renderers/core/``) or in another module of
+``renderers/`` it imports (the probes' algorithm, ``renderers/ddgi.py``),
+wherever the line now lives. :func:`load_mutant` writes the patched sources
+to real files (so numba's ``cache=True`` has a locator) as uniquely named
+modules, imports them, and returns a
+:class:`harness.adapters.registry.RendererEntry` named after the renderer,
+which :func:`harness.gate.run.run_gate` takes as an override.
 
 A mutant is a set of modules: the integrator is ``cbox_mutant_<name>``; a
 mutant that patches any other module (``renderers/core/<stem>.py``, or
@@ -25,8 +26,15 @@ Every patch must apply exactly once: if a refactor moves or rewrites a
 snippet, :func:`patched_sources` raises instead of silently testing an
 unmutated renderer. The sources themselves are never modified.
 
-The catalogue itself (the bugs, as data) is :mod:`mutant_catalogue`; its
-names are re-exported here. Used by ``tests/test_gate_power.py`` and
+The gate on a mutant: :func:`gate_config` (``gate.toml`` with one renderer's
+expectations), :func:`run_until_failure` (cheapest expectation first, up to
+the first that fails), :func:`verdict` (what the gate said, in the terms of
+the detection table) and :func:`run_isolated` (in a child process with a time
+limit, for the mutants of :data:`ISOLATED` that once made a run never end).
+
+The catalogue itself (the bugs, as data, with their snippets) is
+:mod:`mutant_catalogue`; its names are re-exported here. Used by
+``tests/test_gate_power.py``, ``tests/test_ao.py`` and
 ``benchmarks/gate_power.py`` only.
 """
 
