@@ -28,7 +28,7 @@ the maximum distance. Where it differs:
   uniform ones (p = 1/(2π)) for A = 1/(2π) ∫ V. In both the weight
   (cos θ / π or 1 / (2π)) over the pdf is exactly 1, so the estimate is V ∈
   {0, 1} itself: no division is left to guard, and a pixel's variance is the
-  Bernoulli one, Ā(1 − Ā)/n (what tests/test_ao.py tests against).
+  Bernoulli one, Ā(1 − Ā)/n (what tests/renderers/test_ao.py tests against).
 - A miss gives ``miss_value`` (pbrt-v4 returns no radiance: ``miss_value = 0``).
 - Our flat triangles and analytic spheres have no shading normal distinct
   from the geometric one, so the scene's ``normal`` (geometric or shading)

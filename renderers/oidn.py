@@ -25,7 +25,7 @@ the gate gives it budgets and a consistency check.
   JIT warm-up is left out.
 - **Threads**: OIDN's CPU device gets ``numThreads`` from ``CBOX_THREADS`` (or
   the adapter's ``threads``), like our renderers.
-- **Determinism**: measured here (``tests/test_oidn.py``): OIDN 2.5.1's CPU
+- **Determinism**: measured here (``tests/renderers/test_oidn.py``): OIDN 2.5.1's CPU
   output was bit-identical across runs and across 1 and 2 threads on this
   machine (x86-64, AVX2); :data:`DETERMINISM` says so in every result's info.
   OIDN does not promise it across CPUs with other instruction sets.
@@ -53,7 +53,7 @@ OWN_SETTINGS = (
             "(passed as rendered) or none (the beauty alone)", choices=AUX_MODES),
 )
 #: Measured, not promised by OIDN (module docstring); recorded in every result's info.
-DETERMINISM = "bit-identical across runs and thread counts on the machine measured (tests/test_oidn.py)"
+DETERMINISM = "bit-identical across runs and thread counts on the machine measured (tests/renderers/test_oidn.py)"
 OIDN_MINOR = (2, 5)
 
 _LOCK = threading.Lock()  # one filter execution at a time per process: the device is shared

@@ -131,7 +131,7 @@ VARIANTS = ("crytek", "hemisphere", "gtao")
 #: Defaults of the cost settings. At 256² on cornell-box-ao (2 CPU cores, numba, float64) a frame takes
 #: about 10 ms (crytek, hemisphere: 16 points per pixel) and 45-75 ms (gtao: 4 slices × 2 sides × 8
 #: steps = 64 depth reads per pixel); 8 slices × 12 steps take 3-4x as long for less banding (on the
-#: floor beside a wall, |error| ≤ 0.015 instead of 0.035: tests/test_ssao.py).
+#: floor beside a wall, |error| ≤ 0.015 instead of 0.035: tests/renderers/test_ssao.py).
 SAMPLES, SLICES, STEPS = 16, 4, 8
 #: 1/φ, the golden ratio's fractional part: the Kronecker sequence frac(i/φ) of the kernels.
 _GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0

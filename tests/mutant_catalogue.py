@@ -357,7 +357,7 @@ LOW_POWER: dict[str, str] = {
                       "mutated; of 1024 tiles, four had a larger error than every clean seed, by at most 1.7 "
                       "points (small box's top front edge: +10% to +17% against +2% to +9%). Three corner-caustic "
                       "scenes (docs/photon-mapping.md) changed no pixel beyond 18%. Caught by "
-                      "tests/test_photons.py::test_normal_test_keeps_wall_photons_off_the_floor",
+                      "tests/renderers/test_photons.py::test_normal_test_keeps_wall_photons_off_the_floor",
 }
 assert set(LOW_POWER) <= set(BY_NAME)
 

@@ -34,7 +34,7 @@ limit, for the mutants of :data:`ISOLATED` that once made a run never end).
 
 The catalogue itself (the bugs, as data, with their snippets) is
 :mod:`mutant_catalogue`; its names are re-exported here. Used by
-``tests/test_gate_power.py``, ``tests/test_ao.py`` and
+``tests/gate/test_gate_power.py``, ``tests/renderers/test_ao.py`` and
 ``benchmarks/gate_power.py`` only.
 """
 

@@ -16,7 +16,7 @@ two weightings):
 
 and the azimuth integral is done by quadrature (:func:`scipy.integrate.quad`),
 which the issue asks for, split where the integrand has kinks. Known values
-it reproduces (tests/test_ao.py): A = 1 in an open plane, A = 1/2 beside one
+it reproduces (tests/renderers/test_ao.py): A = 1 in an open plane, A = 1/2 beside one
 wall and 1/4 in a corner when R is infinite, whatever the distances; and
 the closed form of one wall under cosine weighting,
 :func:`cosine_ao_beside_wall`.

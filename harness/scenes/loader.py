@@ -2,7 +2,7 @@
 
 Every error is a :class:`~harness.scenes.model.SceneError` that names the file
 and the field, on one line; no other exception escapes :func:`load_scene`,
-whatever the bytes of the file (``tests/test_fuzz.py`` keeps it so). The
+whatever the bytes of the file (``tests/scenes/test_fuzz.py`` keeps it so). The
 format itself (fields, units, conventions, limits) is documented in
 :mod:`harness.scenes.model`.
 """

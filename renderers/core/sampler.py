@@ -13,7 +13,7 @@ instead of hand arithmetic in the kernels:
 A dimension is a pure function of (depth, offset), so a decision that is
 skipped (no emitter, a path ended) never shifts the numbers of the ones
 after it. Changing any number here changes every image:
-``tests/test_pathtracer_pinned.py`` pins them.
+``tests/renderers/test_pathtracer_pinned.py`` pins them.
 
 Which numbers a dimension gets is the sampler's (:data:`SAMPLERS`), carried
 to kernels as a :class:`Stream`; every sample stays a pure function of

@@ -193,7 +193,7 @@ def test_project_gate_passes(tmp_path):
 
     Our path tracer's half of the project gate is run (in this process, the
     same images: test_same_commit_same_verdict) by
-    tests/test_gate_power.py::test_unmutated_path_tracer_passes_the_gate_at_its_seeds.
+    tests/gate/test_gate_power.py::test_unmutated_path_tracer_passes_the_gate_at_its_seeds.
     """
     cfg = load_config(ROOT / "gate.toml")
     cfg.expectations = [e for e in cfg.expectations if e.renderer == "mitsuba"]

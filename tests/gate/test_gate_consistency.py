@@ -1,7 +1,7 @@
 """The gate for biased-but-consistent renderers (issue 11): the estimator declaration against the z-tests,
 consistency checks (a slope over checkpoints, a ratio to a smaller budget) and budgets on region metrics.
 
-Split from tests/test_gate.py, whose helpers it uses, to keep each module near 500 lines.
+Split from tests/gate/test_gate.py, whose helpers it uses, to keep each module near 500 lines.
 """
 
 from __future__ import annotations

@@ -103,38 +103,38 @@ def test_probes_mutants_patch_a_copy_of_ddgi_that_the_integrator_imports():
 
 #: Mutants that only the caustics expectation shows: the gate detects them after rendering every cheaper
 #: expectation (~80 s each in the suite), so their gate test is slow; by default the unit tests that pin the
-#: same code catch them (tests/test_bsdf.py: Fresnel against the closed form; tests/test_specular.py: a
+#: same code catch them (tests/renderers/core/test_bsdf.py: Fresnel against the closed form; tests/renderers/test_specular.py: a
 #: coloured mirror).
-SLOW_MUTANTS = {"fresnel_schlick": "tests/test_bsdf.py", "mirror_reflectance_ignored": "tests/test_specular.py",
+SLOW_MUTANTS = {"fresnel_schlick": "tests/renderers/core/test_bsdf.py", "mirror_reflectance_ignored": "tests/renderers/test_specular.py",
                 # Photon mutants: 23-44 s each in the gate (a numba compile of the copied toolkit, then a
-                # photon expectation; measured), so slow; tests/test_photons.py catches each by default (flux
+                # photon expectation; measured), so slow; tests/renderers/test_photons.py catches each by default (flux
                 # conservation, the furnaces, the caustic map's contents, SPPM's radius).
-                **{m.name: "tests/test_photons.py" for m in mutants.MUTANTS if m.renderer in ("photonmap", "sppm")},
-                # AO mutants: a compile of the copied toolkit each; tests/test_ao.py catches each by default.
-                **{m.name: "tests/test_ao.py" for m in mutants.MUTANTS if m.renderer == "ao"},
-                "ambient_not_occluded": "tests/test_ambient.py",
+                **{m.name: "tests/renderers/test_photons.py" for m in mutants.MUTANTS if m.renderer in ("photonmap", "sppm")},
+                # AO mutants: a compile of the copied toolkit each; tests/renderers/test_ao.py catches each by default.
+                **{m.name: "tests/renderers/test_ao.py" for m in mutants.MUTANTS if m.renderer == "ao"},
+                "ambient_not_occluded": "tests/renderers/test_ambient.py",
                 # Probe mutants: a compile of the copied toolkit and ddgi each (25-40 s in the gate, measured
-                # 2026-12-02); each fails tests/test_probes.py when patched in (checked): chebyshev_inverted its
+                # 2026-12-02); each fails tests/renderers/test_probes.py when patched in (checked): chebyshev_inverted its
                 # two-rooms leak test (dark/lit 0.18, budget 0.002), irradiance_not_cosine_weighted its half-space
                 # sky blend, probe_index_off_by_one its lookup at a probe and between two.
-                **{m.name: "tests/test_probes.py" for m in mutants.MUTANTS if m.renderer == "probes"},
+                **{m.name: "tests/renderers/test_probes.py" for m in mutants.MUTANTS if m.renderer == "probes"},
                 # The six costliest path tracer ones in the suite (21-23 s each, measured 2026-12-01), slow to
                 # keep the suite within its time: each was checked to fail these unit tests when patched in.
-                "two_sided_emitter": "tests/test_pathtracer.py", "camera_half_pixel": "tests/test_pathtracer.py",
-                "swap_rb": "tests/test_pathtracer.py", "nee_at_delta_vertex": "tests/test_specular.py",
-                "ior2_missing": "tests/test_specular.py", "tir_absorbed": "tests/test_specular.py",
+                "two_sided_emitter": "tests/renderers/test_pathtracer.py", "camera_half_pixel": "tests/renderers/test_pathtracer.py",
+                "swap_rb": "tests/renderers/test_pathtracer.py", "nee_at_delta_vertex": "tests/renderers/test_specular.py",
+                "ior2_missing": "tests/renderers/test_specular.py", "tir_absorbed": "tests/renderers/test_specular.py",
                 # Two more (15-16 s each, measured 2026-12-02) when the AO tests joined the suite; both fail
-                # tests/test_pathtracer.py::test_white_furnace when patched in (checked).
-                "energy_loss_1pct": "tests/test_pathtracer.py", "shadow_tfar_past_light": "tests/test_pathtracer.py",
+                # tests/renderers/test_pathtracer.py::test_white_furnace when patched in (checked).
+                "energy_loss_1pct": "tests/renderers/test_pathtracer.py", "shadow_tfar_past_light": "tests/renderers/test_pathtracer.py",
                 # Three more (13-17 s each, measured 2026-12-02) when the probes joined the suite; each fails
-                # tests/test_pathtracer.py::test_white_furnace when patched in (checked: NaN, and the albedo 0.5
+                # tests/renderers/test_pathtracer.py::test_white_furnace when patched in (checked: NaN, and the albedo 0.5
                 # furnace off by 7% and 5%).
-                "nan_throughput": "tests/test_pathtracer.py", "cosine_pdf_mismatch": "tests/test_pathtracer.py",
-                "rr_no_compensation": "tests/test_pathtracer.py",
+                "nan_throughput": "tests/renderers/test_pathtracer.py", "cosine_pdf_mismatch": "tests/renderers/test_pathtracer.py",
+                "rr_no_compensation": "tests/renderers/test_pathtracer.py",
                 # Denoiser mutants: 12-20 s each in the gate (measured 2026-12-02); oidn_aux_not_prefiltered runs
-                # by default; each of these fails tests/test_oidn.py when patched in (checked): the flat HDR image
+                # by default; each of these fails tests/renderers/test_oidn.py when patched in (checked): the flat HDR image
                 # and every checkpoint denoised.
-                "oidn_ldr": "tests/test_oidn.py", "oidn_checkpoints_not_denoised": "tests/test_oidn.py"}
+                "oidn_ldr": "tests/renderers/test_oidn.py", "oidn_checkpoints_not_denoised": "tests/renderers/test_oidn.py"}
 
 
 def _params() -> list:

@@ -173,7 +173,7 @@ def test_denoised_passes_its_gate_expectation():
     """The unmutated pathtracer+oidn passes the project gate's expectation (budgets, consistency, baseline): the
     budgets are 1.2x the worst of seeds 0-4, and the render and the denoise are pure functions of the seed
     (measured: OIDN bit-identical across runs and threads), so a failure is a change, not chance. The denoiser
-    mutants fail it (tests/test_gate_power.py)."""
+    mutants fail it (tests/gate/test_gate_power.py)."""
     from harness.gate.config import load_config
     from harness.gate.run import run_gate
 

@@ -1,7 +1,7 @@
 """Irradiance probes (renderers/ddgi.py, renderers/probes.py) against analytic answers.
 
 Their toolkit parts (octahedral maps, spherical Fibonacci, random rotations)
-are tested in ``tests/test_octahedral.py``. What is exact and what is
+are tested in ``tests/renderers/core/test_octahedral.py``. What is exact and what is
 statistical here: the blending of given rays and the lookup of given maps are
 deterministic: they are checked against closed forms, to
 float64 rounding where the answer is exact, or within a quadrature error that
@@ -566,7 +566,7 @@ def test_bounds_moves_the_grid(two_rooms):
 def test_probes_pass_their_gate_expectation():
     """The unmutated renderer passes the project gate's ``probes`` expectation (its budgets and baseline): the
     budgets were set 1.2x over the worst of seeds 0-9 and the render is a pure function of its seed, so a failure
-    here is a change of the renderer, not chance. The three probe mutants fail it (tests/test_gate_power.py)."""
+    here is a change of the renderer, not chance. The three probe mutants fail it (tests/gate/test_gate_power.py)."""
     from harness.gate.config import load_config
     from harness.gate.run import run_gate
 

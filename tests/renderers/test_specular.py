@@ -24,7 +24,7 @@ catches:
   furnace): :mod:`tests.test_bsdf` checks it against Fresnel's equations.
 
 Monte Carlo tolerances are z-tests with the render's own variance, stated
-as in ``tests/test_pathtracer.py``: two-sided false-alarm rate α with
+as in ``tests/renderers/test_pathtracer.py``: two-sided false-alarm rate α with
 Šidák's correction over simultaneous tests; all seeds fixed.
 """
 

@@ -1,7 +1,7 @@
 """The HTML report: self-contained, complete, escaped, with exact embedded data and sound charts.
 
 Synthetic inputs come from ``tests/report_fixtures.py``; the browser-side
-behaviour is tested in ``tests/test_report_browser.py``.
+behaviour is tested in ``tests/reports/test_report_browser.py``.
 """
 
 from __future__ import annotations

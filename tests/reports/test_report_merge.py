@@ -2,7 +2,7 @@
 
 The experiment folders are made once for the module, in-process, by `cbox converge` and `cbox compare`
 with the fast test renderers (tests/user_renderers.py). PDF and PNG conversion of the figures is switched
-off (the SVG files are still written): tests/test_report.py checks the conversion; here it would only cost
+off (the SVG files are still written): tests/reports/test_report.py checks the conversion; here it would only cost
 seconds per report.
 """
 

@@ -3,7 +3,7 @@
 :mod:`renderers.core.octahedral` and the point sets of :mod:`renderers.core.sampling`
 are deterministic: each check is exact to float64 rounding or within a
 quadrature error that was measured (each tolerance says how). The probes that
-use them are tested in ``tests/test_probes.py``.
+use them are tested in ``tests/renderers/test_probes.py``.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 thread independence, and a variance that is honest for a low-discrepancy mean.
 
 The generators themselves (Sobol' matrices, Owen scrambling, padding) are tested in
-``tests/test_sobol.py``; here they are reached the way a kernel reaches them, through
+``tests/renderers/core/test_sobol.py``; here they are reached the way a kernel reaches them, through
 :class:`renderers.core.sampler.Stream` (path j of a pass: pixel j mod P, sample
 first_sample + j div P, batch sample mod K).
 """
