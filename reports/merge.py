@@ -24,11 +24,11 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from harness.evaluate.summary import ExperimentResults
 from harness.scenes.model import Scene
 from harness.store.provenance import provenance
 from harness.store.references import Reference
 from reports.charts import _bias_variance_chart, _charts, chart_rows
-from reports.experiment import experiment_results
 from reports.html import _renderer_colors, write_report
 from reports.scenes import scene_section
 from reports.tables import renderer_order
@@ -48,9 +48,10 @@ class Experiment:
     summary: pd.DataFrame | None
 
 
-def load_experiment(label: str, folder: Path, scene: Scene, reference: Reference) -> Experiment:
-    """The stored results of ``folder`` (checked by the caller to be of ``scene``), with its derived summary."""
-    config, runs, images, summary = experiment_results(folder, scene, reference)
+def load_experiment(label: str, folder: Path, scene: Scene, reference: Reference,
+                    results: ExperimentResults) -> Experiment:
+    """The experiment in ``folder`` (checked by the caller to be of ``scene``): its stored and derived ``results``."""
+    config, runs, images, summary = results
     return Experiment(label, Path(folder), scene, reference, config, runs, images,
                       summary if not summary.empty else None)
 
@@ -109,10 +110,11 @@ def _concat(frames: Sequence[pd.DataFrame | None]) -> pd.DataFrame | None:
     return pd.concat(frames, ignore_index=True) if frames else None
 
 
-def write_merged_report(out: Path, inputs: Sequence[tuple[str, Path, Scene, Reference]],
+def write_merged_report(out: Path, inputs: Sequence[tuple[str, Path, Scene, Reference, ExperimentResults]],
                         title: str | None = None) -> Path:
     """Write ``out/report.html`` (and ``out/figures/``) for the experiments ``inputs``, each (label, folder,
-    scene, reference) with distinct labels, the scenes checked against the folders by the caller."""
+    scene, reference, results) with distinct labels, the scenes checked against the folders by the caller,
+    the results :func:`harness.workflows.converge.experiment_results`'s."""
     out = Path(out)
     experiments = [load_experiment(*i) for i in inputs]
     labels = [e.label for e in experiments]

@@ -54,10 +54,12 @@ def render(
 def _write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(), title=None) -> Path:
     """Store a comparison as an experiment folder (results, images, CSV/JSON) and build its report."""
     from harness.workflows.compare import store_comparison
+    from harness.workflows.converge import experiment_results
     from reports.experiment import write_experiment_report
 
     store_comparison(out, sc, records, command)
-    return write_experiment_report(out, sc, ref, sections=sections, title=title)
+    results = experiment_results(out, sc, ref, summary_dir=out)
+    return write_experiment_report(out, sc, ref, results=results, sections=sections, title=title)
 
 
 def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool,
