@@ -28,8 +28,8 @@ from harness.evaluate.summary import ExperimentResults
 from harness.scenes.model import Scene
 from harness.store.provenance import provenance
 from harness.store.references import Reference
-from reports.charts import _bias_variance_chart, _charts, chart_rows
-from reports.html import _renderer_colors, write_report
+from reports.charts import bias_variance_chart, chart_rows, page_charts
+from reports.html import renderer_colors, write_report
 from reports.scenes import scene_section
 from reports.tables import renderer_order
 
@@ -100,8 +100,8 @@ def experiment_section(exp: Experiment, report_dir: Path, prefix: str, colors: d
     html = scene_section(exp.scene, exp.reference.image, exp.runs.to_dict("records"), images, link,
                          summary=exp.summary, link_text=f"Full report of {exp.label}")
     names = renderer_order(exp.runs, images)
-    charts = _charts(exp.runs, names, colors, prefix=prefix)
-    bias_variance = _bias_variance_chart(exp.summary, names, colors, prefix=prefix)
+    charts = page_charts(exp.runs, names, colors, prefix=prefix)
+    bias_variance = bias_variance_chart(exp.summary, names, colors, prefix=prefix)
     return (f"experiment-{prefix}", f"{exp.label} · {exp.scene.name}", html, chart_rows(charts, bias_variance))
 
 
@@ -127,7 +127,7 @@ def write_merged_report(out: Path, inputs: Sequence[tuple[str, Path, Scene, Refe
     # One colour per renderer across the page; the lead's first, so its charts and the sections agree.
     all_runs = pd.concat([e.runs for e in lead + others], ignore_index=True)
     all_images = {n: img for e in lead + others for n, img in _first_images(e).items()}
-    colors = _renderer_colors(all_runs, all_images, renderer_order(all_runs, all_images))
+    colors = renderer_colors(all_runs, all_images, renderer_order(all_runs, all_images))
     sections = [experiment_section(e, out, prefix, colors) for e, prefix in zip(experiments, file_prefixes(labels))]
 
     runs = pd.concat([e.runs for e in lead], ignore_index=True)

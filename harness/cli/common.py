@@ -215,7 +215,7 @@ def check_environment() -> None:
         default_threads()
 
 
-def _command_line() -> str:
+def command_line() -> str:
     return " ".join(shlex.quote(a) for a in ["cbox", *sys.argv[1:]])
 
 

@@ -9,7 +9,7 @@ import typer
 
 from harness.adapters.registry import missing_features, resolve
 from harness.cli.common import (DashboardOpt, Progress, RenderersOpt, SceneOpt, SchedulerOpt, SetOpt, TitleOpt,
-                                WorkersOpt, _command_line, app, executor_for, info, out_folder_option, print_json)
+                                WorkersOpt, app, command_line, executor_for, info, out_folder_option, print_json)
 from harness.scenes.library import resolve_scene
 from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results
 from harness.store.references import load_reference
@@ -107,7 +107,7 @@ def run_convergence(out: Path, sc, ref, entries, spps: list[int], seeds: int, ta
         def on_cell(name: str, cached: bool) -> None:  # name: a cell's file stem, pathtracer__seed2
             bar.advance(name.replace("__seed", " seed "), stored=cached, failed=name in failed)
 
-        runs = run_experiment(out, sc, ref, entries, spps, list(range(seeds)), _command_line(), on_cell=on_cell,
+        runs = run_experiment(out, sc, ref, entries, spps, list(range(seeds)), command_line(), on_cell=on_cell,
                               targets=targets or DEFAULT_TARGETS, executor=executor,
                               on_failed=lambda name, reason: failed.add(name))
     results = experiment_results(out, sc, ref, summary_dir=out)

@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.common import Progress, _command_line, app, out_folder_option
+from harness.cli.common import Progress, app, command_line, out_folder_option
 
 
 @app.command()
@@ -41,5 +41,5 @@ def stress(
     finally:
         for bar in bars:
             bar.close()
-    report = write_stress_report(Path(out) / "stress.html", run.table, run.provenance, _command_line())
+    report = write_stress_report(Path(out) / "stress.html", run.table, run.provenance, command_line())
     raise typer.Exit(print_summary(run, report))
