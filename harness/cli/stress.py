@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.common import Progress, app, command_line, out_folder_option
+from harness.cli.common import REFERENCE_RENDERER, Progress, app, command_line, out_folder_option
 
 
 @app.command()
@@ -35,7 +35,7 @@ def stress(
         bars[0].advance(label)
 
     try:
-        run = run_suite(renderer, variant, out, progress)
+        run = run_suite(renderer, variant, out, progress, reference_renderer=REFERENCE_RENDERER)
     except ValueError as e:
         raise typer.BadParameter(str(e), param_hint="--variant") from None
     finally:
