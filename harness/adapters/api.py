@@ -25,7 +25,7 @@ from harness.adapters.settings import Setting, SettingsError
 from harness.scenes.model import Scene
 
 __all__ = ["AOVS", "ESTIMATORS", "Checkpoint", "RenderResult", "Renderer", "Setting", "SettingsError",
-           "default_threads", "pass_key", "pass_seed", "spp_passes"]
+           "THREADS_VARIABLE", "default_threads", "machine_cores", "pass_key", "pass_seed", "spp_passes"]
 
 #: Auxiliary images (AOVs) a renderer may return, defined as Intel Open Image Denoise expects them (its
 #: documentation, "RT" filter): the surface seen through each pixel at the first non-delta hit, following
@@ -83,19 +83,28 @@ class Renderer(Protocol):
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = ()) -> RenderResult: ...
 
 
+#: The environment variable that sets :func:`default_threads` (a Dask worker's share is set through it).
+THREADS_VARIABLE = "CBOX_THREADS"
+
+
+def machine_cores() -> int:
+    """The machine's CPU count (at least 1): the threads without ``$CBOX_THREADS``, and what a host's workers share."""
+    return os.cpu_count() or 1
+
+
 def default_threads() -> int:
     """Worker threads: ``$CBOX_THREADS`` (a positive integer) or the machine's CPU count.
 
     Raises :class:`SettingsError` (one of the CLI's user errors) naming
     ``CBOX_THREADS`` if it is set to anything else.
     """
-    env = os.environ.get("CBOX_THREADS")
+    env = os.environ.get(THREADS_VARIABLE)
     if env:
         try:
             threads = int(env)
         except ValueError:
             threads = 0
         if threads < 1:
-            raise SettingsError(f"CBOX_THREADS: expected a positive integer (worker threads), got {env!r}")
+            raise SettingsError(f"{THREADS_VARIABLE}: expected a positive integer (worker threads), got {env!r}")
         return threads
-    return os.cpu_count() or 1
+    return machine_cores()
