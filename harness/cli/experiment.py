@@ -7,6 +7,7 @@ from typing import List, Optional
 
 import typer
 
+from harness.adapters.api import attribute
 from harness.adapters.registry import missing_features, resolve
 from harness.cli.common import (DashboardOpt, Progress, RenderersOpt, SceneOpt, SchedulerOpt, SetOpt, TitleOpt,
                                 WorkersOpt, app, command_line, executor_for, info, out_folder_option, print_json)
@@ -101,7 +102,7 @@ def run_convergence(out: Path, sc, ref, entries, spps: list[int], seeds: int, ta
     from reports.experiment import write_experiment_report
 
     runnable = [e for e in entries if e.available and not missing_features(e.renderer, sc)]
-    cells = sum(1 if getattr(e.renderer, "deterministic", False) else seeds for e in runnable)
+    cells = sum(1 if attribute(e.renderer, "deterministic") else seeds for e in runnable)
     failed: set[str] = set()
     with Progress(cells, f"converge {sc.name}", "cell", slots=getattr(executor, "slots", 1)) as bar:
         def on_cell(name: str, cached: bool) -> None:  # name: a cell's file stem, pathtracer__seed2

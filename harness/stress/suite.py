@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+from harness.adapters.api import attribute
 from harness.scenes.model import Scene
 from harness.stress.expectations import Z_CRIT, Expectation, expectation_for
 from harness.stress.judge import COLUMNS, STATUSES, fmt_value, judge_run, new_row
@@ -113,7 +114,7 @@ def _plan(chosen: Sequence[Variant], entries) -> list[tuple[Variant, Scene, list
 
 
 def _checks_mean(entry) -> bool:
-    return not tuple(getattr(entry.renderer, "approximations", ()) or ())
+    return not attribute(entry.renderer, "approximations")
 
 
 def _reference_entry(entries, name: str | None) -> tuple[object | None, str | None]:

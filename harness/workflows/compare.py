@@ -8,6 +8,7 @@ from typing import Sequence
 
 import pandas as pd
 
+from harness.adapters.api import attribute
 from harness.adapters.registry import RendererEntry
 from harness.scenes.model import Scene
 from harness.store.atomic import atomic_path, json_safe, write_json_atomic
@@ -42,7 +43,7 @@ def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, m
     deterministic renderer stops early once two doublings of spp leave its error unchanged.
     """
     spp, previous, stalls = 1, None, 0
-    deterministic = getattr(entry.renderer, "deterministic", False)
+    deterministic = attribute(entry.renderer, "deterministic")
     while True:
         rec = runner.run_one(entry, scene, spp, seed, reference)
         if rec.status != "ok":

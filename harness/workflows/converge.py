@@ -19,6 +19,7 @@ from typing import Callable, Sequence
 import numpy as np
 import pandas as pd
 
+from harness.adapters.api import attribute
 from harness.adapters.registry import RendererEntry
 from harness.evaluate import convergence
 from harness.evaluate.summary import ExperimentResults, summary_table
@@ -79,7 +80,7 @@ def run_experiment(
             "kind": kind, "scene": str(scene.path), "scene_name": scene.name, "scene_hash": scene.content_hash(),
             "renderers": [e.name for e in entries], "spp": spps, "seeds": list(seeds), "command": command,
             "targets": [list(t) for t in targets],
-            "deterministic": [e.name for e in entries if getattr(e.renderer, "deterministic", False)],
+            "deterministic": [e.name for e in entries if attribute(e.renderer, "deterministic")],
         })
         table = _Table(out / RESULTS_FILE)
         pending: dict[str, tuple[list[int], Cell, RendererEntry, pd.DataFrame | None]] = {}
@@ -87,7 +88,7 @@ def run_experiment(
             if (row := _not_run_row(entry, scene)) is not None:
                 table.not_run.append(row)
                 continue
-            for seed in (seeds[:1] if getattr(entry.renderer, "deterministic", False) else seeds):
+            for seed in (seeds[:1] if attribute(entry.renderer, "deterministic") else seeds):
                 name = cell_name(entry.name, seed)
                 stored, todo = _plan(out, name, scene, spps)
                 if not todo:  # finished before: loaded, never rendered again

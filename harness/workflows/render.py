@@ -10,8 +10,9 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.registry import RenderResult, RendererEntry
-from harness.adapters.settings import declared
+from harness.adapters.api import RenderResult
+from harness.adapters.registry import RendererEntry
+from harness.adapters.settings import declared, resolve_settings
 from harness.scenes.model import Scene
 
 
@@ -29,12 +30,17 @@ class RenderTimeout(RuntimeError):
 
 def render_checked(entry: RendererEntry, scene: Scene, spp: int, seed: int,
                    checkpoints: Sequence[int] = ()) -> RenderResult:
-    """``entry``'s render with its settings, its image, variance and checkpoints checked; may raise."""
+    """``entry``'s render with its settings, its image, variance and checkpoints checked; may raise.
+
+    A renderer that declares settings gets every one of them, validated, typed and with its default filled in
+    (whatever ``entry`` was built with); one that declares none keeps the plain signature. This is the only
+    place settings are resolved for a render: renderers never validate them again.
+    """
     kwargs = {}
     if checkpoints:
         kwargs["checkpoints"] = list(checkpoints)
-    if declared(entry.renderer):  # adapters without settings keep the plain signature
-        kwargs["settings"] = dict(entry.settings)
+    if declared(entry.renderer):
+        kwargs["settings"] = resolve_settings(entry.renderer, entry.settings)
     result = entry.renderer.render(scene, spp, seed, **kwargs)
     expected = (scene.camera.height, scene.camera.width, 3)
     result.image = _checked_image(result.image, expected, "an image")

@@ -23,8 +23,8 @@ import numpy as np
 from harness.evaluate import metrics
 from harness.evaluate import noise as stats
 from harness.evaluate import regions as named_regions
-from harness.adapters.registry import (ESTIMATORS, Checkpoint, RenderResult, RendererEntry, estimator_of,
-                                      missing_features)
+from harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, attribute
+from harness.adapters.registry import RendererEntry, estimator_of, missing_features
 from harness.adapters.settings import canonical
 from harness.store.atomic import json_safe
 from harness.store.references import Reference
@@ -77,7 +77,7 @@ class RunRecord:
         elif missing := missing_features(entry.renderer, scene):
             rec.status, rec.reason = "skipped", f"does not model {', '.join(missing)}"
         else:
-            rec.approximations = tuple(getattr(entry.renderer, "approximations", ()))
+            rec.approximations = attribute(entry.renderer, "approximations")
         return rec
 
     def failed(self, error: Exception) -> "RunRecord":
