@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field, fields
-from typing import Any, Protocol, Sequence, runtime_checkable
+from typing import Any, Mapping, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
@@ -28,8 +28,8 @@ from harness.adapters.seeds import pass_key, pass_seed, spp_passes
 from harness.scenes.model import Scene
 from harness.scenes.quantities import DEFAULT_QUANTITY
 
-__all__ = ["AOVS", "DECLARATIONS", "ESTIMATORS", "THREADS_VARIABLE", "Checkpoint", "Declarations", "RenderResult",
-           "Renderer", "Setting", "SettingsError", "attribute", "default_threads", "machine_cores", "pass_key",
+__all__ = ["AOVS", "DECLARATIONS", "ESTIMATORS", "THREADS_VARIABLE", "Checkpoint", "Declarations", "ReferenceFit",
+           "RenderResult", "Renderer", "Setting", "SettingsError", "attribute", "default_threads", "machine_cores", "pass_key",
            "pass_seed", "spp_passes"]
 
 #: Auxiliary images (AOVs) a renderer may return, defined as Intel Open Image Denoise expects them (its
@@ -187,6 +187,26 @@ class Renderer(Protocol):
 
 
 @dataclass(frozen=True)
+class ReferenceFit:
+    """A setting value the harness renders as an oracle fitted to the stored reference, not the renderer.
+
+    When a renderer's ``setting`` is ``value`` (the ambient renderer's ``ambient = oracle``), the render
+    path (:mod:`harness.workflows.render`) loads the scene's stored reference R (refusing a scene without
+    one before anything renders), renders twice with the same seed, with ``without`` (the image D without
+    the term) and with ``unit`` (the image with the term at 1) merged into the settings, and returns
+    D + c·B, B = unit − D, with c per channel the least-squares constant against R
+    (:mod:`harness.evaluate.reference_fit`), each checkpoint with its own c; c goes in ``info[record]``.
+    Valid only for an image linear in the fitted constant, which ``unit`` must set to 1.
+    """
+
+    setting: str
+    value: str
+    without: Mapping[str, Any]
+    unit: Mapping[str, Any]
+    record: str
+
+
+@dataclass(frozen=True)
 class Declarations:
     """What a renderer may declare as class attributes besides :class:`Renderer`'s; each default is the value
     of a renderer that does not (or declares None). Read them with :func:`attribute`, never ``getattr``."""
@@ -211,6 +231,8 @@ class Declarations:
     deterministic: bool = False
     #: One line per thing it only approximates (shown in reports; the stress suite checks no mean for it).
     approximations: tuple[str, ...] = ()
+    #: A setting value that asks the harness for an oracle fitted to the stored reference (:class:`ReferenceFit`).
+    reference_fit: ReferenceFit | None = None
 
 
 #: The declarations of a renderer that declares nothing.

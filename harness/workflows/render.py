@@ -10,10 +10,12 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.api import RenderResult
+from harness.adapters.api import Checkpoint, ReferenceFit, RenderResult, attribute
 from harness.adapters.registry import RendererEntry
 from harness.adapters.settings import declared, resolve_settings
+from harness.evaluate.reference_fit import fitted_image
 from harness.scenes.model import Scene
+from harness.store.references import load_reference
 
 
 class RenderError(ValueError):
@@ -41,7 +43,11 @@ def render_checked(entry: RendererEntry, scene: Scene, spp: int, seed: int,
         kwargs["checkpoints"] = list(checkpoints)
     if declared(entry.renderer):
         kwargs["settings"] = resolve_settings(entry.renderer, entry.settings)
-    result = entry.renderer.render(scene, spp, seed, **kwargs)
+    fit = attribute(entry.renderer, "reference_fit")
+    if fit is not None and kwargs.get("settings", {}).get(fit.setting) == fit.value:
+        result = _fitted_render(entry.renderer, fit, scene, spp, seed, kwargs)
+    else:
+        result = entry.renderer.render(scene, spp, seed, **kwargs)
     expected = (scene.camera.height, scene.camera.width, 3)
     result.image = _checked_image(result.image, expected, "an image")
     if result.variance is not None:
@@ -49,6 +55,28 @@ def render_checked(entry: RendererEntry, scene: Scene, spp: int, seed: int,
     for c in result.checkpoints:
         c.image = _checked_image(c.image, expected, f"a checkpoint image at {c.spp} spp")
     return result
+
+
+#: What a fitted render records under ``info["oracle"]``.
+ORACLE_NOTE = ("fitted to the stored reference: the least-squares constant per channel, an oracle no renderer "
+               "could compute from the scene (two renders)")
+
+
+def _fitted_render(renderer, fit: ReferenceFit, scene: Scene, spp: int, seed: int, kwargs: dict) -> RenderResult:
+    """The oracle ``fit`` declares (:class:`harness.adapters.api.ReferenceFit`): two renders with the same seed,
+    D and D + B, and D + c·B with c fitted to the stored reference (per checkpoint too); no variance image (the
+    renders' samples are correlated and their covariance is not kept)."""
+    reference = load_reference(scene).image  # no reference: refused before anything renders
+    settings = kwargs["settings"]
+    direct, unit = (renderer.render(scene, spp, seed, **{**kwargs, "settings": {**settings, **changed}})
+                    for changed in (fit.without, fit.unit))
+    image, c = fitted_image(direct.image, unit.image, reference)
+    shots = [Checkpoint(a.spp, fitted_image(a.image, b.image, reference)[0], a.time_s + b.time_s)
+             for a, b in zip(direct.checkpoints, unit.checkpoints)]
+    info = {**direct.info, fit.setting: fit.value, fit.record: [float(x) for x in c], "oracle": ORACLE_NOTE}
+    if "rays" in direct.info and "rays" in unit.info:
+        info["rays"] = direct.info["rays"] + unit.info["rays"]
+    return RenderResult(image, direct.time_s + unit.time_s, direct.spp, direct.seed, shots, info, None)
 
 
 def _checked_image(image, expected: tuple[int, int, int], what: str) -> np.ndarray:
