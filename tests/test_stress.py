@@ -303,6 +303,7 @@ def test_the_reference_renderer_is_the_callers():
     assert suite._reference_entry([], None) == (None, "no reference renderer was given")
     (entry,) = resolve(["user_renderers:FlatGrey"])
     assert suite._reference_entry([entry], "user_renderers:FlatGrey") == (entry, None)
-    exp = expectations.expectation_for(grazing, grazing.build(), None, None, "not needed", reference_renderer="pathtracer")
+    exp = expectations.expectation_for(grazing, grazing.build(), None, None, "not needed",
+                                       reference_renderer="pathtracer")
     assert exp.value is None
     assert exp.source.startswith(f"no variant reference (pathtracer, {variants.REFERENCE_BATCHES} × 256 spp)")

@@ -29,8 +29,8 @@ from harness.scenes.model import Scene
 from harness.scenes.quantities import DEFAULT_QUANTITY
 
 __all__ = ["AOVS", "DECLARATIONS", "ESTIMATORS", "THREADS_VARIABLE", "Checkpoint", "Declarations", "ReferenceFit",
-           "RenderResult", "Renderer", "Setting", "SettingsError", "attribute", "default_threads", "machine_cores", "pass_key",
-           "pass_seed", "spp_passes"]
+           "RenderResult", "Renderer", "Setting", "SettingsError", "attribute", "default_threads", "machine_cores",
+           "pass_key", "pass_seed", "spp_passes"]
 
 #: Auxiliary images (AOVs) a renderer may return, defined as Intel Open Image Denoise expects them (its
 #: documentation, "RT" filter): the surface seen through each pixel at the first non-delta hit, following
