@@ -53,19 +53,22 @@ How La is chosen (setting ``ambient``)
   power that leaves an open scene (cornell-box's open front), occlusion
   beyond ``ao_max_distance``, and colour bleeding, which it averages away.
 - ``oracle``: the one constant per channel that minimises the squared error
-  against the scene's stored reference (:func:`harness.store.references.load_reference`):
-  an **oracle**, not an estimate a renderer could make, for measuring the most
-  any constant ambient could buy. Least squares in closed form per channel,
-  c = Σ B·(R − D) / Σ B² over all pixels (:func:`oracle_ambient`), with D the
-  direct-only image and B the image of the ambient term alone at La = 1. It
-  costs **two renders** with the same seed: D (``ambient = none``) and the
-  image at La = 1, whose direct parts are then identical sample by sample, so
-  B is their difference; the image is D + c·B (the render at La = c, up to
-  float rounding), each checkpoint with its own c. No variance image is
-  given (the two renders' samples are correlated and their covariance is not
-  kept). The reference exists at the stored scene's resolution and content
-  only: another resolution or max_depth is refused
-  (:class:`harness.store.references.ReferenceError`, before anything renders).
+  against the scene's stored reference: an **oracle**, not an estimate a
+  renderer could make, for measuring the most any constant ambient could buy.
+  The harness fits it, not this renderer (:data:`AOAmbient.reference_fit`,
+  :class:`harness.adapters.api.ReferenceFit`): least squares in closed form
+  per channel, c = Σ B·(R − D) / Σ B² over all pixels
+  (:mod:`harness.evaluate.reference_fit`), with D the direct-only image and B
+  the image of the ambient term alone at La = 1. It costs **two renders**
+  with the same seed: D (``ambient = none``) and the image at La = 1
+  (``ambient = constant``), whose direct parts are then identical sample by
+  sample, so B is their difference; the image is D + c·B (the render at
+  La = c, up to float rounding), each checkpoint with its own c. No variance
+  image is given. The reference exists at the stored scene's resolution and
+  content only: another resolution or max_depth is refused before anything
+  renders. Called directly (not through the harness's render path) with
+  ``oracle``, this renderer refuses (ValueError).
+- ``constant``: La = ``ambient_radiance`` in every channel.
 - ``none``: direct light only (La = 0, no occlusion rays): what the ambient
   term buys is measured against it.
 
@@ -103,10 +106,9 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from harness.adapters.api import Checkpoint, RenderResult
+from harness.adapters.api import ReferenceFit, RenderResult
 from harness.adapters.settings import Setting, resolve_settings
 from harness.scenes.model import Scene
-from harness.store.references import load_reference
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.geometry import SceneGeometry
 from renderers.core.occlusion import occlusion_segment
@@ -119,7 +121,7 @@ from harness.adapters.api import default_threads
 from renderers.core.visible_points import camera_visible_points
 
 #: Ways of choosing La (module docstring).
-AMBIENTS = ("radiosity", "oracle", "none")
+AMBIENTS = ("radiosity", "oracle", "none", "constant")
 #: Occlusion ray s of a sample draws dimensions AO_DIM + 2s, AO_DIM + 2s + 1: above every dimension the
 #: walk uses (vertex d's block starts at 2 + 6(d − 1)), below rng's limit of 2^24 for any ao_samples allowed.
 AO_DIM = 1 << 20
@@ -178,17 +180,6 @@ def interreflection_sum(rho: np.ndarray, bounces: np.ndarray) -> np.ndarray:
         out[~one] = rho[~one] * (1.0 - rho[~one] ** k[~one]) / (1.0 - rho[~one])
     out[one] = k[one]
     return out
-
-
-def oracle_ambient(direct: np.ndarray, unit: np.ndarray, reference: np.ndarray) -> np.ndarray:
-    """The constant c (3,) minimising Σ (D + c·B − R)² per channel: Σ B(R − D) / Σ B²; 0 where B is all 0.
-
-    ``direct`` is D, ``unit`` is B (the ambient term at La = 1), ``reference`` R, all (H, W, 3).
-    """
-    d, b, r = (np.asarray(x, np.float64) for x in (direct, unit, reference))
-    num = (b * (r - d)).sum(axis=(0, 1))
-    den = (b * b).sum(axis=(0, 1))
-    return np.where(den > 0.0, num / np.where(den > 0.0, den, 1.0), 0.0)
 
 
 @jit
@@ -267,18 +258,25 @@ class AOAmbient(ToolkitRenderer):
     settings = (
         Setting("ambient", str, "radiosity", "how the ambient radiance La is chosen: radiosity (Cohen et al. "
                 "1988's ambient term, from the scene alone), oracle (least squares against the stored "
-                "reference: two renders), none (direct light only)", choices=AMBIENTS),
+                "reference by the harness: two renders), none (direct light only), constant (ambient_radiance)",
+                choices=AMBIENTS),
+        Setting("ambient_radiance", float, 1.0, "La in every channel for ambient = constant", low=0.0, high=1e6),
         Setting("ao_max_distance", float, DEFAULT_AO_MAX_DISTANCE, "reach of the occlusion rays, relative to "
                 "the scene's size (bounding-box diagonal); the default is 0.5 scene units on cornell-box",
                 low=1e-6, high=1e3),
         Setting("ao_samples", int, 1, "occlusion rays per camera sample", low=1, high=MAX_AO_SAMPLES),
     )
+    #: ambient = oracle: the harness renders D (none) and D + B (constant La = 1) and fits c (module docstring).
+    reference_fit = ReferenceFit("ambient", "oracle", without={"ambient": "none"},
+                                 unit={"ambient": "constant", "ambient_radiance": 1.0}, record="ambient_radiance")
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
         s = resolve_settings(self, settings or {})
         threads = self.threads or default_threads()
-        reference = load_reference(scene) if s["ambient"] == "oracle" else None  # refuse before rendering
+        if s["ambient"] == "oracle":
+            raise ValueError("ambient = oracle is fitted to the stored reference by the harness's render path "
+                             "(harness.workflows.render), from this renderer's ambient = none and constant")
         tfar = s["ao_max_distance"] * scene.extent()
         geom, setup_s = warmed_geometry(scene, lambda g: Shading(g, scene, lambda depth: np.ones((len(depth), 3)),
                                                                  1, tfar).trace(0, 1, 1, independent(0)))
@@ -301,28 +299,10 @@ class AOAmbient(ToolkitRenderer):
             result = render_with(by_depth(scene, terms.radiance))
             la = terms.radiance(first_hit)[0]
         else:
-            result, la = self._oracle(render_with, scene, reference.image)
-            info["oracle"] = ("fitted to the stored reference: the least-squares constant per channel, an oracle "
-                              "no renderer could compute from the scene (two renders)")
+            result = render_with(by_depth(scene, lambda bounces: np.repeat((bounces >= 1.0)[:, None], 3, axis=1)
+                                          * s["ambient_radiance"]))
+            la = np.repeat(first_hit >= 1.0, 3) * s["ambient_radiance"]
         info.update(ambient_radiance=[float(x) for x in la], mean_reflectance=terms.mean_reflectance.tolist(),
                     emitted_power=terms.power.tolist(), total_area=terms.total_area, rays=geom.rays)
         result.info.update(info)
         return result
-
-    @staticmethod
-    def _oracle(render, scene: Scene, reference: np.ndarray) -> tuple[RenderResult, np.ndarray]:
-        """Two renders (D, and La = 1 where a bounce is left), c per checkpoint, the image D + c·B."""
-        direct = render(None)
-        unit = render(by_depth(scene, lambda bounces: np.repeat((bounces >= 1.0)[:, None], 3, axis=1) * 1.0))
-
-        def combine(d: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            d64 = d.astype(np.float64)
-            b = u.astype(np.float64) - d64
-            c = oracle_ambient(d64, b, reference)
-            return (d64 + c * b).astype(np.float32), c
-
-        image, c = combine(direct.image, unit.image)
-        shots = [Checkpoint(a.spp, combine(a.image, b.image)[0], a.time_s + b.time_s)
-                 for a, b in zip(direct.checkpoints, unit.checkpoints)]
-        return RenderResult(image, direct.time_s + unit.time_s, direct.spp, direct.seed, shots, dict(direct.info),
-                            None), c

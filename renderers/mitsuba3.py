@@ -14,7 +14,7 @@ Renders are split into passes of at most :data:`MAX_SAMPLES_PER_PASS` samples
 so memory stays bounded at any spp (the LLVM variant keeps a whole wavefront
 in memory); each pass has its own seed, derived from the user's seed.
 
-Auxiliary images (albedo, normal: :data:`harness.adapters.registry.AOVS`)
+Auxiliary images (albedo, normal: :data:`harness.adapters.api.AOVS`)
 come from Mitsuba's ``aov`` integrator wrapped around ``path``, in the same
 render: same samples, same box filter. They are Mitsuba's definition, the
 first surface hit (mirrors and glass not followed, unlike our path tracer's;

@@ -29,7 +29,7 @@ so the maximum distance in scene units becomes ``max_distance · k`` there.
 
 Determinism: sample j of a pass looks through pixel ``j // n`` (n samples per
 pixel in the pass) and draws from Mitsuba's ``independent`` sampler seeded with
-the pass's 32-bit seed (:func:`harness.adapters.seeds.pass_seed`) for a
+the pass's 32-bit seed (:func:`harness.adapters.api.pass_seed`) for a
 wavefront of the pass's size; sums are taken in NumPy (float64, fixed order),
 so an image depends only on the seed, the spp and the checkpoints' boundaries.
 Needs a JIT variant (``llvm_ad_rgb``): the scalar variant would trace one ray

@@ -4,10 +4,10 @@ OIDN's ``RT`` filter (Intel Open Image Denoise 2.5, its documentation's
 "RT" and "Denoising with prefiltering" sections; Áfra, "Intel Open Image
 Denoise", 2024) is a U-Net trained on path-traced images: it takes the noisy
 radiance and, optionally, the albedo and normal of what each pixel sees
-(:data:`harness.adapters.registry.AOVS`), and returns a clean estimate. What
+(:data:`harness.adapters.api.AOVS`), and returns a clean estimate. What
 it keeps wrong, no number of samples removes: the harness measures that
 (``docs/denoising.md``), so a denoised renderer declares itself ``biased``
-(:mod:`harness.adapters.registry`): no per-pixel variance, never a z-test;
+(:class:`harness.adapters.api.Declarations`): no per-pixel variance, never a z-test;
 the gate gives it budgets and a consistency check.
 
 - ``hdr=True``: our images are linear HDR radiance.
@@ -36,14 +36,12 @@ from __future__ import annotations
 import threading
 import time
 from functools import cache
-from typing import Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from harness.adapters.api import AOVS, Checkpoint, RenderResult
-from harness.adapters.settings import Setting, declared
+from harness.adapters.api import AOVS, Checkpoint, RenderResult, Setting, attribute, default_threads
 from harness.scenes.model import Scene
-from harness.adapters.api import default_threads
 
 QUALITIES = ("high", "balanced", "fast")
 AUX_MODES = ("prefiltered", "noisy", "none")
@@ -118,7 +116,7 @@ def denoise(color: np.ndarray, albedo: np.ndarray | None = None, normal: np.ndar
             quality: str = "high", aux: str = "prefiltered", threads: int = 0) -> np.ndarray:
     """``color`` (linear HDR radiance, (H, W, 3)) denoised by OIDN's RT filter, float32 (H, W, 3).
 
-    ``albedo`` and ``normal`` (:data:`harness.adapters.registry.AOVS`) are used
+    ``albedo`` and ``normal`` (:data:`harness.adapters.api.AOVS`) are used
     as ``aux`` says (module docstring); both are needed unless ``aux`` is
     ``none``. ``threads`` is the CPU device's thread count (0: OIDN's choice).
     """
@@ -161,10 +159,10 @@ class Denoised:
         self.features = base.features
         self.approximations = tuple(base.approximations) + (
             "denoised by Intel Open Image Denoise (a learned filter): biased, no per-pixel variance",)
-        self.settings = declared(base) + OWN_SETTINGS
+        self.settings = attribute(base, "settings") + OWN_SETTINGS
 
     def unavailable_reason(self) -> str | None:
-        if not set(AOVS) <= set(getattr(self.base, "aovs", ())):
+        if not set(AOVS) <= set(attribute(self.base, "aovs")):
             return f"{self.base.name} gives no albedo and normal AOVs"
         return self.base.unavailable_reason() or unavailable_reason()
 
@@ -174,12 +172,14 @@ class Denoised:
 
         return f"{self.base.version()} + OIDN {oidn_version} (pyoidn {version('pyoidn')})"
 
-    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
-               settings: dict | None = None) -> RenderResult:
-        settings = dict(settings or {})
-        quality = settings.pop("quality", OWN_SETTINGS[0].default)
-        aux = settings.pop("aux", OWN_SETTINGS[1].default)
-        kwargs = {"settings": settings} if declared(self.base) else {}
+    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (), *,
+               settings: Mapping[str, Any]) -> RenderResult:
+        """The wrapped renderer's render with ``settings`` but quality and aux (all of them, resolved by the
+        render path), its image and each checkpoint's denoised."""
+        own = {s.name for s in OWN_SETTINGS}
+        quality, aux = settings["quality"], settings["aux"]
+        base_settings = {k: v for k, v in settings.items() if k not in own}
+        kwargs = {"settings": base_settings} if attribute(self.base, "settings") else {}
         threads = self.threads or default_threads()
         _device(threads)  # created and warmed before any timing
         result = self.base.render(scene, spp, seed, checkpoints, aovs=AOVS if aux != "none" else (), **kwargs)

@@ -113,19 +113,17 @@ from __future__ import annotations
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
-from typing import Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from harness.adapters.api import RenderResult
-from harness.adapters.settings import Setting, resolve_settings
+from harness.adapters.api import RenderResult, Setting, default_threads
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer
 from renderers.core.gbuffer import gbuffer, view_space
 from renderers.core.geometry import SceneGeometry
 from renderers.core.sampling import jit, orthonormal_basis
 from renderers.core.screen_space import on_screen, plane_depth, project, ray_through, to_edge
-from harness.adapters.api import default_threads
 
 VARIANTS = ("crytek", "hemisphere", "gtao")
 #: Defaults of the cost settings. At 256² on cornell-box-ao (2 CPU cores, numba, float64) a frame takes
@@ -428,9 +426,9 @@ class SSAO(ToolkitRenderer):
                 low=0.0),
     )
 
-    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
-               settings: dict | None = None) -> RenderResult:
-        s = resolve_settings(self, settings or {})
+    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (), *,
+               settings: Mapping[str, Any]) -> RenderResult:
+        s = settings  # every declared setting, resolved by the render path
         ao = scene.ambient_occlusion
         if scene.quantity != "ambient_occlusion" or ao is None:
             raise ValueError(f"ssao computes ambient occlusion; scene {scene.name!r} is of quantity {scene.quantity}")

@@ -28,7 +28,7 @@ from markupsafe import Markup
 
 from harness.evaluate import registry
 from reports import plots
-from reports.tables import _finite, _nanstat, _numeric, ok_runs
+from reports.tables import is_finite, nan_stat, numeric_column, ok_runs
 
 SINGLE_SPP_NOTE = "single spp: run `cbox converge` for convergence plots"
 
@@ -60,12 +60,12 @@ def convergence_table(runs: pd.DataFrame, metric_keys: Sequence[str]) -> pd.Data
     rows = []
     for (name, spp), g in ok.groupby(["renderer", "spp"], sort=False):
         row = {"renderer": str(name), "spp": float(spp), "n": len(g),
-               "time_s": _nanstat(np.nanmedian, _numeric(g, "time_s"))}
+               "time_s": nan_stat(np.nanmedian, numeric_column(g, "time_s"))}
         for k in metric_keys:
-            v = _numeric(g, k)
-            row[k] = _nanstat(np.nanmedian, v)
-            row[k + "_min"] = _nanstat(np.nanmin, v)
-            row[k + "_max"] = _nanstat(np.nanmax, v)
+            v = numeric_column(g, k)
+            row[k] = nan_stat(np.nanmedian, v)
+            row[k + "_min"] = nan_stat(np.nanmin, v)
+            row[k + "_max"] = nan_stat(np.nanmax, v)
         rows.append(row)
     df = pd.DataFrame(rows)
     if not len(df):
@@ -119,7 +119,7 @@ def _prefixed(prefix: str, name: str) -> str:
     return f"{prefix}-{name}" if prefix else name
 
 
-def _charts(runs, names, colors, prefix: str = "") -> dict:
+def page_charts(runs, names, colors, prefix: str = "") -> dict:
     """The page's charts, as :class:`Figure` objects, with what the template needs around them; ``prefix``
     starts their file stems and element ids (:func:`_prefixed`)."""
     ok = ok_runs(runs)
@@ -178,7 +178,7 @@ def chart_rows(charts: dict, bias_variance: Figure | None) -> list[dict]:
     return rows
 
 
-def _bias_variance_chart(summary, names, colors, prefix: str = "") -> Figure | None:
+def bias_variance_chart(summary, names, colors, prefix: str = "") -> Figure | None:
     if summary is None or not len(summary) or "bias2" not in summary.columns or "variance" not in summary.columns:
         return None
     by_name = {str(r["renderer"]): r for r in summary.to_dict("records")}
@@ -191,7 +191,7 @@ def _bias_variance_chart(summary, names, colors, prefix: str = "") -> Figure | N
         if not (math.isfinite(b2) or math.isfinite(var)):
             continue
         frac = r.get("bias2_fraction")
-        note = f"bias {100 * float(frac):.0f} %" if _finite(frac) else ""
+        note = f"bias {100 * float(frac):.0f} %" if is_finite(frac) else ""
         groups.append(plots.BarGroup(name, [b2, var], note))
     if not groups:
         return None

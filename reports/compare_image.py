@@ -24,10 +24,10 @@ import pandas as pd
 from PIL import Image
 
 from harness.evaluate import metrics
+from harness.evaluate.image_scores import ImageScore, Target
 from harness.scenes.quantities import DEFAULT_QUANTITY
 from harness.store.atomic import atomic_path
 from harness.store.provenance import provenance
-from harness.workflows.compare_image import ImageScore, Target
 from reports.html import write_report
 from reports.images import DELTA_E_RANGE, MAP_COLORMAPS, apply_colormap
 

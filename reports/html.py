@@ -40,12 +40,13 @@ from markupsafe import Markup
 from harness.evaluate import metrics
 from harness.store.atomic import write_text_atomic
 from reports import plots
-from reports.charts import SINGLE_SPP_NOTE, _bias_variance_chart, _charts, chart_figures
+from reports.charts import SINGLE_SPP_NOTE, bias_variance_chart, chart_figures, page_charts
 from reports.figures import WrittenFigures, write_figures
 from reports.images import JND
 from reports.regions import bias_variance_table, region_section
-from reports.tables import _OPS, _col, _renderer_info, _summary_rows, column_label, ok_runs, renderer_order
-from reports.viewer import _legends, _viewer
+from reports.tables import (OPERATOR_SIGNS, column_label, column_or_nan, ok_runs, renderer_info, renderer_order,
+                            summary_rows)
+from reports.viewer import image_viewer, viewer_legends
 
 #: Swatch colour of renderers that did not run.
 NOT_RUN_COLOR = "#5b616d"
@@ -147,7 +148,7 @@ def _runs_text(runs: pd.DataFrame) -> str:
     if not len(ok):
         return "no successful runs"
     spps = sorted({int(s) for s in ok["spp"]})
-    seeds = sorted({int(s) for s in _col(ok, "seed").dropna()})
+    seeds = sorted({int(s) for s in column_or_nan(ok, "seed").dropna()})
     spp_text = f"{spps[0]} spp" if len(spps) == 1 else f"{len(spps)} spp levels, {spps[0]}–{spps[-1]}"
     seed_text = ("seed " + str(seeds[0])) if len(seeds) == 1 else f"{len(seeds)} seeds"
     return f"{spp_text}, {seed_text}"
@@ -156,12 +157,13 @@ def _runs_text(runs: pd.DataFrame) -> str:
 def _checked_thresholds(thresholds) -> dict:
     thresholds = dict(thresholds or {})
     for key, spec in thresholds.items():
-        if not (isinstance(spec, (tuple, list)) and len(spec) == 2 and spec[0] in _OPS):
-            raise ValueError(f"threshold for {key!r}: expected (op, value) with op in {', '.join(_OPS)}, got {spec!r}")
+        if not (isinstance(spec, (tuple, list)) and len(spec) == 2 and spec[0] in OPERATOR_SIGNS):
+            raise ValueError(f"threshold for {key!r}: expected (op, value) with op in "
+                             f"{', '.join(OPERATOR_SIGNS)}, got {spec!r}")
     return thresholds
 
 
-def _renderer_colors(runs: pd.DataFrame, images: Mapping[str, Any], names: Sequence[str]) -> dict[str, str]:
+def renderer_colors(runs: pd.DataFrame, images: Mapping[str, Any], names: Sequence[str]) -> dict[str, str]:
     """Palette colours for renderers with something to show; grey for those that did not run."""
     ran = set(ok_runs(runs).get("renderer", pd.Series(dtype=str)).astype(str))
     shown = [n for n in names if n in images or n in ran]
@@ -213,13 +215,13 @@ def _context(
     provenance = dict(provenance or {})
 
     names = renderer_order(runs, images)
-    colors = _renderer_colors(runs, images, names)
-    info = _renderer_info(runs, names, colors)
-    table_head, table_rows = _summary_rows(runs, summary, names, info, thresholds)
-    charts = _charts(runs, names, colors)
-    bias_variance = _bias_variance_chart(summary, names, colors)
+    colors = renderer_colors(runs, images, names)
+    info = renderer_info(runs, names, colors)
+    table_head, table_rows = summary_rows(runs, summary, names, info, thresholds)
+    charts = page_charts(runs, names, colors)
+    bias_variance = bias_variance_chart(summary, names, colors)
     run_seeds = provenance.get("seeds") or []
-    viewer, viewer_notes = _viewer(ref_img, exposure, images, names, colors, runs, run_seeds)
+    viewer, viewer_notes = image_viewer(ref_img, exposure, images, names, colors, runs, run_seeds)
     ref_prov = dict(reference.provenance or {})
     counts = {s: sum(i["status"] == s for i in info) for s in ("ok", *_NOT_RUN)}
     sections = list(sections)
@@ -246,7 +248,7 @@ def _context(
         "table_head": table_head[0],
         "table_rows": table_rows,
         "thresholds": [
-            {"key": k, "label": column_label(k)[0], "op": _OPS[op], "value": f"{float(v):g}"}
+            {"key": k, "label": column_label(k)[0], "op": OPERATOR_SIGNS[op], "value": f"{float(v):g}"}
             for k, (op, v) in thresholds.items()
         ],
         "charts": charts,
@@ -258,7 +260,7 @@ def _context(
         "viewer": viewer,
         "viewer_json": _json_for_script(viewer),
         "viewer_notes": viewer_notes,
-        "legends": _legends(),
+        "legends": viewer_legends(),
         "jnd": JND,
         "rel_mse_eps": metrics.REL_MSE_EPS,
     }

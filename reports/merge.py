@@ -24,12 +24,12 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from harness.evaluate.summary import ExperimentResults
 from harness.scenes.model import Scene
 from harness.store.provenance import provenance
 from harness.store.references import Reference
-from reports.charts import _bias_variance_chart, _charts, chart_rows
-from reports.experiment import experiment_results
-from reports.html import _renderer_colors, write_report
+from reports.charts import bias_variance_chart, chart_rows, page_charts
+from reports.html import renderer_colors, write_report
 from reports.scenes import scene_section
 from reports.tables import renderer_order
 
@@ -48,9 +48,10 @@ class Experiment:
     summary: pd.DataFrame | None
 
 
-def load_experiment(label: str, folder: Path, scene: Scene, reference: Reference) -> Experiment:
-    """The stored results of ``folder`` (checked by the caller to be of ``scene``), with its derived summary."""
-    config, runs, images, summary = experiment_results(folder, scene, reference)
+def load_experiment(label: str, folder: Path, scene: Scene, reference: Reference,
+                    results: ExperimentResults) -> Experiment:
+    """The experiment in ``folder`` (checked by the caller to be of ``scene``): its stored and derived ``results``."""
+    config, runs, images, summary = results
     return Experiment(label, Path(folder), scene, reference, config, runs, images,
                       summary if not summary.empty else None)
 
@@ -99,8 +100,8 @@ def experiment_section(exp: Experiment, report_dir: Path, prefix: str, colors: d
     html = scene_section(exp.scene, exp.reference.image, exp.runs.to_dict("records"), images, link,
                          summary=exp.summary, link_text=f"Full report of {exp.label}")
     names = renderer_order(exp.runs, images)
-    charts = _charts(exp.runs, names, colors, prefix=prefix)
-    bias_variance = _bias_variance_chart(exp.summary, names, colors, prefix=prefix)
+    charts = page_charts(exp.runs, names, colors, prefix=prefix)
+    bias_variance = bias_variance_chart(exp.summary, names, colors, prefix=prefix)
     return (f"experiment-{prefix}", f"{exp.label} · {exp.scene.name}", html, chart_rows(charts, bias_variance))
 
 
@@ -109,10 +110,11 @@ def _concat(frames: Sequence[pd.DataFrame | None]) -> pd.DataFrame | None:
     return pd.concat(frames, ignore_index=True) if frames else None
 
 
-def write_merged_report(out: Path, inputs: Sequence[tuple[str, Path, Scene, Reference]],
+def write_merged_report(out: Path, inputs: Sequence[tuple[str, Path, Scene, Reference, ExperimentResults]],
                         title: str | None = None) -> Path:
     """Write ``out/report.html`` (and ``out/figures/``) for the experiments ``inputs``, each (label, folder,
-    scene, reference) with distinct labels, the scenes checked against the folders by the caller."""
+    scene, reference, results) with distinct labels, the scenes checked against the folders by the caller,
+    the results :func:`harness.workflows.converge.experiment_results`'s."""
     out = Path(out)
     experiments = [load_experiment(*i) for i in inputs]
     labels = [e.label for e in experiments]
@@ -125,7 +127,7 @@ def write_merged_report(out: Path, inputs: Sequence[tuple[str, Path, Scene, Refe
     # One colour per renderer across the page; the lead's first, so its charts and the sections agree.
     all_runs = pd.concat([e.runs for e in lead + others], ignore_index=True)
     all_images = {n: img for e in lead + others for n, img in _first_images(e).items()}
-    colors = _renderer_colors(all_runs, all_images, renderer_order(all_runs, all_images))
+    colors = renderer_colors(all_runs, all_images, renderer_order(all_runs, all_images))
     sections = [experiment_section(e, out, prefix, colors) for e, prefix in zip(experiments, file_prefixes(labels))]
 
     runs = pd.concat([e.runs for e in lead], ignore_index=True)

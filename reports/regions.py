@@ -11,7 +11,7 @@ For a scene with ``[regions.*]`` (masks from :mod:`harness.evaluate.regions`):
   renderer's highest spp, as in the summary table), |mean z| > 3 flagged;
 - for the bias/variance section, a table with one row per (renderer,
   region) of bias², variance and bias share (the summary's
-  ``region.<name>.bias2`` … columns, :func:`harness.workflows.converge.region_split`),
+  ``region.<name>.bias2`` … columns, :func:`harness.evaluate.summary.region_split`),
   next to the image-wide bars (:func:`bias_variance_table`).
 
 Region colours are the Okabe-Ito palette (Okabe & Ito 2008, "Color
@@ -30,7 +30,7 @@ import pandas as pd
 
 from harness.evaluate import metrics
 from harness.evaluate.regions import REGION_METRICS, nested_regions, region_masks
-from harness.workflows.converge import REGION_SPLIT, region_split
+from harness.evaluate.summary import REGION_SPLIT, region_split
 from reports.images import png_data_uri, to_uint8
 from reports.tables import at_max_spp, column_label, format_value, value_note
 

@@ -20,7 +20,7 @@ import pandas as pd
 from harness.evaluate import metrics
 from harness.evaluate.regions import REGION_PREFIX, nested_regions
 from reports.images import png_data_uri, to_uint8
-from reports.tables import _finite, _renderer_info, at_max_spp, column_label, format_value, renderer_order
+from reports.tables import at_max_spp, column_label, format_value, is_finite, renderer_info, renderer_order
 
 #: Columns of a convergence experiment's summary that a section's table adds where the experiment has them.
 SECTION_SUMMARY_COLUMNS = ("slope_rmse_spp", "efficiency", "bias2_fraction")
@@ -36,7 +36,7 @@ def _columns(values: Mapping[str, dict]) -> list[tuple[str, str, str, str]]:
     """The table's columns after renderer and status, each (key in ``values``, header, tooltip, metric key
     that formats it): only those some renderer has a value for, but ΔE and its noise yardstick."""
     def some(key: str) -> bool:
-        return any(_finite(v.get(key)) for v in values.values())
+        return any(is_finite(v.get(key)) for v in values.values())
 
     cols = [("spp", "spp", "samples per pixel (a convergence experiment's highest)", "spp")]
     if any(v.get("seeds", 1) > 1 for v in values.values()):
@@ -66,14 +66,14 @@ def _table(runs: pd.DataFrame, summary: pd.DataFrame | None) -> str:
     head = th("renderer", "renderer", "", False) + th("status", "status", "", False)
     head += "".join(th(k, h, tip) for k, h, tip, _ in cols)
     body = []
-    for info in _renderer_info(runs, names, {}):
+    for info in renderer_info(runs, names, {}):
         ok, name = info["status"] == "ok", info["name"]
         status = info["status"] if ok else f'{info["status"]}: {info["reason"]}'
         cells = [f'<td data-key="renderer" data-sort="{escape(name)}">{escape(name)}</td>',
                  f'<td data-key="status" data-sort="{escape(info["status"])}">{escape(status)}</td>']
         for key, _, _, fmt in cols:
             v = values[name].get(key) if ok else None
-            text, sort = (format_value(fmt, v), repr(float(v))) if _finite(v) else ("—", "")
+            text, sort = (format_value(fmt, v), repr(float(v))) if is_finite(v) else ("—", "")
             cells.append(f'<td data-key="{escape(key)}" data-sort="{sort}" class="num">{escape(text)}</td>')
         body.append(f"<tr>{''.join(cells)}</tr>")
     return (f'<table class="summary sortable"><thead><tr class="cols">{head}</tr></thead>'

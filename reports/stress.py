@@ -28,7 +28,7 @@ import pandas as pd
 from markupsafe import Markup
 
 from harness.store.atomic import write_text_atomic
-from reports.tables import _missing
+from reports.tables import is_missing
 
 #: Badge class (from report.css) of each row status.
 _BADGE = {"pass": "ok", "fail": "failed", "error": "failed", "skipped": "skipped"}
@@ -48,7 +48,7 @@ def _css(env: jinja2.Environment) -> Markup:
 
 
 def _num(x: Any, digits: int = 4) -> str:
-    if _missing(x):
+    if is_missing(x):
         return "—"
     x = float(x)
     if math.isinf(x):
@@ -58,7 +58,7 @@ def _num(x: Any, digits: int = 4) -> str:
 
 def _check_class(outcome: Any) -> str:
     """CSS class of a check's cell: pass, fail, or none (n/a, not run)."""
-    text = "" if _missing(outcome) else str(outcome)
+    text = "" if is_missing(outcome) else str(outcome)
     if text == "pass":
         return "pass"
     if text == "fail" or text.startswith("error"):
@@ -68,20 +68,20 @@ def _check_class(outcome: Any) -> str:
 
 def _cell(text: str, check: Any = None, title: str = "", num: bool = True) -> dict:
     return {"text": text, "cls": " ".join(c for c in ("num" if num else "", _check_class(check)) if c),
-            "title": title or ("" if _missing(check) else str(check))}
+            "title": title or ("" if is_missing(check) else str(check))}
 
 
 def _row(r: Mapping) -> dict:
     def pair(value: str, bound: str) -> str:
         return value if value == "—" else f"{value} ≤ {bound}"
 
-    counts = "—" if _missing(r.get("nan_count")) else \
+    counts = "—" if is_missing(r.get("nan_count")) else \
         f"{int(r['nan_count'])} / {int(r['inf_count'])} / {int(r['negative_count'])}"
-    rel = "—" if _missing(r.get("rel_error")) else f"{float(r['rel_error']):+.3%}"
-    z = "—" if _missing(r.get("z")) else f"{float(r['z']):+.2f}"
-    tol = "—" if _missing(r.get("tolerance")) else f"± {_num(r['tolerance'], 3)}"
-    lin = "—" if _missing(r.get("linearity_rel_error")) else f"{float(r['linearity_rel_error']):+.1e}"
-    mean_check = "" if _missing(r.get("mean_check")) else str(r["mean_check"])
+    rel = "—" if is_missing(r.get("rel_error")) else f"{float(r['rel_error']):+.3%}"
+    z = "—" if is_missing(r.get("z")) else f"{float(r['z']):+.2f}"
+    tol = "—" if is_missing(r.get("tolerance")) else f"± {_num(r['tolerance'], 3)}"
+    lin = "—" if is_missing(r.get("linearity_rel_error")) else f"{float(r['linearity_rel_error']):+.1e}"
+    mean_check = "" if is_missing(r.get("mean_check")) else str(r["mean_check"])
     cells = [
         _cell(str(r.get("spp", "—"))),
         _cell(str(r.get("resolution", "—")), num=False),
@@ -102,11 +102,11 @@ def _row(r: Mapping) -> dict:
         "status": status,
         "badge": _BADGE.get(status, "unavailable"),
         "cells": cells,
-        "message": "" if _missing(r.get("message")) else str(r["message"]),
+        "message": "" if is_missing(r.get("message")) else str(r["message"]),
         "mean_note": mean_check if mean_check.startswith("n/a") else "",
-        "checks": "" if _missing(r.get("checks")) else str(r["checks"]),
-        "expected_source": "" if _missing(r.get("expected_source")) else str(r["expected_source"]),
-        "tolerance_basis": "" if _missing(r.get("tolerance_basis")) else str(r["tolerance_basis"]),
+        "checks": "" if is_missing(r.get("checks")) else str(r["checks"]),
+        "expected_source": "" if is_missing(r.get("expected_source")) else str(r["expected_source"]),
+        "tolerance_basis": "" if is_missing(r.get("tolerance_basis")) else str(r["tolerance_basis"]),
         "not_run": status == "skipped",
     }
 
@@ -119,13 +119,13 @@ def _variants(table: pd.DataFrame) -> list[dict]:
         src = ran.iloc[0] if len(ran) else first
         out.append({
             "name": str(name),
-            "stresses": "" if _missing(first.get("stresses")) else str(first["stresses"]),
+            "stresses": "" if is_missing(first.get("stresses")) else str(first["stresses"]),
             "spp": str(first.get("spp", "—")),
             "resolution": str(first.get("resolution", "—")),
             "time_bound": f"{_num(first.get('time_bound_s'))} s",
             "rss_bound": f"{_num(first.get('rss_bound_mb'))} MB",
-            "expected": "" if _missing(src.get("expected_source")) else str(src["expected_source"]),
-            "basis": "" if _missing(src.get("tolerance_basis")) else str(src["tolerance_basis"]),
+            "expected": "" if is_missing(src.get("expected_source")) else str(src["expected_source"]),
+            "basis": "" if is_missing(src.get("tolerance_basis")) else str(src["tolerance_basis"]),
         })
     return out
 
@@ -147,7 +147,7 @@ def render_stress_html(table: pd.DataFrame, provenance: Mapping | None = None, c
     counts = {s: int((table["status"] == s).sum()) if len(table) else 0 for s in ("pass", "fail", "error", "skipped")}
     versions = provenance.pop("versions", {}) or {}
     other = [(str(k), ", ".join(map(str, v)) if isinstance(v, (list, tuple)) else str(v))
-             for k, v in provenance.items() if not _missing(v) and v != ""]
+             for k, v in provenance.items() if not is_missing(v) and v != ""]
     env = _environment()
     return env.get_template("stress.html.j2").render(
         title="Stress test — numerical stability at the extremes",

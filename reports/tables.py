@@ -44,7 +44,8 @@ TABLE_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
 )
 _ALWAYS = {"renderer", "status", "spp", "seeds", "time_s"}
 
-_OPS = {"<=": "≤", ">=": "≥", "<": "<", ">": ">"}
+#: A threshold's comparison as the page prints it.
+OPERATOR_SIGNS = {"<=": "≤", ">=": "≥", "<": "<", ">": ">"}
 
 
 # --------------------------------------------------------------------------
@@ -56,11 +57,13 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
 
 
-def _finite(v: Any) -> bool:
+def is_finite(v: Any) -> bool:
+    """A finite number (not a string, None or NaN)."""
     return _is_number(v) and math.isfinite(float(v))
 
 
-def _missing(v: Any) -> bool:
+def is_missing(v: Any) -> bool:
+    """None, NaN or pandas' NA: a cell with nothing to show."""
     if v is None:
         return True
     try:
@@ -131,7 +134,7 @@ def value_note(key: str, v: Any) -> str:
     measurable above the noise) rather than "-8.6e-06", which reads as a value, or "< 0", which reads
     as an impossibility; the tooltip keeps the raw estimate, and the column sorts on it.
     """
-    if not _finite(v) or not _is_negative_bias2(key, float(v)):
+    if not is_finite(v) or not _is_negative_bias2(key, float(v)):
         return ""
     raw = "−" + f"{-float(v):.2g}"  # a typographic minus for the sign; the exponent's stays ASCII (−8.6e-06)
     return f"estimate {raw}: below zero by noise alone; no bias measurable above the noise"
@@ -159,16 +162,16 @@ def column_label(key: str) -> tuple[str, str]:
     if parsed:
         metric, op, value = parsed
         label = METRICS.get(metric, (metric,))[0]
-        return (f"time to {label} {_OPS[op]} {value:g}",
-                f"seconds to reach {metric} {_OPS[op]} {value:g} (median over seeds; — if never reached)")
+        return (f"time to {label} {OPERATOR_SIGNS[op]} {value:g}",
+                f"seconds to reach {metric} {OPERATOR_SIGNS[op]} {value:g} (median over seeds; — if never reached)")
     return key.replace("_", " "), key
 
 
 def check_threshold(value: Any, op: str, limit: float) -> bool:
     """Does ``value`` meet ``op limit``? A missing or NaN value does not."""
-    if op not in _OPS:
-        raise ValueError(f"threshold operator {op!r}: expected one of {', '.join(_OPS)}")
-    if _missing(value) or not _is_number(value) or math.isnan(float(value)):
+    if op not in OPERATOR_SIGNS:
+        raise ValueError(f"threshold operator {op!r}: expected one of {', '.join(OPERATOR_SIGNS)}")
+    if is_missing(value) or not _is_number(value) or math.isnan(float(value)):
         return False
     v = float(value)
     return {"<=": v <= limit, ">=": v >= limit, "<": v < limit, ">": v > limit}[op]
@@ -179,12 +182,14 @@ def check_threshold(value: Any, op: str, limit: float) -> bool:
 # --------------------------------------------------------------------------
 
 
-def _col(df: pd.DataFrame, key: str) -> pd.Series:
+def column_or_nan(df: pd.DataFrame, key: str) -> pd.Series:
+    """``df[key]``, or NaN for every row when the table has no such column."""
     return df[key] if key in df.columns else pd.Series([np.nan] * len(df), index=df.index, dtype=float)
 
 
-def _numeric(df: pd.DataFrame, key: str) -> pd.Series:
-    return pd.to_numeric(_col(df, key), errors="coerce")
+def numeric_column(df: pd.DataFrame, key: str) -> pd.Series:
+    """:func:`column_or_nan` as numbers (NaN where a cell is not one)."""
+    return pd.to_numeric(column_or_nan(df, key), errors="coerce")
 
 
 def _metric_keys(runs: pd.DataFrame) -> list[str]:
@@ -201,7 +206,7 @@ def _metric_keys(runs: pd.DataFrame) -> list[str]:
 
 def renderer_order(runs: pd.DataFrame, images: Mapping[str, Any]) -> list[str]:
     """Renderers in the order of their first row, then any renderer that only has an image."""
-    names = [str(n) for n in dict.fromkeys(_col(runs, "renderer").dropna())] if len(runs) else []
+    names = [str(n) for n in dict.fromkeys(column_or_nan(runs, "renderer").dropna())] if len(runs) else []
     return names + [n for n in images if n not in names]
 
 
@@ -210,7 +215,7 @@ def ok_runs(runs: pd.DataFrame) -> pd.DataFrame:
     if not len(runs) or "status" not in runs.columns:
         return runs.iloc[0:0]
     ok = runs[runs["status"] == "ok"].copy()
-    ok["spp"] = pd.to_numeric(_col(ok, "spp"), errors="coerce")
+    ok["spp"] = pd.to_numeric(column_or_nan(ok, "spp"), errors="coerce")
     return ok[ok["spp"].notna()]
 
 
@@ -221,20 +226,21 @@ def at_max_spp(runs: pd.DataFrame) -> dict[str, dict]:
     out = {}
     for name, g in ok.groupby("renderer", sort=False):
         top = g[g["spp"] == g["spp"].max()]
-        row = {k: _nanstat(np.nanmedian, _numeric(top, k)) for k in keys}
+        row = {k: nan_stat(np.nanmedian, numeric_column(top, k)) for k in keys}
         row["spp"] = float(g["spp"].max())
-        row["seeds"] = int(_col(g, "seed").nunique()) or 1
+        row["seeds"] = int(column_or_nan(g, "seed").nunique()) or 1
         out[str(name)] = row
     return out
 
 
-def _nanstat(fn, values: pd.Series) -> float:
+def nan_stat(fn, values: pd.Series) -> float:
+    """``fn`` (np.nanmedian, ...) of ``values``; NaN, without a warning, when none is finite."""
     v = values.to_numpy(dtype=float)
     return float(fn(v)) if np.isfinite(v).any() else math.nan
 
 
 def _empty(v: Any) -> bool:
-    return not isinstance(v, (list, tuple, dict, np.ndarray)) and _missing(v)
+    return not isinstance(v, (list, tuple, dict, np.ndarray)) and is_missing(v)
 
 
 def _parse_json(value: Any, default):
@@ -249,7 +255,7 @@ def _parse_json(value: Any, default):
 
 
 def _first(g: pd.DataFrame, key: str) -> Any:
-    for v in _col(g, key):
+    for v in column_or_nan(g, key):
         if not _empty(v):
             return v
     return None
@@ -260,16 +266,16 @@ def _first(g: pd.DataFrame, key: str) -> Any:
 # --------------------------------------------------------------------------
 
 
-def _renderer_info(runs: pd.DataFrame, names: Sequence[str], colors: dict[str, str]) -> list[dict]:
+def renderer_info(runs: pd.DataFrame, names: Sequence[str], colors: dict[str, str]) -> list[dict]:
     """Per renderer: status, reasons, version, settings, approximations (for the table and the cards)."""
     out = []
     for name in names:
-        g = runs[_col(runs, "renderer").astype(str) == name] if len(runs) else runs
-        statuses = [str(s) for s in _col(g, "status").dropna()]
+        g = runs[column_or_nan(runs, "renderer").astype(str) == name] if len(runs) else runs
+        statuses = [str(s) for s in column_or_nan(g, "status").dropna()]
         status = "ok" if "ok" in statuses else (statuses[0] if statuses else "ok")
         reasons = []
-        for s, r in zip(_col(g, "status"), _col(g, "reason")):
-            if str(s) != "ok" and not _missing(r) and str(r) not in [x for _, x in reasons]:
+        for s, r in zip(column_or_nan(g, "status"), column_or_nan(g, "reason")):
+            if str(s) != "ok" and not is_missing(r) and str(r) not in [x for _, x in reasons]:
                 reasons.append((str(s), str(r)))
         n_bad = sum(1 for s in statuses if s != "ok")
         approx = _parse_json(_first(g, "approximations"), [])
@@ -320,13 +326,14 @@ def _table_columns(rows: Sequence[dict], thresholds: Mapping) -> list[dict]:
     return groups
 
 
-def _summary_rows(runs, summary, names, info, thresholds) -> tuple[list[dict], list[dict]]:
+def summary_rows(runs, summary, names, info, thresholds) -> tuple[list[dict], list[dict]]:
+    """The summary table's header cells and rows, one per renderer (the figures at its highest spp)."""
     medians = at_max_spp(runs)
     extra: dict[str, dict] = {}
     if summary is not None and len(summary):
         for rec in summary.to_dict("records"):
             d = {k: v for k, v in rec.items() if k != "renderer"}
-            if "max_spp" in d and not _missing(d["max_spp"]):
+            if "max_spp" in d and not is_missing(d["max_spp"]):
                 d["spp"] = d.pop("max_spp")
             else:
                 d.pop("max_spp", None)
@@ -338,7 +345,7 @@ def _summary_rows(runs, summary, names, info, thresholds) -> tuple[list[dict], l
         if inf["status"] == "ok":
             row.update(medians.get(name, {}))
             for k, v in extra.get(name, {}).items():
-                if not _missing(v) or k not in row:
+                if not is_missing(v) or k not in row:
                     row[k] = float(v) if _is_number(v) else v
         rows.append(row)
     groups = _table_columns(rows, thresholds)
@@ -348,7 +355,7 @@ def _summary_rows(runs, summary, names, info, thresholds) -> tuple[list[dict], l
         cells = []
         for key in columns:
             v = row.get(key)
-            cell = {"key": key, "text": format_value(key, v) if not _missing(v) or key in ("version",) else "—",
+            cell = {"key": key, "text": format_value(key, v) if not is_missing(v) or key in ("version",) else "—",
                     "sort": "", "cls": "", "title": ""}
             if key == "version":
                 cell["text"] = row.get("version") or "—"
@@ -360,7 +367,7 @@ def _summary_rows(runs, summary, names, info, thresholds) -> tuple[list[dict], l
                 cell["cls"] = "num"
                 cell["title"] = value_note(key, v)
                 ci = row.get(key + "_ci")
-                if key.startswith("slope_") and _finite(ci):
+                if key.startswith("slope_") and is_finite(ci):
                     cell["text"] += f" ± {float(ci):.2f}"
             else:
                 cell["cls"] = "num"
@@ -371,7 +378,7 @@ def _summary_rows(runs, summary, names, info, thresholds) -> tuple[list[dict], l
                 op, limit = thresholds[key]
                 passed = check_threshold(v, op, float(limit))
                 cell["cls"] += " pass" if passed else " fail"
-                cell["title"] = f"{'meets' if passed else 'misses'} {key} {_OPS[op]} {limit:g}"
+                cell["title"] = f"{'meets' if passed else 'misses'} {key} {OPERATOR_SIGNS[op]} {limit:g}"
             cells.append(cell)
         table.append({"renderer": inf["name"], "status": inf["status"], "color": inf["color"],
                       "reason": inf["reason"], "cells": cells})
@@ -384,7 +391,7 @@ def _summary_rows(runs, summary, names, info, thresholds) -> tuple[list[dict], l
             better = "low"
         if key in thresholds:
             op, limit = thresholds[key]
-            tip += f" — threshold: {_OPS[op]} {limit:g}"
+            tip += f" — threshold: {OPERATOR_SIGNS[op]} {limit:g}"
         cols.append({"key": key, "label": label, "tip": tip, "better": better,
                      "num": key not in ("renderer", "status", "version")})
     return [{"head": head, "cols": cols}], table

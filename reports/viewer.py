@@ -33,16 +33,16 @@ from reports.images import (
     error_maps,
     f16_base64,
 )
-from reports.tables import _col, ok_runs
+from reports.tables import column_or_nan, ok_runs
 
 def _first_seed_image_run(runs: pd.DataFrame, name: str, seeds: Sequence) -> tuple[Any, Any]:
     ok = ok_runs(runs)
     g = ok[ok["renderer"].astype(str) == name]
     if not len(g):
         return None, None
-    seed_vals = [s for s in _col(g, "seed").dropna().tolist()]
+    seed_vals = [s for s in column_or_nan(g, "seed").dropna().tolist()]
     seed = next((s for s in seeds if s in seed_vals), min(seed_vals) if seed_vals else None)
-    gs = g[_col(g, "seed") == seed] if seed is not None else g
+    gs = g[column_or_nan(g, "seed") == seed] if seed is not None else g
     return (int(gs["spp"].max()) if len(gs) else None), (int(seed) if seed is not None else None)
 
 
@@ -50,7 +50,9 @@ def _clean(v: float) -> float | None:
     return float(v) if v is not None and math.isfinite(v) else None
 
 
-def _viewer(reference: np.ndarray, exposure: float, images: Mapping, names, colors, runs, seeds) -> tuple[dict, list]:
+def image_viewer(reference: np.ndarray, exposure: float, images: Mapping, names, colors, runs,
+                 seeds) -> tuple[dict, list]:
+    """The image viewer's data (the reference, each renderer's image and error maps) and its notes."""
     h, w = reference.shape[:2]
     entries, notes = [], []
     flip_available = True
@@ -100,7 +102,8 @@ def _viewer(reference: np.ndarray, exposure: float, images: Mapping, names, colo
     return data, notes
 
 
-def _legends() -> list[dict]:
+def viewer_legends() -> list[dict]:
+    """The colour bars of the viewer's error maps, with their ticks."""
     def ticks(lo, hi, values, fmt):
         return [(fmt(v), 100 * (v - lo) / (hi - lo)) for v in values]
 

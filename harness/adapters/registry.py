@@ -1,34 +1,12 @@
-"""The renderer adapter interface and the registry that finds adapters.
+"""The registry that finds renderers: discovery, loading, and their settings as given by the user.
 
-An adapter is a small class (state: the renderer's own handles) with
-
-- ``name``: short id used on the command line (``mitsuba``, ``pyrender``);
-- ``features``: the scene features (:data:`harness.scenes.model.FEATURES`) it models;
-- optionally ``quantities``: what its images can mean (:data:`harness.scenes.quantities.QUANTITIES`),
-  ``("radiance",)`` when absent; it never runs on a scene of another quantity;
-- ``approximations``: one line per thing it only approximates (shown in reports);
-- ``unavailable_reason()``: ``None`` if it can run here, else why not;
-- ``version()``: the renderer's version string (only called when available);
-- ``render(scene, spp, seed, checkpoints=())``: a :class:`RenderResult`;
-- optionally ``aovs``, the auxiliary images (:data:`AOVS`) it can return
-  alongside its image when ``render`` is called with ``aovs=(...)``; the
-  denoisers (:mod:`renderers.oidn`) ask for them;
-- optionally ``deterministic = True`` for a renderer whose image does not
-  depend on the seed (a rasteriser): experiments then run it for one seed only;
-- optionally ``estimator``, what kind of estimate its image is (:data:`ESTIMATORS`,
-  read with :func:`estimator_of`): ``"unbiased"`` (the default when absent:
-  path tracers; the expected image is the reference at any spp),
-  ``"consistent"`` (biased, but the error goes to 0 as the budget grows:
-  photon mapping, SPPM; Hachisuka et al. 2008, Jensen 2001) or ``"biased"``
-  (does not converge to the reference: rasterisers, approximations). The gate
-  refuses its z-tests (``unbiased = true``) for the last two, which assume an
-  unbiased estimator, and offers a consistency check instead
-  (:mod:`harness.gate.config`); results record it in the ``estimator`` column.
-  Any other value is a :class:`RendererError` when the adapter is loaded.
-
-Adapters are found through the entry-point group ``cbox.renderers`` (ours are
-registered in ``pyproject.toml`` the same way a third party's would be), or
-given directly as ``package.module:ClassName``.
+What a renderer is (the :class:`~harness.adapters.api.Renderer` protocol and
+what it may declare, :class:`~harness.adapters.api.Declarations`) is
+:mod:`harness.adapters.api`'s. Renderers are found through the entry-point
+group ``cbox.renderers`` (ours are registered in ``pyproject.toml`` the same
+way a third party's would be), or given directly as ``package.module:ClassName``.
+A declared ``estimator`` that is not one of :data:`~harness.adapters.api.ESTIMATORS`
+is a :class:`RendererError` when the renderer is loaded.
 """
 
 from __future__ import annotations
@@ -40,10 +18,10 @@ import sys
 from dataclasses import dataclass, field
 from typing import Sequence
 
-from harness.adapters.api import AOVS, ESTIMATORS, Checkpoint, Renderer, RenderResult  # noqa: F401 (re-exported)
+# AOVS, Checkpoint and RenderResult are re-exported for code written before the API had its own module.
+from harness.adapters.api import AOVS, ESTIMATORS, Checkpoint, Renderer, RenderResult, attribute  # noqa: F401
 from harness.adapters.settings import declared, label, resolve_settings, split_spec
 from harness.scenes.model import Scene
-from harness.scenes.quantities import DEFAULT_QUANTITY
 from harness.suggest import did_you_mean
 
 ENTRY_POINT_GROUP = "cbox.renderers"
@@ -77,7 +55,7 @@ class RendererEntry:
         if self.renderer is None:
             # Cannot validate against a renderer that did not load; it will not run anyway.
             return RendererEntry(self.name, self.spec, None, self.reason, dict(given))
-        base = getattr(self.renderer, "name", self.name)
+        base = self.renderer.name
         values = resolve_settings(self.renderer, {**self.settings, **given}, base)
         defaults = {st.name: st.default for st in declared(self.renderer)}
         return RendererEntry(label(base, values, defaults), self.spec, self.renderer, self.reason, values)
@@ -96,7 +74,7 @@ def estimator_of(renderer) -> str:
     Raises RendererError for a value that is not one of them: a typo must not
     let a biased renderer be tested as an unbiased one, or the reverse.
     """
-    value = getattr(renderer, "estimator", ESTIMATORS[0])
+    value = attribute(renderer, "estimator")
     if (why := _estimator_problem(value)) is not None:
         raise RendererError(f"renderer {getattr(renderer, 'name', type(renderer).__name__)!r}: {why}")
     return value
@@ -104,7 +82,7 @@ def estimator_of(renderer) -> str:
 
 def quantities_of(renderer) -> tuple[str, ...]:
     """The quantities (:data:`harness.scenes.quantities.QUANTITIES`) a renderer computes; radiance if it says none."""
-    return tuple(getattr(renderer, "quantities", (DEFAULT_QUANTITY,)))
+    return attribute(renderer, "quantities")
 
 
 def missing_features(renderer: Renderer, scene: Scene) -> list[str]:
@@ -147,7 +125,7 @@ def _instantiate(cls, spec: str) -> Renderer:
     for attr in ("name", "features", "render", "unavailable_reason", "version"):
         if not hasattr(obj, attr):
             raise RendererError(f"renderer {spec!r}: does not implement the adapter interface (no {attr!r})")
-    if (why := _estimator_problem(getattr(obj, "estimator", ESTIMATORS[0]))) is not None:
+    if (why := _estimator_problem(attribute(obj, "estimator"))) is not None:
         raise RendererError(f"renderer {spec!r}: {why}")
     return obj
 

@@ -16,89 +16,24 @@ gate config as ``settings = { rr_depth = 3 }``, and sweep one with
 from __future__ import annotations
 
 import json
-import math
 import re
-from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
+from harness.adapters.api import Setting, SettingsError, attribute
 from harness.suggest import did_you_mean
 
-
-class SettingsError(ValueError):
-    """A setting is unknown or out of range; ``str()`` names it and what is allowed."""
-
-
-@dataclass(frozen=True)
-class Setting:
-    """One declared setting: ``kind`` is int, float, bool or str; bounds are inclusive."""
-
-    name: str
-    kind: type
-    default: Any
-    doc: str
-    low: float | None = None
-    high: float | None = None
-    choices: tuple = ()
-
-    def allowed(self) -> str:
-        """What values are allowed, in words (for errors and ``cbox renderers --settings``)."""
-        if self.choices:
-            return "one of " + ", ".join(map(str, self.choices))
-        kind = {int: "an integer", float: "a number", bool: "true or false", str: "a string"}[self.kind]
-        if self.low is not None and self.high is not None:
-            return f"{kind} in [{self.low:g}, {self.high:g}]"
-        if self.low is not None:
-            return f"{kind} >= {self.low:g}"
-        if self.high is not None:
-            return f"{kind} <= {self.high:g}"
-        return kind
-
-    def coerce(self, value: Any, renderer: str) -> Any:
-        """``value`` (from TOML, or a string from the command line) as this setting's type, checked."""
-        bad = SettingsError(f"renderer {renderer!r}: setting {self.name}={value!r}: expected {self.allowed()}")
-        if isinstance(value, str) and self.kind is not str:
-            value = _parse_word(value)
-        if self.kind is bool:
-            if not isinstance(value, bool):
-                raise bad
-        elif self.kind is int:
-            # bool is an int in Python, and 3.0 from a sweep list is a fine 3; 3.5 is not.
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or value != int(value):
-                raise bad
-            value = int(value)
-        elif self.kind is float:
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise bad
-            value = float(value)
-        elif not isinstance(value, str):
-            raise bad
-        if self.choices and value not in self.choices:
-            raise bad
-        if (self.low is not None and value < self.low) or (self.high is not None and value > self.high):
-            raise bad
-        return value
-
-
-def _parse_word(text: str) -> Any:
-    low = text.strip().lower()
-    if low in ("true", "false"):
-        return low == "true"
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text.strip()
+__all__ = ["Setting", "SettingsError", "canonical", "declared", "describe", "label", "parse_sweep",
+           "resolve_settings", "split_spec"]
 
 
 def declared(renderer) -> tuple[Setting, ...]:
-    """The settings a renderer declares (none for an adapter without the attribute)."""
-    return tuple(getattr(renderer, "settings", ()) or ())
+    """The settings a renderer declares (:func:`harness.adapters.api.attribute`; none when it declares none)."""
+    return attribute(renderer, "settings")
 
 
 def resolve_settings(renderer, given: Mapping[str, Any], name: str | None = None) -> dict[str, Any]:
     """Every declared setting: ``given`` validated, defaults for the rest. Raises :class:`SettingsError`."""
-    name = name or getattr(renderer, "name", "?")
+    name = name or renderer.name
     known = {s.name: s for s in declared(renderer)}
     out = {s.name: s.default for s in known.values()}
     for key, value in given.items():

@@ -50,7 +50,7 @@ from harness.store.references import ReferenceError
 from harness.suggest import did_you_mean
 from harness.workflows.executor import ExecutorError
 
-#: The harness's reference renderer: references are built with it.
+#: The harness's reference renderer: references are built with it, and the stress suite's variant references.
 REFERENCE_RENDERER = "mitsuba"
 
 app = typer.Typer(
@@ -210,12 +210,12 @@ def fail(message: str, code: int = 2) -> NoReturn:
 def check_environment() -> None:
     """Refuse a bad ``$CBOX_THREADS`` up front; renderers read it mid-run, where it would be a failed row."""
     if os.environ.get("CBOX_THREADS"):
-        from harness.adapters.api import default_threads
+        from harness.adapters.api import default_threads  # not at the top: `cbox --help` loads no NumPy
 
         default_threads()
 
 
-def _command_line() -> str:
+def command_line() -> str:
     return " ".join(shlex.quote(a) for a in ["cbox", *sys.argv[1:]])
 
 

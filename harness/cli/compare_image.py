@@ -8,7 +8,7 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.common import _command_line, app, info, out_folder_option
+from harness.cli.common import app, command_line, info, out_folder_option
 from harness.cli.run import TABLE_METRICS
 from harness.scenes.library import resolve_scene
 # Heavy modules (the metrics, pandas, the report) are imported inside the command: `cbox --help` must answer
@@ -74,7 +74,7 @@ def compare_image(
         _print_table(scores)
     info(f"error maps: {out}/*{ERROR_MAP_SUFFIX}")
     if report:
-        info(f"report: {write_compare_image_report(out / 'report.html', target, scores, _command_line())}")
+        info(f"report: {write_compare_image_report(out / 'report.html', target, scores, command_line())}")
 
 
 def _print_table(scores) -> None:

@@ -7,9 +7,10 @@ from typing import List, Optional
 
 import typer
 
+from harness.adapters.api import attribute
 from harness.adapters.registry import missing_features, resolve
 from harness.cli.common import (DashboardOpt, Progress, RenderersOpt, SceneOpt, SchedulerOpt, SetOpt, TitleOpt,
-                                WorkersOpt, _command_line, app, executor_for, info, out_folder_option, print_json)
+                                WorkersOpt, app, command_line, executor_for, info, out_folder_option, print_json)
 from harness.scenes.library import resolve_scene
 from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results
 from harness.store.references import load_reference
@@ -97,20 +98,21 @@ def run_convergence(out: Path, sc, ref, entries, spps: list[int], seeds: int, ta
 
     ``executor``: where the cells render (:mod:`harness.workflows.executor`; default in this process)."""
     from harness.evaluate.convergence import DEFAULT_TARGETS
-    from harness.workflows.converge import run_experiment
+    from harness.workflows.converge import experiment_results, run_experiment
     from reports.experiment import write_experiment_report
 
     runnable = [e for e in entries if e.available and not missing_features(e.renderer, sc)]
-    cells = sum(1 if getattr(e.renderer, "deterministic", False) else seeds for e in runnable)
+    cells = sum(1 if attribute(e.renderer, "deterministic") else seeds for e in runnable)
     failed: set[str] = set()
     with Progress(cells, f"converge {sc.name}", "cell", slots=getattr(executor, "slots", 1)) as bar:
         def on_cell(name: str, cached: bool) -> None:  # name: a cell's file stem, pathtracer__seed2
             bar.advance(name.replace("__seed", " seed "), stored=cached, failed=name in failed)
 
-        runs = run_experiment(out, sc, ref, entries, spps, list(range(seeds)), _command_line(), on_cell=on_cell,
+        runs = run_experiment(out, sc, ref, entries, spps, list(range(seeds)), command_line(), on_cell=on_cell,
                               targets=targets or DEFAULT_TARGETS, executor=executor,
                               on_failed=lambda name, reason: failed.add(name))
-    return runs, write_experiment_report(out, sc, ref, title=title, sections=sections)
+    results = experiment_results(out, sc, ref, summary_dir=out)
+    return runs, write_experiment_report(out, sc, ref, results=results, title=title, sections=sections)
 
 
 def print_summary(out: Path, runs) -> None:
@@ -138,7 +140,7 @@ def _print_summary(path: Path) -> None:
     import pandas as pd
 
     from harness.evaluate.regions import REGION_PREFIX
-    from harness.workflows.converge import region_split
+    from harness.evaluate.summary import region_split
 
     summary = pd.read_csv(path)
     fmt = {"float_format": lambda v: f"{v:.4g}", "index": False}
@@ -203,17 +205,20 @@ def report(
     of the first DIR's scene combined in one summary table, image viewer and
     set of convergence charts.
     """
+    from harness.workflows.converge import experiment_results
     from reports.experiment import write_experiment_report
 
     labels = _report_labels(folders, label, out)
     checked = [(folder, _checked_scene(folder, overrides)) for folder in folders]
     if len(folders) == 1:
-        sc = checked[0][1]
-        path = write_experiment_report(folders[0], sc, load_reference(sc), title=title, labels=label or (),
+        (folder, sc), ref = checked[0], load_reference(checked[0][1])
+        results = experiment_results(folder, sc, ref, summary_dir=out or folder)
+        path = write_experiment_report(folder, sc, ref, results=results, title=title, labels=label or (),
                                        report_dir=out)
     else:
         from reports.merge import write_merged_report
 
-        path = write_merged_report(out, [(name, folder, sc, load_reference(sc))
-                                         for name, (folder, sc) in zip(labels, checked)], title=title)
+        refs = [load_reference(sc) for _, sc in checked]
+        path = write_merged_report(out, [(name, folder, sc, ref, experiment_results(folder, sc, ref))
+                                         for name, (folder, sc), ref in zip(labels, checked, refs)], title=title)
     info(f"report: {path}")

@@ -9,9 +9,9 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.common import (USER_ERRORS, DashboardOpt, Progress, SchedulerOpt, WorkersOpt, _command_line, app,
+from harness.cli.common import (USER_ERRORS, DashboardOpt, Progress, SchedulerOpt, WorkersOpt, app, command_line,
                                 executor_for, info, out_folder_option, print_json)
-from harness.cli.run import _write_compare_outputs
+from harness.cli.run import write_compare_outputs
 from harness.gate.config import GateConfigError, load_config
 from harness.scenes.library import resolve_scene
 from harness.store.atomic import write_text_atomic
@@ -179,7 +179,7 @@ def _write_reports(outcomes, alpha: float, out: Path, overrides=None) -> None:
         mine = [o for o in outcomes if o.expectation.scene == scene_name]
         folder = out if len(scenes) == 1 else out / Path(scene_name).stem
         sc = resolve_scene(scene_name, overrides)
-        report = _write_compare_outputs(folder, sc, load_reference(sc), [o.record for o in mine], _command_line(),
+        report = write_compare_outputs(folder, sc, load_reference(sc), [o.record for o in mine], command_line(),
                                         sections=[("gate", "Gate", gate_section(mine, alpha))],
                                         title=f"cbox gate — {sc.name}")
         links.append((sc.name, report.relative_to(out).as_posix() if len(scenes) > 1 else report.name,

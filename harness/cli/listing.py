@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from harness.adapters.api import attribute
 from harness.adapters.registry import quantities_of, resolve
 from harness.adapters.settings import declared, describe
 from harness.cli.common import app, print_json
@@ -115,7 +116,7 @@ def _renderer_entry(entry) -> dict:
             out["version"] = f"version unknown ({type(e).__name__})"
     if r is not None:
         out.update(models=sorted(r.features), computes=list(quantities_of(r)),
-                   approximations=list(getattr(r, "approximations", ())),
+                   approximations=list(attribute(r, "approximations")),
                    settings=[{"name": s.name, "type": s.kind.__name__, "default": s.default, "allowed": s.allowed(),
                               "doc": s.doc} for s in declared(r)])
     return out

@@ -10,8 +10,8 @@ import typer
 
 from harness.adapters.registry import RendererError, missing_features, resolve
 from harness.adapters.settings import canonical
-from harness.cli.common import (Progress, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt, TitleOpt, _command_line,
-                                app, check_output_file, info, out_folder_option)
+from harness.cli.common import (Progress, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt, TitleOpt, app,
+                                check_output_file, command_line, info, out_folder_option)
 from harness.scenes.library import resolve_scene
 from harness.store.exr import write_exr
 from harness.store.image_files import SPP_ATTRIBUTE
@@ -51,13 +51,15 @@ def render(
     info(f"wrote {out} ({sc.camera.width}x{sc.camera.height}, {spp} spp, {result.time_s:.2f} s)")
 
 
-def _write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(), title=None) -> Path:
+def write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(), title=None) -> Path:
     """Store a comparison as an experiment folder (results, images, CSV/JSON) and build its report."""
     from harness.workflows.compare import store_comparison
+    from harness.workflows.converge import experiment_results
     from reports.experiment import write_experiment_report
 
     store_comparison(out, sc, records, command)
-    return write_experiment_report(out, sc, ref, sections=sections, title=title)
+    results = experiment_results(out, sc, ref, summary_dir=out)
+    return write_experiment_report(out, sc, ref, results=results, sections=sections, title=title)
 
 
 def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool,
@@ -96,7 +98,7 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
         if as_json:
             bar.write(json.dumps(runner.json_record(rec), allow_nan=False))
     bar.close()
-    report = _write_compare_outputs(out, sc, ref, records, _command_line(), sections=sections, title=title)
+    report = write_compare_outputs(out, sc, ref, records, command_line(), sections=sections, title=title)
     if not as_json:
         import pandas as pd
 

@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.common import Progress, _command_line, app, out_folder_option
+from harness.cli.common import REFERENCE_RENDERER, Progress, app, command_line, out_folder_option
 
 
 @app.command()
@@ -35,11 +35,11 @@ def stress(
         bars[0].advance(label)
 
     try:
-        run = run_suite(renderer, variant, out, progress)
+        run = run_suite(renderer, variant, out, progress, reference_renderer=REFERENCE_RENDERER)
     except ValueError as e:
         raise typer.BadParameter(str(e), param_hint="--variant") from None
     finally:
         for bar in bars:
             bar.close()
-    report = write_stress_report(Path(out) / "stress.html", run.table, run.provenance, _command_line())
+    report = write_stress_report(Path(out) / "stress.html", run.table, run.provenance, command_line())
     raise typer.Exit(print_summary(run, report))

@@ -17,7 +17,7 @@ largest error. The paper derives the range from the reference alone:
 - ``N = max(2, ceil(c_stop − c_start))``: about one exposure per stop.
 
 ``L`` is luminance with the BT.709 weights
-(:func:`harness.evaluate.metrics.luminance`, FLIP's own), and the median is
+(:func:`harness.evaluate.pixels.luminance`, FLIP's own), and the median is
 the library's: element ``n // 2`` of the sorted luminances.
 
 The ``flip-evaluator`` package (the authors' code) computes the map. It
@@ -35,7 +35,7 @@ wide 3840-pixel display seen from 0.7 m).
 
 Inputs are linear-sRGB float images of one shape; a pixel with a NaN or Inf
 is taken as black (the harness's one rule,
-:func:`harness.evaluate.metrics.zero_broken_pixels`) and negative values as 0
+:func:`harness.evaluate.pixels.zero_broken_pixels`) and negative values as 0
 (HDR-FLIP's input is non-negative radiance). ``flip_evaluator`` is imported
 when first needed (:func:`flip_library`): it is a dependency, but ``cbox
 --help`` should not load it.
@@ -48,7 +48,7 @@ import os
 
 import numpy as np
 
-from harness.evaluate import metrics
+from harness.evaluate.pixels import as_image, as_pair, luminance, zero_broken_pixels
 
 #: The library's default tone mapper (its name as ``flip_evaluator`` takes it).
 TONE_MAPPER = "aces"
@@ -77,7 +77,7 @@ def tone_mapper_input_for(target: float = EXPOSED_TARGET, coefficients=ACES_COEF
 
 def flip_input(img) -> np.ndarray:
     """``img`` as HDR-FLIP takes it: float32, broken pixels black, negative values 0."""
-    return np.ascontiguousarray(np.maximum(metrics.zero_broken_pixels(metrics._as_image(img)), 0.0),
+    return np.ascontiguousarray(np.maximum(zero_broken_pixels(as_image(img)), 0.0),
                                 dtype=np.float32)
 
 
@@ -89,7 +89,7 @@ def flip_parameters(ref) -> dict | None:
     to what the library picks itself whenever at least half the reference's
     pixels have light (it computes in float32, so to about 1e-6).
     """
-    y = metrics.luminance(flip_input(ref)).ravel()
+    y = luminance(flip_input(ref)).ravel()
     y_max = float(y.max()) if y.size else 0.0
     if not y_max > 0.0:
         return None
@@ -126,7 +126,7 @@ def flip_map(img, ref, parameters: dict | None = None) -> np.ndarray:
     when scoring many images against one reference).
     """
     flip_evaluator = flip_library()
-    img, ref = metrics._as_pair(img, ref)
+    img, ref = as_pair(img, ref)
     if parameters is None:
         parameters = flip_parameters(ref)
     if parameters is None:

@@ -58,16 +58,14 @@ import warnings
 import numpy as np
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
+from harness.evaluate import flip
+from harness.evaluate.pixels import as_image, as_pair, finite_pixels, luminance, zero_broken_pixels
 from harness.scenes.quantities import DEFAULT_QUANTITY, has_colour
 
 with warnings.catch_warnings():
     # colour-science warns at import when matplotlib is missing; we never plot.
     warnings.filterwarnings("ignore", message=".*Matplotlib.*")
     import colour
-
-# BT.709 luminance weights (the Y row of the sRGB -> XYZ matrix, as rounded
-# in IEC 61966-2-1).
-_LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
 
 _D65_XY = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
 
@@ -89,46 +87,10 @@ REL_MSE_TRIM = 1e-3
 JND_DELTA_E2000 = 2.3
 
 
-def _as_image(img) -> np.ndarray:
-    arr = np.asarray(img, dtype=np.float64)
-    if arr.ndim != 3 or arr.shape[-1] != 3:
-        raise ValueError(f"expected an (H, W, 3) image, got shape {arr.shape}")
-    return arr
-
-
-def _as_pair(img, ref) -> tuple[np.ndarray, np.ndarray]:
-    img, ref = np.asarray(img), np.asarray(ref)
-    if img.shape != ref.shape:
-        raise ValueError(
-            f"image shape {img.shape} does not match reference shape {ref.shape}"
-        )
-    return _as_image(img), _as_image(ref)
-
-
-def _finite_pixels(img: np.ndarray) -> np.ndarray:
-    return np.all(np.isfinite(img), axis=-1)
-
-
-def zero_broken_pixels(img: np.ndarray) -> np.ndarray:
-    """The image with every broken pixel (a NaN or Inf in any channel) black: the harness's one rule.
-
-    Whole pixel, not just the bad channel: the other channels of a pixel that
-    produced a NaN are not trustworthy either. Broken pixels are counted
-    separately (:func:`invalid_pixel_counts`), and every error metric, the
-    gate's agreement test and its slope check score them as black.
-    """
-    return np.where(_finite_pixels(img)[..., None], img, 0.0)
-
-
-def luminance(img) -> np.ndarray:
-    """Relative luminance Y of a linear-sRGB image, shape (H, W)."""
-    return _as_image(img) @ _LUMINANCE_WEIGHTS
-
-
 def exposure_scale(ref, key: float = REINHARD_KEY, delta: float = REINHARD_DELTA) -> float:
     """Reinhard key-value exposure ``key / exp(mean(log(delta + Y)))`` of ``ref``."""
-    ref = _as_image(ref)
-    y = luminance(ref)[_finite_pixels(ref)]
+    ref = as_image(ref)
+    y = luminance(ref)[finite_pixels(ref)]
     if y.size == 0:
         raise ValueError("reference has no finite pixels; cannot derive an exposure")
     # Reconstruction filters with negative lobes can leave slightly negative
@@ -149,20 +111,20 @@ def display_exposure(ref, quantity: str = DEFAULT_QUANTITY) -> float:
 
 def display_encode(img, exposure: float) -> np.ndarray:
     """Exposed, NaN->0, clipped to [0, 1], sRGB-OETF-encoded float64 image."""
-    exposed = _as_image(img) * float(exposure)
+    exposed = as_image(img) * float(exposure)
     exposed = np.clip(np.nan_to_num(exposed, nan=0.0), 0.0, 1.0)
     return np.asarray(colour.models.eotf_inverse_sRGB(exposed), dtype=np.float64)
 
 
 def rmse(img, ref) -> float:
     """Root-mean-square error on linear radiance, over all channels."""
-    img, ref = _as_pair(img, ref)
+    img, ref = as_pair(img, ref)
     return float(np.sqrt(np.mean((img - ref) ** 2)))
 
 
 def rel_mse(img, ref, eps: float = REL_MSE_EPS, trim: float = 0.0) -> float:
     """Mean of ``(img - ref)² / (ref² + eps)``, dropping the worst ``trim`` fraction of pixels."""
-    img, ref = _as_pair(img, ref)
+    img, ref = as_pair(img, ref)
     if not 0.0 <= trim < 1.0:
         raise ValueError(f"trim must be in [0, 1), got {trim}")
     per_pixel = np.mean((img - ref) ** 2 / (ref**2 + eps), axis=-1).ravel()
@@ -175,7 +137,7 @@ def rel_mse(img, ref, eps: float = REL_MSE_EPS, trim: float = 0.0) -> float:
 
 def psnr(img, ref, exposure: float | None = None) -> float:
     """PSNR in dB of the display-encoded images (data range 1); inf if identical."""
-    img, ref = _as_pair(img, ref)
+    img, ref = as_pair(img, ref)
     if exposure is None:
         exposure = exposure_scale(ref)
     with np.errstate(divide="ignore"):  # identical images: log10(1/0) = inf, as intended
@@ -187,7 +149,7 @@ def psnr(img, ref, exposure: float | None = None) -> float:
 
 def ssim(img, ref, exposure: float | None = None) -> float:
     """Mean SSIM of the display-encoded images (skimage defaults, data range 1)."""
-    img, ref = _as_pair(img, ref)
+    img, ref = as_pair(img, ref)
     if exposure is None:
         exposure = exposure_scale(ref)
     return float(
@@ -202,7 +164,7 @@ def ssim(img, ref, exposure: float | None = None) -> float:
 
 def linear_srgb_to_lab(img) -> np.ndarray:
     """CIELAB (D65, 2° observer) of a linear-sRGB image, unclipped."""
-    xyz = _as_image(img) @ _RGB_TO_XYZ.T
+    xyz = as_image(img) @ _RGB_TO_XYZ.T
     return np.asarray(colour.XYZ_to_Lab(xyz, _D65_XY), dtype=np.float64)
 
 
@@ -215,7 +177,7 @@ def delta_e2000_lab(lab1, lab2) -> np.ndarray:
 
 def delta_e2000(img, ref, exposure: float | None = None, full: bool = False):
     """Mean CIEDE2000 of the exposed images; with ``full=True`` also the (H, W) map."""
-    img, ref = _as_pair(img, ref)
+    img, ref = as_pair(img, ref)
     if exposure is None:
         exposure = exposure_scale(ref)
     de_map = delta_e2000_lab(
@@ -242,7 +204,7 @@ def delta_e2000_stats(de_map, threshold: float = JND_DELTA_E2000) -> dict:
 
 def invalid_pixel_counts(img) -> dict:
     """Pixels with any NaN, any ±Inf, and any negative finite channel."""
-    img = _as_image(img)
+    img = as_image(img)
     return {
         "nan_count": int(np.count_nonzero(np.any(np.isnan(img), axis=-1))),
         "inf_count": int(np.count_nonzero(np.any(np.isinf(img), axis=-1))),
@@ -254,8 +216,8 @@ def invalid_pixel_counts(img) -> dict:
 
 def mean_radiance(img) -> np.ndarray:
     """Per-channel mean radiance over the finite pixels, shape (3,); NaN if none."""
-    img = _as_image(img)
-    finite = img[_finite_pixels(img)]
+    img = as_image(img)
+    finite = img[finite_pixels(img)]
     if finite.shape[0] == 0:
         return np.full(3, np.nan)
     return finite.mean(axis=0)
@@ -273,7 +235,7 @@ def masked_pixels(img, mask) -> np.ndarray:
     Every per-pixel metric here (RMSE, relMSE, ΔE, mean radiance) then
     applies to a region unchanged; pass the whole reference's exposure to ΔE.
     """
-    img = _as_image(img)
+    img = as_image(img)
     mask = np.asarray(mask, dtype=bool)
     if mask.shape != img.shape[:2]:
         raise ValueError(f"mask shape {mask.shape} does not match image shape {img.shape[:2]}")
@@ -289,9 +251,7 @@ def image_metrics(img, ref, exposure: float | None = None, quantity: str = DEFAU
     ``flip_mean`` is :func:`harness.evaluate.flip.flip_mean`, with its own
     exposures from the reference (``exposure`` does not apply to it).
     """
-    from harness.evaluate import flip  # it imports this module
-
-    img, ref = _as_pair(img, ref)
+    img, ref = as_pair(img, ref)
     if exposure is None:
         exposure = display_exposure(ref, quantity)
     clean = zero_broken_pixels(img)

@@ -271,7 +271,7 @@ def region_metrics(image, reference, masks: dict[str, np.ndarray], spp: int | No
 
     An empty region has ``pixels`` 0 and NaN metrics.
     """
-    img, ref = metrics._as_pair(image, reference.image)
+    img, ref = metrics.as_pair(image, reference.image)
     ref_var = np.asarray(reference.variance, dtype=np.float64)
     if variance is not None:
         img_var = np.asarray(variance, dtype=np.float64)

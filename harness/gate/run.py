@@ -24,7 +24,7 @@ from harness.gate.checks import Outcome, doubling, evaluate
 from harness.gate.config import Expectation, GateConfig, GateConfigError
 from harness.scenes.library import resolve_scene
 from harness.scenes.model import SceneError
-from harness.store.atomic import write_json_atomic
+from harness.store.atomic import json_safe, write_json_atomic
 from harness.store.references import ReferenceError, load_reference
 from harness.workflows import runner
 from harness.workflows.cells import entry_for
@@ -231,7 +231,7 @@ def write_baseline(cfg: GateConfig, outcomes: Sequence[Outcome]) -> tuple[Path, 
     if cfg.baseline is None:
         raise GateConfigError(cfg.path, "baseline", "set baseline = \"FILE.json\" to record a baseline")
     old = load_baseline(cfg).get("expectations", {})
-    data = {"expectations": {o.expectation.name: runner.json_safe(o.record.metrics) for o in outcomes
+    data = {"expectations": {o.expectation.name: json_safe(o.record.metrics) for o in outcomes
                              if o.record.status == "ok"},
             "seeds": {o.expectation.name: o.record.seed for o in outcomes}}
     changes = []

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from harness.scenes.materials import MATERIAL_TYPES, MAX_IOR, material_fields
-from harness.scenes.model import (_DEGENERATE_REL_AREA, FEATURES, FOV_AXES, IMAGE_BUFFERS, MAX_COORDINATE,
+from harness.scenes.model import (DEGENERATE_REL_AREA, FEATURES, FOV_AXES, IMAGE_BUFFERS, MAX_COORDINATE,
                                   MAX_DEPTH, MAX_IMAGE_BYTES, MAX_OBJ_FILE_BYTES, MAX_RADIANCE, MAX_SCENE_FILE_BYTES,
                                   PIXEL_FILTERS, Camera, Mesh, Region, Scene, SceneError, Sphere, extent,
                                   image_memory_bytes, object_bounds, one_line)
@@ -486,6 +486,6 @@ def _check_degenerate(r: _Reader, meshes: tuple[Mesh, ...]) -> None:
     for i, m in enumerate(meshes):
         a, b, c = ((m.vertices[m.triangles[:, k]] - lo) / scale for k in range(3))
         area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-        bad = np.flatnonzero(area <= _DEGENERATE_REL_AREA * size2)
+        bad = np.flatnonzero(area <= DEGENERATE_REL_AREA * size2)
         if bad.size:
             raise r.err(f"meshes[{i}] ({m.name})", f"triangle {int(bad[0])} is degenerate (zero area)")

@@ -99,7 +99,7 @@ FEATURES: dict[str, str] = {
 PIXEL_FILTERS = ("box",)
 FOV_AXES = ("x", "y", "smaller", "larger")
 #: Below this area (relative to the scene's squared size) a triangle is degenerate.
-_DEGENERATE_REL_AREA = 1e-12
+DEGENERATE_REL_AREA = 1e-12
 
 #: Largest |coordinate| in scene units (vertices, camera position, look_at, up). The harness
 #: squares lengths and multiplies them (extent², edge cross products for areas, Le·A·π for

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -40,3 +41,9 @@ def write_text_atomic(path: str | Path, text: str) -> None:
 def write_json_atomic(path: str | Path, data) -> None:
     """Strict JSON (no NaN/Infinity), indented, written atomically."""
     write_text_atomic(path, json.dumps(data, indent=1, allow_nan=False) + "\n")
+
+
+def json_safe(row: dict) -> dict:
+    """The row with non-finite floats (e.g. PSNR of identical images) as None, nested dicts too: strict JSON."""
+    return {k: json_safe(v) if isinstance(v, dict) else
+            (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}

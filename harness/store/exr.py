@@ -11,10 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from harness.store.atomic import atomic_path
+from harness.store.image_files import ImageFileError, read_image_file
 
-
-class ImageFileError(OSError):
-    """An image file is missing, unreadable, or not an RGB image."""
+__all__ = ["ImageFileError", "read_exr", "write_exr"]
 
 
 def write_exr(path: str | Path, image: np.ndarray, metadata: dict[str, str] | None = None) -> None:
@@ -56,7 +55,5 @@ def write_exr(path: str | Path, image: np.ndarray, metadata: dict[str, str] | No
 
 def read_exr(path: str | Path) -> np.ndarray:
     """Read an RGB image as float32 (H, W, 3) (:func:`harness.store.image_files.read_image_file`'s pixels)."""
-    from harness.store.image_files import read_image_file  # it imports this module's ImageFileError
-
     return read_image_file(path).pixels
 

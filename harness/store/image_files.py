@@ -16,7 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.store.exr import ImageFileError
+
+class ImageFileError(OSError):
+    """An image file is missing, unreadable, or not an RGB image."""
+
 
 #: The header attribute the spp of an image is written into (``cbox render``, experiment folders, references).
 SPP_ATTRIBUTE = "cbox:spp"
@@ -50,7 +53,7 @@ def read_image_file(path: str | Path) -> ImageFile:
     """The first three channels (RGB) of ``path``'s first subimage, with its pixel type, format and header.
 
     A missing or unreadable file, or one with fewer than three channels, is
-    :class:`harness.store.exr.ImageFileError` naming the file.
+    :class:`ImageFileError` naming the file.
     """
     import OpenImageIO as oiio
 

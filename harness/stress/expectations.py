@@ -57,7 +57,7 @@ from harness.evaluate.noise import render_variance
 from harness.scenes.analytic import furnace_radiance
 from harness.scenes.model import Scene
 from harness.workflows.sandbox import SandboxOutcome
-from harness.stress.variants import REFERENCE_BATCHES, REFERENCE_RENDERER, Variant
+from harness.stress.variants import REFERENCE_BATCHES, Variant
 
 #: Critical |z| of every statistical mean check: two-sided α = 6.8e-6 per check, about 2e-4
 #: family-wise over the ~25 mean checks of a two-renderer suite (Šidák).
@@ -163,9 +163,10 @@ def _furnace_expectation(variant: Variant) -> Expectation:
 
 
 def _variant_reference_expectation(variant: Variant, scene: Scene, outcome: SandboxOutcome | None,
-                                   why_not: str | None) -> Expectation:
-    """The mean of a variant reference rendered by the suite (``outcome``: its batches), SE from their spread."""
-    label = f"{REFERENCE_RENDERER}, {REFERENCE_BATCHES} × {variant.reference_spp} spp"
+                                   why_not: str | None, renderer: str) -> Expectation:
+    """The mean of a variant reference rendered by the suite with ``renderer`` (``outcome``: its batches), SE
+    from their spread."""
+    label = f"{renderer}, {REFERENCE_BATCHES} × {variant.reference_spp} spp"
     if outcome is None:
         return Expectation(None, f"no variant reference ({label}): {why_not}")
     problem = outcome.problem()
@@ -189,13 +190,13 @@ def _variant_reference_expectation(variant: Variant, scene: Scene, outcome: Sand
 
 
 def expectation_for(variant: Variant, scene: Scene, stored_reference=None, outcome: SandboxOutcome | None = None,
-                    why_not: str | None = None) -> Expectation:
+                    why_not: str | None = None, reference_renderer: str = "the reference renderer") -> Expectation:
     """The expectation of ``variant`` by its kind; ``stored_reference`` for "reference", ``outcome`` for
-    "variant-reference" (None, with ``why_not``, when it was not rendered)."""
+    "variant-reference" (rendered by ``reference_renderer``; None, with ``why_not``, when it was not)."""
     if variant.expected == "furnace":
         return _furnace_expectation(variant)
     if variant.expected == "reference":
         return _reference_expectation(variant, scene, stored_reference)
     if variant.expected == "variant-reference":
-        return _variant_reference_expectation(variant, scene, outcome, why_not)
+        return _variant_reference_expectation(variant, scene, outcome, why_not, reference_renderer)
     return Expectation(None, variant.expected_note)

@@ -31,6 +31,7 @@ from typing import Sequence
 
 import numpy as np
 
+from harness.adapters.api import attribute
 from harness.evaluate import metrics
 from harness.scenes.model import Scene
 from harness.stress.expectations import FLOAT_FLOOR, Z_CRIT, Expectation, pixel_var
@@ -146,7 +147,7 @@ def _check_mean(row: dict, image: np.ndarray, variance, exp: Expectation, spp: i
     keep = exp.keep if exp.keep is not None and exp.keep.shape == image.shape[:2] else None
     mean, sel = _region_mean(image, keep)
     row.update(mean=mean, expected_source=exp.source, tolerance_basis=exp.basis)
-    approximations = tuple(getattr(renderer, "approximations", ()) or ())
+    approximations = attribute(renderer, "approximations")
     if approximations:
         row["mean_check"] = f"n/a (approximates: {_approximation_note(approximations)})"
         row["expected"] = exp.value

@@ -35,12 +35,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+from harness.adapters.api import attribute
 from harness.scenes.model import Scene
 from harness.stress.expectations import Z_CRIT, Expectation, expectation_for
 from harness.stress.judge import COLUMNS, STATUSES, fmt_value, judge_run, new_row
 from harness.workflows.sandbox import SandboxOutcome, run_sandboxed
-from harness.stress.variants import (REFERENCE_BATCHES, REFERENCE_RENDERER, REFERENCE_SEED, SEED, Variant,
-                                     cornell_scene, select_variants)
+from harness.stress.variants import REFERENCE_BATCHES, REFERENCE_SEED, SEED, Variant, cornell_scene, select_variants
 
 Progress = Callable[[int, int, str], None]
 
@@ -60,14 +60,16 @@ class _Counter:
 
 
 def run_stress(renderer_specs: list[str] | None, variants: list[str] | None = None,
-               progress: Progress | None = None):
+               progress: Progress | None = None, reference_renderer: str | None = None):
     """Run the stress variants on the renderers; a pandas DataFrame, one row per (variant, renderer).
 
     ``renderer_specs``: registered names or ``module:Class`` (None: every
     registered renderer); ``variants``: names from
     :data:`~harness.stress.variants.VARIANTS` (None: all; an unknown name
     raises ValueError). ``progress(done, total, label)`` is called after each
-    process ends. Columns: :data:`~harness.stress.judge.COLUMNS`; ``status``
+    process ends. ``reference_renderer`` (a registered name or ``module:Class``;
+    the CLI's is Mitsuba) renders the variant references; None: they are not
+    rendered and those rows say so. Columns: :data:`~harness.stress.judge.COLUMNS`; ``status``
     is pass, fail, skipped (unavailable, or does not model a feature) or
     error (the renderer raised, or gave an image of the wrong shape).
     """
@@ -80,13 +82,14 @@ def run_stress(renderer_specs: list[str] | None, variants: list[str] | None = No
     plan = _plan(chosen, entries)
     needs_ref = {v.name for v, _, cells in plan if v.expected == "variant-reference"
                  and any(why is None and _checks_mean(e) for e, why in cells)}
-    ref_entry, ref_why = _reference_entry(entries) if needs_ref else (None, None)
+    ref_entry, ref_why = _reference_entry(entries, reference_renderer) if needs_ref else (None, None)
     total = sum(why is None for _, _, cells in plan for _, why in cells)
     counter = _Counter(total + (len(needs_ref) if ref_entry is not None else 0), progress)
     stored: list = []  # the stored reference, loaded when a variant first needs it
     rows = []
     for v, scene, cells in plan:
-        exp = _expectation(v, scene, stored, ref_entry if v.name in needs_ref else None, ref_why, counter)
+        exp = _expectation(v, scene, stored, ref_entry if v.name in needs_ref else None, ref_why, counter,
+                           reference_renderer)
         rows += _run_cells(v, scene, cells, exp, counter)
     return pd.DataFrame(rows, columns=list(COLUMNS))
 
@@ -111,26 +114,28 @@ def _plan(chosen: Sequence[Variant], entries) -> list[tuple[Variant, Scene, list
 
 
 def _checks_mean(entry) -> bool:
-    return not tuple(getattr(entry.renderer, "approximations", ()) or ())
+    return not attribute(entry.renderer, "approximations")
 
 
-def _reference_entry(entries) -> tuple[object | None, str | None]:
-    """(the reference renderer's entry, None), or (None, why it cannot render variant references)."""
+def _reference_entry(entries, name: str | None) -> tuple[object | None, str | None]:
+    """(the reference renderer ``name``'s entry, None), or (None, why it cannot render variant references)."""
     from harness.adapters.registry import RendererError, resolve
 
-    ref_entry = next((e for e in entries if e.name == REFERENCE_RENDERER), None)
+    if name is None:
+        return None, "no reference renderer was given"
+    ref_entry = next((e for e in entries if name in (e.name, e.spec)), None)
     if ref_entry is None:
         try:
-            (ref_entry,) = resolve([REFERENCE_RENDERER])
+            (ref_entry,) = resolve([name])
         except RendererError as e:
             return None, str(e)
     if not ref_entry.available:
-        return None, f"{REFERENCE_RENDERER} is unavailable: {ref_entry.reason}"
+        return None, f"{name} is unavailable: {ref_entry.reason}"
     return ref_entry, None
 
 
 def _expectation(v: Variant, scene: Scene, stored: list, ref_entry, ref_why: str | None,
-                 counter: _Counter) -> Expectation:
+                 counter: _Counter, reference_renderer: str | None) -> Expectation:
     """The variant's expectation, loading the stored reference or rendering the variant reference if needed."""
     if v.expected == "reference" and not stored:
         from harness.store.references import load_reference
@@ -141,8 +146,9 @@ def _expectation(v: Variant, scene: Scene, stored: list, ref_entry, ref_why: str
         seeds = [REFERENCE_SEED + b for b in range(REFERENCE_BATCHES)]
         outcome = run_sandboxed(ref_entry.spec, [(scene, v.reference_spp, s) for s in seeds],
                                 2.0 * v.time_bound_s, v.rss_bound_mb)
-        counter.tick(f"{v.name}: {REFERENCE_RENDERER} reference")
-    return expectation_for(v, scene, stored[0] if stored else None, outcome, ref_why or "not needed")
+        counter.tick(f"{v.name}: {ref_entry.name} reference")
+    return expectation_for(v, scene, stored[0] if stored else None, outcome, ref_why or "not needed",
+                           reference_renderer or "the reference renderer")
 
 
 def _run_cells(v: Variant, scene: Scene, cells: list, exp: Expectation, counter: _Counter) -> list[dict]:
@@ -221,9 +227,9 @@ class StressRun:
 
 
 def run_suite(renderer_specs: list[str] | None, variants: list[str] | None, out_dir: Path,
-              progress: Progress | None = None) -> StressRun:
-    """``cbox stress``: run the suite (``progress`` as in :func:`run_stress`) and write ``out_dir/stress.csv``
-    atomically.
+              progress: Progress | None = None, reference_renderer: str | None = None) -> StressRun:
+    """``cbox stress``: run the suite (``progress`` and ``reference_renderer`` as in :func:`run_stress`) and
+    write ``out_dir/stress.csv`` atomically.
 
     Unknown variant names raise ValueError before anything runs or is
     written, unknown renderers RendererError, a stale reference
@@ -240,7 +246,7 @@ def run_suite(renderer_specs: list[str] | None, variants: list[str] | None, out_
     out_dir = Path(out_dir)
     date = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     t0 = time.perf_counter()
-    table = run_stress(renderer_specs, variants, progress)
+    table = run_stress(renderer_specs, variants, progress, reference_renderer)
     wall = time.perf_counter() - t0
     out_dir.mkdir(parents=True, exist_ok=True)
     with atomic_path(out_dir / "stress.csv") as tmp:

@@ -31,11 +31,12 @@ covers both), for the **linearity** check: the image mean equals the same
 seed's unscaled render times the scale within :data:`LINEARITY_TOLERANCE` =
 1e-5. The image is linear in Le and no sampling decision depends on Le's
 scale, so this is exact up to float32 rounding. The grazing camera's
-reference is rendered by the suite, by :data:`REFERENCE_RENDERER` in
+reference is rendered by the suite, by the reference renderer the caller
+names (``cbox stress``: Mitsuba, :data:`harness.cli.common.REFERENCE_RENDERER`) in
 :data:`REFERENCE_BATCHES` batches of 256 spp with seeds from
 :data:`REFERENCE_SEED` (bound 180 s), and only when a row needs it; for
-Mitsuba's own row it is a self-consistency check (independent seeds, 16× the
-spp), for the others a cross-check against the reference renderer.
+the reference renderer's own row it is a self-consistency check (independent
+seeds, 16× the spp), for the others a cross-check against it.
 
 The time bounds are generous: 7-50× the times measured on a 2-core machine,
 so a busy machine does not fail them. Every variant's memory bound is
@@ -78,8 +79,6 @@ from harness.scenes.transforms import (GRAZING_ANGLE_DEG, GRAZING_DISTANCE, emit
 SEED = 1
 #: Peak resident memory allowed to one (variant, renderer) process.
 RSS_BOUND_MB = 4096.0
-#: The harness's reference renderer: builds the variant references (grazing camera).
-REFERENCE_RENDERER = "mitsuba"
 #: Independent batches a variant reference is rendered in (its per-pixel variance comes from their spread).
 REFERENCE_BATCHES = 4
 #: Seeds of variant-reference batches: in the reference seed range, never a stress render's.
@@ -114,7 +113,7 @@ class Variant:
     - ``"furnace"``: the analytic furnace radiance; noise from the image's own pixel spread;
     - ``"reference"``: the stored Cornell-box reference (times ``reference_scale()``, over the
       pixels ``exclude`` leaves); noise from the render's variance or the reference's;
-    - ``"variant-reference"``: a render of the variant by :data:`REFERENCE_RENDERER` at
+    - ``"variant-reference"``: a render of the variant by the reference renderer at
       ``reference_spp`` × :data:`REFERENCE_BATCHES`, made by the suite;
     - ``"none"``: no finite expected value (only termination, finiteness and sign).
     """
@@ -193,8 +192,8 @@ def _transformed_variants() -> list[Variant]:
                      f"{GRAZING_ANGLE_DEG:g}° off its plane: grazing hits, self-intersection",
             build=lambda: grazing_camera(cornell_scene(), 128), spp=64, time_bound_s=90.0,
             expected="variant-reference",
-            expected_note=f"{REFERENCE_RENDERER} render of the same variant at {REFERENCE_BATCHES} × 256 spp "
-                          f"(independent seeds; for {REFERENCE_RENDERER} itself a self-consistency check)",
+            expected_note=f"the reference renderer's render of the same variant at {REFERENCE_BATCHES} × 256 spp "
+                          "(independent seeds; for the reference renderer itself a self-consistency check)",
             reference_spp=256),
     ]
 

@@ -8,9 +8,10 @@ from typing import Sequence
 
 import pandas as pd
 
+from harness.adapters.api import attribute
 from harness.adapters.registry import RendererEntry
 from harness.scenes.model import Scene
-from harness.store.atomic import atomic_path, write_json_atomic
+from harness.store.atomic import atomic_path, json_safe, write_json_atomic
 from harness.store.experiments import (CONFIG_FILE, RESULTS_FILE, ExperimentError, cell_name, experiment_lock,
                                        write_parquet_atomic)
 from harness.store.exr import write_exr
@@ -42,7 +43,7 @@ def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, m
     deterministic renderer stops early once two doublings of spp leave its error unchanged.
     """
     spp, previous, stalls = 1, None, 0
-    deterministic = getattr(entry.renderer, "deterministic", False)
+    deterministic = attribute(entry.renderer, "deterministic")
     while True:
         rec = runner.run_one(entry, scene, spp, seed, reference)
         if rec.status != "ok":
@@ -81,4 +82,4 @@ def _store(out: Path, scene: Scene, records: Sequence[runner.RunRecord], command
     write_parquet_atomic(frame, out / RESULTS_FILE)
     with atomic_path(out / "metrics.csv") as tmp:
         frame.to_csv(tmp, index=False)
-    write_json_atomic(out / "metrics.json", [runner.json_safe(r) for r in rows])
+    write_json_atomic(out / "metrics.json", [json_safe(r) for r in rows])

@@ -38,7 +38,6 @@ variance when it reports one, so there ``mean_z`` may differ).
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
@@ -46,7 +45,7 @@ import numpy as np
 
 from harness.evaluate import flip, metrics
 from harness.evaluate import noise as stats
-from harness.evaluate import regions as named_regions
+from harness.evaluate.image_scores import ImageScore, InputImage, Target
 from harness.scenes.model import Scene
 from harness.scenes.quantities import DEFAULT_QUANTITY
 from harness.store.exr import ImageFileError, read_exr
@@ -60,54 +59,6 @@ INPUT_TRANSFERS = {
     "srgb": "undo the sRGB transfer function (the EOTF of IEC 61966-2-1)",
     "linear": "take the stored values as linear, scaled to [0, 1] (a linear 16-bit image)",
 }
-
-
-@dataclass
-class Target:
-    """What test images are scored against: the reference, its file, and the scene whose regions are scored."""
-
-    reference: Reference  # its variance and noise are None when none is stored
-    path: Path  # the reference image file
-    scene: Scene | None = None  # with a scene: its regions are scored
-    noise_note: str | None = None  # why this reference cannot give noise yardsticks, if it cannot
-
-    @property
-    def label(self) -> str:
-        return self.scene.name if self.scene is not None else str(self.path)
-
-
-@dataclass
-class InputImage:
-    """One test image, linear and checked against its target."""
-
-    path: Path
-    label: str  # unique among the images of one run (names output files and report entries)
-    image: np.ndarray = field(repr=False)  # (H, W, 3) float32 linear
-    spp: int | None  # from its header or given; None: unknown
-
-
-@dataclass
-class ImageScore:
-    """One test image's numbers: image metrics, noise yardsticks (or why not), region metrics."""
-
-    source: InputImage
-    metrics: dict
-    noise: dict | None
-    noise_note: str | None
-    regions: dict
-    flip_parameters: dict | None  # the HDR-FLIP viewing conditions flip_mean was computed under
-
-    def record(self, target: Target) -> dict:
-        """The score as strict-JSON-ready nested dicts (non-finite numbers as None)."""
-        return runner.json_safe({
-            "image": str(self.source.path), "label": self.source.label, "reference": str(target.path),
-            "scene": target.scene.name if target.scene is not None else None, "spp": self.source.spp,
-            "metrics": self.metrics, "noise": self.noise, "noise_note": self.noise_note, "regions": self.regions,
-            "flip_parameters": self.flip_parameters})
-
-    def row(self) -> dict:
-        """Flat: metrics, yardsticks and ``region.<name>.<metric>`` columns (a results-table row's form)."""
-        return {**self.metrics, **(self.noise or {}), **named_regions.region_columns(self.regions)}
 
 
 # --------------------------------------------------------------------------

@@ -19,12 +19,14 @@ from typing import Callable, Sequence
 import numpy as np
 import pandas as pd
 
+from harness.adapters.api import attribute
 from harness.adapters.registry import RendererEntry
 from harness.evaluate import convergence
-from harness.evaluate.regions import nested_regions, region_columns, region_masks
+from harness.evaluate.summary import ExperimentResults, summary_table
 from harness.scenes.model import Scene
-from harness.store.experiments import (RESULTS_FILE, cell_name, experiment_lock, prepare_dir, spps_to_render,
-                                       stored_cell, write_parquet_atomic)
+from harness.store.atomic import atomic_path
+from harness.store.experiments import (RESULTS_FILE, SUMMARY_FILE, cell_name, experiment_lock, final_images,
+                                       load_results, prepare_dir, spps_to_render, stored_cell, write_parquet_atomic)
 from harness.store.exr import ImageFileError, write_exr
 from harness.store.image_files import SPP_ATTRIBUTE, header_spp, read_image_file
 from harness.store.references import Reference
@@ -78,7 +80,7 @@ def run_experiment(
             "kind": kind, "scene": str(scene.path), "scene_name": scene.name, "scene_hash": scene.content_hash(),
             "renderers": [e.name for e in entries], "spp": spps, "seeds": list(seeds), "command": command,
             "targets": [list(t) for t in targets],
-            "deterministic": [e.name for e in entries if getattr(e.renderer, "deterministic", False)],
+            "deterministic": [e.name for e in entries if attribute(e.renderer, "deterministic")],
         })
         table = _Table(out / RESULTS_FILE)
         pending: dict[str, tuple[list[int], Cell, RendererEntry, pd.DataFrame | None]] = {}
@@ -86,7 +88,7 @@ def run_experiment(
             if (row := _not_run_row(entry, scene)) is not None:
                 table.not_run.append(row)
                 continue
-            for seed in (seeds[:1] if getattr(entry.renderer, "deterministic", False) else seeds):
+            for seed in (seeds[:1] if attribute(entry.renderer, "deterministic") else seeds):
                 name = cell_name(entry.name, seed)
                 stored, todo = _plan(out, name, scene, spps)
                 if not todo:  # finished before: loaded, never rendered again
@@ -179,43 +181,19 @@ def _image_spp(path: Path) -> int | None:
         return None
 
 
-def summary_table(runs: pd.DataFrame, images: dict[str, list[np.ndarray]], reference: Reference, scene: Scene,
-                  targets=convergence.DEFAULT_TARGETS, deterministic: Sequence[str] = ()) -> pd.DataFrame:
-    """Derived figures per renderer, with the bias/variance split from the stored images.
-
-    For a scene with named regions the split is also given per region, as
-    columns ``region.<name>.bias2``, ``.variance`` and ``.bias2_fraction``
-    (:func:`harness.evaluate.convergence.region_bias_variance`).
-    """
-    summary = convergence.summarize(runs, targets)
-    if summary.empty:
-        return summary
-    masks = region_masks(scene)
-    rows = []
-    for r in summary["renderer"]:
-        finals, det = images.get(r, []), r in deterministic
-        row = convergence.bias_variance(finals, reference.image, reference.variance, det)
-        if masks:
-            row.update(region_columns(convergence.region_bias_variance(finals, reference.image, reference.variance,
-                                                                       masks, det)))
-        rows.append(row)
-    return pd.concat([summary, pd.DataFrame(rows)], axis=1)
-
-
-#: The per-region columns :func:`summary_table` adds, in table order.
-REGION_SPLIT = ("bias2", "variance", "bias2_fraction")
-
-
-def region_split(summary: pd.DataFrame) -> pd.DataFrame:
-    """The per-region bias/variance columns of a summary as long rows: renderer, region, bias2, variance,
-    bias2_fraction (empty without them); in summary order, regions in column order."""
-    rows = []
-    for rec in summary.to_dict("records") if summary is not None else []:
-        for region, values in nested_regions(rec).items():
-            if any(k in values for k in REGION_SPLIT):
-                rows.append({"renderer": rec["renderer"], "region": region,
-                             **{k: values.get(k, math.nan) for k in REGION_SPLIT}})
-    return pd.DataFrame(rows, columns=["renderer", "region", *REGION_SPLIT])
+def experiment_results(out: Path, scene: Scene, reference: Reference,
+                       summary_dir: Path | None = None) -> ExperimentResults:
+    """What the experiment folder ``out`` holds, and its summary (:mod:`harness.evaluate.summary`); no
+    rendering. With ``summary_dir`` (the folder itself, or where its report goes) the summary is written
+    there as ``summary.csv`` (not when nothing ran): every experiment's summary.csv is written here."""
+    config, runs = load_results(out)
+    images = final_images(out, runs)
+    targets = [tuple(t) for t in config.get("targets", convergence.DEFAULT_TARGETS)]
+    summary = summary_table(runs, images, reference, scene, targets, config.get("deterministic", ()))
+    if summary_dir is not None and not summary.empty:
+        with atomic_path(Path(summary_dir) / SUMMARY_FILE) as tmp:
+            summary.to_csv(tmp, index=False)
+    return ExperimentResults(config, runs, images, summary)
 
 
 #: More checkpoints than this is a typo (``1,2,...,100000``), not an experiment; refused before expanding it.

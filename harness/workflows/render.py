@@ -10,9 +10,12 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.registry import RenderResult, RendererEntry
-from harness.adapters.settings import declared
+from harness.adapters.api import Checkpoint, ReferenceFit, RenderResult, attribute
+from harness.adapters.registry import RendererEntry
+from harness.adapters.settings import declared, resolve_settings
+from harness.evaluate.reference_fit import fitted_image
 from harness.scenes.model import Scene
+from harness.store.references import load_reference
 
 
 class RenderError(ValueError):
@@ -29,13 +32,22 @@ class RenderTimeout(RuntimeError):
 
 def render_checked(entry: RendererEntry, scene: Scene, spp: int, seed: int,
                    checkpoints: Sequence[int] = ()) -> RenderResult:
-    """``entry``'s render with its settings, its image, variance and checkpoints checked; may raise."""
+    """``entry``'s render with its settings, its image, variance and checkpoints checked; may raise.
+
+    A renderer that declares settings gets every one of them, validated, typed and with its default filled in
+    (whatever ``entry`` was built with); one that declares none keeps the plain signature. This is the only
+    place settings are resolved for a render: renderers never validate them again.
+    """
     kwargs = {}
     if checkpoints:
         kwargs["checkpoints"] = list(checkpoints)
-    if declared(entry.renderer):  # adapters without settings keep the plain signature
-        kwargs["settings"] = dict(entry.settings)
-    result = entry.renderer.render(scene, spp, seed, **kwargs)
+    if declared(entry.renderer):
+        kwargs["settings"] = resolve_settings(entry.renderer, entry.settings)
+    fit = attribute(entry.renderer, "reference_fit")
+    if fit is not None and kwargs.get("settings", {}).get(fit.setting) == fit.value:
+        result = _fitted_render(entry.renderer, fit, scene, spp, seed, kwargs)
+    else:
+        result = entry.renderer.render(scene, spp, seed, **kwargs)
     expected = (scene.camera.height, scene.camera.width, 3)
     result.image = _checked_image(result.image, expected, "an image")
     if result.variance is not None:
@@ -43,6 +55,28 @@ def render_checked(entry: RendererEntry, scene: Scene, spp: int, seed: int,
     for c in result.checkpoints:
         c.image = _checked_image(c.image, expected, f"a checkpoint image at {c.spp} spp")
     return result
+
+
+#: What a fitted render records under ``info["oracle"]``.
+ORACLE_NOTE = ("fitted to the stored reference: the least-squares constant per channel, an oracle no renderer "
+               "could compute from the scene (two renders)")
+
+
+def _fitted_render(renderer, fit: ReferenceFit, scene: Scene, spp: int, seed: int, kwargs: dict) -> RenderResult:
+    """The oracle ``fit`` declares (:class:`harness.adapters.api.ReferenceFit`): two renders with the same seed,
+    D and D + B, and D + c·B with c fitted to the stored reference (per checkpoint too); no variance image (the
+    renders' samples are correlated and their covariance is not kept)."""
+    reference = load_reference(scene).image  # no reference: refused before anything renders
+    settings = kwargs["settings"]
+    direct, unit = (renderer.render(scene, spp, seed, **{**kwargs, "settings": {**settings, **changed}})
+                    for changed in (fit.without, fit.unit))
+    image, c = fitted_image(direct.image, unit.image, reference)
+    shots = [Checkpoint(a.spp, fitted_image(a.image, b.image, reference)[0], a.time_s + b.time_s)
+             for a, b in zip(direct.checkpoints, unit.checkpoints)]
+    info = {**direct.info, fit.setting: fit.value, fit.record: [float(x) for x in c], "oracle": ORACLE_NOTE}
+    if "rays" in direct.info and "rays" in unit.info:
+        info["rays"] = direct.info["rays"] + unit.info["rays"]
+    return RenderResult(image, direct.time_s + unit.time_s, direct.spp, direct.seed, shots, info, None)
 
 
 def _checked_image(image, expected: tuple[int, int, int], what: str) -> np.ndarray:

@@ -23,9 +23,10 @@ import numpy as np
 from harness.evaluate import metrics
 from harness.evaluate import noise as stats
 from harness.evaluate import regions as named_regions
-from harness.adapters.registry import (ESTIMATORS, Checkpoint, RenderResult, RendererEntry, estimator_of,
-                                      missing_features)
+from harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, attribute
+from harness.adapters.registry import RendererEntry, estimator_of, missing_features
 from harness.adapters.settings import canonical
+from harness.store.atomic import json_safe
 from harness.store.references import Reference
 from harness.workflows.render import RenderError, RenderTimeout, render_checked
 from harness.workflows.sandbox import run_sandboxed
@@ -76,7 +77,7 @@ class RunRecord:
         elif missing := missing_features(entry.renderer, scene):
             rec.status, rec.reason = "skipped", f"does not model {', '.join(missing)}"
         else:
-            rec.approximations = tuple(getattr(entry.renderer, "approximations", ()))
+            rec.approximations = attribute(entry.renderer, "approximations")
         return rec
 
     def failed(self, error: Exception) -> "RunRecord":
@@ -112,12 +113,6 @@ class RunRecord:
         for k, v in self.info.items():
             out[f"info_{k}"] = v if isinstance(v, (str, int, float, bool)) or v is None else json.dumps(v)
         return out
-
-
-def json_safe(row: dict) -> dict:
-    """The row with non-finite floats (e.g. PSNR of identical images) as None, nested dicts too: strict JSON."""
-    return {k: json_safe(v) if isinstance(v, dict) else
-            (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
 
 
 #: Fields a results row holds as JSON text (a table cell is a scalar); objects again in JSON output.

@@ -16,6 +16,8 @@ from typing import Any
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
+from harness.adapters.api import THREADS_VARIABLE, machine_cores
+
 
 def threads_per_worker(cores: int, workers_on_host: int) -> int:
     """A worker's share of its machine's cores: N workers on N cores get one each, never fewer than one."""
@@ -50,7 +52,7 @@ def _writable(folder: Path) -> bool:
 def local_env(workers: int) -> dict[str, str]:
     """The environment of a LocalCluster's ``workers`` processes: their share of this machine's cores, and
     the numba cache of this process (warm where the harness ran before) when it is set."""
-    env = {"CBOX_THREADS": str(threads_per_worker(os.cpu_count() or 1, workers))}
+    env = {THREADS_VARIABLE: str(threads_per_worker(machine_cores(), workers))}
     if (cache := numba_cache_dir()) is not None:
         env["NUMBA_CACHE_DIR"] = cache
     return env
@@ -66,7 +68,7 @@ def local_pre_spawn_environ(workers: int) -> dict[str, str]:
     """Dask's pre-spawn environment for a LocalCluster of ``workers``, its thread pools at each worker's share."""
     import dask
 
-    share = str(threads_per_worker(os.cpu_count() or 1, workers))
+    share = str(threads_per_worker(machine_cores(), workers))
     given = dask.config.get("distributed.nanny.pre-spawn-environ", default={}) or {}
     return {**{k: str(v) for k, v in given.items()}, **{name: share for name in THREAD_POOL_VARIABLES}}
 
@@ -105,10 +107,10 @@ class WorkerSetup(WorkerPlugin):
 
     def setup(self, worker: Any) -> None:
         # Kept only when whoever started the worker set it: one this plugin set for an earlier client is redone.
-        given = os.environ.get("CBOX_THREADS") and os.environ.get(_OURS) != os.environ.get("CBOX_THREADS")
+        given = os.environ.get(THREADS_VARIABLE) and os.environ.get(_OURS) != os.environ.get(THREADS_VARIABLE)
         if not (self.keep_threads and given):
-            share = threads_per_worker(os.cpu_count() or 1, self.workers_by_host.get(host_of(worker.address), 1))
-            os.environ["CBOX_THREADS"] = os.environ[_OURS] = str(share)
+            share = threads_per_worker(machine_cores(), self.workers_by_host.get(host_of(worker.address), 1))
+            os.environ[THREADS_VARIABLE] = os.environ[_OURS] = str(share)
         cache = numba_cache_dir()
         if cache is not None and os.environ.get("NUMBA_CACHE_DIR") != cache:
             os.environ["NUMBA_CACHE_DIR"] = cache

@@ -1,8 +1,9 @@
 """What every renderer of ours shares as a harness adapter: threads, availability, version, features.
 
-The adapter interface is :mod:`harness.adapters.registry`'s; our renderers
-(path tracer, photon mapper, SPPM) differ only in their integrator and
-settings, so the rest is written once here.
+The adapter interface is the renderer API's (:class:`harness.adapters.api.Renderer`,
+and what a renderer may declare, :class:`harness.adapters.api.Declarations`);
+our renderers (path tracer, photon mapper, SPPM, probes, AO, ambient, SSAO)
+differ only in their integrator and settings, so the rest is written once here.
 """
 
 from __future__ import annotations

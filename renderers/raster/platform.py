@@ -105,7 +105,7 @@ def choose_platform() -> tuple[str | None, str]:
     return None, "no headless OpenGL context could be created (" + "; ".join(failures) + ")"
 
 
-def _open_platform(platform: str, width: int = 8, height: int = 8):
+def open_platform(platform: str, width: int = 8, height: int = 8):
     """A current pyrender platform (GL context) for ``platform``."""
     if platform == "egl":
         from pyrender.platforms import egl
@@ -161,7 +161,7 @@ def _check_availability() -> tuple[str | None, str | None, dict]:
         return None, (f"pyrender {version} uses np.infty, which NumPy {np.__version__} removed; "
                       f"{_INSTALL_HINT} (uninstall pyrender first)"), {}
     try:
-        plat = _open_platform(platform)
+        plat = open_platform(platform)
     except Exception as e:
         msg = str(e) or "initialisation failed"
         return None, f"cannot create an OpenGL context with {platform}: {type(e).__name__}: {msg}", {}
@@ -198,7 +198,7 @@ def _version_tuple(v: str) -> tuple[int, ...]:
     return tuple(out)
 
 
-def _distribution() -> str:
+def pyrender_distribution() -> str:
     """The installed distribution that provides the ``pyrender`` module, with its version."""
     try:
         names = importlib.metadata.packages_distributions().get("pyrender", [])

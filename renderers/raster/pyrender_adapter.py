@@ -117,7 +117,7 @@ from harness.scenes.model import Scene
 from renderers.raster.framebuffer import BACK_SIDE_ATTR, MSAA_SAMPLES, float_renderer
 from renderers.raster.glsl import write_direct_lighting_shaders
 from renderers.raster.lights import DEFAULT_LIGHTS, light_samples
-from renderers.raster.platform import _distribution, _open_platform, availability
+from renderers.raster.platform import availability, open_platform, pyrender_distribution
 
 #: Largest supersampling factor per axis (s x s samples per pixel).
 MAX_SUPERSAMPLING = 8
@@ -300,7 +300,8 @@ class Pyrender:
 
     def version(self) -> str:
         platform, _, facts = availability()
-        return f"{_distribution()} ({platform}: {facts.get('gl_renderer', '?')}, OpenGL {facts.get('gl_version', '?')})"
+        return (f"{pyrender_distribution()} ({platform}: {facts.get('gl_renderer', '?')}, "
+                f"OpenGL {facts.get('gl_version', '?')})")
 
     def supersampling(self, spp: int, width: int, height: int, max_size: int) -> int:
         """Supersampling factor per axis for ``spp`` (see the module docstring)."""
@@ -315,7 +316,7 @@ class Pyrender:
             raise RuntimeError(f"pyrender is unavailable: {reason}")
         cam = scene.camera
         lights = [] if scene.max_depth == 1 else light_samples(scene, self.lights)
-        plat = _open_platform(platform)
+        plat = open_platform(platform)
         shader_dir = tempfile.mkdtemp(prefix="cbox-pyrender-")
         renderer = None
         try:
@@ -332,7 +333,7 @@ class Pyrender:
             _release(renderer, plat, shader_dir)
 
         info = {
-            "package": _distribution(),
+            "package": pyrender_distribution(),
             "platform": platform,
             "gl_renderer": facts.get("gl_renderer"),
             "supersampling": s,

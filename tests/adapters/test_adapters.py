@@ -8,7 +8,9 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import CORNELL, ROOT, run_cbox
+from tests.user_renderers import FlatGrey
 from harness.workflows import runner
+from harness.adapters.api import Setting, SettingsError
 from harness.adapters.registry import RendererError, discover, load_spec, resolve
 from harness.scenes.loader import load_scene
 
@@ -156,3 +158,62 @@ def test_pyrender_is_skipped_on_the_caustics_scene_without_rendering():
         assert rec.reason == "does not model dielectric, mirror, sphere"
         assert rec.image is None and rec.metrics == {}
     assert missing_features(PathTracer(), scene) == [] and missing_features(Mitsuba3(), scene) == []
+
+
+class Recorder(FlatGrey):
+    """Declares one setting of each kind and records what ``render`` was handed."""
+
+    name = "recorder"
+    settings = (Setting("count", int, 2, "an integer", low=1, high=9),
+                Setting("gain", float, 0.5, "a number", low=0.0),
+                Setting("flag", bool, False, "a switch"),
+                Setting("mode", str, "plain", "a word", choices=("plain", "fancy")))
+    seen: list = []
+
+    def render(self, scene, spp, seed, checkpoints=(), *, settings):
+        type(self).seen.append(dict(settings))
+        return super().render(scene, spp, seed, checkpoints)
+
+
+def test_the_render_path_hands_every_setting_validated_typed_and_defaulted():
+    """However the entry was made (from a spec, or by hand with text values), the renderer gets every declared
+    setting, typed, defaults filled; a bad value is refused before it renders; one declaring none gets none."""
+    from harness.adapters.registry import RendererEntry
+    from harness.workflows.render import render_checked
+
+    scene = load_scene(CORNELL).with_resolution(4, 4)
+    Recorder.seen.clear()
+    (entry,) = resolve(["test_adapters:Recorder[count=3, flag=true]"])
+    render_checked(entry, scene, 1, 0)
+    by_hand = RendererEntry("recorder", "test_adapters:Recorder", Recorder(), None, {"gain": "2", "mode": "fancy"})
+    render_checked(by_hand, scene, 1, 0)
+    assert Recorder.seen == [{"count": 3, "gain": 0.5, "flag": True, "mode": "plain"},
+                             {"count": 2, "gain": 2.0, "flag": False, "mode": "fancy"}]
+    assert [[type(v) for v in s.values()] for s in Recorder.seen] == [[int, float, bool, str]] * 2
+    with pytest.raises(SettingsError, match=r"setting count=0: expected an integer in \[1, 9\]"):
+        render_checked(RendererEntry("recorder", "x", Recorder(), None, {"count": 0}), scene, 1, 0)
+    assert len(Recorder.seen) == 2
+    (plain,) = resolve(["tests.user_renderers:FlatGrey"])  # its render takes no settings keyword
+    assert render_checked(plain, scene, 1, 0).image.shape == (4, 4, 3)
+
+
+def test_declarations_are_read_in_one_place():
+    """attribute(): a declaration's default when a renderer declares nothing (or None), sequences as tuples; a
+    name that is not a declaration is an error, not a silent default."""
+    from harness.adapters.api import DECLARATIONS, attribute
+
+    bare = object()
+    assert {k: attribute(bare, k) for k in ("aovs", "estimator", "deterministic", "quantities", "settings",
+                                              "approximations")} == {
+        "aovs": (), "estimator": "unbiased", "deterministic": False, "quantities": ("radiance",), "settings": (),
+        "approximations": ()}
+    assert attribute(FlatGrey(), "approximations") == ("everything is grey",)
+    assert attribute(Recorder(), "settings") == Recorder.settings and DECLARATIONS.estimator == "unbiased"
+
+    class Lists:
+        aovs, quantities, settings = ["albedo"], ["ambient_occlusion"], None
+
+    assert attribute(Lists(), "aovs") == ("albedo",) and attribute(Lists(), "quantities") == ("ambient_occlusion",)
+    assert attribute(Lists(), "settings") == ()
+    with pytest.raises(KeyError, match="'feature' is not a renderer declaration"):
+        attribute(bare, "feature")

@@ -22,15 +22,17 @@ import numpy as np
 import pytest
 
 from tests.conftest import run_cbox
-from harness.adapters.registry import missing_features, resolve
+from harness.adapters.registry import RendererEntry, missing_features, resolve
 from harness.evaluate.agreement import agreement_test
+from harness.evaluate.reference_fit import least_squares_constant
 from harness.scenes.analytic import (FLOOR_RHO, LIGHT_A, LIGHT_B, LIGHT_LE, furnace_scene, rectangle_light_image,
                                      rectangle_light_scene)
 from harness.scenes.library import resolve_scene
 from harness.scenes.model import Camera, Diffuse, Mesh, Scene
 from harness.store.references import ReferenceError, load_reference
+from harness.workflows.render import render_checked
 from harness.workflows.runner import run_one
-from renderers.ambient import AOAmbient, interreflection_sum, oracle_ambient
+from renderers.ambient import AOAmbient, interreflection_sum
 from renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")
@@ -175,38 +177,51 @@ def test_interreflection_sum_and_divergence():
 
 # -- the oracle ------------------------------------------------------------------------------------
 
+def oracle(scene: Scene, spp: int, seed: int, threads: int = 2, checkpoints=()):
+    """The oracle as the harness renders it: through the render path, which fits it (the renderer refuses)."""
+    entry = RendererEntry("ambient", "renderers.ambient:AOAmbient", AOAmbient(threads), None, {"ambient": "oracle"})
+    return render_checked(entry, scene, spp, seed, checkpoints)
+
+
 def test_oracle_ambient_is_least_squares():
-    """oracle_ambient against numpy's least squares, per channel, on random images; 0 where B is all 0."""
+    """The oracle's fit against numpy's least squares, per channel, on random images; 0 where B is all 0."""
     gen = np.random.default_rng(0)
     d, b, r = gen.random((3, 8, 8, 3))
     b[..., 2] = 0.0
-    c = oracle_ambient(d, b, r)
+    c = least_squares_constant(d, b, r)
     for ch in range(2):
         want = np.linalg.lstsq(b[..., ch].reshape(-1, 1), (r - d)[..., ch].ravel(), rcond=None)[0][0]
         assert c[ch] == pytest.approx(want, rel=1e-12)
     assert c[2] == 0.0
 
 
-def test_oracle_minimises_the_error_against_the_reference(cornell):
+def test_oracle_minimises_the_error_against_the_reference(cornell, monkeypatch):
     """cornell-box at the reference's 256², 1 spp, seed 9: the oracle's image is D + c·B, D the direct-only
     render of the same seed, B = (image − D)/c its ambient part; ±10% on c raises the MSE against the reference
     in every channel, and c recomputed from D and B agrees with the recorded one (relative 1e-3: B from float32
-    images). Another resolution has no reference: refused."""
+    images); B is the render at ambient = constant, La = 1, minus D. Another resolution has no reference: refused
+    before rendering; the renderer itself refuses the oracle (the harness fits it)."""
     ref = load_reference(cornell).image.astype(np.float64)
-    oracle = render(cornell, 1, seed=9, ambient="oracle")
+    fitted = oracle(cornell, 1, seed=9)
     direct = render(cornell, 1, seed=9, ambient="none")
-    c = np.array(oracle.info["ambient_radiance"])
-    assert np.all(c > 0.0) and "oracle" in oracle.info["oracle"] and oracle.variance is None
+    c = np.array(fitted.info["ambient_radiance"])
+    assert np.all(c > 0.0) and "oracle" in fitted.info["oracle"] and fitted.variance is None
+    assert fitted.info["ambient"] == "oracle"
     d = direct.image.astype(np.float64)
-    b = (oracle.image - d) / c
+    b = (fitted.image - d) / c
 
     def mse(k):
         return ((d + k * c * b - ref) ** 2).mean(axis=(0, 1))
 
     assert np.all(mse(1.1) > mse(1.0)) and np.all(mse(0.9) > mse(1.0)), (mse(0.9), mse(1.0), mse(1.1))
-    assert oracle_ambient(d, b, ref) / c == pytest.approx(np.ones(3), rel=1e-3)
+    assert least_squares_constant(d, b, ref) / c == pytest.approx(np.ones(3), rel=1e-3)
+    unit = render(cornell, 1, seed=9, ambient="constant", ambient_radiance=1.0).image - d
+    np.testing.assert_allclose(d + c * unit, fitted.image, rtol=F32, atol=1e-7)
+    with pytest.raises(ValueError, match="fitted to the stored reference by the harness"):
+        render(cornell, 1, seed=9, ambient="oracle")
+    monkeypatch.setattr(AOAmbient, "render", lambda *a, **k: pytest.fail("rendered before refusing"))
     with pytest.raises(ReferenceError):
-        render(cornell.with_resolution(32, 32), 1, seed=9, ambient="oracle")
+        oracle(cornell.with_resolution(32, 32), 1, seed=9)
 
 
 # -- determinism, progress, registration, the CLI -------------------------------------------------
@@ -222,7 +237,7 @@ def test_bit_identical_for_any_thread_count_and_progressive(cornell):
     full = render(small, 8, seed=1, checkpoints=[4, 8])
     assert [c.spp for c in full.checkpoints] == [4, 8]
     assert full.checkpoints[0].image.tobytes() == render(small, 4, seed=1, threads=1).image.tobytes()
-    o1, o2 = (render(cornell, 2, seed=1, threads=t, checkpoints=[1, 2], ambient="oracle") for t in (1, 2))
+    o1, o2 = (oracle(cornell, 2, seed=1, threads=t, checkpoints=[1, 2]) for t in (1, 2))
     assert o1.image.tobytes() == o2.image.tobytes()
     assert [c.image.tobytes() for c in o1.checkpoints] == [c.image.tobytes() for c in o2.checkpoints]
 

@@ -16,6 +16,7 @@ import pytest
 
 from tests.conftest import run_cbox
 from harness.adapters.registry import resolve
+from harness.adapters.settings import resolve_settings
 from harness.scenes.analytic_ao import cosine_ao_beside_wall
 from harness.scenes.library import resolve_scene
 from harness.scenes.model import Camera, Diffuse, Mesh, Scene
@@ -50,9 +51,14 @@ HALF_FLOOR = _quad("floor", [(-8, 0, -8), (-8, 0, 8), (0, 0, 8), (0, 0, -8)])
 WALL = _quad("wall", [(0, 0, -8), (0, 4, -8), (0, 4, 8), (0, 0, 8)])
 
 
+def _settings(**given) -> dict:
+    """Every SSAO setting, ``given`` or its default, as the render path hands them."""
+    return resolve_settings(SSAO(), given)
+
+
 def _ao(scene: Scene, **settings) -> np.ndarray:
     """The AO image's first channel, float64."""
-    result = SSAO(threads=2).render(scene, 1, 0, settings=settings)
+    result = SSAO(threads=2).render(scene, 1, 0, settings=_settings(**settings))
     assert result.image.shape == (scene.camera.height, scene.camera.width, 3) and result.image.dtype == np.float32
     assert np.array_equal(result.image[..., 0], result.image[..., 2])
     return result.image[..., 0].astype(np.float64)
@@ -108,7 +114,7 @@ def test_open_plane_uniform_weighting():
 def test_unbounded_max_distance_uses_the_scene_size():
     """max_distance = inf: the radius is the scene's size (the farthest any occluder can be)."""
     scene = _scene([HALF_FLOOR, WALL], (-2.6, 1.3, 0.0), (0.0, 0.15, 0.0), res=32, max_distance=math.inf)
-    result = SSAO(threads=1).render(scene, 1, 0)
+    result = SSAO(threads=1).render(scene, 1, 0, settings=_settings())
     assert result.info["radius"] == pytest.approx(scene.extent())
     a = result.image[..., 0]
     assert np.all((a >= 0.0) & (a <= 1.0)) and a.min() < 0.9
@@ -232,9 +238,9 @@ def test_haloes_at_depth_discontinuities_and_the_thickness_heuristic():
 def test_deterministic(variant):
     scene = _wall_scene(res=48)
     r = SSAO(threads=2)
-    a = r.render(scene, 1, 0, settings={"variant": variant})
-    b = r.render(scene, 4, 0, settings={"variant": variant})
-    c = SSAO(threads=1).render(scene, 1, 12345, settings={"variant": variant})
+    a = r.render(scene, 1, 0, settings=_settings(variant=variant))
+    b = r.render(scene, 4, 0, settings=_settings(variant=variant))
+    c = SSAO(threads=1).render(scene, 1, 12345, settings=_settings(variant=variant))
     assert np.array_equal(a.image, b.image) and np.array_equal(a.image, c.image)
     assert (a.spp, b.spp, c.seed) == (1, 4, 12345)
     assert SSAO.deterministic and SSAO.estimator == "biased" and SSAO.quantities == ("ambient_occlusion",)

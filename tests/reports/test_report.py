@@ -501,7 +501,7 @@ def test_region_bias_variance_table(tmp_path, case):
     region) in the bias/variance section, with the numbers of convergence.region_bias_variance."""
     from harness.evaluate.convergence import region_bias_variance
     from harness.evaluate.regions import region_masks
-    from harness.workflows.converge import summary_table
+    from harness.evaluate.summary import summary_table
 
     ref, sc = case["reference"], case["scene"]
     images = {n: [case["raw"][n, s, 64] for s in (0, 1, 2)] for n in OK_NAMES}
@@ -764,6 +764,7 @@ def test_title_option_reaches_the_report(tmp_path, capsys, monkeypatch):
 
     import reports.experiment
     from harness.cli.app import main
+    from harness.evaluate.summary import ExperimentResults
     from harness.workflows import converge as converge_workflow
 
     titles = []
@@ -778,8 +779,10 @@ def test_title_option_reaches_the_report(tmp_path, capsys, monkeypatch):
         assert done.value.code == 0, capsys.readouterr().err
 
     monkeypatch.setattr(reports.experiment, "write_experiment_report", record)
-    monkeypatch.setattr(converge_workflow, "run_experiment",
-                        lambda *a, **k: pd.DataFrame({"renderer": [], "status": [], "reason": []}))
+    nothing = pd.DataFrame({"renderer": [], "status": [], "reason": []})
+    monkeypatch.setattr(converge_workflow, "run_experiment", lambda *a, **k: nothing)
+    monkeypatch.setattr(converge_workflow, "experiment_results",
+                        lambda *a, **k: ExperimentResults({}, nothing, {}, pd.DataFrame()))
     out = tmp_path / "cmp"
     cbox("compare", "--scene", "cornell-box", "-r", "tests.user_renderers:FlatGrey", "--spp", "1", "--out", str(out),
          "--title", "Paper <figure> 1")

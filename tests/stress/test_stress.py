@@ -288,3 +288,20 @@ def test_unknown_variants_are_rejected_before_running(tmp_path):
     proc = run_cbox("stress", "-r", "pathtracer", "-v", "albedo-7", "--out", str(tmp_path / "out"))
     assert proc.returncode == 2 and "albedo-7" in proc.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_the_reference_renderer_is_the_callers():
+    """The suite names no renderer: the variant references are rendered by the one its caller gives (cbox
+    stress: the CLI's REFERENCE_RENDERER), and without one the variant-reference rows say why not."""
+    from harness.adapters.registry import resolve
+    from harness.cli.common import REFERENCE_RENDERER
+
+    (grazing,) = [v for v in variants.VARIANTS if v.expected == "variant-reference"]
+    assert REFERENCE_RENDERER not in grazing.expected_note
+    assert suite._reference_entry([], None) == (None, "no reference renderer was given")
+    (entry,) = resolve(["tests.user_renderers:FlatGrey"])
+    assert suite._reference_entry([entry], "tests.user_renderers:FlatGrey") == (entry, None)
+    exp = expectations.expectation_for(grazing, grazing.build(), None, None, "not needed",
+                                       reference_renderer="pathtracer")
+    assert exp.value is None
+    assert exp.source.startswith(f"no variant reference (pathtracer, {variants.REFERENCE_BATCHES} × 256 spp)")

@@ -1,0 +1,69 @@
+"""An experiment's summary: derived figures per renderer and the bias/variance split, image-wide and per region.
+
+Computed from an experiment's results table and its stored highest-spp
+images (:mod:`harness.store.experiments`); the workflow writes it as
+``summary.csv`` (:func:`harness.workflows.converge.experiment_results`) and
+the reports draw it. Nothing here reads or writes files.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, NamedTuple, Sequence
+
+import numpy as np
+import pandas as pd
+
+from harness.evaluate import convergence
+from harness.evaluate.regions import nested_regions, region_columns, region_masks
+from harness.scenes.model import Scene
+
+if TYPE_CHECKING:
+    from harness.store.references import Reference
+
+#: The per-region columns :func:`summary_table` adds, in table order.
+REGION_SPLIT = ("bias2", "variance", "bias2_fraction")
+
+
+class ExperimentResults(NamedTuple):
+    """What an experiment folder holds and what is derived from it: what a report draws."""
+
+    config: dict  # experiment.json
+    runs: pd.DataFrame  # results.parquet
+    images: dict[str, list[np.ndarray]]  # highest-spp images per renderer, in seed order
+    summary: pd.DataFrame  # summary_table's; empty when nothing ran
+
+
+def summary_table(runs: pd.DataFrame, images: dict[str, list[np.ndarray]], reference: Reference, scene: Scene,
+                  targets=convergence.DEFAULT_TARGETS, deterministic: Sequence[str] = ()) -> pd.DataFrame:
+    """Derived figures per renderer, with the bias/variance split from the stored images.
+
+    For a scene with named regions the split is also given per region, as
+    columns ``region.<name>.bias2``, ``.variance`` and ``.bias2_fraction``
+    (:func:`harness.evaluate.convergence.region_bias_variance`).
+    """
+    summary = convergence.summarize(runs, targets)
+    if summary.empty:
+        return summary
+    masks = region_masks(scene)
+    rows = []
+    for r in summary["renderer"]:
+        finals, det = images.get(r, []), r in deterministic
+        row = convergence.bias_variance(finals, reference.image, reference.variance, det)
+        if masks:
+            row.update(region_columns(convergence.region_bias_variance(finals, reference.image, reference.variance,
+                                                                       masks, det)))
+        rows.append(row)
+    return pd.concat([summary, pd.DataFrame(rows)], axis=1)
+
+
+def region_split(summary: pd.DataFrame) -> pd.DataFrame:
+    """The per-region bias/variance columns of a summary as long rows: renderer, region, bias2, variance,
+    bias2_fraction (empty without them); in summary order, regions in column order."""
+    rows = []
+    for rec in summary.to_dict("records") if summary is not None else []:
+        for region, values in nested_regions(rec).items():
+            if any(k in values for k in REGION_SPLIT):
+                rows.append({"renderer": rec["renderer"], "region": region,
+                             **{k: values.get(k, math.nan) for k in REGION_SPLIT}})
+    return pd.DataFrame(rows, columns=["renderer", "region", *REGION_SPLIT])
