@@ -109,18 +109,6 @@ def _parse_word(text: str) -> Any:
     return text.strip()
 
 
-def _parse_word(text: str) -> Any:
-    low = text.strip().lower()
-    if low in ("true", "false"):
-        return low == "true"
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text.strip()
-
-
 @dataclass
 class Checkpoint:
     """The image after the first ``spp`` samples per pixel, and the time to get there."""
