@@ -13,7 +13,9 @@ instead of hand arithmetic in the kernels:
 A dimension is a pure function of (depth, offset), so a decision that is
 skipped (no emitter, a path ended) never shifts the numbers of the ones
 after it. Changing any number here changes every image:
-``tests/test_pathtracer_pinned.py`` pins them.
+``tests/test_pathtracer_pinned.py`` and ``tests/test_photon_pinned.py`` pin them.
+Photon paths have their own layout (:mod:`renderers.core.photons`) and
+draw from :func:`sequence_stream`: one sequence over a map's photons.
 
 Which numbers a dimension gets is the sampler's (:data:`SAMPLERS`), carried
 to kernels as a :class:`Stream`; every sample stays a pure function of
@@ -99,16 +101,33 @@ def independent(key: np.uint64, pixels: int = 1, first_sample: int = 0) -> Strea
     return Stream(INDEPENDENT, np.uint64(key), max(pixels, 1), first_sample, 1, SOBOL_MATRICES)
 
 
-def pass_stream(sampler: str, seed: int, index: int, pixels: int, first_sample: int) -> Stream:
+def pass_stream(sampler: str, seed: int, index: int, pixels: int, first_sample: int,
+                batches: int = BATCHES) -> Stream:
     """The stream of pass ``index`` (its first sample per pixel ``first_sample``) of a render seeded ``seed``.
 
-    ``independent`` keys each pass (:func:`harness.adapters.seeds.pass_key`); a
-    low-discrepancy sampler keys the whole render, since its sequences span the passes.
+    ``independent`` keys each pass (:func:`harness.adapters.api.pass_key`); a
+    low-discrepancy sampler keys the whole render, since its sequences span the passes,
+    and splits each pixel's samples into ``batches`` randomisations (1: a render
+    that reports no variance, as SPPM's camera passes, keeps one sequence per pixel).
     """
     kind = SAMPLERS[sampler]
     if kind == INDEPENDENT:
         return independent(pass_key(seed, index), pixels, first_sample)
-    return Stream(kind, pass_key(seed, 0, SEQUENCE_STREAM), pixels, first_sample, BATCHES, SOBOL_MATRICES)
+    return Stream(kind, pass_key(seed, 0, SEQUENCE_STREAM), pixels, first_sample, batches, SOBOL_MATRICES)
+
+
+def sequence_stream(sampler: str, key: np.uint64, pixels: int = 1, first_sample: int = 0) -> Stream:
+    """One randomisation (no batches) of ``sampler`` keyed ``key``: path j is sample ``first_sample + j div
+    pixels`` of sequence ``j mod pixels``.
+
+    A photon pass is one sequence over its photons (``pixels`` 1), so the
+    photons' emission and bounce decisions are stratified across the map.
+    ``independent``: uniform(key, path, dimension), as :func:`independent`.
+    """
+    kind = SAMPLERS[sampler]
+    if kind == INDEPENDENT:
+        return independent(key, pixels, first_sample)
+    return Stream(kind, np.uint64(key), max(pixels, 1), first_sample, 1, SOBOL_MATRICES)
 
 
 @jit
