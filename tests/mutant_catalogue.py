@@ -235,6 +235,14 @@ MUTANTS: tuple[Mutant, ...] = (
         "photonmap",
     ),
     Mutant(
+        "photon_direction_reuses_point_dims",
+        "a photon's emitted direction drawn from the sample dimensions of its point on the emitter (EMIT_U for "
+        "both decisions): where a photon leaves the light decides where it goes",
+        (("        w = sample_2d(stream, pt, EMIT_DIR_U)\n", "        w = sample_2d(stream, pt, EMIT_U)\n",
+          f"{CORE}/photons.py"),),
+        "photonmap",
+    ),
+    Mutant(
         "no_normal_test",
         "no normal test in the density estimate: photons on a wall count on the floor at their corner",
         (("    if cos_n < NORMAL_COS_MIN:\n        return 0.0\n", "", f"{CORE}/photon_map.py"),),
