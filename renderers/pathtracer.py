@@ -7,10 +7,11 @@ and spheres, and one-sided diffuse area emitters. This module is the integrator 
 cameras, rays, geometry, emitters, BSDFs, sample dimensions, threads and
 the film are the shared toolkit's (``renderers/core/``).
 
-- **Next-event estimation**: at each surface vertex an emitter triangle is
-  picked in proportion to its power and a point on it uniformly by area
-  (:func:`renderers.core.lights.sample_emitter`); the area pdf is converted
-  to solid angle, ``p_ω = p_A · r² / cos θ_y``.
+- **Next-event estimation** (pbrt's ``SampleLd``, the toolkit's
+  :func:`renderers.core.direct.sample_ld`): at each surface vertex an emitter
+  triangle is picked in proportion to its power and a point on it uniformly
+  by area (:func:`renderers.core.lights.sample_emitter`); the area pdf is
+  converted to solid angle, ``p_ω = p_A · r² / cos θ_y``.
 - **BSDF sampling** (:func:`renderers.core.bsdf.bsdf_sample`): for a
   Lambertian BRDF ρ/π, cosine-weighted directions (pdf cos θ / π), which make
   the throughput update exactly ρ.
