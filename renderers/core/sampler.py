@@ -49,7 +49,7 @@ import numpy as np
 
 from harness.adapters.api import Setting, pass_key
 from renderers.core.rng import mix64, uniform
-from renderers.core.sampling import jit
+from renderers.core.sampling import jit, jit_inline
 from renderers.core.sobol import SOBOL_MATRICES, padded_1d, padded_2d, pixel_seed, sobol_1d
 
 #: The camera ray's jitter inside its pixel (box filter), x then y.
@@ -130,7 +130,7 @@ def sequence_stream(sampler: str, key: np.uint64, pixels: int = 1, first_sample:
     return Stream(kind, np.uint64(key), max(pixels, 1), first_sample, 1, SOBOL_MATRICES)
 
 
-@jit
+@jit_inline
 def path_point(st, path):
     """Where ``path``'s numbers come from, computed once per path and passed to the sample functions.
 
@@ -145,7 +145,7 @@ def path_point(st, path):
     return pixel_seed(batch_key, path % st.pixels), np.int64(s // st.batches)
 
 
-@jit
+@jit_inline
 def sample_1d(st, point, dim) -> float:
     """Number ``dim`` of the path at ``point`` (:func:`path_point`; pbrt's Get1D)."""
     seed, index = point
@@ -156,7 +156,7 @@ def sample_1d(st, point, dim) -> float:
     return padded_1d(seed, index, dim)
 
 
-@jit
+@jit_inline
 def sample_2d(st, point, dim):
     """Numbers ``dim`` and ``dim + 1`` of the path at ``point``, stratified jointly (pbrt's Get2D)."""
     seed, index = point
