@@ -67,7 +67,7 @@ jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 #: :data:`jit` for the few helpers every kernel calls per decision whose body LLVM will not inline by itself
 #: (:mod:`renderers.core.sampler`'s ``path_point``, ``sample_1d``, ``sample_2d``: a branch per sampler, so
 #: their compiled body is large): numba inlines them into each caller. Without it, the photon kernels, which
-#: drew raw numbers before they drew through the sampler, ran 30-60% slower (measured 2026-12-03).
+#: drew raw numbers before they drew through the sampler, ran 30-80% slower (measured 2026-12-03).
 jit_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
