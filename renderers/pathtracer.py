@@ -7,10 +7,11 @@ and spheres, and one-sided diffuse area emitters. This module is the integrator 
 cameras, rays, geometry, emitters, BSDFs, sample dimensions, threads and
 the film are the shared toolkit's (``renderers/core/``).
 
-- **Next-event estimation**: at each surface vertex an emitter triangle is
-  picked in proportion to its power and a point on it uniformly by area
-  (:func:`renderers.core.lights.sample_emitter`); the area pdf is converted
-  to solid angle, ``p_ω = p_A · r² / cos θ_y``.
+- **Next-event estimation** (pbrt's ``SampleLd``, the toolkit's
+  :func:`renderers.core.direct.sample_ld`): at each surface vertex an emitter
+  triangle is picked in proportion to its power and a point on it uniformly
+  by area (:func:`renderers.core.lights.sample_emitter`); the area pdf is
+  converted to solid angle, ``p_ω = p_A · r² / cos θ_y``.
 - **BSDF sampling** (:func:`renderers.core.bsdf.bsdf_sample`): for a
   Lambertian BRDF ρ/π, cosine-weighted directions (pdf cos θ / π), which make
   the throughput update exactly ρ.
@@ -49,25 +50,37 @@ is two-sided).
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
 from harness.adapters.api import AOVS, RenderResult, Setting
 from harness.scenes.model import Scene
-from renderers.core.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, refraction_scale, two_sided
-from renderers.core.camera import camera_basis, camera_rays
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
-from renderers.core.geometry import SceneGeometry, offset_origin, surface_point
-from renderers.core.lights import sample_emitter, solid_angle_pdf, solid_angle_pdf_along, towards_emitter
+from renderers.core.bsdf import bsdf_sample, faces, is_delta, refraction_scale
+from renderers.core.camera import camera_basis, camera_rays
+from renderers.core.direct import sample_ld
+from renderers.core.geometry import SceneGeometry, offset_origin, ray_hit
+from renderers.core.lights import solid_angle_pdf_along
 from renderers.core.roulette import Q_MAX, RR_DEPTH, continue_path
-from renderers.core.rays import (add_unoccluded, head, ray_buffer, set_path, set_ray, set_shadow, shadow_buffer,
-                                 shadow_segment)
+from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, head, ray_buffer, set_path, set_ray,
+                                 set_shadow, shadow_buffer)
 from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, SAMPLER_SETTING, Stream,
                                     independent, path_point, vertex_1d, vertex_2d)
 from renderers.core.sampling import jit, power_heuristic
 from renderers.core.schedule import render_image
+from renderers.core.settings import with_defaults
 
+
+class Bounce(NamedTuple):
+    """What one bounce of :func:`_shade` writes: per path of the unit its radiance ``L`` and AOVs (``aux``,
+    rows while ``aux_open``); for the wavefront, NEE shadow segments and continuation rays."""
+
+    L: np.ndarray  # (m, 3) float64
+    shadow: ShadowBuffer
+    nxt: RayBuffer
+    aux: np.ndarray  # (m, 6) or (0, 6): albedo, normal
+    aux_open: np.ndarray  # (m,) bool: the path has not written its AOVs yet
 
 
 @jit
@@ -78,22 +91,6 @@ def _emission_weight(pdf_bsdf, pa, t, cos_o) -> float:
     camera ray, a delta-BSDF sample): its emission counts with weight 1.
     """
     return 1.0 if pdf_bsdf == 0.0 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))
-
-
-@jit
-def _light_sample(x, n, mat, y, ny, pe):
-    """NEE from ``x`` (normal ``n``) to emitter point ``y`` (normal ``ny``, area pdf ``pe``).
-
-    Returns (cos θ_x, g) with g = cos θ_x cos θ_y / r² · w_light / p_A, the
-    factor that turns β·f·Le into the estimate; cos θ_x = 0 when the sample
-    gives nothing (emitter seen from behind, receiver facing away).
-    """
-    wi, dist2, cos_x, cos_y = towards_emitter(x, n, y, ny)
-    if not (cos_x > 0.0 and pe > 0.0):
-        return 0.0, 0.0
-    w = power_heuristic(solid_angle_pdf(pe, dist2, cos_y), bsdf_pdf(mat, cos_x))
-    g = cos_x * cos_y / dist2 * w / pe
-    return cos_x, g
 
 
 @jit
@@ -110,58 +107,51 @@ def _write_aovs(aux, q, geo, p, beta, scale, n):
 # reads/writes the buffers itself: helpers that take arrays and branch cost
 # reference counting and inlining (renderers/core/rays.py), so they stay here.
 @jit
-def _shade(prim, t_sphere, rays, stream, first, depth, extend, roulette, geo, L, shadow, nxt, aux, aux_open):
-    """Shade one bounce of a wavefront: ray i of ``rays`` hit primitive ``prim[i]`` (-1: missed).
+def _shade(hits, rays, stream, first, depth, extend, roulette, geo, out):
+    """Shade one bounce of a wavefront: ray i of ``rays`` hit primitive ``hits.prim[i]`` (-1: missed).
 
-    ``t_sphere`` holds the distances of sphere hits (:meth:`SceneGeometry.closest_hits`).
-    Adds the emission each ray found; then, if ``extend`` (max_depth allows
-    another segment), writes one NEE shadow segment into ``shadow`` and one
-    continuation ray into ``nxt`` per path, with Russian roulette if
-    ``roulette``. Ray paths are indices local to the unit; random numbers are
-    drawn from ``stream`` for path ``first + path``, its index in the pass. Returns (shadow
-    segments, next rays). When ``aux`` has rows, a path whose ``aux_open`` is
-    set and that reaches a non-delta surface writes its albedo and normal
-    there (:data:`harness.adapters.registry.AOVS`) and closes.
+    Adds the emission each ray found into ``out.L``; then, if ``extend``
+    (max_depth allows another segment), writes one NEE shadow segment
+    (:func:`renderers.core.direct.sample_ld`, MIS-weighted) into
+    ``out.shadow`` and one continuation ray into ``out.nxt`` per path, with
+    Russian roulette if ``roulette``. Ray paths are indices local to the unit;
+    random numbers are drawn from ``stream`` for path ``first + path``, its
+    index in the pass. Returns (shadow segments, next rays). When ``out.aux``
+    has rows, a path whose ``aux_open`` is set and that reaches a non-delta
+    surface writes its albedo and normal there (:data:`harness.adapters.api.AOVS`)
+    and closes.
     """
     ns = 0
     nn = 0
-    for i in range(prim.size):
-        p = prim[i]
+    for i in range(hits.prim.size):
+        p = hits.prim[i]
         if p < 0:
             continue
-        d = (rays.d[i, 0], rays.d[i, 1], rays.d[i, 2])
-        o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
-        x, n, cos_o, t = surface_point(geo, p, o, d, t_sphere[i] if p >= geo.n_triangles else 0.0)
-        mat = geo.material[p]
-        if not (cos_o > 0.0 or (cos_o < 0.0 and two_sided(mat))):
+        d, x, n, cos_o, t, mat = ray_hit(geo, rays, i, p, hits.t_sphere)
+        if not faces(mat, cos_o):
             continue  # back side (or grazing): one-sided emitters and BSDFs give nothing, the path ends
         q = rays.path[i]
         beta = (rays.beta[i, 0], rays.beta[i, 1], rays.beta[i, 2])
-        if aux.shape[0] > 0 and aux_open[q] and not is_delta(mat):
-            _write_aovs(aux, q, geo, p, beta, rays.scale[i], n)
-            aux_open[q] = False
+        if out.aux.shape[0] > 0 and out.aux_open[q] and not is_delta(mat):
+            _write_aovs(out.aux, q, geo, p, beta, rays.scale[i], n)
+            out.aux_open[q] = False
         pa = geo.light_pdf_area[p]
         if pa > 0.0 and cos_o > 0.0:
             w = _emission_weight(rays.pdf[i], pa, t, cos_o)
             for c in range(3):
-                L[q, c] += beta[c] * geo.radiance[p, c] * w
+                out.L[q, c] += beta[c] * geo.radiance[p, c] * w
         if not extend:
             continue
         pt = path_point(stream, first + q)
         rho = (geo.reflectance[p, 0], geo.reflectance[p, 1], geo.reflectance[p, 2])
         if geo.emitter_ids.size > 0 and not is_delta(mat):
             u = vertex_2d(stream, pt, depth, EMITTER_U)
-            y, ny, e, pe = sample_emitter(vertex_1d(stream, pt, depth, EMITTER_PICK), u[0], u[1], geo)
-            cos_x, g = _light_sample(x, n, mat, y, ny, pe)
-            if cos_x > 0.0:
-                # Between the two offset points, stopping short of the light (which must not shadow itself).
-                a = offset_origin(x, n, geo.offset)
-                sd, tfar, sl = shadow_segment(a, offset_origin(y, ny, geo.offset))
-                if sl > 0.0:
-                    set_shadow(shadow, ns, a, sd, tfar, q)
-                    for c in range(3):
-                        shadow.c[ns, c] = bsdf_eval(mat, beta[c] * rho[c], cos_x) * geo.radiance[e, c] * g
-                    ns += 1
+            found, a, sd, tfar, c = sample_ld(x, n, mat, (beta[0] * rho[0], beta[1] * rho[1], beta[2] * rho[2]),
+                                              (vertex_1d(stream, pt, depth, EMITTER_PICK), u[0], u[1]), geo, True)
+            if found:
+                set_shadow(out.shadow, ns, a, sd, tfar, q)
+                out.shadow.c[ns, 0], out.shadow.c[ns, 1], out.shadow.c[ns, 2] = c
+                ns += 1
         u = vertex_2d(stream, pt, depth, BSDF_U)
         wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p], u[0], u[1])
         scale = rays.scale[i] * refraction_scale(mat, cos_o, cos_w, geo.eta[p])
@@ -169,8 +159,8 @@ def _shade(prim, t_sphere, rays, stream, first, depth, extend, roulette, geo, L,
                                        vertex_1d(stream, pt, depth, ROULETTE) if roulette else 1.0, roulette)
         if alive:
             side = n if cos_w > 0.0 else (-n[0], -n[1], -n[2])  # the new ray leaves on the side it travels to
-            set_ray(nxt, nn, offset_origin(x, side, geo.offset), wi)
-            set_path(nxt, nn, q, b, pdf, scale)
+            set_ray(out.nxt, nn, offset_origin(x, side, geo.offset), wi)
+            set_path(out.nxt, nn, q, b, pdf, scale)
             nn += 1
     return ns, nn
 
@@ -185,21 +175,18 @@ def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels
     geo = geom.tables()
     L = np.zeros((m, 3))
     aux = np.zeros((m if aovs else 0, 6))
-    aux_open = np.ones(aux.shape[0], dtype=np.bool_)
     cur, nxt = ray_buffer(m), ray_buffer(m)  # double buffer: shade reads one wavefront, writes the next
-    shadow = shadow_buffer(m)
+    out = Bounce(L, shadow_buffer(m), nxt, aux, np.ones(aux.shape[0], dtype=np.bool_))
     camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, cur)
     n, depth = m, 1  # live rays; segments so far, the current ray included
     while n:
         rays = head(cur, n)
-        prim, t_sphere = geom.closest_hits(rays)
         extend = unbounded or depth + 1 <= scene.max_depth
-        ns, n = _shade(prim, t_sphere, rays, stream, first, depth, extend, depth >= rr_depth, geo, L, shadow, nxt,
-                       aux, aux_open)
+        ns, n = _shade(geom.closest_hits(rays), rays, stream, first, depth, extend, depth >= rr_depth, geo, out)
         if ns:
-            seg = head(shadow, ns)
+            seg = head(out.shadow, ns)
             add_unoccluded(L, seg, geom.unoccluded(seg.o, seg.d, seg.t))
-        cur, nxt = nxt, cur
+        cur, out = out.nxt, out._replace(nxt=cur)
         depth += 1
     return (L, aux) if aovs else L
 
@@ -214,8 +201,8 @@ class PathTracer(ToolkitRenderer):
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None, aovs: Sequence[str] = ()) -> RenderResult:
-        rr_depth = (settings or {}).get("rr_depth", RR_DEPTH)
-        sampler = (settings or {}).get("sampler", SAMPLER_SETTING.default)
+        s = with_defaults(self.settings, settings)
+        rr_depth, sampler = s["rr_depth"], s["sampler"]
         if unknown := set(aovs) - set(AOVS):
             raise ValueError(f"unknown AOVs {sorted(unknown)}; this renderer gives {', '.join(AOVS)}")
         aovs = AOVS if aovs else ()  # both come from one pass

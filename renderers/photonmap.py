@@ -42,8 +42,11 @@ consistent as the photon counts grow and r shrinks: the harness measures
 it with bias/variance splits and a consistency check, never a z-test
 (``estimator = "consistent"``). spp is the render pass's samples per pixel;
 the photon maps are built once per render, deterministically from the seed
-(:func:`harness.adapters.seeds.pass_key` streams :data:`GLOBAL_STREAM`,
+(:func:`harness.adapters.api.pass_key` streams :data:`GLOBAL_STREAM`,
 :data:`CAUSTIC_STREAM`), so images are bit-identical for any thread count.
+The ``sampler`` setting (:mod:`renderers.core.sampler`) draws every number:
+each map's photons are one sequence, camera paths and gather rays one per
+pixel (default ``independent``, the numbers the gate's budgets were measured with).
 """
 
 from __future__ import annotations
@@ -55,18 +58,17 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.api import RenderResult, pass_key
-from harness.adapters.settings import Setting, resolve_settings
+from harness.adapters.api import RenderResult, Setting, default_threads, pass_key
 from harness.scenes.model import Scene
-from renderers.core.bsdf import LAMBERT
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
+from renderers.core.bsdf import LAMBERT
 from renderers.core.geometry import SceneGeometry
 from renderers.core.photon_map import KERNELS, UNBOUNDED, PhotonMap, PrecomputedIrradiance, depth_budget
 from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, empty_photons, shoot, subset
 from renderers.core.rays import head, ray_buffer
-from renderers.core.sampler import Stream, independent
+from renderers.core.sampler import SAMPLERS, Stream, independent
 from renderers.core.schedule import render_image
-from harness.adapters.api import default_threads
+from renderers.core.settings import with_defaults
 from renderers.core.visible_points import camera_visible_points, gather_rays, walk_to_diffuse
 
 GLOBAL_STREAM, CAUSTIC_STREAM = 1, 2
@@ -101,17 +103,20 @@ class PhotonMapper(ToolkitRenderer):
                 choices=KERNELS),
         Setting("gather_rays", int, 1, "final-gathering rays per camera sample; 0 shows the global map directly",
                 low=0, high=1024),
+        Setting("sampler", str, "independent", "random numbers of the photons (one sequence per map), the camera "
+                "paths and the gather rays (per pixel): independent, pmj02 or sobol (renderers.core.sampler)",
+                choices=tuple(SAMPLERS)),
     )
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
-        s = resolve_settings(self, settings or {})
+        s = with_defaults(self.settings, settings)
         threads = self.threads or default_threads()
         geom, setup_s = warmed_geometry(scene, lambda g: _warm_up(g, scene))
         t0 = time.perf_counter()
         pass2 = build_pass2(geom, scene, seed, s, threads)
         photons_s = time.perf_counter() - t0
-        result = render_image(scene, spp, seed, pass2.shade, checkpoints, threads)
+        result = render_image(scene, spp, seed, pass2.shade, checkpoints, threads, sampler=s["sampler"])
         result.time_s += photons_s
         for c in result.checkpoints:
             c.time_s += photons_s
@@ -151,8 +156,8 @@ class Pass2:
 
     def shade(self, first: int, stop: int, pixels: int, stream: Stream) -> np.ndarray:
         """Radiance estimates (m, 3) of camera paths first .. stop-1 (render_image's trace function)."""
-        s, geom, key = self.s, self.geom, stream.key  # the independent sampler's pass key
-        L, vp = camera_visible_points(geom, self.scene, first, stop, pixels, key)
+        s, geom = self.s, self.geom
+        L, vp = camera_visible_points(geom, self.scene, first, stop, pixels, stream)
         f = np.flatnonzero(vp.found)
         x, n, w, budget = vp.position[f], vp.normal[f], vp.weight[f], depth_budget(self.scene.max_depth, vp.depth[f])
         E, _ = self.caustic_map.irradiance(x, n, budget, s["k"], self.r_caustic, s["kernel"])
@@ -163,8 +168,8 @@ class Pass2:
             return L
         rays = ray_buffer(len(f))
         for g in range(s["gather_rays"]):
-            r = gather_rays(vp, key, first, GATHER_DIM + 2 * g, s["gather_rays"], geom.offset, rays)
-            _, hit = walk_to_diffuse(geom, self.scene, head(rays, r), key, first, dim_base=GATHER_WALK_DIM
+            r = gather_rays(vp, stream, first, GATHER_DIM + 2 * g, s["gather_rays"], geom.offset, rays)
+            _, hit = walk_to_diffuse(geom, self.scene, head(rays, r), stream, first, dim_base=GATHER_WALK_DIM
                                      + g * GATHER_WALK_STRIDE, emission=False, nee=False, bounded=False,
                                      paths=len(L))
             h = np.flatnonzero(hit.found)
@@ -184,11 +189,11 @@ def build_pass2(geom: SceneGeometry, scene: Scene, seed: int, settings: dict, th
     global_ph, global_n = empty_photons(), 0
     if settings["global_photons"]:
         global_ph, global_n = shoot(geom, scene, pass_key(seed, 0, GLOBAL_STREAM), settings["global_photons"],
-                                    STORE_ALL, threads, stored=True)
+                                    STORE_ALL, threads, stored=True, sampler=settings["sampler"])
     caustic_ph, caustic_n = empty_photons(), 0
     if settings["caustic_photons"] and (geom.material != LAMBERT).any():  # no mirror or glass: no caustic
         caustic_ph, caustic_n = shoot(geom, scene, pass_key(seed, 0, CAUSTIC_STREAM), settings["caustic_photons"],
-                                      STORE_CAUSTIC, threads, stored=True)
+                                      STORE_CAUSTIC, threads, stored=True, sampler=settings["sampler"])
     p2 = Pass2(geom, scene, settings, PhotonMap(global_ph, global_n), PhotonMap(caustic_ph, caustic_n))
     if settings["gather_rays"] and scene.max_depth < 0:
         p2.precomputed(int(UNBOUNDED))
@@ -197,7 +202,7 @@ def build_pass2(geom: SceneGeometry, scene: Scene, seed: int, settings: dict, th
 
 def _warm_up(geom: SceneGeometry, scene: Scene) -> None:
     """Compile (or load from numba's cache) every kernel before the clock starts."""
-    settings = resolve_settings(PhotonMapper, {"global_photons": 64, "caustic_photons": 0})
+    settings = with_defaults(PhotonMapper.settings, {"global_photons": 64, "caustic_photons": 0})
     p2 = build_pass2(geom, scene, 0, settings, 1)
     p2.shade(0, 1, 1, independent(0))
     p2.s = dict(settings, gather_rays=0)

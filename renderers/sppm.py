@@ -39,9 +39,12 @@ not per photon.
 
 spp is iterations. The render is progressive: the checkpoints 1, 2, 4, ...
 come from one run. Every pass is keyed from the seed
-(:func:`harness.adapters.seeds.pass_key`: iteration i's camera pass is
+(:func:`harness.adapters.api.pass_key`: iteration i's camera pass is
 stream 0, its photons :data:`PHOTON_STREAM`), and work is reduced in order,
-so an image is bit-identical for any thread count.
+so an image is bit-identical for any thread count. The ``sampler`` setting
+draws the numbers (:mod:`renderers.core.sampler`): with ``pmj02`` or
+``sobol`` iteration i is sample i of each pixel's sequence, and each photon
+pass is one sequence over its photons.
 """
 
 from __future__ import annotations
@@ -53,15 +56,15 @@ from typing import Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
-from harness.adapters.api import Checkpoint, RenderResult, pass_key
-from harness.adapters.settings import Setting, resolve_settings
+from harness.adapters.api import Checkpoint, RenderResult, Setting, default_threads, pass_key
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.geometry import SceneGeometry
 from renderers.core.photon_map import depth_budget, pairs_that_count
 from renderers.core.photons import BATCH, STORE_INDIRECT, trace_photons
+from renderers.core.sampler import SAMPLERS, Stream, independent, pass_stream, sequence_stream
 from renderers.core.schedule import pass_units, run_units
-from harness.adapters.api import default_threads
+from renderers.core.settings import with_defaults
 from renderers.core.visible_points import VisiblePoints, camera_visible_points, visible_buffer
 
 PHOTON_STREAM = 1
@@ -83,21 +86,26 @@ class SPPM(ToolkitRenderer):
         Setting("initial_radius", float, 2.0, "starting gather radius, in pixel footprints at the scene's centre "
                 "(2: see the module docstring)",
                 low=1e-3, high=1000.0),
+        Setting("sampler", str, "independent", "random numbers of the camera passes (one sequence per pixel over "
+                "the iterations) and of each photon pass (one sequence over its photons): independent, pmj02 or "
+                "sobol (renderers.core.sampler)", choices=tuple(SAMPLERS)),
     )
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
         if spp < 1:
             raise ValueError(f"spp must be >= 1, got {spp}")
-        s = resolve_settings(self, settings or {})
+        s = with_defaults(self.settings, settings)
         threads = self.threads or default_threads()
-        geom, setup_s = warmed_geometry(scene, lambda g: Progress(g, scene, s).iterate(np.uint64(0), np.uint64(0), 1,
-                                                                                       photons=1))
+        geom, setup_s = warmed_geometry(scene, lambda g: Progress(g, scene, s).iterate(independent(0), independent(0),
+                                                                                       1, photons=1))
         state = Progress(geom, scene, s)
         photons = s["photons_per_iteration"] or state.pixels
         shots, t0 = [], time.perf_counter()
         for i in range(spp):
-            state.iterate(pass_key(seed, i), pass_key(seed, i, PHOTON_STREAM), threads, photons)
+            # Iteration i is sample i of each pixel's camera sequence (no batches: SPPM reports no variance).
+            state.iterate(pass_stream(s["sampler"], seed, i, state.pixels, i, batches=1),
+                          sequence_stream(s["sampler"], pass_key(seed, i, PHOTON_STREAM)), threads, photons)
             if i + 1 in checkpoints and i + 1 < spp:
                 shots.append(Checkpoint(i + 1, state.image(i + 1), time.perf_counter() - t0))
         elapsed = time.perf_counter() - t0
@@ -141,15 +149,16 @@ class Progress:
         L = self.ld / iterations + self.tau / (iterations * math.pi * self.radius ** 2)[:, None]
         return L.reshape(cam.height, cam.width, 3).astype(np.float32)
 
-    def iterate(self, camera_key: np.uint64, photon_key: np.uint64, threads: int, photons: int) -> None:
-        vp = self._camera_pass(camera_key, threads)
+    def iterate(self, camera: Stream, photon: Stream, threads: int, photons: int) -> None:
+        """One iteration: the camera pass drawing from ``camera``, ``photons`` photons from ``photon``."""
+        vp = self._camera_pass(camera, threads)
         found = np.flatnonzero(vp.found)
         phi, m = np.zeros((self.pixels, 3)), np.zeros(self.pixels)
         if found.size:
             gather = _Gather(self, vp, found)
 
             def work(batch):
-                return gather.photons(photon_key, batch[0], batch[1])
+                return gather.photons(photon, batch[0], batch[1])
 
             def reduce(batch, result):
                 phi[:] += result[0]
@@ -160,11 +169,11 @@ class Progress:
             phi /= photons
         self._update(phi, m)
 
-    def _camera_pass(self, key: np.uint64, threads: int) -> VisiblePoints:
+    def _camera_pass(self, stream: Stream, threads: int) -> VisiblePoints:
         vp = visible_buffer(self.pixels)
 
         def work(unit):
-            return camera_visible_points(self.geom, self.scene, unit.first, unit.stop, self.pixels, key)
+            return camera_visible_points(self.geom, self.scene, unit.first, unit.stop, self.pixels, stream)
 
         def reduce(unit, result):
             L, points = result
@@ -198,9 +207,9 @@ class _Gather:
         self.radius = progress.radius[found]
         self.tree = cKDTree(self.position, balanced_tree=False, compact_nodes=False)
 
-    def photons(self, key: np.uint64, first: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
-        """(Φ (pixels, 3), M (pixels,)) gathered from photons first .. stop-1 of this iteration."""
-        ph = trace_photons(self.p.geom, self.p.scene, key, first, stop, STORE_INDIRECT)
+    def photons(self, stream: Stream, first: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """(Φ (pixels, 3), M (pixels,)) gathered from photons first .. stop-1 of this iteration's ``stream``."""
+        ph = trace_photons(self.p.geom, self.p.scene, stream, first, stop, STORE_INDIRECT)
         phi, m = np.zeros((self.p.pixels, 3)), np.zeros(self.p.pixels)
         if len(ph) == 0:
             return phi, m

@@ -53,14 +53,14 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "nee_missing_cos_x",
         "NEE geometry term written cos θ_y / r² (the receiver's cos θ_x dropped)",
-        (("g = cos_x * cos_y / dist2 * w / pe", "g = cos_y / dist2 * w / pe"),),
+        (("g = cos_x * cos_y / dist2 * w / pe", "g = cos_y / dist2 * w / pe", f"{CORE}/direct.py"),),
     ),
     Mutant(
         "light_pdf_2pct",
         "light pdf 2% too high where NEE reads it (pe = light_pdf_area[e] * 1.02, e.g. a stale area table)",
-        (("pe = sample_emitter(vertex_1d(stream, pt, depth, EMITTER_PICK), u[0], u[1], geo)\n",
-          "pe = sample_emitter(vertex_1d(stream, pt, depth, EMITTER_PICK), u[0], u[1], geo)\n"
-          "            pe = pe * 1.02\n"),),
+        (("    y, ny, e, pe = sample_emitter(u[0], u[1], u[2], geo)\n",
+          "    y, ny, e, pe = sample_emitter(u[0], u[1], u[2], geo)\n"
+          "    pe = pe * 1.02\n", f"{CORE}/direct.py"),),
     ),
     Mutant(
         "rr_no_compensation",
@@ -133,8 +133,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "offset_minus_n",
         "continuation-ray origin offset along −n instead of +n: the ray starts behind the surface "
         "and hits it from the back (self-intersection ends every path)",
-        (("set_ray(nxt, nn, offset_origin(x, side, geo.offset), wi)",
-          "set_ray(nxt, nn, offset_origin(x, side, -geo.offset), wi)"),),
+        (("set_ray(out.nxt, nn, offset_origin(x, side, geo.offset), wi)",
+          "set_ray(out.nxt, nn, offset_origin(x, side, -geo.offset), wi)"),),
     ),
     Mutant(
         "cosine_pdf_mismatch",
@@ -147,11 +147,11 @@ MUTANTS: tuple[Mutant, ...] = (
         "two_sided_emitter",
         "the one-sided area light made two-sided: emission found on its back side counted (and |cos θ_y| in "
         "NEE)",
-        (("        if not (cos_o > 0.0 or (cos_o < 0.0 and two_sided(mat))):\n            continue  # back side",
-          "        if not (cos_o > 0.0 or (cos_o < 0.0 and two_sided(mat))):\n"
+        (("        if not faces(mat, cos_o):\n            continue  # back side",
+          "        if not faces(mat, cos_o):\n"
           "            if geo.light_pdf_area[p] > 0.0:  # area lights emit on both sides; NEE never samples the back\n"
           "                for c in range(3):\n"
-          "                    L[rays.path[i], c] += rays.beta[i, c] * geo.radiance[p, c]\n"
+          "                    out.L[rays.path[i], c] += rays.beta[i, c] * geo.radiance[p, c]\n"
           "            continue  # back side"),
          ("return -(ny[0] * w[0] + ny[1] * w[1] + ny[2] * w[2])",
           "return abs(ny[0] * w[0] + ny[1] * w[1] + ny[2] * w[2])", f"{CORE}/lights.py")),
@@ -228,8 +228,17 @@ MUTANTS: tuple[Mutant, ...] = (
         "caustic_photon_on_specular_surface",
         "caustic photons stored where they leave the last specular surface (the ray's origin) instead of "
         "where they land",
-        (("                _store(out, ns, x, power, d, n, depth, caustic)\n",
-          "                _store(out, ns, o if mode == STORE_CAUSTIC else x, power, d, n, depth, caustic)\n",
+        (("                _store(out.photons, ns, x, power, d, n, depth, caustic)\n",
+          "                o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])\n"
+          "                _store(out.photons, ns, o if mode == STORE_CAUSTIC else x, power, d, n, depth, caustic)\n",
+          f"{CORE}/photons.py"),),
+        "photonmap",
+    ),
+    Mutant(
+        "photon_direction_reuses_point_dims",
+        "a photon's emitted direction drawn from the sample dimensions of its point on the emitter (EMIT_U for "
+        "both decisions): where a photon leaves the light decides where it goes",
+        (("        w = sample_2d(stream, pt, EMIT_DIR_U)\n", "        w = sample_2d(stream, pt, EMIT_U)\n",
           f"{CORE}/photons.py"),),
         "photonmap",
     ),

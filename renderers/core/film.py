@@ -19,7 +19,7 @@ independent replicates of randomised QMC: L'Ecuyer & Lemieux 2002, "Recent
 advances in randomized quasi-Monte Carlo methods"); unbiased when K divides
 n, as at every power-of-two checkpoint ≥ K.
 
-Auxiliary images (AOVs: :data:`harness.adapters.registry.AOVS`) are summed
+Auxiliary images (AOVs: :data:`harness.adapters.api.AOVS`) are summed
 the same way, path by path, and averaged like the image; nobody asks for
 their variance, so no squares are kept.
 

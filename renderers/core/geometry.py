@@ -69,6 +69,13 @@ class Tables(NamedTuple):
     sphere_radius: np.ndarray  # (S,)
 
 
+class Hits(NamedTuple):
+    """Closest hits of a wavefront (:meth:`SceneGeometry.closest_hits`): what a shading kernel reads first."""
+
+    prim: np.ndarray  # (m,) int32 primitive hit by ray i, -1: missed
+    t_sphere: np.ndarray  # (m,) float64 distance of a sphere hit (empty in a scene without spheres)
+
+
 class SceneGeometry:
     """Triangles of a scene, with the Embree scene built over them."""
 
@@ -137,7 +144,7 @@ class SceneGeometry:
         closest_triangles(self._embree.handle, origins, directions, prim, ray_record())
         return prim
 
-    def closest_hits(self, rays) -> tuple[np.ndarray, np.ndarray]:
+    def closest_hits(self, rays) -> Hits:
         """Closest primitive per ray of a :class:`renderers.core.rays.RayBuffer` (-1: miss), and distances.
 
         The distances (float64) are filled for sphere hits only, and are an
@@ -146,10 +153,10 @@ class SceneGeometry:
         """
         prim = self.intersect(rays.o32, rays.d32)
         if not self.has_spheres:
-            return prim, np.empty(0)
+            return Hits(prim, np.empty(0))
         t = np.empty(len(prim))
         _nearer_spheres(prim, rays.o, rays.d, self.tables(), t)
-        return prim, t
+        return Hits(prim, t)
 
     def unoccluded(self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray) -> np.ndarray:
         """True where nothing lies along origin + t·direction for t in (0, tfar); float32 inputs."""

@@ -97,9 +97,9 @@ def kernel_weight(kernel, d, r) -> float:
 
 
 @jit
-def _estimate(dist, idx, normals, budget, r_max, kernel, p_normal, p_direction, p_power, p_depth, out, radius):
-    """out[i] = Σ over the found photons of query i that pass the tests of Φ_p·K (see the module docstring)."""
-    n_ph = p_depth.size
+def _estimate(dist, idx, normals, budget, r_max, kernel, photons, out, radius):
+    """out[i] = Σ over the found ``photons`` of query i that pass the tests of Φ_p·K (see the module docstring)."""
+    n_ph = photons.depth.size
     m, k = dist.shape
     for i in range(m):
         r = dist[i, k - 1] if idx[i, k - 1] < n_ph else r_max
@@ -110,14 +110,14 @@ def _estimate(dist, idx, normals, budget, r_max, kernel, p_normal, p_direction, 
             p = idx[i, a]
             if p >= n_ph:
                 break  # cKDTree pads missing neighbours with n, after the found ones
-            if p_depth[p] > budget[i]:
+            if photons.depth[p] > budget[i]:
                 continue
-            cos_in = photon_faces((normals[i, 0], normals[i, 1], normals[i, 2]), p_normal, p_direction, p)
+            cos_in = photon_faces((normals[i, 0], normals[i, 1], normals[i, 2]), photons.normal, photons.direction, p)
             if not cos_in > 0.0:
                 continue
             w = kernel_weight(kernel, dist[i, a], r)
             for c in range(3):
-                out[i, c] += w * p_power[p, c]
+                out[i, c] += w * photons.power[p, c]
 
 
 class PhotonMap:
@@ -148,9 +148,8 @@ class PhotonMap:
         k = min(k, len(self))
         dist, idx = self.tree.query(points, k=k, distance_upper_bound=r_max, workers=1)
         dist, idx = dist.reshape(m, k), idx.reshape(m, k)
-        ph = self.photons
         _estimate(dist, idx, np.ascontiguousarray(normals, np.float64), np.asarray(budget, np.int64), r_max,
-                  kernel_id(kernel), ph.normal, ph.direction, ph.power, ph.depth, out, radius)
+                  kernel_id(kernel), self.photons, out, radius)
         return out, radius
 
 

@@ -34,10 +34,12 @@ Using Photon Mapping", ch. 5) and the photon pass of each SPPM iteration
 Photons are stored compactly (:class:`Photons`): float32 position, flux,
 incoming direction and normal, int16 depth, a caustic flag.
 
-Determinism: photon j of a map uses the counter-based numbers of (key, j,
-dimension) (:mod:`renderers.core.rng`) in the layout named below, so the
-photons do not depend on how batches are spread over threads, and batches
-are joined in order (:func:`shoot`).
+Determinism: photon j of a map draws its numbers from the map's sampler
+stream (:func:`renderers.core.sampler.sequence_stream`: with ``independent``
+the counter-based numbers of (key, j, dimension), with ``pmj02`` or ``sobol``
+sample j of one sequence over the map's photons) in the layout named below,
+so the photons do not depend on how batches are spread over threads, and
+batches are joined in order (:func:`shoot`).
 """
 
 from __future__ import annotations
@@ -48,12 +50,12 @@ from typing import NamedTuple
 import numpy as np
 
 from harness.scenes.model import Scene
-from renderers.core.bsdf import bsdf_sample, is_delta, refraction_scale, two_sided
-from renderers.core.geometry import SceneGeometry, offset_origin, surface_point
+from renderers.core.bsdf import bsdf_sample, faces, is_delta, refraction_scale
+from renderers.core.geometry import SceneGeometry, offset_origin, ray_hit
 from renderers.core.lights import sample_emitter
-from renderers.core.rays import head, ray_buffer, set_path, set_ray
-from renderers.core.rng import uniform
+from renderers.core.rays import RayBuffer, head, ray_buffer, set_path, set_ray
 from renderers.core.roulette import Q_MAX
+from renderers.core.sampler import Stream, path_point, sample_1d, sample_2d, sequence_stream
 from renderers.core.sampling import cosine_hemisphere, jit
 from renderers.core.schedule import run_units
 
@@ -88,6 +90,15 @@ class Photons(NamedTuple):
         return len(self.depth)
 
 
+class Scattered(NamedTuple):
+    """What one bounce of :func:`_scatter` writes: the photons it stores, the photons going on (rays) and
+    whether each has met specular surfaces only so far."""
+
+    photons: Photons
+    rays: RayBuffer
+    spec: np.ndarray  # (m,) bool
+
+
 def empty_photons(n: int = 0) -> Photons:
     return Photons(np.zeros((n, 3), np.float32), np.zeros((n, 3), np.float32), np.zeros((n, 3), np.float32),
                    np.zeros((n, 3), np.float32), np.zeros(n, np.int16), np.zeros(n, bool))
@@ -112,14 +123,14 @@ def bounce_dim(depth, offset):
 
 
 @jit
-def _emit(key, first, geo, rays, spec):
-    """Photons first .. first + len(rays) - 1 leave the emitters: rays with their flux π·Le/p_A."""
+def _emit(stream, first, geo, rays, spec):
+    """Photons first .. first + len(rays) - 1 of ``stream`` leave the emitters: rays with their flux π·Le/p_A."""
     for i in range(rays.path.size):
-        j = first + i
-        y, ny, e, pe = sample_emitter(uniform(key, j, EMIT_PICK), uniform(key, j, EMIT_U),
-                                      uniform(key, j, EMIT_V), geo)
-        dx, dy, dz, cos = cosine_hemisphere(ny[0], ny[1], ny[2], uniform(key, j, EMIT_DIR_U),
-                                            uniform(key, j, EMIT_DIR_V))
+        pt = path_point(stream, first + i)
+        u = sample_2d(stream, pt, EMIT_U)
+        y, ny, e, pe = sample_emitter(sample_1d(stream, pt, EMIT_PICK), u[0], u[1], geo)
+        w = sample_2d(stream, pt, EMIT_DIR_U)
+        dx, dy, dz, cos = cosine_hemisphere(ny[0], ny[1], ny[2], w[0], w[1])
         k = math.pi / pe if pe > 0.0 and cos > 0.0 else 0.0  # zero-pdf samples carry nothing
         set_ray(rays, i, offset_origin(y, ny, geo.offset), (dx, dy, dz))
         set_path(rays, i, i, (geo.radiance[e, 0] * k, geo.radiance[e, 1] * k, geo.radiance[e, 2] * k), 0.0)
@@ -138,82 +149,79 @@ def _store(out, k, x, power, d, n, depth, caustic):
 
 
 @jit
-def _scatter(prim, t_sphere, rays, spec, key, first, depth, mode, extend, geo, out, nxt, nxt_spec):
-    """One bounce of a photon wavefront: store where the mode says, then scatter or absorb.
+def _scatter(hits, rays, spec, stream, first, depth, mode, extend, geo, out):
+    """One bounce of a photon wavefront (photon ``first`` + path of ``stream``): store where the mode says,
+    then scatter or absorb.
 
-    Returns (photons stored into ``out``, photons going on into ``nxt``).
+    Returns (photons stored into ``out.photons``, photons going on into ``out.rays``).
     """
     ns = 0
     nn = 0
-    for i in range(prim.size):
-        p = prim[i]
+    for i in range(hits.prim.size):
+        p = hits.prim[i]
         if p < 0:
             continue
-        d = (rays.d[i, 0], rays.d[i, 1], rays.d[i, 2])
-        o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
-        x, n, cos_o, t = surface_point(geo, p, o, d, t_sphere[i] if p >= geo.n_triangles else 0.0)
-        mat = geo.material[p]
-        if not (cos_o > 0.0 or (cos_o < 0.0 and two_sided(mat))):
+        d, x, n, cos_o, t, mat = ray_hit(geo, rays, i, p, hits.t_sphere)
+        if not faces(mat, cos_o):
             continue  # a one-sided surface's back: absorbed
         power = (rays.beta[i, 0], rays.beta[i, 1], rays.beta[i, 2])
         diffuse = not is_delta(mat)
         if diffuse:
             caustic = spec[i] and depth >= 2
             if mode == STORE_ALL or (mode == STORE_CAUSTIC and caustic) or (mode == STORE_INDIRECT and depth >= 2):
-                _store(out, ns, x, power, d, n, depth, caustic)
+                _store(out.photons, ns, x, power, d, n, depth, caustic)
                 ns += 1
             if mode == STORE_CAUSTIC:
                 continue  # past a diffuse bounce no photon is a caustic one
         if not extend:
             continue
-        j = first + rays.path[i]
+        pt = path_point(stream, first + rays.path[i])
         rho = (geo.reflectance[p, 0], geo.reflectance[p, 1], geo.reflectance[p, 2])
-        wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p],
-                                          uniform(key, j, bounce_dim(depth, BOUNCE_U)),
-                                          uniform(key, j, bounce_dim(depth, BOUNCE_V)))
+        u = sample_2d(stream, pt, bounce_dim(depth, BOUNCE_U))
+        wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p], u[0], u[1])
         if not valid:
             continue
         s = refraction_scale(mat, cos_o, cos_w, geo.eta[p])  # flux has no (η_i/η_t)² (module docstring)
         w = (f[0] / s, f[1] / s, f[2] / s)
         q = min(max(w[0], w[1], w[2]), Q_MAX)
-        if not (q > 0.0 and uniform(key, j, bounce_dim(depth, BOUNCE_ROULETTE)) < q):
+        if not (q > 0.0 and sample_1d(stream, pt, bounce_dim(depth, BOUNCE_ROULETTE)) < q):
             continue
         side = n if cos_w > 0.0 else (-n[0], -n[1], -n[2])
-        set_ray(nxt, nn, offset_origin(x, side, geo.offset), wi)
-        set_path(nxt, nn, rays.path[i], (power[0] * w[0] / q, power[1] * w[1] / q, power[2] * w[2] / q), 0.0)
-        nxt_spec[nn] = spec[i] and not diffuse
+        set_ray(out.rays, nn, offset_origin(x, side, geo.offset), wi)
+        set_path(out.rays, nn, rays.path[i], (power[0] * w[0] / q, power[1] * w[1] / q, power[2] * w[2] / q), 0.0)
+        out.spec[nn] = spec[i] and not diffuse
         nn += 1
     return ns, nn
 
 
-def trace_photons(geom: SceneGeometry, scene: Scene, key: np.uint64, first: int, stop: int, mode: int) -> Photons:
-    """The photons ``first .. stop-1`` of the map keyed ``key``, traced and stored by ``mode`` (not normalised)."""
+def trace_photons(geom: SceneGeometry, scene: Scene, stream: Stream, first: int, stop: int, mode: int) -> Photons:
+    """The photons ``first .. stop-1`` of ``stream`` (:func:`renderers.core.sampler.sequence_stream`: one
+    sequence over a map's photons), traced and stored by ``mode`` (not normalised)."""
     m = stop - first
     geo = geom.tables()
     if m <= 0 or not geom.has_emitters or not (scene.max_depth < 0 or scene.max_depth >= 2):
         return empty_photons()
-    cur, nxt = ray_buffer(m), ray_buffer(m)
-    spec, nxt_spec = np.empty(m, bool), np.empty(m, bool)
-    out = empty_photons(m)
-    _emit(key, first, geo, cur, spec)
+    cur, spec = ray_buffer(m), np.empty(m, bool)
+    out = Scattered(empty_photons(m), ray_buffer(m), np.empty(m, bool))
+    _emit(stream, first, geo, cur, spec)
     parts, n, depth = [], m, 1
     while n:
         rays = head(cur, n)
-        prim, t_sphere = geom.closest_hits(rays)
         extend = scene.max_depth < 0 or depth + 2 <= scene.max_depth
-        ns, n = _scatter(prim, t_sphere, rays, spec[:n], key, first, depth, mode, extend, geo, out, nxt, nxt_spec)
+        ns, n = _scatter(geom.closest_hits(rays), rays, spec[:n], stream, first, depth, mode, extend, geo, out)
         if ns:
-            parts.append(Photons(*(a[:ns].copy() for a in out)))
-        cur, nxt = nxt, cur
-        spec, nxt_spec = nxt_spec, spec
+            parts.append(Photons(*(a[:ns].copy() for a in out.photons)))
+        cur, spec, out = out.rays, out.spec, out._replace(rays=cur, spec=spec)
         depth += 1
     return join(parts)
 
 
 def shoot(geom: SceneGeometry, scene: Scene, key: np.uint64, count: int, mode: int, threads: int,
-          stored: bool = False, first: int = 0) -> tuple[Photons, int]:
+          stored: bool = False, first: int = 0, sampler: str = "independent") -> tuple[Photons, int]:
     """A photon map's photons, their flux divided by the photons emitted: (photons, emitted).
 
+    The map's photons are one sequence of ``sampler``
+    (:func:`renderers.core.sampler.sequence_stream`) keyed ``key``.
     ``count`` photons are emitted (numbered ``first`` on), or, with
     ``stored``, batches of :data:`BATCH` are emitted until ``count`` photons
     are stored (Mitsuba 0.6's ``globalPhotons``/``causticPhotons`` count stored
@@ -230,8 +238,10 @@ def shoot(geom: SceneGeometry, scene: Scene, key: np.uint64, count: int, mode: i
             yield b, min(b + BATCH, limit)
             b += BATCH
 
+    stream = sequence_stream(sampler, key)
+
     def work(batch):
-        return trace_photons(geom, scene, key, batch[0], batch[1], mode)
+        return trace_photons(geom, scene, stream, batch[0], batch[1], mode)
 
     def reduce(batch, photons):
         if state["done"]:

@@ -6,7 +6,7 @@ pseudorandom number generators", OOPSLA) applied twice. No state is carried
 between calls, so the numbers a path sees do not depend on how paths are
 batched, ordered or shared among threads. The key is per pass, never per
 work unit (units are cut by thread count, and the image must not depend on
-it): :func:`harness.adapters.seeds.pass_key`, the seed derivation every
+it): :func:`harness.adapters.api.pass_key`, the seed derivation every
 renderer shares.
 """
 

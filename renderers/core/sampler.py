@@ -13,7 +13,9 @@ instead of hand arithmetic in the kernels:
 A dimension is a pure function of (depth, offset), so a decision that is
 skipped (no emitter, a path ended) never shifts the numbers of the ones
 after it. Changing any number here changes every image:
-``tests/renderers/test_pathtracer_pinned.py`` pins them.
+``tests/renderers/test_pathtracer_pinned.py`` and ``tests/renderers/test_photon_pinned.py`` pin them.
+Photon paths have their own layout (:mod:`renderers.core.photons`) and
+draw from :func:`sequence_stream`: one sequence over a map's photons.
 
 Which numbers a dimension gets is the sampler's (:data:`SAMPLERS`), carried
 to kernels as a :class:`Stream`; every sample stays a pure function of
@@ -47,7 +49,7 @@ import numpy as np
 
 from harness.adapters.api import Setting, pass_key
 from renderers.core.rng import mix64, uniform
-from renderers.core.sampling import jit
+from renderers.core.sampling import jit, jit_inline
 from renderers.core.sobol import SOBOL_MATRICES, padded_1d, padded_2d, pixel_seed, sobol_1d
 
 #: The camera ray's jitter inside its pixel (box filter), x then y.
@@ -99,19 +101,36 @@ def independent(key: np.uint64, pixels: int = 1, first_sample: int = 0) -> Strea
     return Stream(INDEPENDENT, np.uint64(key), max(pixels, 1), first_sample, 1, SOBOL_MATRICES)
 
 
-def pass_stream(sampler: str, seed: int, index: int, pixels: int, first_sample: int) -> Stream:
+def pass_stream(sampler: str, seed: int, index: int, pixels: int, first_sample: int,
+                batches: int = BATCHES) -> Stream:
     """The stream of pass ``index`` (its first sample per pixel ``first_sample``) of a render seeded ``seed``.
 
-    ``independent`` keys each pass (:func:`harness.adapters.seeds.pass_key`); a
-    low-discrepancy sampler keys the whole render, since its sequences span the passes.
+    ``independent`` keys each pass (:func:`harness.adapters.api.pass_key`); a
+    low-discrepancy sampler keys the whole render, since its sequences span the passes,
+    and splits each pixel's samples into ``batches`` randomisations (1: a render
+    that reports no variance, as SPPM's camera passes, keeps one sequence per pixel).
     """
     kind = SAMPLERS[sampler]
     if kind == INDEPENDENT:
         return independent(pass_key(seed, index), pixels, first_sample)
-    return Stream(kind, pass_key(seed, 0, SEQUENCE_STREAM), pixels, first_sample, BATCHES, SOBOL_MATRICES)
+    return Stream(kind, pass_key(seed, 0, SEQUENCE_STREAM), pixels, first_sample, batches, SOBOL_MATRICES)
 
 
-@jit
+def sequence_stream(sampler: str, key: np.uint64, pixels: int = 1, first_sample: int = 0) -> Stream:
+    """One randomisation (no batches) of ``sampler`` keyed ``key``: path j is sample ``first_sample + j div
+    pixels`` of sequence ``j mod pixels``.
+
+    A photon pass is one sequence over its photons (``pixels`` 1), so the
+    photons' emission and bounce decisions are stratified across the map.
+    ``independent``: uniform(key, path, dimension), as :func:`independent`.
+    """
+    kind = SAMPLERS[sampler]
+    if kind == INDEPENDENT:
+        return independent(key, pixels, first_sample)
+    return Stream(kind, np.uint64(key), max(pixels, 1), first_sample, 1, SOBOL_MATRICES)
+
+
+@jit_inline
 def path_point(st, path):
     """Where ``path``'s numbers come from, computed once per path and passed to the sample functions.
 
@@ -126,7 +145,7 @@ def path_point(st, path):
     return pixel_seed(batch_key, path % st.pixels), np.int64(s // st.batches)
 
 
-@jit
+@jit_inline
 def sample_1d(st, point, dim) -> float:
     """Number ``dim`` of the path at ``point`` (:func:`path_point`; pbrt's Get1D)."""
     seed, index = point
@@ -137,7 +156,7 @@ def sample_1d(st, point, dim) -> float:
     return padded_1d(seed, index, dim)
 
 
-@jit
+@jit_inline
 def sample_2d(st, point, dim):
     """Numbers ``dim`` and ``dim + 1`` of the path at ``point``, stratified jointly (pbrt's Get2D)."""
     seed, index = point

@@ -7,14 +7,14 @@ most ``2·threads`` jobs in flight, so memory stays bounded and the reduced
 result cannot depend on which thread finished first.
 
 :func:`render_image` is the image loop built on it. A render of ``spp``
-samples per pixel is split into passes (:func:`harness.adapters.seeds.spp_passes`;
+samples per pixel is split into passes (:func:`harness.adapters.api.spp_passes`;
 pass sizes double, so power-of-two checkpoints come free). A pass of ``n``
 samples over ``P`` pixels is a range of ``n·P`` paths (path j looks through
 pixel j mod P), cut into work units.
 
 - Random numbers are a pure function of (pass key, path index, dimension)
   (:mod:`renderers.core.rng`; the pass key is
-  :func:`harness.adapters.seeds.pass_key`), so they do not depend on how the
+  :func:`harness.adapters.api.pass_key`), so they do not depend on how the
   paths are cut into units.
 - Each unit returns one estimate per path; they are added into the film
   path by path, in path order (:mod:`renderers.core.film`), units in order.
@@ -114,7 +114,7 @@ def render_image(
 
     ``sampler`` names one of :data:`renderers.core.sampler.SAMPLERS`; a
     low-discrepancy one gets its variance from independent batches. With
-    ``aovs`` (names, :data:`harness.adapters.registry.AOVS`), ``trace`` returns
+    ``aovs`` (names, :data:`harness.adapters.api.AOVS`), ``trace`` returns
     (estimates, aux) and the result and its checkpoints carry those images.
     """
     if spp < 1:

@@ -16,9 +16,9 @@ light from photons; this module adds what photons must not carry:
   SPPM does, so photons carry only indirect light and caustics.
 
 Both are switched off for final-gathering rays, which reuse the walk
-(:func:`walk_to_diffuse`). Sample dimensions are :mod:`renderers.core.sampler`'s
-per-vertex layout, shifted by ``dim_base`` so a photon mapper's gather rays
-draw numbers of their own.
+(:func:`walk_to_diffuse`). Every number comes from the pass's
+:class:`renderers.core.sampler.Stream` in its per-vertex layout, shifted by
+``dim_base`` so a photon mapper's gather rays draw numbers of their own.
 """
 
 from __future__ import annotations
@@ -28,16 +28,15 @@ from typing import NamedTuple
 import numpy as np
 
 from harness.scenes.model import Scene
-from renderers.core.bsdf import (LAMBERT, bsdf_eval, bsdf_sample, is_delta, lambert_pdf, lambert_sample,
-                                 refraction_scale, two_sided)
+from renderers.core.bsdf import bsdf_sample, faces, is_delta, lambert_pdf, lambert_sample, refraction_scale
 from renderers.core.camera import camera_basis, camera_rays
-from renderers.core.geometry import SceneGeometry, offset_origin, surface_point
-from renderers.core.lights import sample_emitter, towards_emitter
-from renderers.core.rays import (RayBuffer, add_unoccluded, head, ray_buffer, set_path, set_ray, set_shadow,
-                                 shadow_buffer, shadow_segment)
-from renderers.core.rng import uniform
+from renderers.core.direct import sample_ld
+from renderers.core.geometry import SceneGeometry, offset_origin, ray_hit
+from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, head, ray_buffer, set_path, set_ray,
+                                 set_shadow, shadow_buffer)
 from renderers.core.roulette import RR_DEPTH, continue_path
-from renderers.core.sampler import BSDF_U, BSDF_V, EMITTER_PICK, EMITTER_U, EMITTER_V, ROULETTE, independent, vertex_dim
+from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, Stream, independent, path_point,
+                                    sample_1d, sample_2d, vertex_dim)
 from renderers.core.sampling import jit
 
 
@@ -57,38 +56,61 @@ def visible_buffer(m: int) -> VisiblePoints:
                          np.zeros(m, bool), np.zeros((m, 3)))
 
 
-@jit
-def _u(key, j, dim_base, depth, offset):
-    return uniform(key, j, dim_base + vertex_dim(depth, offset))
+class Walk(NamedTuple):
+    """What every bounce of a walk shares: path j = ``first`` + path draws from ``stream``, its vertex
+    dimensions shifted by ``dim_base``; whether it adds ``emission`` and ``nee``."""
+
+    stream: Stream
+    first: int
+    dim_base: int
+    emission: bool
+    nee: bool
+
+
+class Found(NamedTuple):
+    """What a walk's bounces write: per path, the light found and the visible point; per bounce, the NEE
+    shadow segments and the rays going on."""
+
+    L: np.ndarray  # (paths, 3) float64
+    vp: VisiblePoints
+    shadow: ShadowBuffer
+    nxt: RayBuffer
 
 
 @jit
-def _step(prim, t_sphere, rays, key, first, dim_base, depth, emission, nee, extend, roulette, geo, L, vp,
-          shadow, nxt):
+def _vertex_1d(walk, pt, depth, offset) -> float:
+    return sample_1d(walk.stream, pt, walk.dim_base + vertex_dim(depth, offset))
+
+
+@jit
+def _vertex_2d(walk, pt, depth, offset):
+    return sample_2d(walk.stream, pt, walk.dim_base + vertex_dim(depth, offset))
+
+
+@jit
+def _step(hits, rays, walk, depth, extend, roulette, geo, out):
     """One bounce: record diffuse hits as visible points (with NEE), continue specular ones.
 
     Returns (shadow segments, rays going on).
     """
     ns = 0
     nn = 0
-    for i in range(prim.size):
-        p = prim[i]
+    for i in range(hits.prim.size):
+        p = hits.prim[i]
         if p < 0:
             continue
-        d = (rays.d[i, 0], rays.d[i, 1], rays.d[i, 2])
-        o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
-        x, n, cos_o, t = surface_point(geo, p, o, d, t_sphere[i] if p >= geo.n_triangles else 0.0)
-        mat = geo.material[p]
-        if not (cos_o > 0.0 or (cos_o < 0.0 and two_sided(mat))):
+        d, x, n, cos_o, t, mat = ray_hit(geo, rays, i, p, hits.t_sphere)
+        if not faces(mat, cos_o):
             continue
         q = rays.path[i]
         beta = (rays.beta[i, 0], rays.beta[i, 1], rays.beta[i, 2])
-        if emission and geo.light_pdf_area[p] > 0.0 and cos_o > 0.0:
+        if walk.emission and geo.light_pdf_area[p] > 0.0 and cos_o > 0.0:
             for c in range(3):
-                L[q, c] += beta[c] * geo.radiance[p, c]
-        j = first + q
+                out.L[q, c] += beta[c] * geo.radiance[p, c]
+        pt = path_point(walk.stream, walk.first + q)
         rho = (geo.reflectance[p, 0], geo.reflectance[p, 1], geo.reflectance[p, 2])
         if not is_delta(mat):
+            vp = out.vp
             vp.found[q] = True
             vp.depth[q] = depth
             for c in range(3):
@@ -96,96 +118,97 @@ def _step(prim, t_sphere, rays, key, first, dim_base, depth, emission, nee, exte
                 vp.normal[q, c] = n[c]
                 vp.weight[q, c] = beta[c] * rho[c]
                 vp.incoming[q, c] = d[c]
-            if nee and extend and geo.emitter_ids.size > 0:
-                y, ny, e, pe = sample_emitter(_u(key, j, dim_base, depth, EMITTER_PICK),
-                                              _u(key, j, dim_base, depth, EMITTER_U),
-                                              _u(key, j, dim_base, depth, EMITTER_V), geo)
-                wi, dist2, cos_x, cos_y = towards_emitter(x, n, y, ny)
-                if cos_x > 0.0 and pe > 0.0:
-                    g = cos_x * cos_y / dist2 / pe
-                    a = offset_origin(x, n, geo.offset)
-                    sd, tfar, sl = shadow_segment(a, offset_origin(y, ny, geo.offset))
-                    if sl > 0.0:
-                        set_shadow(shadow, ns, a, sd, tfar, q)
-                        for c in range(3):
-                            shadow.c[ns, c] = bsdf_eval(LAMBERT, beta[c] * rho[c], cos_x) * geo.radiance[e, c] * g
-                        ns += 1
+            if walk.nee and extend:
+                u = _vertex_2d(walk, pt, depth, EMITTER_U)
+                found, a, sd, tfar, c = sample_ld(x, n, mat, (beta[0] * rho[0], beta[1] * rho[1], beta[2] * rho[2]),
+                                                  (_vertex_1d(walk, pt, depth, EMITTER_PICK), u[0], u[1]), geo, False)
+                if found:
+                    set_shadow(out.shadow, ns, a, sd, tfar, q)
+                    out.shadow.c[ns, 0], out.shadow.c[ns, 1], out.shadow.c[ns, 2] = c
+                    ns += 1
             continue
         if not extend:
             continue
-        wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p],
-                                          _u(key, j, dim_base, depth, BSDF_U), _u(key, j, dim_base, depth, BSDF_V))
+        u = _vertex_2d(walk, pt, depth, BSDF_U)
+        wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p], u[0], u[1])
         scale = rays.scale[i] * refraction_scale(mat, cos_o, cos_w, geo.eta[p])
         alive, b, pdf = continue_path(mat, valid, cos_w, f, beta, scale,
-                                      _u(key, j, dim_base, depth, ROULETTE) if roulette else 1.0, roulette)
+                                      _vertex_1d(walk, pt, depth, ROULETTE) if roulette else 1.0, roulette)
         if alive:
             side = n if cos_w > 0.0 else (-n[0], -n[1], -n[2])
-            set_ray(nxt, nn, offset_origin(x, side, geo.offset), wi)
-            set_path(nxt, nn, q, b, pdf, scale)
+            set_ray(out.nxt, nn, offset_origin(x, side, geo.offset), wi)
+            set_path(out.nxt, nn, q, b, pdf, scale)
             nn += 1
     return ns, nn
 
 
-def walk_to_diffuse(geom: SceneGeometry, scene: Scene, rays: RayBuffer, key: np.uint64, first: int,
+def walk_to_diffuse(geom: SceneGeometry, scene: Scene, rays: RayBuffer, stream: Stream, first: int,
                     depth: int = 1, dim_base: int = 0, emission: bool = True, nee: bool = True,
                     bounded: bool = True, paths: int | None = None) -> tuple[np.ndarray, VisiblePoints]:
     """Follow ``rays`` (their first segment is number ``depth``) to diffuse surfaces.
 
     Ray i belongs to path ``rays.path[i]`` of the unit (``paths`` of them,
     default one per ray). Returns, per path, the light found on the way
-    (``emission``; ``nee``: direct light at the diffuse point) and the
-    :class:`VisiblePoints`. Random numbers are drawn for path ``first + path``,
-    dimensions shifted by ``dim_base``. ``bounded=False`` ignores the scene's
-    max_depth (a caller that counts depth itself, from a later vertex).
+    (``emission``; ``nee``: direct light at the diffuse point, by
+    :func:`renderers.core.direct.sample_ld` without MIS) and the
+    :class:`VisiblePoints`. Random numbers are drawn from ``stream`` for path
+    ``first + path``, dimensions shifted by ``dim_base``. ``bounded=False``
+    ignores the scene's max_depth (a caller that counts depth itself, from a
+    later vertex).
     """
     m = len(rays.path)
     paths = m if paths is None else paths
     geo = geom.tables()
-    L = np.zeros((paths, 3))
-    vp = visible_buffer(paths)
-    cur, nxt = rays, ray_buffer(m)
-    shadow = shadow_buffer(m)
+    walk = Walk(stream, first, dim_base, emission, nee)
+    out = Found(np.zeros((paths, 3)), visible_buffer(paths), shadow_buffer(m), ray_buffer(m))
+    cur = rays
     unbounded = scene.max_depth < 0 or not bounded
     n = m
     while n:
         live = head(cur, n)
-        prim, t_sphere = geom.closest_hits(live)
         extend = unbounded or depth + 1 <= scene.max_depth
-        ns, n = _step(prim, t_sphere, live, key, first, dim_base, depth, emission, nee, extend, depth >= RR_DEPTH,
-                      geo, L, vp, shadow, nxt)
+        ns, n = _step(geom.closest_hits(live), live, walk, depth, extend, depth >= RR_DEPTH, geo, out)
         if ns:
-            seg = head(shadow, ns)
-            add_unoccluded(L, seg, geom.unoccluded(seg.o, seg.d, seg.t))
-        if cur is rays:
-            cur = ray_buffer(m)  # the caller's buffer is read once, never written
-        cur, nxt = nxt, cur
+            seg = head(out.shadow, ns)
+            add_unoccluded(out.L, seg, geom.unoccluded(seg.o, seg.d, seg.t))
+        # The caller's buffer is read once, never written.
+        cur, out = out.nxt, out._replace(nxt=ray_buffer(m) if cur is rays else cur)
         depth += 1
-    return L, vp
+    return out.L, out.vp
 
 
 def camera_visible_points(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: int,
-                          key: np.uint64) -> tuple[np.ndarray, VisiblePoints]:
-    """Camera paths ``first .. stop-1`` of a pass (path j sees pixel j mod ``pixels``) to their visible points."""
+                          stream: Stream) -> tuple[np.ndarray, VisiblePoints]:
+    """Camera paths ``first .. stop-1`` of a pass (path j sees pixel j mod ``pixels``) to their visible points,
+    their numbers drawn from the pass's ``stream``.
+
+    A bare pass key is taken as the ``independent`` stream of that key, for
+    callers not yet on the sampler (renderers/ambient.py, renderers/probes.py).
+    """
+    if not isinstance(stream, Stream):
+        stream = independent(stream)
     cam = scene.camera
     rays = ray_buffer(stop - first)
-    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, independent(key), rays)
-    return walk_to_diffuse(geom, scene, rays, key, first)
+    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, rays)
+    return walk_to_diffuse(geom, scene, rays, stream, first)
 
 
 @jit
-def gather_rays(vp, key, first, dim, count, offset, rays):
+def gather_rays(vp, stream, first, dim, count, offset, rays):
     """One cosine-weighted ray from each found visible point into ``rays``; returns how many.
 
     Ray r carries path = its visible point's index and throughput weight/``count``
     (the weight of Lambert's cosine sample is ρ, already in ``weight``), and
-    the sample's pdf; it uses dimensions ``dim`` and ``dim + 1`` of the path.
+    the sample's pdf; it uses dimensions ``dim`` and ``dim + 1`` of path
+    ``first + index`` of ``stream``.
     """
     r = 0
     for i in range(vp.found.size):
         if not vp.found[i]:
             continue
         n = (vp.normal[i, 0], vp.normal[i, 1], vp.normal[i, 2])
-        dx, dy, dz, cos = lambert_sample(n, uniform(key, first + i, dim), uniform(key, first + i, dim + 1))
+        u = sample_2d(stream, path_point(stream, first + i), dim)
+        dx, dy, dz, cos = lambert_sample(n, u[0], u[1])
         if not cos > 0.0:
             continue
         x = (vp.position[i, 0], vp.position[i, 1], vp.position[i, 2])

@@ -64,7 +64,7 @@ def test_catalogue_applies_exactly_once_and_changes_the_source():
 
 
 def test_a_patch_that_does_not_apply_once_fails_loudly():
-    m = mutants.BY_NAME["light_pdf_2pct"]
+    m = mutants.BY_NAME["mis_emitter_double"]  # a patch of the path tracer itself
     old = m.patches[0][0]
     source = mutants.original_source()
     with pytest.raises(AssertionError, match="occurs 0 times"):

@@ -19,8 +19,9 @@ from harness.scenes.library import resolve_scene
 from renderers.core import film as film_module
 from renderers.core.film import Film
 from renderers.core.rng import uniform
+from renderers.core.photons import EMIT_DIR_U, EMIT_U, BOUNCE_U, bounce_dim
 from renderers.core.sampler import (BATCHES, CAMERA_U, PMJ02, SOBOL, Stream, independent, path_point, sample_1d,
-                                    sample_2d, vertex_dim)
+                                    sample_2d, sequence_stream, vertex_dim)
 from renderers.core.sobol import SOBOL_MATRICES
 from renderers.pathtracer import PathTracer
 
@@ -82,6 +83,30 @@ def test_each_batch_of_a_pixel_is_stratified_progressively(kind):
                         samples = batch + BATCHES * np.arange(block * 2 ** m, (block + 1) * 2 ** m)
                         pts = _draw_2d(st, _paths(pixel, samples), dim)
                         assert _is_net(pts, m), (kind, pixel, batch, dim, m, block)
+
+
+@pytest.mark.parametrize("sampler", ["pmj02", "sobol"])
+def test_a_photon_stream_is_one_sequence_stratified_over_the_photons(sampler):
+    """Exact: photons 0 .. 2^m - 1 of a map (one sequence, no batches: :func:`sequence_stream`) and the next
+    aligned block put one number in each interval of width 2^-m in every emission dimension, for every
+    m ≤ 10; for pmj02 they are also (0, m, 2)-nets in the emission point's, the emitted direction's and a
+    bounce's 2D dimensions (each 2D decision its own padded sequence; Sobol' pairs past (0, 1) are not)."""
+    st = sequence_stream(sampler, KEY)
+    assert (st.pixels, st.batches) == (1, 1)
+    for m in range(1, 11):
+        for block in (0, 1):
+            photons = np.arange(block * 2 ** m, (block + 1) * 2 ** m)
+            for dim in range(5):
+                cells = np.floor(_draw_1d(st, photons, dim) * 2 ** m)
+                assert np.unique(cells).size == 2 ** m, (dim, m, block)
+            for dim in [EMIT_U, EMIT_DIR_U, bounce_dim(2, BOUNCE_U)] if sampler == "pmj02" else []:
+                assert _is_net(_draw_2d(st, photons, dim), m), (dim, m, block)
+
+
+def test_an_independent_photon_stream_is_the_counter_based_rng():
+    """With ``independent`` photon j draws uniform(key, j, dim), as photons did before samplers."""
+    paths = np.arange(40)
+    assert np.array_equal(_draw_1d(sequence_stream("independent", KEY), paths, 7), [uniform(KEY, j, 7) for j in paths])
 
 
 @pytest.mark.parametrize("kind", [PMJ02, SOBOL])
