@@ -41,7 +41,10 @@ ALPHA = 1e-3
 F32 = 1e-5
 
 
-def render(scene: Scene, spp: int, seed: int, threads: int = 2, checkpoints=(), **settings):
+def render(scene: Scene, spp: int, seed: int, threads: int = 2, checkpoints=(), **overrides):
+    """:class:`AOAmbient`'s render with its complete settings, as the render path hands them (defaults but for
+    ``overrides``)."""
+    settings = {s.name: s.default for s in AOAmbient.settings} | overrides
     return AOAmbient(threads=threads).render(scene, spp, seed, checkpoints, settings=settings)
 
 

@@ -52,7 +52,8 @@ PINNED = {
 def full_settings(renderer, given: dict) -> dict:
     """The renderer's declared defaults with ``given`` over them, as the render path hands them in."""
     declared = {s.name: s.default for s in renderer.settings}
-    return declared | {k: v for k, v in given.items() if k in declared}
+    assert set(given) <= set(declared), set(given) - set(declared)
+    return declared | given
 
 
 def image_hash(result) -> str:

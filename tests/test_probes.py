@@ -53,8 +53,13 @@ pytest.importorskip("embreex")
 RHO, LE, FURNACE_L = 0.8, 1.0, 5.0
 
 def probe_settings(**overrides) -> dict:
-    """The renderer's settings, defaults but for ``overrides``, validated as a render would."""
+    """The renderer's settings, defaults but for ``overrides``, validated as the render path does."""
     return resolve_settings(IrradianceProbes(), overrides)
+
+
+def render(scene, spp: int, seed: int, threads: int = 2, **overrides):
+    """The renderer's image with the settings the render path would hand it (:func:`probe_settings`)."""
+    return IrradianceProbes(threads=threads).render(scene, spp, seed, settings=probe_settings(**overrides))
 
 
 def unit(v: np.ndarray) -> np.ndarray:
@@ -433,7 +438,7 @@ def test_furnace_image_is_five(furnace):
     of 5 seeds within :data:`FURNACE_IMAGE_TOLERANCE`, each above :data:`FURNACE_IMAGE_FLOOR`. A camera pass that
     forgot ρ is 15% too bright, probes that also held emission (counted twice) 80%."""
     settings = {"grid": 2, "bounces": 40, "iterations": 0}
-    means = [IrradianceProbes(threads=2).render(furnace, 16, seed, settings=settings).image.mean() / FURNACE_L - 1.0
+    means = [render(furnace, 16, seed, **settings).image.mean() / FURNACE_L - 1.0
              for seed in range(5)]
     assert np.median(means) == pytest.approx(0.0, abs=FURNACE_IMAGE_TOLERANCE), means
     assert min(means) >= FURNACE_IMAGE_FLOOR, means
@@ -485,9 +490,8 @@ def test_two_rooms_visibility_stops_the_leak(two_rooms):
     settings = {"grid": 4, "rays_per_probe": 128, "bounces": 3, "iterations": 0}
     grid = grid_of(two_rooms, probe_settings(**settings))
     assert not np.any(np.abs(ddgi.probe_positions(grid)[:, 0]) <= 0.01)  # no probe inside the wall
-    with_vis = room_ratio(two_rooms, IrradianceProbes(threads=2).render(two_rooms, 4, 0, settings=settings).image)
-    without = room_ratio(two_rooms, IrradianceProbes(threads=2).render(
-        two_rooms, 4, 0, settings=dict(settings, visibility=False)).image)
+    with_vis = room_ratio(two_rooms, render(two_rooms, 4, 0, **settings).image)
+    without = room_ratio(two_rooms, render(two_rooms, 4, 0, **settings, visibility=False).image)
     assert 0.0 <= with_vis <= LEAK_BUDGET, (with_vis, without)
     assert without >= LEAK_WITHOUT_VISIBILITY and without >= 10 * with_vis, (with_vis, without)
 
@@ -497,9 +501,8 @@ def test_two_rooms_leak_with_the_default_settings(two_rooms):
     """The same with every setting at its default (grid 8, 256 rays, 8 + 16 updates; about 25 s on 2 cores):
     measured dark/lit 2e-6 with visibility and 0.0105 without (seed 1); budgets as
     :func:`test_two_rooms_visibility_stops_the_leak`'s."""
-    with_vis = room_ratio(two_rooms, IrradianceProbes(threads=2).render(two_rooms, 4, 1).image)
-    without = room_ratio(two_rooms, IrradianceProbes(threads=2).render(two_rooms, 4, 1,
-                                                                       settings={"visibility": False}).image)
+    with_vis = room_ratio(two_rooms, render(two_rooms, 4, 1).image)
+    without = room_ratio(two_rooms, render(two_rooms, 4, 1, visibility=False).image)
     assert 0.0 <= with_vis <= LEAK_BUDGET, (with_vis, without)
     assert without >= LEAK_WITHOUT_VISIBILITY and without >= 10 * with_vis, (with_vis, without)
 
@@ -518,7 +521,7 @@ def test_images_depend_on_the_seed_only(two_rooms):
     geom = SceneGeometry(two_rooms)
     one, two = (update_probes(geom, grid, 5, resolved, threads) for threads in (1, 2))
     assert one.irradiance.tobytes() == two.irradiance.tobytes() and one.moments.tobytes() == two.moments.tobytes()
-    renders = [IrradianceProbes(threads=t).render(two_rooms, 4, seed, settings=settings)
+    renders = [render(two_rooms, 4, seed, threads=t, **settings)
                for t, seed in ((1, 5), (2, 5), (2, 5), (2, 6))]
     first = renders[0]
     for r in renders[1:3]:
@@ -537,7 +540,7 @@ def test_malformed_bounds_is_refused(two_rooms, bounds):
     before any work, by a SettingsError (the CLI's user error) that names the setting. (An infinite corner once
     rendered silently, with NaN probe positions; one of 1e300 overflowed the distance clamp.)"""
     with pytest.raises(SettingsError, match="bounds"):
-        IrradianceProbes(threads=1).render(two_rooms, 1, 0, settings={"bounds": bounds})
+        render(two_rooms, 1, 0, threads=1, bounds=bounds)
 
 
 def test_bounds_moves_the_grid(two_rooms):
@@ -552,11 +555,11 @@ def test_bounds_moves_the_grid(two_rooms):
     default = grid_of(two_rooms, probe_settings(grid=3))
     assert np.allclose(default.origin, [-0.9, -0.468, 0.031], rtol=0, atol=1e-12)  # the box shrunk by 5%
     settings = {"grid": 3, "rays_per_probe": 32, "bounces": 1, "iterations": 0}
-    moved = IrradianceProbes(threads=2).render(two_rooms, 1, 0, settings=dict(settings, bounds=bounds))
+    moved = render(two_rooms, 1, 0, **settings, bounds=bounds)
     assert moved.info["probe_origin"] == pytest.approx(lo.tolist(), abs=1e-15)
     assert moved.info["probe_spacing"] == pytest.approx(((hi - lo) / 2).tolist(), rel=1e-15)
     assert moved.info["probes"] == 27
-    plain = IrradianceProbes(threads=2).render(two_rooms, 1, 0, settings=settings)
+    plain = render(two_rooms, 1, 0, **settings)
     assert plain.info["probe_origin"] == pytest.approx(default.origin.tolist(), abs=1e-15)
     assert not np.array_equal(plain.image, moved.image)
 

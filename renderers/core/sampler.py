@@ -170,3 +170,35 @@ def vertex_1d(st, point, depth, offset) -> float:
 def vertex_2d(st, point, depth, offset):
     """Two numbers of vertex ``depth`` of the path at ``point``, from ``offset`` on, stratified jointly."""
     return sample_2d(st, point, vertex_dim(depth, offset))
+
+
+def sequence_stream(sampler: str, key: np.uint64, sequences: int) -> Stream:
+    """A stream of ``sequences`` sequences keyed by ``key`` and numbered sequence by sequence
+    (:func:`sequence_point`), e.g. one per irradiance probe over its rays.
+
+    ``independent``: :func:`independent` (``key``); the numbers are uniform(key, path, dim) as
+    before samplers. A low-discrepancy sampler: each sequence is one scrambling (a "pixel") and
+    unbatched, since no variance is estimated from them.
+    """
+    kind = SAMPLERS[sampler]
+    if kind == INDEPENDENT:
+        return independent(key)
+    return Stream(kind, np.uint64(key), max(sequences, 1), 0, 1, SOBOL_MATRICES)
+
+
+@jit
+def sequence_point(st, path, length):
+    """:func:`path_point` of ``path`` numbered sequence by sequence: point ``path mod length`` of sequence
+    ``path div length`` (``independent``: (key, path), so the numbers are those of :func:`path_point`)."""
+    if st.kind == INDEPENDENT:
+        return np.uint64(st.key), np.int64(path)
+    return path_point(st, (path % length) * st.pixels + path // length)
+
+
+def independent_key(st: Stream) -> np.uint64:
+    """A key for code that still draws uniform(key, path, dim) itself, in the pass ``st`` describes: the
+    pass's key (``independent``: the same numbers), or for a low-discrepancy stream, whose key spans the
+    render, a key of its own pass (its first sample), so no two passes repeat their numbers."""
+    if st.kind == INDEPENDENT:
+        return np.uint64(st.key)
+    return mix64(np.uint64(st.key) ^ (np.uint64(st.first_sample + 1) * _GOLDEN))
