@@ -223,8 +223,16 @@ def update_rotation(sampler: str, seed: int, k: int) -> np.ndarray:
         stream, path = update_stream(sampler, seed, k, 1), ROTATION_PATH
     else:
         stream, path = sequence_stream(sampler, pass_key(seed, 0, ROTATION_STREAM), 1), k
+    u0, (u1, u2) = _rotation_numbers(stream, path)
+    return random_rotation(u0, u1, u2)
+
+
+@jit
+def _rotation_numbers(stream, path):
+    """Dimension 0 (1D) and 1-2 (2D) of ``path``; in a kernel, since a point's uint64 seed does not survive
+    a round trip through Python ints."""
     point = path_point(stream, path)
-    return random_rotation(sample_1d(stream, point, 0), *sample_2d(stream, point, 1))
+    return sample_1d(stream, point, 0), sample_2d(stream, point, 1)
 
 
 def probes_per_unit(probes: int, rays: int, threads: int) -> int:

@@ -36,16 +36,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.adapters.settings import SettingsError, resolve_settings
+from harness.adapters.api import SettingsError, pass_key
+from harness.adapters.settings import resolve_settings
 from harness.evaluate.regions import region_masks
 from harness.scenes.library import resolve_scene
 from harness.store.references import load_reference
 from renderers import ddgi
 from renderers.core.geometry import SceneGeometry
 from renderers.core.octahedral import texel_directions
+from renderers.core.rng import uniform
+from renderers.core.sampler import SAMPLERS
 from renderers.core.sampling import random_rotation, spherical_fibonacci
 from renderers.pathtracer import PathTracer
-from renderers.probes import IrradianceProbes, grid_of, probes_per_unit, update_probes, volume_of
+from renderers.probes import (PROBE_STREAM, ROTATION_PATH, IrradianceProbes, grid_of, probes_per_unit, update_probes,
+                              update_rotation, volume_of)
 
 pytest.importorskip("embreex")
 
@@ -288,12 +292,14 @@ def furnace_closed_form(bounces: int, iterations: int = 0, averaging: str = "ema
 FURNACE_BOUNCES = {1: (0.0045, 0.0225), 2: (0.0029, 0.0145), 5: (0.0020, 0.010), 30: (0.0015, 0.0075)}
 
 
-def test_furnace_probes_gain_one_bounce_per_update(furnace, furnace_geometry):
+@pytest.mark.parametrize("sampler", SAMPLERS)
+def test_furnace_probes_gain_one_bounce_per_update(furnace, furnace_geometry, sampler):
     """Updates that each replace the probes (``bounces`` = 30, ``iterations`` = 0; grid 2, 1024 rays per probe,
     seed 0): after update k, E/π at interior points equals the partial sum Σ_{i=1..k} 0.8^i (k = 1, 2, 5, 30:
     0.8, 1.44, 2.689, 3.995) within :data:`FURNACE_BOUNCES`. Update 1 holds direct light only (no emission, no
-    previous volume), and each later one adds exactly one bounce (ρ/π times the previous volume's E)."""
-    settings = probe_settings(grid=2, rays_per_probe=1024, bounces=30, iterations=0)
+    previous volume), and each later one adds exactly one bounce (ρ/π times the previous volume's E). With each
+    sampler (the tolerances are the independent one's; the low-discrepancy ones stratify each probe's rays)."""
+    settings = probe_settings(grid=2, rays_per_probe=1024, bounces=30, iterations=0, sampler=sampler)
     seen = {}
 
     def on_update(k, volume):
@@ -432,12 +438,13 @@ FURNACE_IMAGE_TOLERANCE = 0.03
 FURNACE_IMAGE_FLOOR = -0.05
 
 
-def test_furnace_image_is_five(furnace):
+@pytest.mark.parametrize("sampler", SAMPLERS)
+def test_furnace_image_is_five(furnace, sampler):
     """The renderer's image of the furnace (emission + direct light by NEE + ρ/π·E from 40-bounce probes): its
     mean radiance is Le/(1 − ρ) = 5 (short by 4·0.8^41 = 4e-4: the bounces the probes do not hold), the median
     of 5 seeds within :data:`FURNACE_IMAGE_TOLERANCE`, each above :data:`FURNACE_IMAGE_FLOOR`. A camera pass that
-    forgot ρ is 15% too bright, probes that also held emission (counted twice) 80%."""
-    settings = {"grid": 2, "bounces": 40, "iterations": 0}
+    forgot ρ is 15% too bright, probes that also held emission (counted twice) 80%. With each sampler."""
+    settings = {"grid": 2, "bounces": 40, "iterations": 0, "sampler": sampler}
     means = [render(furnace, 16, seed, **settings).image.mean() / FURNACE_L - 1.0
              for seed in range(5)]
     assert np.median(means) == pytest.approx(0.0, abs=FURNACE_IMAGE_TOLERANCE), means
@@ -509,12 +516,13 @@ def test_two_rooms_leak_with_the_default_settings(two_rooms):
 
 # -- determinism -----------------------------------------------------------------------------------
 
-def test_images_depend_on_the_seed_only(two_rooms):
+@pytest.mark.parametrize("sampler", SAMPLERS)
+def test_images_depend_on_the_seed_only(two_rooms, sampler):
     """Grid 4 (64 probes) at 512 rays per probe, cut into work units of probes differently on 1 and 2 threads
     (:func:`renderers.probes.probes_per_unit`), 2 replacing and 2 blended updates, 4 spp: the volume after the
     updates and the rendered image (and its variance) are bit-identical on 1 and 2 threads and from one render
-    to the next with the same seed, and differ with another seed."""
-    settings = {"grid": 4, "rays_per_probe": 512, "bounces": 2, "iterations": 2}
+    to the next with the same seed, and differ with another seed. With each sampler."""
+    settings = {"grid": 4, "rays_per_probe": 512, "bounces": 2, "iterations": 2, "sampler": sampler}
     assert 1 < probes_per_unit(64, 512, 2) < probes_per_unit(64, 512, 1) < 64  # several units, cut differently
     resolved = probe_settings(**settings)
     grid = grid_of(two_rooms, resolved)
@@ -528,6 +536,24 @@ def test_images_depend_on_the_seed_only(two_rooms):
         assert r.image.tobytes() == first.image.tobytes() and r.variance.tobytes() == first.variance.tobytes()
     assert not np.array_equal(renders[3].image, first.image)
     assert renders[3].image.mean() == pytest.approx(first.image.mean(), rel=0.1)  # another sample of one image
+
+
+def test_each_sampler_draws_the_probe_rays(two_rooms):
+    """``independent`` turns update k's directions by the rotation of path ROTATION_PATH, dimensions 0-2, of
+    the update's key, as before samplers; pmj02 and sobol draw other rotations and other probe rays, so their
+    volumes differ from it and from each other (same seed)."""
+    key = pass_key(11, 3, PROBE_STREAM)
+    today = random_rotation(*(uniform(key, ROTATION_PATH, d) for d in range(3)))
+    assert update_rotation("independent", 11, 3).tobytes() == today.tobytes()
+    assert not np.array_equal(update_rotation("pmj02", 11, 3), today)
+    geom = SceneGeometry(two_rooms)
+    volumes = {}
+    for sampler in SAMPLERS:
+        settings = probe_settings(grid=2, rays_per_probe=64, bounces=1, iterations=0, sampler=sampler)
+        volumes[sampler] = update_probes(geom, grid_of(two_rooms, settings), 11, settings, 2).irradiance
+    assert not np.array_equal(volumes["pmj02"], volumes["independent"])
+    assert not np.array_equal(volumes["sobol"], volumes["independent"])
+    assert not np.array_equal(volumes["sobol"], volumes["pmj02"])
 
 
 # -- settings --------------------------------------------------------------------------------------

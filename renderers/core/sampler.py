@@ -201,4 +201,9 @@ def independent_key(st: Stream) -> np.uint64:
     render, a key of its own pass (its first sample), so no two passes repeat their numbers."""
     if st.kind == INDEPENDENT:
         return np.uint64(st.key)
-    return mix64(np.uint64(st.key) ^ (np.uint64(st.first_sample + 1) * _GOLDEN))
+    return np.uint64(_pass_hash(np.uint64(st.key), np.uint64(st.first_sample + 1)))
+
+
+@jit
+def _pass_hash(key, index):
+    return mix64(key ^ (index * _GOLDEN))  # uint64 arithmetic wraps in numba (numpy's scalars warn)
