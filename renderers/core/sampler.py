@@ -172,18 +172,17 @@ def vertex_2d(st, point, depth, offset):
     return sample_2d(st, point, vertex_dim(depth, offset))
 
 
-def sequence_stream(sampler: str, key: np.uint64, sequences: int) -> Stream:
-    """A stream of ``sequences`` sequences keyed by ``key`` and numbered sequence by sequence
-    (:func:`sequence_point`), e.g. one per irradiance probe over its rays.
+def sequence_stream(sampler: str, key: np.uint64, pixels: int = 1, first_sample: int = 0) -> Stream:
+    """One randomisation (no batches) of ``sampler`` keyed ``key``: path j is sample ``first_sample + j div
+    pixels`` of sequence ``j mod pixels``.
 
-    ``independent``: :func:`independent` (``key``); the numbers are uniform(key, path, dim) as
-    before samplers. A low-discrepancy sampler: each sequence is one scrambling (a "pixel") and
-    unbatched, since no variance is estimated from them.
+    Irradiance probes: one sequence per probe (``pixels`` = probes) over its rays, numbered by
+    :func:`sequence_point`. ``independent``: uniform(key, path, dimension), as :func:`independent`.
     """
     kind = SAMPLERS[sampler]
     if kind == INDEPENDENT:
-        return independent(key)
-    return Stream(kind, np.uint64(key), max(sequences, 1), 0, 1, SOBOL_MATRICES)
+        return independent(key, pixels, first_sample)
+    return Stream(kind, np.uint64(key), max(pixels, 1), first_sample, 1, SOBOL_MATRICES)
 
 
 @jit
