@@ -92,29 +92,30 @@ exactly the direct-only image); for ``oracle`` the constant applies where
 K ≥ 1. With unbounded depth and ρ̄ = 1 in a channel the series diverges and
 the render is refused (ValueError).
 
-Random numbers: the visible-point walk uses the toolkit's per-vertex layout
-(:mod:`renderers.core.sampler`); occlusion ray s of a sample uses dimensions
-:data:`AO_DIM` + 2s and + 2s + 1, far above any vertex's. The image depends on
+Random numbers, from the ``sampler`` setting's stream (:mod:`renderers.core.sampler`;
+default ``independent``, the sampler the gate's expectations were measured
+with): the visible-point walk uses the toolkit's per-vertex layout, drawn from the pass's stream;
+occlusion ray s of a sample draws the 2D sample at dimension :data:`AO_DIM` + 2s
+(dimensions :data:`AO_DIM` + 2s and + 2s + 1), far above any vertex's. The image depends on
 the seed only, bit for bit, for any thread count (:func:`renderers.core.schedule.render_image`);
 passes double, so power-of-two checkpoints are free.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from harness.adapters.api import ReferenceFit, RenderResult
-from harness.adapters.settings import Setting, resolve_settings
+from harness.adapters.api import ReferenceFit, RenderResult, Setting
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.geometry import SceneGeometry
 from renderers.core.occlusion import occlusion_segment
 from renderers.core.rays import add_unoccluded, head, shadow_buffer
-from renderers.core.rng import uniform
-from renderers.core.sampler import Stream, independent
+from renderers.core.sampler import SAMPLER_SETTING, Stream, independent, path_point, sample_2d
 from renderers.core.sampling import jit
 from renderers.core.schedule import render_image
 from harness.adapters.api import default_threads
@@ -183,19 +184,19 @@ def interreflection_sum(rho: np.ndarray, bounces: np.ndarray) -> np.ndarray:
 
 
 @jit
-def _ambient_rays(found, position, normal, value, key, first, sample, tfar, offset, occ):
-    """Occlusion ray ``sample`` of each visible point ``found[j]`` carrying ``value[j]`` (skipped if all 0)."""
+def _ambient_rays(found, vp, value, stream, first, sample, tfar, offset, occ):
+    """Occlusion ray ``sample`` of each visible point ``found[j]`` (of ``vp``, path ``first + found[j]`` of
+    the pass's ``stream``) carrying ``value[j]`` (skipped if all 0)."""
     k = 0
     for j in range(found.size):
         v = (value[j, 0], value[j, 1], value[j, 2])
         if v[0] == 0.0 and v[1] == 0.0 and v[2] == 0.0:
             continue  # nothing to add (a black surface, or no bounce left): no ray
         q = found[j]
-        x = (position[q, 0], position[q, 1], position[q, 2])
-        n = (normal[q, 0], normal[q, 1], normal[q, 2])
-        dim = AO_DIM + 2 * sample
-        occlusion_segment(occ, k, x, n, True, uniform(key, first + q, dim), uniform(key, first + q, dim + 1),
-                          tfar, offset, q, v)
+        x = (vp.position[q, 0], vp.position[q, 1], vp.position[q, 2])
+        n = (vp.normal[q, 0], vp.normal[q, 1], vp.normal[q, 2])
+        u = sample_2d(stream, path_point(stream, first + q), AO_DIM + 2 * sample)
+        occlusion_segment(occ, k, x, n, True, u, tfar, offset, q, v)
         k += 1
     return k
 
@@ -209,8 +210,7 @@ class Shading:
         self.geom, self.scene, self.ambient, self.samples, self.tfar = geom, scene, ambient, samples, tfar
 
     def trace(self, first: int, stop: int, pixels: int, stream: Stream) -> np.ndarray:
-        key = stream.key  # the independent sampler's pass key
-        L, vp = camera_visible_points(self.geom, self.scene, first, stop, pixels, key)
+        L, vp = camera_visible_points(self.geom, self.scene, first, stop, pixels, stream)
         if self.ambient is None:
             return L
         f = np.flatnonzero(vp.found)
@@ -218,7 +218,7 @@ class Shading:
         value = vp.weight[f] * self.ambient(vp.depth[f]) / self.samples
         occ = shadow_buffer(len(f))
         for s in range(self.samples):
-            k = _ambient_rays(f, vp.position, vp.normal, value, key, first, s, self.tfar, self.geom.offset, occ)
+            k = _ambient_rays(f, vp, value, stream, first, s, self.tfar, self.geom.offset, occ)
             seg = head(occ, k)
             add_unoccluded(L, seg, self.geom.unoccluded(seg.o, seg.d, seg.t))
         return L
@@ -256,6 +256,7 @@ class AOAmbient(ToolkitRenderer):
     approximations = ("indirect light is one constant ambient radiance per channel, shadowed by short-range "
                       "ambient occlusion: biased, it does not converge to the reference",)
     settings = (
+        dataclasses.replace(SAMPLER_SETTING, default="independent"),
         Setting("ambient", str, "radiosity", "how the ambient radiance La is chosen: radiosity (Cohen et al. "
                 "1988's ambient term, from the scene alone), oracle (least squares against the stored "
                 "reference by the harness: two renders), none (direct light only), constant (ambient_radiance)",
@@ -272,7 +273,7 @@ class AOAmbient(ToolkitRenderer):
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
-        s = resolve_settings(self, settings or {})
+        s = settings  # complete and validated by the render path
         threads = self.threads or default_threads()
         if s["ambient"] == "oracle":
             raise ValueError("ambient = oracle is fitted to the stored reference by the harness's render path "
@@ -289,7 +290,7 @@ class AOAmbient(ToolkitRenderer):
 
         def render_with(ambient) -> RenderResult:
             shading = Shading(geom, scene, ambient, s["ao_samples"], tfar)
-            return render_image(scene, spp, seed, shading.trace, checkpoints, threads)
+            return render_image(scene, spp, seed, shading.trace, checkpoints, threads, sampler=s["sampler"])
 
         first_hit = bounces_left(scene, np.ones(1, np.int64))
         if s["ambient"] == "none":

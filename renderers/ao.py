@@ -56,7 +56,7 @@ and Embree gets float32 copies of it and of ``tfar = max_distance``.
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
@@ -64,7 +64,7 @@ from harness.adapters.api import RenderResult
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.camera import camera_basis, camera_rays
-from renderers.core.geometry import SceneGeometry, surface_point
+from renderers.core.geometry import SceneGeometry, ray_hit
 from renderers.core.occlusion import face_forward, occlusion_segment
 from renderers.core.rays import add_unoccluded, head, ray_buffer, shadow_buffer
 from renderers.core.sampler import CAMERA_DIMS, SAMPLER_SETTING, Stream, independent, path_point, sample_2d
@@ -86,13 +86,21 @@ def ao_sample(stream, path):
 
 # One kernel for the whole sample, as the path tracer's _shade: it reads and writes the buffers itself
 # (helpers that take arrays and branch cost reference counting and inlining, renderers/core/rays.py).
+class Occlusion(NamedTuple):
+    """What an occlusion ray tests, from the scene's ``ambient_occlusion`` (module docstring)."""
+
+    cosine: bool  # cosine-weighted directions (AO); otherwise uniform (obscurance)
+    tfar: float  # an occluder counts only if nearer than this (inf: any)
+    miss: float  # the estimate of a camera ray that hits nothing
+
+
 @jit
-def _occlusion_rays(prim, t_sphere, rays, stream, first, cosine, tfar, miss, geo, A, occ):
+def _occlusion_rays(prim, t_sphere, rays, stream, first, ao, geo, A, occ):
     """For camera ray i of a unit (hit ``prim[i]``, -1: missed), its occlusion ray, into ``occ``.
 
-    A miss writes ``miss`` into ``A[i]``; a hit leaves ``A[i]`` at 0 and writes
+    A miss writes ``ao.miss`` into ``A[i]``; a hit leaves ``A[i]`` at 0 and writes
     one segment from the offset hit point along the sampled direction, up to
-    ``tfar``, carrying 1 in every channel (added where unoccluded). Random
+    ``ao.tfar``, carrying 1 in every channel (added where unoccluded). Random
     numbers are drawn for sample ``first + i``. Returns the number of segments.
     """
     k = 0
@@ -100,14 +108,12 @@ def _occlusion_rays(prim, t_sphere, rays, stream, first, cosine, tfar, miss, geo
         p = prim[i]
         if p < 0:
             for c in range(3):
-                A[i, c] = miss
+                A[i, c] = ao.miss
             continue
-        d = (rays.d[i, 0], rays.d[i, 1], rays.d[i, 2])
-        o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
-        x, n0, cos_o, _ = surface_point(geo, p, o, d, t_sphere[i] if p >= geo.n_triangles else 0.0)
+        _, x, n0, cos_o, _, _ = ray_hit(geo, rays, i, p, t_sphere)
         n = face_forward(n0, cos_o)
         u = ao_sample(stream, first + i)
-        occlusion_segment(occ, k, x, n, cosine, u[0], u[1], tfar, geo.offset, i, (1.0, 1.0, 1.0))
+        occlusion_segment(occ, k, x, n, ao.cosine, u, ao.tfar, geo.offset, i, (1.0, 1.0, 1.0))
         k += 1
     return k
 
@@ -123,8 +129,8 @@ def trace_ao(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: i
     A = np.zeros((m, 3))
     occ = shadow_buffer(m)
     tfar = ao.max_distance  # an occluder counts only if nearer than this (inf: any)
-    k = _occlusion_rays(prim, t_sphere, rays, stream, first, ao.weighting == "cosine", tfar, ao.miss_value,
-                        geom.tables(), A, occ)
+    k = _occlusion_rays(prim, t_sphere, rays, stream, first,
+                        Occlusion(ao.weighting == "cosine", float(tfar), float(ao.miss_value)), geom.tables(), A, occ)
     seg = head(occ, k)
     add_unoccluded(A, seg, geom.unoccluded(seg.o, seg.d, seg.t))
     return A
@@ -146,6 +152,6 @@ class AORenderer(ToolkitRenderer):
                              f"quantity is {scene.quantity}")
         geom, setup_s = warmed_geometry(scene, lambda g: trace_ao(g, scene, 0, 1, 1, independent(0)))
         result = render_image(scene, spp, seed, lambda *unit: trace_ao(geom, scene, *unit), checkpoints,
-                              self.threads, sampler=(settings or {}).get("sampler", SAMPLER_SETTING.default))
+                              self.threads, sampler=settings["sampler"])
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
         return result

@@ -76,13 +76,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from renderers.core.bsdf import LAMBERT, bsdf_eval, is_delta, lambert_pdf, lambert_sample, two_sided
-from renderers.core.geometry import SceneGeometry, offset_origin, surface_point
-from renderers.core.lights import emits, sample_emitter, solid_angle_pdf, solid_angle_pdf_along, towards_emitter
+from renderers.core.bsdf import faces, is_delta, lambert_pdf, lambert_sample
+from renderers.core.direct import sample_ld
+from renderers.core.geometry import SceneGeometry, offset_origin, ray_hit
+from renderers.core.lights import emits, solid_angle_pdf_along
 from renderers.core.octahedral import bilinear_texels, fill_borders, octahedral_uv, texel_directions
-from renderers.core.rays import add_unoccluded, head, ray_buffer, set_path, set_ray, set_shadow, shadow_buffer, \
-    shadow_segment
-from renderers.core.rng import uniform
+from renderers.core.rays import add_unoccluded, head, ray_buffer, set_path, set_ray, set_shadow, shadow_buffer
+from renderers.core.sampler import Stream, sample_1d, sample_2d, sequence_point
 from renderers.core.sampling import INV_PI, jit, power_heuristic
 
 #: RTXGI's constants of the heuristics (Irradiance.hlsl, ProbeBlendingCS.hlsl, DDGIVolume.h).
@@ -94,8 +94,9 @@ MAX_DISTANCE_SPACINGS = 1.5
 MIN_TRILINEAR = 0.001
 MIN_WEIGHT = 1e-6
 NEGLIGIBLE_WEIGHT = 1e-12
-#: Probe ray j's direct-light numbers are dimensions 0-4 of path j of the update's key: the light sample's
-#: emitter and point, the BSDF sample's direction.
+#: Probe ray j's direct-light numbers are dimensions 0-4 of its point of the update's stream
+#: (:func:`renderers.core.sampler.sequence_point`): the light sample's emitter and point (1D, then 2D), the
+#: BSDF sample's direction (2D).
 NEE_PICK, NEE_U, NEE_V, BSDF_U, BSDF_V = 0, 1, 2, 3, 4
 
 
@@ -241,14 +242,27 @@ def _start_probe_rays(positions, directions, p0, count, rays):
             set_path(rays, i, i, (1.0, 1.0, 1.0), 0.0)
 
 
+class ProbeRayOutput(NamedTuple):
+    """What :func:`_shade_probe_rays` writes, per probe ray i of a unit (and the direct-light rays it makes)."""
+
+    radiance: np.ndarray  # (m, 3) reflected radiance towards the probe
+    distance: np.ndarray  # (m,) hit distance; negative: a backface (-0.2 t); the clamp distance on a miss
+    shadow: object  # ShadowBuffer: the light samples' segments, each carrying its MIS-weighted radiance
+    bsdf: object  # RayBuffer: the BSDF samples' rays, each carrying ρ and its pdf
+
+
 @jit
-def _shade_probe_rays(prim, t_sphere, rays, key, first, vol, geo, far, radiance, distance, shadow, bsdf):
-    """Reflected radiance towards the probe and hit distance of each probe ray.
+def _shade_probe_rays(prim, t_sphere, rays, stream, first, per_probe, vol, geo, far, out):
+    """Reflected radiance towards the probe and hit distance of each probe ray, into ``out``
+    (:class:`ProbeRayOutput`).
 
     Writes the radiance the previous volume gives (ρ/π·E), the light sample's
-    segments into ``shadow`` and the BSDF sample's rays into ``bsdf``, each
-    carrying its MIS weight; returns how many of each.
+    segments into ``out.shadow`` and the BSDF sample's rays into ``out.bsdf``,
+    each carrying its MIS weight; returns how many of each. Ray i draws the
+    numbers of probe ray ``first + i``, ``per_probe`` rays to a probe
+    (:func:`renderers.core.sampler.sequence_point`).
     """
+    radiance, distance, shadow, bsdf = out
     ns = 0
     nb = 0
     for i in range(prim.size):
@@ -257,11 +271,8 @@ def _shade_probe_rays(prim, t_sphere, rays, key, first, vol, geo, far, radiance,
         if p < 0:
             distance[i] = far
             continue
-        d = (rays.d[i, 0], rays.d[i, 1], rays.d[i, 2])
-        o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
-        x, n, cos_o, t = surface_point(geo, p, o, d, t_sphere[i] if p >= geo.n_triangles else 0.0)
-        mat = geo.material[p]
-        if cos_o < 0.0 and not two_sided(mat):
+        d, x, n, cos_o, t, mat = ray_hit(geo, rays, i, p, t_sphere)
+        if not faces(mat, cos_o):
             distance[i] = -BACKFACE_DISTANCE * t  # negative marks the backface
             continue
         distance[i] = t
@@ -273,24 +284,20 @@ def _shade_probe_rays(prim, t_sphere, rays, key, first, vol, geo, far, radiance,
             radiance[i, c] = rho[c] * INV_PI * e[c]
         if geo.emitter_ids.size == 0:
             continue
-        j = first + i
-        a = offset_origin(x, n, geo.offset)
+        point = sequence_point(stream, first + i, per_probe)
         # Direct light by MIS of a light sample and a cosine-weighted BSDF sample (Veach 1997 §9.2, power
         # heuristic): a light sample alone has unbounded variance next to an emitter that meets the surface
         # at an edge (the furnace: every wall emits).
-        y, ny, k, pe = sample_emitter(uniform(key, j, NEE_PICK), uniform(key, j, NEE_U), uniform(key, j, NEE_V), geo)
-        wi, dist2, cos_x, cos_y = towards_emitter(x, n, y, ny)
-        if cos_x > 0.0 and pe > 0.0:
-            g = cos_x * cos_y / dist2 / pe * power_heuristic(solid_angle_pdf(pe, dist2, cos_y), lambert_pdf(cos_x))
-            sd, tfar, sl = shadow_segment(a, offset_origin(y, ny, geo.offset))
-            if sl > 0.0:
-                set_shadow(shadow, ns, a, sd, tfar, i)
-                for c in range(3):
-                    shadow.c[ns, c] = bsdf_eval(LAMBERT, rho[c], cos_x) * geo.radiance[k, c] * g
-                ns += 1
-        dx, dy, dz, cos_b = lambert_sample(n, uniform(key, j, BSDF_U), uniform(key, j, BSDF_V))
+        u1, u2 = sample_2d(stream, point, NEE_U)
+        found, a, sd, tfar, lc = sample_ld(x, n, mat, rho, (sample_1d(stream, point, NEE_PICK), u1, u2), geo, True)
+        if found:
+            set_shadow(shadow, ns, a, sd, tfar, i)
+            shadow.c[ns, 0], shadow.c[ns, 1], shadow.c[ns, 2] = lc
+            ns += 1
+        ub1, ub2 = sample_2d(stream, point, BSDF_U)
+        dx, dy, dz, cos_b = lambert_sample(n, ub1, ub2)
         if cos_b > 0.0:
-            set_ray(bsdf, nb, a, (dx, dy, dz))
+            set_ray(bsdf, nb, offset_origin(x, n, geo.offset), (dx, dy, dz))
             set_path(bsdf, nb, i, rho, lambert_pdf(cos_b))  # f·cos/pdf = ρ for a cosine sample
             nb += 1
     return ns, nb
@@ -303,9 +310,7 @@ def _emission_found(prim, t_sphere, rays, geo, radiance):
         p = prim[i]
         if p < 0 or geo.light_pdf_area[p] <= 0.0:
             continue
-        d = (rays.d[i, 0], rays.d[i, 1], rays.d[i, 2])
-        o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
-        x, n, cos_o, t = surface_point(geo, p, o, d, t_sphere[i] if p >= geo.n_triangles else 0.0)
+        _, _, _, cos_o, t, _ = ray_hit(geo, rays, i, p, t_sphere)
         if not emits(cos_o):
             continue
         w = power_heuristic(rays.pdf[i], solid_angle_pdf_along(geo.light_pdf_area[p], t, cos_o))
@@ -315,20 +320,21 @@ def _emission_found(prim, t_sphere, rays, geo, radiance):
 
 
 def trace_probe_rays(geom: SceneGeometry, volume: Volume, positions: np.ndarray, directions: np.ndarray,
-                     p0: int, count: int, key: np.uint64) -> tuple[np.ndarray, np.ndarray]:
+                     p0: int, count: int, stream: Stream) -> tuple[np.ndarray, np.ndarray]:
     """Radiance (count·N, 3) and signed distance (count·N,) of the rays of probes p0 .. p0+count-1.
 
-    Random numbers are those of path ``p0·N + i`` of ``key``: independent of how probes are cut into units.
+    Ray r of probe p draws the numbers of probe ray ``p·N + r`` of the update's ``stream``
+    (:func:`renderers.probes.update_stream`): independent of how probes are cut into units.
     """
     m = count * len(directions)
     rays = ray_buffer(m)
     _start_probe_rays(positions, directions, p0, count, rays)
     prim, t_sphere = geom.closest_hits(rays)
-    radiance, distance = np.empty((m, 3)), np.empty(m)
-    shadow, bsdf = shadow_buffer(m), ray_buffer(m)
+    out = ProbeRayOutput(np.empty((m, 3)), np.empty(m), shadow_buffer(m), ray_buffer(m))
+    radiance, distance, shadow, bsdf = out
     geo = geom.tables()
-    ns, nb = _shade_probe_rays(prim, t_sphere, rays, key, p0 * len(directions), volume, geo, max_distance(volume),
-                               radiance, distance, shadow, bsdf)
+    n = len(directions)
+    ns, nb = _shade_probe_rays(prim, t_sphere, rays, stream, p0 * n, n, volume, geo, max_distance(volume), out)
     seg = head(shadow, ns)
     add_unoccluded(radiance, seg, geom.unoccluded(seg.o, seg.d, seg.t))
     found = head(bsdf, nb)

@@ -35,36 +35,42 @@ spacing 0.3, normal bias 0.02, view bias 0.1).
 The estimate is biased (probe resolution, interpolation, visibility
 heuristics, finite updates) and does not converge to the reference as spp
 grows: ``estimator = "biased"``; the harness measures its bias per region.
-Time includes the probe updates (``info["probes_s"]``). Random numbers:
-probe updates use :func:`harness.adapters.seeds.pass_key` stream
-:data:`PROBE_STREAM` with the update's index; the camera pass the toolkit's
-per-vertex layout, so images are bit-identical for any thread count.
+Time includes the probe updates (``info["probes_s"]``). Random numbers come
+from the ``sampler`` setting (:mod:`renderers.core.sampler`; default
+``independent``, the sampler the gate's expectations were measured with):
+update k's probe rays draw from its key (:func:`harness.adapters.seeds.pass_key`
+stream :data:`PROBE_STREAM`, index k), one sequence per probe over its rays
+(:func:`update_stream`), and its rotation from :func:`update_rotation`; the
+camera pass uses the toolkit's per-vertex layout
+(:func:`renderers.core.visible_points.camera_visible_points`), drawn from the pass's stream.
+Images are bit-identical for any thread count.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.api import RenderResult, pass_key
-from harness.adapters.settings import Setting, SettingsError, resolve_settings
+from harness.adapters.api import RenderResult, Setting, SettingsError, default_threads, pass_key
 from harness.scenes.model import Scene
 from renderers import ddgi
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.geometry import SceneGeometry
-from renderers.core.rng import uniform
-from renderers.core.sampler import Stream, independent
+from renderers.core.sampler import SAMPLER_SETTING, Stream, independent, path_point, sample_1d, \
+    sample_2d, sequence_stream
 from renderers.core.sampling import INV_PI, jit, random_rotation, spherical_fibonacci
 from renderers.core.schedule import render_image, run_units
-from harness.adapters.api import default_threads
 from renderers.core.visible_points import camera_visible_points
 
 PROBE_STREAM = 3
-#: The update's rotation draws dimensions 0-2 of this path of its key, above any probe ray's index.
+#: ``independent``: the update's rotation draws dimensions 0-2 of this path of its key, above any probe ray's
+#: index. A low-discrepancy sampler: update k's rotation is point k of one sequence of this stream's key.
 ROTATION_PATH = (1 << 40) - 1
+ROTATION_STREAM = 4
 #: Most probe rays per work unit (whole probes), as the camera pass's unit sizes.
 UNIT_RAYS = 1 << 14
 AVERAGING = ("ema", "exact")
@@ -79,6 +85,8 @@ class IrradianceProbes(ToolkitRenderer):
                       "between probes, visibility by a Chebyshev bound, RTXGI's energy heuristics; biased",
                       "mirrors and glass seen by probe rays reflect nothing into the probes")
     settings = (
+        dataclasses.replace(SAMPLER_SETTING, default="independent",
+                            doc=SAMPLER_SETTING.doc + "; the probe rays: one sequence per probe over its rays"),
         Setting("grid", int, 8, "probes per axis (RTXGI's Cornell box: 9 at spacing 0.3 for a box of 2.4)",
                 low=2, high=64),
         Setting("margin", float, 0.05, "the probe grid spans the scene's bounding box shrunk by this fraction "
@@ -116,14 +124,15 @@ class IrradianceProbes(ToolkitRenderer):
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
-        s = resolve_settings(self, settings or {})
+        s = settings  # complete and validated by the render path
         threads = self.threads or default_threads()
         grid = grid_of(scene, s)
         geom, setup_s = warmed_geometry(scene, lambda g: _warm_up(g, scene, grid, s))
         t0 = time.perf_counter()
         volume = update_probes(geom, grid, seed, s, threads)
         probes_s = time.perf_counter() - t0
-        result = render_image(scene, spp, seed, CameraPass(geom, scene, volume).trace, checkpoints, threads)
+        result = render_image(scene, spp, seed, CameraPass(geom, scene, volume).trace, checkpoints, threads,
+                              sampler=s["sampler"])
         result.time_s += probes_s
         for c in result.checkpoints:
             c.time_s += probes_s
@@ -180,15 +189,14 @@ def update_probes(geom: SceneGeometry, grid: ddgi.ProbeGrid, seed: int, settings
     ni, nd = settings["irradiance_texels"], settings["depth_texels"]
     bounces, updates = settings["bounces"], settings["bounces"] + settings["iterations"]
     for k in range(updates):
-        key = pass_key(seed, k, PROBE_STREAM)
-        rotation = random_rotation(*(uniform(key, ROTATION_PATH, d) for d in range(3)))
-        directions = np.ascontiguousarray(fibonacci @ rotation.T)
+        stream = update_stream(settings["sampler"], seed, k, probes)
+        directions = np.ascontiguousarray(fibonacci @ update_rotation(settings["sampler"], seed, k).T)
         h = history_weight(k, bounces, settings["hysteresis"], settings["averaging"])
         irradiance, moments = np.empty((probes, ni, ni, 3)), np.empty((probes, nd, nd, 2))
 
-        def work(p0: int, volume=volume, directions=directions, key=key, h=h):
+        def work(p0: int, volume=volume, directions=directions, stream=stream, h=h):
             count = min(per_unit, probes - p0)
-            radiance, distance = ddgi.trace_probe_rays(geom, volume, positions, directions, p0, count, key)
+            radiance, distance = ddgi.trace_probe_rays(geom, volume, positions, directions, p0, count, stream)
             return ddgi.blend(volume, p0, radiance, distance, directions, h, settings["half_normalisation"],
                               settings["sharpness"])
 
@@ -200,6 +208,30 @@ def update_probes(geom: SceneGeometry, grid: ddgi.ProbeGrid, seed: int, settings
         if on_update is not None:
             on_update(k + 1, volume)
     return volume
+
+
+def update_stream(sampler: str, seed: int, k: int, probes: int) -> Stream:
+    """The numbers of update k's probe rays: its own key (:data:`PROBE_STREAM`), one sequence per probe."""
+    return sequence_stream(sampler, pass_key(seed, k, PROBE_STREAM), probes)
+
+
+def update_rotation(sampler: str, seed: int, k: int) -> np.ndarray:
+    """Update k's random rotation of the Fibonacci directions (3, 3): ``independent``, from path
+    :data:`ROTATION_PATH` of the update's key; otherwise point k of one sequence over the updates."""
+    if sampler == "independent":
+        stream, path = update_stream(sampler, seed, k, 1), ROTATION_PATH
+    else:
+        stream, path = sequence_stream(sampler, pass_key(seed, 0, ROTATION_STREAM), 1), k
+    u0, (u1, u2) = _rotation_numbers(stream, path)
+    return random_rotation(u0, u1, u2)
+
+
+@jit
+def _rotation_numbers(stream, path):
+    """Dimension 0 (1D) and 1-2 (2D) of ``path``; in a kernel, since a point's uint64 seed does not survive
+    a round trip through Python ints."""
+    point = path_point(stream, path)
+    return sample_1d(stream, point, 0), sample_2d(stream, point, 1)
 
 
 def probes_per_unit(probes: int, rays: int, threads: int) -> int:
@@ -241,7 +273,7 @@ class CameraPass:
         self.geom, self.scene, self.volume = geom, scene, volume
 
     def trace(self, first: int, stop: int, pixels: int, stream: Stream) -> np.ndarray:
-        L, vp = camera_visible_points(self.geom, self.scene, first, stop, pixels, stream.key)
+        L, vp = camera_visible_points(self.geom, self.scene, first, stop, pixels, stream)
         _add_indirect(np.flatnonzero(vp.found), vp, self.volume, self.scene.max_depth, L)
         return L
 

@@ -113,7 +113,7 @@ from __future__ import annotations
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
@@ -175,6 +175,15 @@ def hemisphere_kernel(samples: int, weighting: str) -> np.ndarray:
 
 
 # -- reading the depth buffer ----------------------------------------------------------------
+class Screen(NamedTuple):
+    """The frame a pass works on (scalars only: kernels unpack it at once)."""
+
+    width: int  # pixels
+    height: int
+    tx: float  # tan of the half field of view, horizontally
+    ty: float  # and vertically
+
+
 # The kernels read the G-buffer arrays themselves and every helper takes scalars
 # (renderers/core/screen_space.py says why: an array-taking helper made crytek's pass 2x slower).
 
@@ -189,8 +198,9 @@ def _occludes(behind, thickness) -> bool:
 # the camera or off screen finds nothing there (inf): what the screen does not show never occludes.
 
 @jit
-def _crytek(gb, kernel, radius, thickness, width, height, tx, ty, row0, row1, out):
+def _crytek(gb, kernel, radius, thickness, screen, row0, row1, out):
     """Mittring 2007: fraction of the ball's points in front of the depth buffer."""
+    width, height, tx, ty = screen
     n = kernel.shape[0]
     cx, cy, cu, cv = width / (2.0 * tx), height / (2.0 * ty), 0.5 * width, 0.5 * height
     for row in range(row0, row1):
@@ -216,9 +226,10 @@ def _crytek(gb, kernel, radius, thickness, width, height, tx, ty, row0, row1, ou
 
 
 @jit
-def _hemisphere(gb, kernel, radius, thickness, width, height, tx, ty, row0, row1, out):
+def _hemisphere(gb, kernel, radius, thickness, screen, row0, row1, out):
     """Chapman / LearnOpenGL: 1 − the fraction of the normal hemisphere's points behind the depth buffer
     (range-checked)."""
+    width, height, tx, ty = screen
     n = kernel.shape[0]
     cx, cy, cu, cv = width / (2.0 * tx), height / (2.0 * ty), 0.5 * width, 0.5 * height
     for row in range(row0, row1):
@@ -286,8 +297,9 @@ def _arc(side, hc, lowest, gamma, cos_g, sin_g):
 
 
 @jit
-def _gtao(gb, radius, thickness, slices, steps, cosine, width, height, tx, ty, row0, row1, out):
+def _gtao(gb, radius, thickness, slices, steps, cosine, screen, row0, row1, out):
     """Jimenez et al. 2016, Algorithm 1 (module docstring): horizons per slice, visible arc in closed form."""
+    width, height, tx, ty = screen
     fx, fy = width / (2.0 * tx), height / (2.0 * ty)  # pixels per image-plane unit at depth 1
     r2 = radius * radius
     ax, ay = 2.0 * tx / width, 2.0 * ty / height
@@ -361,20 +373,21 @@ def screen_space_pass(variant: str, pos: np.ndarray, nrm: np.ndarray, scene: Sce
     cam = scene.camera
     w, h = cam.width, cam.height
     tx, ty = cam.tan_half_fov()
+    screen = Screen(int(w), int(h), float(tx), float(ty))
     # One array of (x, y, z, nx, ny, nz) per pixel: a depth-buffer read touches one place in memory, not two.
     gb = np.ascontiguousarray(np.concatenate([pos, nrm], axis=2))
     cosine = scene.ambient_occlusion.weighting == "cosine"
     if variant == "crytek":
         kernel = sphere_kernel(samples)
         def band(r0, r1, out):
-            _crytek(gb, kernel, radius, thickness, w, h, tx, ty, r0, r1, out)
+            _crytek(gb, kernel, radius, thickness, screen, r0, r1, out)
     elif variant == "hemisphere":
         kernel = hemisphere_kernel(samples, "cosine" if cosine else "uniform")
         def band(r0, r1, out):
-            _hemisphere(gb, kernel, radius, thickness, w, h, tx, ty, r0, r1, out)
+            _hemisphere(gb, kernel, radius, thickness, screen, r0, r1, out)
     elif variant == "gtao":
         def band(r0, r1, out):
-            _gtao(gb, radius, thickness, slices, steps, cosine, w, h, tx, ty, r0, r1, out)
+            _gtao(gb, radius, thickness, slices, steps, cosine, screen, r0, r1, out)
     else:
         raise ValueError(f"unknown SSAO variant {variant!r}; known: {', '.join(VARIANTS)}")
     # A few bands per thread even out rows of unequal cost (misses are free).

@@ -47,6 +47,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from harness.adapters.registry import RendererEntry
+from harness.adapters.settings import resolve_settings
 from tests.mutant_catalogue import (BY_NAME, CORE, DDGI, INTEGRATORS, ISOLATED, LOW_POWER, MUTANTS,  # noqa: F401
                               PATHTRACER, PHOTONMAP, PROBES, ROOT, SOURCE, SPPM, Mutant, Patch)
 
@@ -187,7 +188,9 @@ def load_mutant(name: str, tmp_dir: str | Path) -> RendererEntry:
     """A gate override: ``{m.renderer: load_mutant(name, tmp_dir)}`` runs the mutant in place of ours."""
     module = load_module(name, tmp_dir)
     renderer = BY_NAME[name].renderer
-    return RendererEntry(renderer, f"mutant:{name}", getattr(module, INTEGRATORS[renderer][1])(), None)
+    r = getattr(module, INTEGRATORS[renderer][1])()
+    # Its defaults, validated, as the registry's entries hold them: renderers read settings as handed in.
+    return RendererEntry(renderer, f"mutant:{name}", r, None, resolve_settings(r, {}, renderer))
 
 
 # -- running the gate on a mutant ----------------------------------------------------

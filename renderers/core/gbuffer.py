@@ -34,7 +34,7 @@ import numpy as np
 
 from harness.scenes.model import Camera, Scene
 from renderers.core.camera import camera_basis, camera_ray
-from renderers.core.geometry import SceneGeometry, surface_point
+from renderers.core.geometry import SceneGeometry, ray_hit
 from renderers.core.occlusion import face_forward
 from renderers.core.rays import ray_buffer, set_ray
 from renderers.core.sampling import jit
@@ -66,9 +66,8 @@ def _surfaces(prim, t_sphere, rays, geo, basis, depth, position, normal):
                 position[i, c] = np.nan
                 normal[i, c] = np.nan
             continue
+        _, x, n0, cos_o, _, _ = ray_hit(geo, rays, i, p, t_sphere)
         o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
-        d = (rays.d[i, 0], rays.d[i, 1], rays.d[i, 2])
-        x, n0, cos_o, t = surface_point(geo, p, o, d, t_sphere[i] if p >= geo.n_triangles else 0.0)
         n = face_forward(n0, cos_o)  # a back face seen by the camera: its normal turned to the camera
         depth[i] = (x[0] - o[0]) * basis[3, 0] + (x[1] - o[1]) * basis[3, 1] + (x[2] - o[2]) * basis[3, 2]
         for c in range(3):

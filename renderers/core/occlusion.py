@@ -52,9 +52,9 @@ def face_forward(n, cos_o):
 # Straight-line code over scalars and one buffer, as renderers/core/rays.py's writers: the only branch
 # is ao_direction's, on a scalar, so callers' kernels inline it without per-call reference counting.
 @jit
-def occlusion_segment(occ, k, x, n, cosine, u1, u2, tfar, offset, path, value):
+def occlusion_segment(occ, k, x, n, cosine, u, tfar, offset, path, value):
     """Segment ``k`` of ``occ``: from ``x`` (offset along unit ``n``, the side to test) along the direction
-    :func:`ao_direction` draws from (u1, u2), up to ``tfar``, for ``path``, carrying the 3-tuple ``value``."""
-    w = ao_direction(n, cosine, u1, u2)
+    :func:`ao_direction` draws from ``u`` (u1, u2), up to ``tfar``, for ``path``, carrying the 3-tuple ``value``."""
+    w = ao_direction(n, cosine, u[0], u[1])
     set_shadow(occ, k, offset_origin(x, n, offset), w, tfar, path)
     occ.c[k, 0], occ.c[k, 1], occ.c[k, 2] = value

@@ -121,8 +121,9 @@ def sequence_stream(sampler: str, key: np.uint64, pixels: int = 1, first_sample:
     pixels`` of sequence ``j mod pixels``.
 
     A photon pass is one sequence over its photons (``pixels`` 1), so the
-    photons' emission and bounce decisions are stratified across the map.
-    ``independent``: uniform(key, path, dimension), as :func:`independent`.
+    photons' emission and bounce decisions are stratified across the map;
+    irradiance probes have one sequence per probe (``pixels`` = probes) over
+    its rays, numbered by :func:`sequence_point`. ``independent``: uniform(key, path, dimension), as :func:`independent`.
     """
     kind = SAMPLERS[sampler]
     if kind == INDEPENDENT:
@@ -189,3 +190,12 @@ def vertex_1d(st, point, depth, offset) -> float:
 def vertex_2d(st, point, depth, offset):
     """Two numbers of vertex ``depth`` of the path at ``point``, from ``offset`` on, stratified jointly."""
     return sample_2d(st, point, vertex_dim(depth, offset))
+
+
+@jit
+def sequence_point(st, path, length):
+    """:func:`path_point` of ``path`` numbered sequence by sequence: point ``path mod length`` of sequence
+    ``path div length`` (``independent``: (key, path), so the numbers are those of :func:`path_point`)."""
+    if st.kind == INDEPENDENT:
+        return np.uint64(st.key), np.int64(path)
+    return path_point(st, (path % length) * st.pixels + path // length)

@@ -35,7 +35,7 @@ from renderers.core.geometry import SceneGeometry, offset_origin, ray_hit
 from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, head, ray_buffer, set_path, set_ray,
                                  set_shadow, shadow_buffer)
 from renderers.core.roulette import RR_DEPTH, continue_path
-from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, Stream, independent, path_point,
+from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, Stream, path_point,
                                     sample_1d, sample_2d, vertex_dim)
 from renderers.core.sampling import jit
 
@@ -180,13 +180,7 @@ def walk_to_diffuse(geom: SceneGeometry, scene: Scene, rays: RayBuffer, stream: 
 def camera_visible_points(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: int,
                           stream: Stream) -> tuple[np.ndarray, VisiblePoints]:
     """Camera paths ``first .. stop-1`` of a pass (path j sees pixel j mod ``pixels``) to their visible points,
-    their numbers drawn from the pass's ``stream``.
-
-    A bare pass key is taken as the ``independent`` stream of that key, for
-    callers not yet on the sampler (renderers/ambient.py, renderers/probes.py).
-    """
-    if not isinstance(stream, Stream):
-        stream = independent(stream)
+    their numbers drawn from the pass's ``stream``."""
     cam = scene.camera
     rays = ray_buffer(stop - first)
     camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, rays)

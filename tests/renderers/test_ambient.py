@@ -33,6 +33,7 @@ from harness.store.references import ReferenceError, load_reference
 from harness.workflows.render import render_checked
 from harness.workflows.runner import run_one
 from renderers.ambient import AOAmbient, interreflection_sum
+from renderers.core.sampler import SAMPLERS
 from renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")
@@ -43,7 +44,10 @@ ALPHA = 1e-3
 F32 = 1e-5
 
 
-def render(scene: Scene, spp: int, seed: int, threads: int = 2, checkpoints=(), **settings):
+def render(scene: Scene, spp: int, seed: int, threads: int = 2, checkpoints=(), **overrides):
+    """:class:`AOAmbient`'s render with its complete settings, as the render path hands them (defaults but for
+    ``overrides``)."""
+    settings = {s.name: s.default for s in AOAmbient.settings} | overrides
     return AOAmbient(threads=threads).render(scene, spp, seed, checkpoints, settings=settings)
 
 
@@ -93,13 +97,14 @@ def test_direct_light_matches_the_rectangle_light_formula(tmp_path):
 
 # -- the ambient term ------------------------------------------------------------------------------
 
-def test_occlusion_shadows_the_ambient_term(cornell):
+@pytest.mark.parametrize("sampler", SAMPLERS)
+def test_occlusion_shadows_the_ambient_term(cornell, sampler):
     """The ambient term is shadowed by AO: with the same seed, the default AO distance (0.5 on cornell-box)
     never adds more than a distance too short for anything to occlude (the same directions, some rays
     blocked), and in all it adds 0.7-0.9 of it (measured 0.80 at 32², 16 spp: the Cornell box's AO within
-    0.5, weighted by albedo; 1 if occlusion were ignored, the mutant ambient_not_occluded)."""
+    0.5, weighted by albedo; 1 if occlusion were ignored, the mutant ambient_not_occluded). With each sampler."""
     small = cornell.with_resolution(32, 32)
-    none, full, open_ = (render(small, 16, seed=3, **s).image.astype(np.float64)
+    none, full, open_ = (render(small, 16, seed=3, sampler=sampler, **s).image.astype(np.float64)
                          for s in ({"ambient": "none"}, {}, {"ao_max_distance": 1e-6}))
     shadowed, unshadowed = full - none, open_ - none
     assert (shadowed <= unshadowed + 1e-6).all()
@@ -115,15 +120,16 @@ def rectangle_light_la() -> float:
     return rho_bar / (1.0 - rho_bar) * (math.pi * LIGHT_LE * light) / (math.pi * total)
 
 
-@pytest.mark.parametrize("ao_samples", [1, 3])
-def test_open_floor_adds_exactly_rho_la(tmp_path, ao_samples):
+@pytest.mark.parametrize("ao_samples, sampler", [(1, "independent"), (3, "independent"), (3, "pmj02"),
+                                                 (3, "sobol")])
+def test_open_floor_adds_exactly_rho_la(tmp_path, ao_samples, sampler):
     """The rectangle-light floor with the occlusion rays' reach 0.3 (0.1 of the scene's size 3), below the
     light (height 1): nothing occludes, A = 1 in every sample, so the radiosity image minus the direct-only one
     (same seed) is exactly ρ·La wherever a pixel sees only floor, between 0 and that where it also sees the
-    light's black back, to float32 rounding."""
+    light's black back, to float32 rounding. With each sampler."""
     scene = rectangle_light_scene(tmp_path, res=16)
-    none = render(scene, 16, seed=5, ambient="none", ao_max_distance=0.1)
-    rad = render(scene, 16, seed=5, ao_max_distance=0.1, ao_samples=ao_samples)
+    none = render(scene, 16, seed=5, ambient="none", ao_max_distance=0.1, sampler=sampler)
+    rad = render(scene, 16, seed=5, ao_max_distance=0.1, ao_samples=ao_samples, sampler=sampler)
     la = rectangle_light_la()
     assert rad.info["ambient_radiance"] == pytest.approx([la] * 3, rel=1e-12)
     assert rad.info["ao_max_distance_units"] == pytest.approx(0.3, rel=1e-12)
@@ -225,6 +231,20 @@ def test_oracle_minimises_the_error_against_the_reference(cornell, monkeypatch):
 
 
 # -- determinism, progress, registration, the CLI -------------------------------------------------
+
+@pytest.mark.parametrize("sampler", ["pmj02", "sobol"])
+def test_low_discrepancy_samplers_are_bit_identical_for_any_thread_count_and_progressive(cornell, sampler):
+    """As :func:`test_bit_identical_for_any_thread_count_and_progressive` (radiosity) with a low-discrepancy
+    sampler: the same image and variance on 1 and 2 threads, another seed another image, the 4-spp checkpoint
+    of an 8-spp render the 4-spp render; and not the independent sampler's image."""
+    small = cornell.with_resolution(32, 32)
+    a, b = (render(small, 16, seed=3, threads=t, ao_samples=2, sampler=sampler) for t in (1, 2))
+    assert a.image.tobytes() == b.image.tobytes() and a.variance.tobytes() == b.variance.tobytes()
+    assert not np.array_equal(a.image, render(small, 16, seed=4, ao_samples=2, sampler=sampler).image)
+    assert not np.array_equal(a.image, render(small, 16, seed=3, ao_samples=2).image)
+    full = render(small, 8, seed=1, checkpoints=[4, 8], sampler=sampler)
+    assert full.checkpoints[0].image.tobytes() == render(small, 4, seed=1, threads=1, sampler=sampler).image.tobytes()
+
 
 def test_bit_identical_for_any_thread_count_and_progressive(cornell):
     """64², 16 spp, 2 occlusion rays per sample: the same image and variance bit for bit on 1 and 2 threads

@@ -39,6 +39,7 @@ from harness.scenes.model import Camera, Diffuse, Mesh, Scene, Sphere
 from harness.scenes.quantities import AmbientOcclusion
 from harness.workflows.runner import RunRecord
 from renderers.ao import AORenderer
+from renderers.core.sampler import SAMPLERS
 from renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")
@@ -204,7 +205,7 @@ def _binomial_p(k: np.ndarray, n: int, p: np.ndarray, slack: float) -> np.ndarra
     return np.minimum(1.0, 2.0 * np.minimum(low, high))
 
 
-def _sample_failures(name: str, result, spp: int) -> list[str]:
+def _sample_failures(name: str, result, spp: int, independent: bool = True) -> list[str]:
     """What says the samples were not each 0 or 1 (grey, counts of n, the Bernoulli variance)."""
     img = result.image.astype(np.float64)
     out = []
@@ -215,7 +216,7 @@ def _sample_failures(name: str, result, spp: int) -> list[str]:
     counts = img[..., 0] * spp
     if np.abs(counts - np.rint(counts)).max() > 1e-3:
         out.append(f"{name}: samples: a pixel is not a count of unoccluded samples over {spp}")
-    if result.variance is not None:
+    if result.variance is not None and independent:  # a low-discrepancy sampler's variance is its batches'
         mean = img[..., 0]
         bernoulli = mean * (1.0 - mean) / (spp - 1)
         if np.abs(result.variance[..., 0] - bernoulli).max() > 1e-6:
@@ -223,7 +224,7 @@ def _sample_failures(name: str, result, spp: int) -> list[str]:
     return out
 
 
-def analytic_failures(renderer) -> list[str]:
+def analytic_failures(renderer, sampler: str = "independent") -> list[str]:
     """Every analytic case rendered by ``renderer`` at seed :data:`SEED`; what disagrees (empty: all agree).
 
     Per pixel, an exact binomial test; per case, a z-test of the total count
@@ -231,9 +232,10 @@ def analytic_failures(renderer) -> list[str]:
     A check that fails reads ``"<case>: agreement ..."``; a failure of the
     samples' form (not 0 or 1, not grey) reads ``"<case>: samples ..."``.
     """
-    # Exact binomial tests need independent samples: a renderer with a sampler setting is asked for them.
-    kw = {"settings": {"sampler": "independent"}} if any(s.name == "sampler" for s in
-                                                           getattr(renderer, "settings", ())) else {}
+    # Exact binomial tests are for independent samples, which a renderer with a sampler setting is asked for
+    # by default; a low-discrepancy sampler's counts vary less, so the same tests hold for it, conservatively.
+    declared = {s.name: s.default for s in getattr(renderer, "settings", ())}
+    kw = {"settings": declared | {"sampler": sampler}} if "sampler" in declared else {}
     renders = {name: renderer.render(floor_scene(c), c.spp, seed=SEED, **kw) for name, c in CASES.items()}
     expected = {name: expected_image(name) for name in CASES}
     tests = sum(int(np.isfinite(e).sum()) + 1 for e, _ in expected.values())
@@ -241,7 +243,7 @@ def analytic_failures(renderer) -> list[str]:
     failures = []
     for name, case in CASES.items():
         result, (exp, slack) = renders[name], expected[name]
-        failures += _sample_failures(name, result, case.spp)
+        failures += _sample_failures(name, result, case.spp, sampler == "independent")
         seen = np.isfinite(exp)
         k = np.rint(result.image[..., 0].astype(np.float64) * case.spp)[seen]
         p = _binomial_p(k, case.spp, exp[seen], slack)
@@ -292,9 +294,11 @@ def test_expected_images_cover_the_floor():
 
 # -- the renderer against them ------------------------------------------------------------
 
-def test_ao_matches_the_analytic_cases():
-    """Every analytic case (:data:`CASES`) within the tests of :func:`analytic_failures`: α = 1e-3 overall."""
-    assert analytic_failures(AORenderer()) == []
+@pytest.mark.parametrize("sampler", SAMPLERS)
+def test_ao_matches_the_analytic_cases(sampler):
+    """Every analytic case (:data:`CASES`) within the tests of :func:`analytic_failures`: α = 1e-3 overall,
+    with each sampler."""
+    assert analytic_failures(AORenderer(), sampler) == []
 
 
 AO_MUTANTS = [m.name for m in mutants.MUTANTS if m.renderer == "ao"]
@@ -316,25 +320,33 @@ def test_mutant_fails_the_analytic_cases(name, tmp_path_factory):
 
 # -- determinism and progress ---------------------------------------------------------------
 
+def render(scene: Scene, spp: int, seed: int, threads: int = 2, checkpoints=(), **overrides):
+    """:class:`AORenderer`'s render with its complete settings, as the render path hands them (defaults
+    but for ``overrides``)."""
+    settings = {s.name: s.default for s in AORenderer.settings} | overrides
+    return AORenderer(threads=threads).render(scene, spp, seed, checkpoints, settings=settings)
+
+
 @pytest.fixture(scope="module")
 def cornell_ao() -> Scene:
     return resolve_scene("cornell-box-ao").with_resolution(64, 64)
 
 
-def test_bit_identical_for_any_thread_count_and_seed_dependent(cornell_ao):
+@pytest.mark.parametrize("sampler", SAMPLERS)
+def test_bit_identical_for_any_thread_count_and_seed_dependent(cornell_ao, sampler):
     """Same seed: the same image and variance bit for bit on 1 and 2 threads (16 spp at 64² cuts the last pass
-    into 2 and 4 work units); another seed: another image."""
-    a, b = (AORenderer(threads=t).render(cornell_ao, 16, seed=3) for t in (1, 2))
+    into 2 and 4 work units); another seed: another image. With each sampler."""
+    a, b = (render(cornell_ao, 16, 3, threads=t, sampler=sampler) for t in (1, 2))
     assert a.image.tobytes() == b.image.tobytes() and a.variance.tobytes() == b.variance.tobytes()
-    c = AORenderer(threads=2).render(cornell_ao, 16, seed=4)
+    c = render(cornell_ao, 16, 4, sampler=sampler)
     assert not np.array_equal(a.image, c.image)
 
 
 def test_checkpoints_are_the_smaller_renders(cornell_ao):
     """Progressive: the 4-spp checkpoint of an 8-spp render is the 4-spp render, bit for bit."""
-    full = AORenderer(threads=2).render(cornell_ao, 8, seed=1, checkpoints=[4, 8])
+    full = render(cornell_ao, 8, 1, checkpoints=[4, 8])
     assert [c.spp for c in full.checkpoints] == [4, 8]
-    assert full.checkpoints[0].image.tobytes() == AORenderer(threads=1).render(cornell_ao, 4, seed=1).image.tobytes()
+    assert full.checkpoints[0].image.tobytes() == render(cornell_ao, 4, 1, threads=1).image.tobytes()
 
 
 # -- the stored AO scene ------------------------------------------------------------------
@@ -358,7 +370,7 @@ def test_cornell_box_ao_borders_open_wall_and_range(cornell_ao):
     - Every value in [0, 1], grey. No statistics: each assertion is exact.
     """
     cam = cornell_ao.camera
-    r = AORenderer().render(cornell_ao, 64, seed=2)
+    r = render(cornell_ao, 64, 2)
     img = r.image
     assert np.all((img >= 0.0) & (img <= 1.0)) and np.array_equal(img[..., 0], img[..., 2])
     (c0, r1), (c1, r0) = cam.project_to_pixels(np.array([[-1.0, -1.0, 1.0], [1.0, 1.0, 1.0]]))
@@ -372,7 +384,7 @@ def test_cornell_box_ao_borders_open_wall_and_range(cornell_ao):
     assert img[~border].mean() < 0.95  # the box's edges and corners are occluded
     ao = cornell_ao.ambient_occlusion
     grey = dataclasses.replace(cornell_ao, ambient_occlusion=dataclasses.replace(ao, miss_value=0.25))
-    assert np.all(AORenderer().render(grey, 4, seed=2).image[border] == np.float32(0.25))
+    assert np.all(render(grey, 4, 2).image[border] == np.float32(0.25))
 
 
 # -- the runner's refusals and the registration -------------------------------------------------

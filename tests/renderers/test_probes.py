@@ -36,16 +36,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.adapters.settings import SettingsError, resolve_settings
+from harness.adapters.api import SettingsError, pass_key
+from harness.adapters.settings import resolve_settings
 from harness.evaluate.regions import region_masks
 from harness.scenes.library import resolve_scene
 from harness.store.references import load_reference
 from renderers import ddgi
 from renderers.core.geometry import SceneGeometry
 from renderers.core.octahedral import texel_directions
+from renderers.core.rng import uniform
+from renderers.core.sampler import SAMPLERS
 from renderers.core.sampling import random_rotation, spherical_fibonacci
 from renderers.pathtracer import PathTracer
-from renderers.probes import IrradianceProbes, grid_of, probes_per_unit, update_probes, volume_of
+from renderers.probes import (PROBE_STREAM, ROTATION_PATH, IrradianceProbes, grid_of, probes_per_unit, update_probes,
+                              update_rotation, volume_of)
 
 pytest.importorskip("embreex")
 
@@ -53,8 +57,13 @@ pytest.importorskip("embreex")
 RHO, LE, FURNACE_L = 0.8, 1.0, 5.0
 
 def probe_settings(**overrides) -> dict:
-    """The renderer's settings, defaults but for ``overrides``, validated as a render would."""
+    """The renderer's settings, defaults but for ``overrides``, validated as the render path does."""
     return resolve_settings(IrradianceProbes(), overrides)
+
+
+def render(scene, spp: int, seed: int, threads: int = 2, **overrides):
+    """The renderer's image with the settings the render path would hand it (:func:`probe_settings`)."""
+    return IrradianceProbes(threads=threads).render(scene, spp, seed, settings=probe_settings(**overrides))
 
 
 def unit(v: np.ndarray) -> np.ndarray:
@@ -283,12 +292,14 @@ def furnace_closed_form(bounces: int, iterations: int = 0, averaging: str = "ema
 FURNACE_BOUNCES = {1: (0.0045, 0.0225), 2: (0.0029, 0.0145), 5: (0.0020, 0.010), 30: (0.0015, 0.0075)}
 
 
-def test_furnace_probes_gain_one_bounce_per_update(furnace, furnace_geometry):
+@pytest.mark.parametrize("sampler", SAMPLERS)
+def test_furnace_probes_gain_one_bounce_per_update(furnace, furnace_geometry, sampler):
     """Updates that each replace the probes (``bounces`` = 30, ``iterations`` = 0; grid 2, 1024 rays per probe,
     seed 0): after update k, E/π at interior points equals the partial sum Σ_{i=1..k} 0.8^i (k = 1, 2, 5, 30:
     0.8, 1.44, 2.689, 3.995) within :data:`FURNACE_BOUNCES`. Update 1 holds direct light only (no emission, no
-    previous volume), and each later one adds exactly one bounce (ρ/π times the previous volume's E)."""
-    settings = probe_settings(grid=2, rays_per_probe=1024, bounces=30, iterations=0)
+    previous volume), and each later one adds exactly one bounce (ρ/π times the previous volume's E). With each
+    sampler (the tolerances are the independent one's; the low-discrepancy ones stratify each probe's rays)."""
+    settings = probe_settings(grid=2, rays_per_probe=1024, bounces=30, iterations=0, sampler=sampler)
     seen = {}
 
     def on_update(k, volume):
@@ -427,13 +438,14 @@ FURNACE_IMAGE_TOLERANCE = 0.03
 FURNACE_IMAGE_FLOOR = -0.05
 
 
-def test_furnace_image_is_five(furnace):
+@pytest.mark.parametrize("sampler", SAMPLERS)
+def test_furnace_image_is_five(furnace, sampler):
     """The renderer's image of the furnace (emission + direct light by NEE + ρ/π·E from 40-bounce probes): its
     mean radiance is Le/(1 − ρ) = 5 (short by 4·0.8^41 = 4e-4: the bounces the probes do not hold), the median
     of 5 seeds within :data:`FURNACE_IMAGE_TOLERANCE`, each above :data:`FURNACE_IMAGE_FLOOR`. A camera pass that
-    forgot ρ is 15% too bright, probes that also held emission (counted twice) 80%."""
-    settings = {"grid": 2, "bounces": 40, "iterations": 0}
-    means = [IrradianceProbes(threads=2).render(furnace, 16, seed, settings=settings).image.mean() / FURNACE_L - 1.0
+    forgot ρ is 15% too bright, probes that also held emission (counted twice) 80%. With each sampler."""
+    settings = {"grid": 2, "bounces": 40, "iterations": 0, "sampler": sampler}
+    means = [render(furnace, 16, seed, **settings).image.mean() / FURNACE_L - 1.0
              for seed in range(5)]
     assert np.median(means) == pytest.approx(0.0, abs=FURNACE_IMAGE_TOLERANCE), means
     assert min(means) >= FURNACE_IMAGE_FLOOR, means
@@ -485,9 +497,8 @@ def test_two_rooms_visibility_stops_the_leak(two_rooms):
     settings = {"grid": 4, "rays_per_probe": 128, "bounces": 3, "iterations": 0}
     grid = grid_of(two_rooms, probe_settings(**settings))
     assert not np.any(np.abs(ddgi.probe_positions(grid)[:, 0]) <= 0.01)  # no probe inside the wall
-    with_vis = room_ratio(two_rooms, IrradianceProbes(threads=2).render(two_rooms, 4, 0, settings=settings).image)
-    without = room_ratio(two_rooms, IrradianceProbes(threads=2).render(
-        two_rooms, 4, 0, settings=dict(settings, visibility=False)).image)
+    with_vis = room_ratio(two_rooms, render(two_rooms, 4, 0, **settings).image)
+    without = room_ratio(two_rooms, render(two_rooms, 4, 0, **settings, visibility=False).image)
     assert 0.0 <= with_vis <= LEAK_BUDGET, (with_vis, without)
     assert without >= LEAK_WITHOUT_VISIBILITY and without >= 10 * with_vis, (with_vis, without)
 
@@ -497,34 +508,52 @@ def test_two_rooms_leak_with_the_default_settings(two_rooms):
     """The same with every setting at its default (grid 8, 256 rays, 8 + 16 updates; about 25 s on 2 cores):
     measured dark/lit 2e-6 with visibility and 0.0105 without (seed 1); budgets as
     :func:`test_two_rooms_visibility_stops_the_leak`'s."""
-    with_vis = room_ratio(two_rooms, IrradianceProbes(threads=2).render(two_rooms, 4, 1).image)
-    without = room_ratio(two_rooms, IrradianceProbes(threads=2).render(two_rooms, 4, 1,
-                                                                       settings={"visibility": False}).image)
+    with_vis = room_ratio(two_rooms, render(two_rooms, 4, 1).image)
+    without = room_ratio(two_rooms, render(two_rooms, 4, 1, visibility=False).image)
     assert 0.0 <= with_vis <= LEAK_BUDGET, (with_vis, without)
     assert without >= LEAK_WITHOUT_VISIBILITY and without >= 10 * with_vis, (with_vis, without)
 
 
 # -- determinism -----------------------------------------------------------------------------------
 
-def test_images_depend_on_the_seed_only(two_rooms):
+@pytest.mark.parametrize("sampler", SAMPLERS)
+def test_images_depend_on_the_seed_only(two_rooms, sampler):
     """Grid 4 (64 probes) at 512 rays per probe, cut into work units of probes differently on 1 and 2 threads
     (:func:`renderers.probes.probes_per_unit`), 2 replacing and 2 blended updates, 4 spp: the volume after the
     updates and the rendered image (and its variance) are bit-identical on 1 and 2 threads and from one render
-    to the next with the same seed, and differ with another seed."""
-    settings = {"grid": 4, "rays_per_probe": 512, "bounces": 2, "iterations": 2}
+    to the next with the same seed, and differ with another seed. With each sampler."""
+    settings = {"grid": 4, "rays_per_probe": 512, "bounces": 2, "iterations": 2, "sampler": sampler}
     assert 1 < probes_per_unit(64, 512, 2) < probes_per_unit(64, 512, 1) < 64  # several units, cut differently
     resolved = probe_settings(**settings)
     grid = grid_of(two_rooms, resolved)
     geom = SceneGeometry(two_rooms)
     one, two = (update_probes(geom, grid, 5, resolved, threads) for threads in (1, 2))
     assert one.irradiance.tobytes() == two.irradiance.tobytes() and one.moments.tobytes() == two.moments.tobytes()
-    renders = [IrradianceProbes(threads=t).render(two_rooms, 4, seed, settings=settings)
+    renders = [render(two_rooms, 4, seed, threads=t, **settings)
                for t, seed in ((1, 5), (2, 5), (2, 5), (2, 6))]
     first = renders[0]
     for r in renders[1:3]:
         assert r.image.tobytes() == first.image.tobytes() and r.variance.tobytes() == first.variance.tobytes()
     assert not np.array_equal(renders[3].image, first.image)
     assert renders[3].image.mean() == pytest.approx(first.image.mean(), rel=0.1)  # another sample of one image
+
+
+def test_each_sampler_draws_the_probe_rays(two_rooms):
+    """``independent`` turns update k's directions by the rotation of path ROTATION_PATH, dimensions 0-2, of
+    the update's key, as before samplers; pmj02 and sobol draw other rotations and other probe rays, so their
+    volumes differ from it and from each other (same seed)."""
+    key = pass_key(11, 3, PROBE_STREAM)
+    today = random_rotation(*(uniform(key, ROTATION_PATH, d) for d in range(3)))
+    assert update_rotation("independent", 11, 3).tobytes() == today.tobytes()
+    assert not np.array_equal(update_rotation("pmj02", 11, 3), today)
+    geom = SceneGeometry(two_rooms)
+    volumes = {}
+    for sampler in SAMPLERS:
+        settings = probe_settings(grid=2, rays_per_probe=64, bounces=1, iterations=0, sampler=sampler)
+        volumes[sampler] = update_probes(geom, grid_of(two_rooms, settings), 11, settings, 2).irradiance
+    assert not np.array_equal(volumes["pmj02"], volumes["independent"])
+    assert not np.array_equal(volumes["sobol"], volumes["independent"])
+    assert not np.array_equal(volumes["sobol"], volumes["pmj02"])
 
 
 # -- settings --------------------------------------------------------------------------------------
@@ -537,7 +566,7 @@ def test_malformed_bounds_is_refused(two_rooms, bounds):
     before any work, by a SettingsError (the CLI's user error) that names the setting. (An infinite corner once
     rendered silently, with NaN probe positions; one of 1e300 overflowed the distance clamp.)"""
     with pytest.raises(SettingsError, match="bounds"):
-        IrradianceProbes(threads=1).render(two_rooms, 1, 0, settings={"bounds": bounds})
+        render(two_rooms, 1, 0, threads=1, bounds=bounds)
 
 
 def test_bounds_moves_the_grid(two_rooms):
@@ -552,11 +581,11 @@ def test_bounds_moves_the_grid(two_rooms):
     default = grid_of(two_rooms, probe_settings(grid=3))
     assert np.allclose(default.origin, [-0.9, -0.468, 0.031], rtol=0, atol=1e-12)  # the box shrunk by 5%
     settings = {"grid": 3, "rays_per_probe": 32, "bounces": 1, "iterations": 0}
-    moved = IrradianceProbes(threads=2).render(two_rooms, 1, 0, settings=dict(settings, bounds=bounds))
+    moved = render(two_rooms, 1, 0, **settings, bounds=bounds)
     assert moved.info["probe_origin"] == pytest.approx(lo.tolist(), abs=1e-15)
     assert moved.info["probe_spacing"] == pytest.approx(((hi - lo) / 2).tolist(), rel=1e-15)
     assert moved.info["probes"] == 27
-    plain = IrradianceProbes(threads=2).render(two_rooms, 1, 0, settings=settings)
+    plain = render(two_rooms, 1, 0, **settings)
     assert plain.info["probe_origin"] == pytest.approx(default.origin.tolist(), abs=1e-15)
     assert not np.array_equal(plain.image, moved.image)
 
