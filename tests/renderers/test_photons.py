@@ -188,8 +188,8 @@ def test_photonmap_in_the_white_furnace(sampler):
 def test_sppm_in_the_white_furnace(sampler):
     """SPPM converges to Le/(1-ρ) = 2 (ρ = 0.5) in the furnace. Its bias sits at the cube's edges and
     corners (the gather disc leaves the face) and shrinks with the radius: the border pixels' error must
-    be smaller after 64 iterations than after 4 and 16, the interior stay within 1% and the whole image
-    end within 3%, for every sampler.
+    fall from 4 to 16 to 64 iterations (pmj02, whose border starts above the answer: be smaller after 64
+    than after 4 and 16), the interior stay within 1% and the whole image end within 3%, for every sampler.
 
     Measured (seed 0, 32², 8192 photons per iteration, initial radius 1 footprint): border -5.3%, -4.6%,
     -3.0% after 4, 16, 64 iterations; interior -0.63%, -0.32%, -0.14%; image -4.1% → -2.2%. pmj02: border
@@ -206,7 +206,10 @@ def test_sppm_in_the_white_furnace(sampler):
     expected = furnace_radiance(0.5, 1.0, -1)
     img = {c.spp: c.image.astype(np.float64).mean(axis=2) / expected - 1 for c in res.checkpoints}
     border = [abs(img[n][~inner].mean()) for n in (4, 16, 64)]
-    assert border[2] < min(border[0], border[1]), border
+    if sampler == "pmj02":
+        assert border[2] < min(border[0], border[1]), border
+    else:
+        assert border[0] > border[1] > border[2], border
     assert abs(img[64][inner].mean()) < 0.01 and abs(img[64].mean()) < 0.03
     # α = 2/3: the radius shrinks (N' = N + αM); with α left out it would stay at its start.
     assert res.info["final_radius_median"] < 0.8 * res.info["initial_radius_world"], res.info
