@@ -183,9 +183,9 @@ def test_the_render_path_hands_every_setting_validated_typed_and_defaulted():
 
     scene = load_scene(CORNELL).with_resolution(4, 4)
     Recorder.seen.clear()
-    (entry,) = resolve(["test_adapters:Recorder[count=3, flag=true]"])
+    (entry,) = resolve(["tests.adapters.test_adapters:Recorder[count=3, flag=true]"])
     render_checked(entry, scene, 1, 0)
-    by_hand = RendererEntry("recorder", "test_adapters:Recorder", Recorder(), None, {"gain": "2", "mode": "fancy"})
+    by_hand = RendererEntry("recorder", "tests.adapters.test_adapters:Recorder", Recorder(), None, {"gain": "2", "mode": "fancy"})
     render_checked(by_hand, scene, 1, 0)
     assert Recorder.seen == [{"count": 3, "gain": 0.5, "flag": True, "mode": "plain"},
                              {"count": 2, "gain": 2.0, "flag": False, "mode": "fancy"}]

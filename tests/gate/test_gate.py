@@ -252,9 +252,9 @@ def _checks(tmp_path, body: str) -> dict:
 
 def test_alpha_is_split_over_the_three_statistical_tests(tmp_path):
     """The config's α is per expectation: agreement, variance and outliers each get 1 − (1 − α)^(1/3)."""
-    from harness.gate.checks import STATISTICAL_ROOT, statistical_alpha
+    from harness.gate.checks import STATISTICAL_TESTS, statistical_alpha
 
-    assert STATISTICAL_ROOT == ("agreement", "variance", "outliers")
+    assert STATISTICAL_TESTS == ("agreement", "variance", "outliers")
     share = statistical_alpha(0.01)
     assert 1 - (1 - share) ** 3 == pytest.approx(0.01)
     out = run_gate(load_config(_config(tmp_path, _unbiased("tests.user_renderers:ScaledMitsubaNoise", spp=64))))[0]
@@ -262,7 +262,7 @@ def test_alpha_is_split_over_the_three_statistical_tests(tmp_path):
     names = [c.name for c in out.checks]
     assert names[:4] == ["finite", "agreement", "variance", "outliers"]
     assert all("α = 0.01 per expectation, Šidák-split over agreement, variance, outliers: 0.00334 each" in c.message
-               for c in out.checks if c.name in STATISTICAL_ROOT)
+               for c in out.checks if c.name in STATISTICAL_TESTS)
 
 
 def test_variance_check_false_alarm_rate_is_at_most_alpha():
