@@ -2,7 +2,7 @@
 
 Run (13 minutes on the shared 2-core machine, most of it the 20 clean runs of the whole gate)::
 
-    .venv/bin/python benchmarks/gate_checks.py --seeds 20 --markdown docs/gate-detection.md
+    .venv/bin/python -m benchmarks.gate_checks --seeds 20 --markdown docs/gate-detection.md
 
 (1) Variance check: ``LyingVariance`` (``tests/user_renderers.py``: the
     reference plus noise of the reference's own model, 1% too dark, reporting
@@ -45,18 +45,17 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import binom
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "tests"))
+from benchmarks import markdown_blocks
+from harness.adapters.registry import resolve
+from harness.evaluate import outliers, variance_check
+from harness.gate.checks import STATISTICAL_TESTS, evaluate, statistical_alpha
+from harness.gate.config import Expectation, load_config
+from harness.gate.run import run_gate
+from harness.scenes.library import resolve_scene
+from harness.store.references import load_reference
+from harness.workflows import runner
 
-import markdown_blocks  # noqa: E402
-from harness.adapters.registry import resolve  # noqa: E402
-from harness.evaluate import outliers, variance_check  # noqa: E402
-from harness.gate.checks import STATISTICAL_TESTS, evaluate, statistical_alpha  # noqa: E402
-from harness.gate.config import Expectation, load_config  # noqa: E402
-from harness.gate.run import run_gate  # noqa: E402
-from harness.scenes.library import resolve_scene  # noqa: E402
-from harness.store.references import load_reference  # noqa: E402
-from harness.workflows import runner  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent
 
 BLOCK = "gate_checks.py"  # the block of docs/gate-detection.md this writes (benchmarks/markdown_blocks.py)
 GATE = ROOT / "gate.toml"
@@ -98,7 +97,7 @@ def variance_part(cfg, seeds: int) -> list[str]:
         fails = agr = whole = 0
         scales = []
         for s in range(seeds):
-            _, o = _run(cfg, _expectation("user_renderers:LyingVariance", {"variance_factor": f}, s))
+            _, o = _run(cfg, _expectation("tests.user_renderers:LyingVariance", {"variance_factor": f}, s))
             v = _check(o, "variance")
             fails += not v.passed
             agr += not _check(o, "agreement").passed
@@ -127,7 +126,7 @@ def outlier_part(cfg, seeds: int) -> list[str]:
     for label, x, y in PIXELS:
         found = agr = whole = 0
         for s in range(seeds):
-            _, o = _run(cfg, _expectation("user_renderers:HotPixel", {"x": x, "y": y, "factor": 2.0}, s))
+            _, o = _run(cfg, _expectation("tests.user_renderers:HotPixel", {"x": x, "y": y, "factor": 2.0}, s))
             c = _check(o, "outliers")
             found += (not c.passed) and f"pixel x {x}, y {y}," in c.message
             agr += not _check(o, "agreement").passed
@@ -227,7 +226,7 @@ def main(argv=None) -> int:
         part += ["", f"Time per whole gate run: median {np.median(wall):.0f} s, max {max(wall):.0f} s."]
         print("\n".join(part), flush=True)
         lines += part
-    lines += ["", f"Command: `.venv/bin/python benchmarks/gate_checks.py --seeds {args.seeds} --markdown "
+    lines += ["", f"Command: `.venv/bin/python -m benchmarks.gate_checks --seeds {args.seeds} --markdown "
                   f"docs/gate-detection.md` ({(time.perf_counter() - t0) / 60:.0f} min)."]
     if args.markdown:
         markdown_blocks.write_blocks([args.markdown], {BLOCK: "\n".join(lines)})

@@ -8,7 +8,7 @@ are left out) through :func:`harness.gate.run.run_gate`.
     (0, 1, ...). A gate run has several expectations, each a family-wise
     α-level test, so a run is a false alarm with probability at most
     1 - (1 - α)^E for E expectations; the count over seeds is binomial.
-(2) Power: every mutant of ``tests/mutants.py`` (a realistic bug patched into
+(2) Power: every mutant of ``tests/mutants/`` (a realistic bug patched into
     a copy of ``renderers/pathtracer.py``) at the gate's seeds, which must
     fail. For each: detected or not, the failing checks, the smallest
     p-value or the margin, and where.
@@ -23,7 +23,7 @@ are left out) through :func:`harness.gate.run.run_gate`.
 
 Run (about 8 minutes on an idle 2-core machine)::
 
-    .venv/bin/python benchmarks/gate_power.py --seeds 20 --markdown docs/gate-detection.md
+    .venv/bin/python -m benchmarks.gate_power --seeds 20 --markdown docs/gate-detection.md
 
 With ``--markdown``, the file keeps everything outside the generated block
 ``gate_power.py`` (between its markers; ``benchmarks/markdown_blocks.py``).
@@ -45,17 +45,16 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import binom, norm
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "tests"))
-
-import markdown_blocks  # noqa: E402
-import mutants  # noqa: E402
-from harness.evaluate.agreement import tile_sums  # noqa: E402
-from harness.evaluate.registry import HIGHER_IS_BETTER  # noqa: E402
-from harness.gate.run import load_baseline, run_gate  # noqa: E402
+from benchmarks import markdown_blocks
+from tests import mutants
+from harness.evaluate.agreement import tile_sums
+from harness.evaluate.registry import HIGHER_IS_BETTER
+from harness.gate.run import load_baseline, run_gate
 from harness.store.references import load_reference
-from harness.scenes.library import resolve_scene  # noqa: E402
-from harness.adapters.api import default_threads  # noqa: E402
+from harness.scenes.library import resolve_scene
+from harness.adapters.api import default_threads
+
+ROOT = Path(__file__).resolve().parent.parent
 
 POWER = 0.99
 #: The checks with a stated false-alarm rate: agreement, variance and outliers share the expectation's alpha.
@@ -279,7 +278,7 @@ def main(argv=None) -> int:
     print(f"calibration: {calib_text}")
 
     if args.markdown:
-        cmd = ".venv/bin/python benchmarks/gate_power.py " + " ".join(argv if argv is not None else sys.argv[1:])
+        cmd = ".venv/bin/python -m benchmarks.gate_power " + " ".join(argv if argv is not None else sys.argv[1:])
         lines = ["| bug | description | detected | failing checks | p-value or margin | where | "
                  "effect (expected \\|z\\|, CRN) | power at budget | budget for 99% power |",
                  "|---|---|---|---|---|---|---|---|---|"]

@@ -3,34 +3,38 @@ every file and module the docs name exists.
 
 The convention and the writer are ``benchmarks/markdown_blocks.py``. For every marker in ``docs/*.md``,
 ``BENCHMARKS.md`` and ``README.md``: it parses, begin and end pair up, the command is
-``.venv/bin/python benchmarks/<script>.py ...`` with a script that exists, writes through ``markdown_blocks``
+``.venv/bin/python benchmarks/<script>.py ...`` (or ``.venv/bin/python -m benchmarks.<script> ...``, for a
+script that imports ``tests``) with a script that exists, writes through ``markdown_blocks``
 and names the block, and a block's command names this very file (``--markdown <file>``).
 """
 
 from __future__ import annotations
 
 import ast
-import importlib.util
 import re
 import shlex
-import sys
 from pathlib import Path
 
 import pytest
 
+from benchmarks import markdown_blocks
+
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = sorted((ROOT / "docs").glob("*.md")) + [ROOT / "BENCHMARKS.md", ROOT / "README.md"]
 
-_spec = importlib.util.spec_from_file_location("markdown_blocks", ROOT / "benchmarks" / "markdown_blocks.py")
-markdown_blocks = importlib.util.module_from_spec(_spec)
-sys.modules["markdown_blocks"] = markdown_blocks  # the module's dataclass looks itself up there
-_spec.loader.exec_module(markdown_blocks)
+
+def script_words(command: str) -> list[str]:
+    """The command's words, ``-m benchmarks.NAME`` read as the script ``benchmarks/NAME.py`` it runs."""
+    words = shlex.split(command)
+    if len(words) > 2 and words[1] == "-m" and words[2].startswith("benchmarks."):
+        words = [words[0], words[2].replace(".", "/") + ".py", *words[3:]]
+    return words
 
 
 def command_problems(rel: str, name: str | None, command: str, root: Path = ROOT) -> list[str]:
     """What is wrong with the command a marker names (``name`` None: a whole page's)."""
     what = f"{rel}: block {name!r}" if name else f"{rel}: page"
-    words = shlex.split(command)
+    words = script_words(command)
     if len(words) < 2 or words[0] != ".venv/bin/python" or not words[1].startswith("benchmarks/"):
         return [f"{what} names no script (want `.venv/bin/python benchmarks/<script>.py ...`): {command!r}"]
     script = root / words[1]
@@ -89,8 +93,9 @@ def test_a_page_that_names_a_benchmark_holds_what_it_writes(page):
     benchmark's figures pasted by hand, with no marker at all, fail here."""
     text = page.read_text(encoding="utf-8")
     head, blocks = markdown_blocks.parse(text)
-    writers = {shlex.split(c)[1] for c in [head, *(b.command for b in blocks)] if c}
-    named = set(re.findall(r"\.venv/bin/python (benchmarks/\w+\.py)", text)) - set(WRITES_NO_BLOCK)
+    writers = {script_words(c)[1] for c in [head, *(b.command for b in blocks)] if c}
+    named = {f"benchmarks/{m}.py" for m in re.findall(r"\.venv/bin/python (?:benchmarks/|-m benchmarks\.)(\w+)", text)}
+    named -= set(WRITES_NO_BLOCK)
     assert named <= writers, f"named but writing no block here: {sorted(named - writers)}"
 
 

@@ -4,7 +4,7 @@ Both run the gate's own ``pathtracer`` expectations of ``gate.toml`` (their
 scenes, spp, seeds, tiles, α and baseline; the other renderers'
 expectations are left out) through :func:`harness.gate.run.run_gate`.
 
-- **Power**: each mutant of ``tests/mutants.py`` (a realistic bug patched
+- **Power**: each mutant of ``tests/mutants/`` (a realistic bug patched
   into a copy of ``renderers/pathtracer.py``) must fail the gate at the CI
   budget, on an agreement test or a finite check (the baseline checks alone
   do not count: a baseline re-recorded from a buggy renderer would hide the
@@ -92,7 +92,7 @@ def test_probes_mutants_patch_a_copy_of_ddgi_that_the_integrator_imports():
     assert f"import cbox_mutant_{name}__ddgi as ddgi\n" in top and "from renderers import ddgi" not in top
     assert "if r < mean:" in helper and f"from cbox_mutant_{name}__octahedral import " in helper
     assert f"from cbox_mutant_{name}__visible_points import " in top  # the toolkit copied too (but SHARED_CORE)
-    assert mutants._imports(top, f"cbox_mutant_{name}__ddgi")
+    assert mutants.imports_module(top, f"cbox_mutant_{name}__ddgi")
     source = mutants.original_source("probes").replace("from renderers import ddgi\n",
                                                        "from renderers import ddgi, core\n")
     with pytest.raises(AssertionError, match="does not redirect"):

@@ -310,7 +310,7 @@ MUTANT_CASES = {"ao_uniform_as_cosine": "one-wall", "ao_max_distance_ignored": "
 
 @pytest.mark.parametrize("name", AO_MUTANTS)
 def test_mutant_fails_the_analytic_cases(name, tmp_path_factory):
-    """Each ao mutant of tests/mutant_catalogue.py fails :func:`analytic_failures` on agreement (not only on
+    """Each ao mutant of tests/mutants/ambient_occlusion.py fails :func:`analytic_failures` on agreement (not only on
     the samples' form), at least in the case it must break."""
     assert set(AO_MUTANTS) == set(MUTANT_CASES)
     entry = mutants.load_mutant(name, tmp_path_factory.mktemp("ao-mutants"))

@@ -1,41 +1,6 @@
-"""Deliberately broken copies of our renderers, for measuring the CI gate's power.
+"""Applying a mutant (copies of the patched modules, loaded as the renderer's entry) and running the gate on it.
 
-Each :class:`Mutant` is a realistic bug in one of our renderers
-(:data:`INTEGRATORS`: the path tracer, the photon mapper, SPPM, ao, ambient,
-probes and the denoised path tracer ``pathtracer+oidn``), written as exact
-source patches: an ``old`` snippet replaced by ``new`` in the renderer's
-module (the integrator, e.g. ``renderers/pathtracer.py``), in a module of the
-toolkit it is built on (``renderers/core/``) or in another module of
-``renderers/`` it imports (the probes' algorithm, ``renderers/ddgi.py``),
-wherever the line now lives. :func:`load_mutant` writes the patched sources
-to real files (so numba's ``cache=True`` has a locator) as uniquely named
-modules, imports them, and returns a
-:class:`harness.adapters.registry.RendererEntry` named after the renderer,
-which :func:`harness.gate.run.run_gate` takes as an override.
-
-A mutant is a set of modules: the integrator is ``cbox_mutant_<name>``; a
-mutant that patches any other module (``renderers/core/<stem>.py``, or
-``renderers/<stem>.py`` such as ``ddgi``) gets a copy
-``cbox_mutant_<name>__<stem>`` of it and of each core module but the scalar
-helpers (:data:`SHARED_CORE`), patched or not, so no part of the renderer
-still sees the unpatched code and no shared module is compiled for the
-copies' types; their ``from renderers.core.<stem> import`` (and
-``from renderers import <stem>``) lines are pointed at the copies.
-
-Every patch must apply exactly once: if a refactor moves or rewrites a
-snippet, :func:`patched_sources` raises instead of silently testing an
-unmutated renderer. The sources themselves are never modified.
-
-The gate on a mutant: :func:`gate_config` (``gate.toml`` with one renderer's
-expectations), :func:`run_until_failure` (cheapest expectation first, up to
-the first that fails), :func:`verdict` (what the gate said, in the terms of
-the detection table) and :func:`run_isolated` (in a child process with a time
-limit, for the mutants of :data:`ISOLATED` that once made a run never end).
-
-The catalogue itself (the bugs, as data, with their snippets) is
-:mod:`mutant_catalogue`; its names are re-exported here. Used by
-``tests/gate/test_gate_power.py``, ``tests/renderers/test_ao.py`` and
-``benchmarks/gate_power.py`` only.
+See :mod:`tests.mutants` for how a mutant becomes a renderer, and why every patch must apply exactly once.
 """
 
 from __future__ import annotations
@@ -48,8 +13,8 @@ from pathlib import Path
 
 from harness.adapters.registry import RendererEntry
 from harness.adapters.settings import resolve_settings
-from tests.mutant_catalogue import (BY_NAME, CORE, DDGI, INTEGRATORS, ISOLATED, LOW_POWER, MUTANTS,  # noqa: F401
-                              PATHTRACER, PHOTONMAP, PROBES, ROOT, SOURCE, SPPM, Mutant, Patch)
+from tests.mutants.catalogue import BY_NAME
+from tests.mutants.model import CORE, INTEGRATORS, PATHTRACER, ROOT, SOURCE, Mutant
 
 #: Core modules every mutant shares with the real renderer: scalar helpers, no types of their own.
 SHARED_CORE = ("sampling", "rng")
@@ -80,7 +45,7 @@ def _core_module(file: str) -> str:
     return file[: -len(".py")].replace("/", ".")
 
 
-def _imports(text: str, module: str) -> bool:
+def imports_module(text: str, module: str) -> bool:
     return re.search(rf"^\s*(from {re.escape(module)} import |import {re.escape(module)} as )", text, re.M) is not None
 
 
@@ -121,7 +86,7 @@ def patched_sources(mutant: Mutant | str, sources: dict[str, str] | None = None)
         text = texts.get(p.file, read(p.file))
         count = text.count(p.old)
         assert count == 1, (f"mutant {m.name!r}: the snippet {p.old!r} occurs {count} times in {p.file} "
-                            f"(expected exactly once); update tests/mutants.py to the refactored source")
+                            f"(expected exactly once); update its family module under tests/mutants/ to the refactored source")
         texts[p.file] = text.replace(p.old, p.new)
     assert any(texts[f] != read(f) for f in texts), f"mutant {m.name!r} does not change the source"
     # A mutant of the toolkit gets its own copy of every core module that a kernel may call with the
@@ -170,7 +135,7 @@ def load_module(name: str, tmp_dir: str | Path):
     pending = dict(files)
     while pending:
         mod = next(k for k, (_, text) in pending.items()
-                   if not any(_imports(text, d) for d in pending if d != k))
+                   if not any(imports_module(text, d) for d in pending if d != k))
         path, _ = pending.pop(mod)
         spec = importlib.util.spec_from_file_location(mod, path)
         module = importlib.util.module_from_spec(spec)

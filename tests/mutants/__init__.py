@@ -1,0 +1,57 @@
+"""Deliberately broken copies of our renderers, for measuring the CI gate's power.
+
+Each :class:`Mutant` is a realistic bug in one of our renderers
+(:data:`INTEGRATORS`: the path tracer, the photon mapper, SPPM, ao, ambient,
+probes and the denoised path tracer ``pathtracer+oidn``), written as exact
+source patches: an ``old`` snippet replaced by ``new`` in the renderer's
+module (the integrator, e.g. ``renderers/pathtracer.py``), in a module of the
+toolkit it is built on (``renderers/core/``) or in another module of
+``renderers/`` it imports (the probes' algorithm, ``renderers/ddgi.py``),
+wherever the line now lives. :func:`load_mutant` writes the patched sources
+to real files (so numba's ``cache=True`` has a locator) as uniquely named
+modules, imports them, and returns a
+:class:`harness.adapters.registry.RendererEntry` named after the renderer,
+which :func:`harness.gate.run.run_gate` takes as an override.
+
+A mutant is a set of modules: the integrator is ``cbox_mutant_<name>``; a
+mutant that patches any other module (``renderers/core/<stem>.py``, or
+``renderers/<stem>.py`` such as ``ddgi``) gets a copy
+``cbox_mutant_<name>__<stem>`` of it and of each core module but the scalar
+helpers (:data:`SHARED_CORE`), patched or not, so no part of the renderer
+still sees the unpatched code and no shared module is compiled for the
+copies' types; their ``from renderers.core.<stem> import`` (and
+``from renderers import <stem>``) lines are pointed at the copies.
+
+Every patch must apply exactly once: if a refactor moves or rewrites a
+snippet, :func:`patched_sources` raises instead of silently testing an
+unmutated renderer. The sources themselves are never modified.
+
+The gate on a mutant: :func:`gate_config` (``gate.toml`` with one renderer's
+expectations), :func:`run_until_failure` (cheapest expectation first, up to
+the first that fails), :func:`verdict` (what the gate said, in the terms of
+the detection table) and :func:`run_isolated` (in a child process with a time
+limit, for the mutants of :data:`ISOLATED` that once made a run never end).
+
+The package: what a mutant is (:mod:`tests.mutants.model`), the bugs, one
+module per renderer family (:mod:`tests.mutants.pathtracer`,
+:mod:`~tests.mutants.photon_mapping`, :mod:`~tests.mutants.ambient_occlusion`,
+:mod:`~tests.mutants.probes`, :mod:`~tests.mutants.denoising`), gathered in
+:mod:`tests.mutants.catalogue`, and applying them (:mod:`tests.mutants.patching`);
+the names used outside are re-exported here. Used by
+``tests/gate/test_gate_power.py``, ``tests/renderers/test_ao.py`` and
+``benchmarks/gate_power.py`` only.
+"""
+
+from tests.mutants.catalogue import BY_NAME, FAMILIES, ISOLATED, LOW_POWER, MUTANTS
+from tests.mutants.model import (AMBIENT, AO, CORE, DDGI, INTEGRATORS, OIDN, PATHTRACER, PHOTONMAP, PROBES, ROOT,
+                                 SOURCE, SPPM, Mutant, Patch)
+from tests.mutants.patching import (GATE_TOML, INTEGRATOR_FILES, SHARED_CORE, Verdict, cost, gate_config,
+                                    imports_module, integrator, label, load_module, load_mutant, module_name,
+                                    original_source, patched_source, patched_sources, pathtracer_gate_config,
+                                    run_isolated, run_until_failure, verdict)
+
+__all__ = ["AMBIENT", "AO", "BY_NAME", "CORE", "DDGI", "FAMILIES", "GATE_TOML", "INTEGRATORS", "INTEGRATOR_FILES",
+           "ISOLATED", "LOW_POWER", "MUTANTS", "OIDN", "PATHTRACER", "PHOTONMAP", "PROBES", "ROOT", "SHARED_CORE",
+           "SOURCE", "SPPM", "Mutant", "Patch", "Verdict", "cost", "gate_config", "imports_module", "integrator",
+           "label", "load_module", "load_mutant", "module_name", "original_source", "patched_source",
+           "patched_sources", "pathtracer_gate_config", "run_isolated", "run_until_failure", "verdict"]

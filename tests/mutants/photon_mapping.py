@@ -1,0 +1,60 @@
+"""The photon mappers' mutants: photonmap (photon tracing, the photon map's estimate) and SPPM."""
+
+from __future__ import annotations
+
+from tests.mutants.model import CORE, SPPM, Mutant
+
+MUTANTS: tuple[Mutant, ...] = (
+    # -- photon mapping (photonmap, sppm) ------------------------------------------------
+    Mutant(
+        "photon_power_not_divided",
+        "photon flux not divided by the number of photons emitted (each photon carries the light's whole "
+        "power)",
+        (("    photons.power[:] /= max(emitted, 1)\n", "", f"{CORE}/photons.py"),),
+        "photonmap",
+    ),
+    Mutant(
+        "double_cosine",
+        "density estimate weighted by the cosine of each photon's incidence, which its flux already counts",
+        (("            w = kernel_weight(kernel, dist[i, a], r)\n",
+          "            w = kernel_weight(kernel, dist[i, a], r) * cos_in\n", f"{CORE}/photon_map.py"),),
+        "photonmap",
+    ),
+    Mutant(
+        "caustic_photon_on_specular_surface",
+        "caustic photons stored where they leave the last specular surface (the ray's origin) instead of "
+        "where they land",
+        (("                _store(out.photons, ns, x, power, d, n, depth, caustic)\n",
+          "                o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])\n"
+          "                _store(out.photons, ns, o if mode == STORE_CAUSTIC else x, power, d, n, depth, caustic)\n",
+          f"{CORE}/photons.py"),),
+        "photonmap",
+    ),
+    Mutant(
+        "photon_direction_reuses_point_dims",
+        "a photon's emitted direction drawn from the sample dimensions of its point on the emitter (EMIT_U for "
+        "both decisions): where a photon leaves the light decides where it goes",
+        (("        w = sample_2d(stream, pt, EMIT_DIR_U)\n", "        w = sample_2d(stream, pt, EMIT_U)\n",
+          f"{CORE}/photons.py"),),
+        "photonmap",
+    ),
+    Mutant(
+        "no_normal_test",
+        "no normal test in the density estimate: photons on a wall count on the floor at their corner",
+        (("    if cos_n < NORMAL_COS_MIN:\n        return 0.0\n", "", f"{CORE}/photon_map.py"),),
+        "photonmap",
+    ),
+    Mutant(
+        "no_radius_shrinking",
+        "SPPM's α left out of the photon-count update (N' = N + M): the radius never shrinks, and the image "
+        "converges to a blurred one",
+        (("        n_new = self.n[hit] + alpha * m[hit]\n", "        n_new = self.n[hit] + m[hit]\n", SPPM),),
+        "sppm",
+    ),
+    Mutant(
+        "sppm_power_not_divided",
+        "SPPM's gathered flux not divided by the iteration's photon count",
+        (("            phi /= photons\n", "", SPPM),),
+        "sppm",
+    ),
+)
