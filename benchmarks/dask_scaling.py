@@ -88,7 +88,7 @@ def client_cost(scene, ref, cells: int, table_cells: int) -> tuple[float, float]
 
     from harness.store.experiments import RESULTS_FILE, write_parquet_atomic
     from harness.workflows.cells import Cell
-    from harness.workflows.converge import _store_cell
+    from harness.workflows.converge import store_cell
 
     (entry,) = resolve(["pathtracer"])
     packed = pack(cells_module.render_cell_task(Cell("pathtracer__seed0", entry.spec, {}, 0, tuple(SPPS),
@@ -97,7 +97,7 @@ def client_cost(scene, ref, cells: int, table_cells: int) -> tuple[float, float]
         t = time.perf_counter()
         for s in range(cells):
             cell = Cell(f"pathtracer__seed{s}", entry.spec, {}, s, tuple(SPPS), scene.content_hash())
-            rows = _store_cell(Path(out), cell, None, *unpack(packed), SPPS)
+            rows = store_cell(Path(out), cell, None, *unpack(packed), SPPS)
         store = (time.perf_counter() - t) / cells
         table = pd.concat([rows] * table_cells, ignore_index=True)
         t = time.perf_counter()

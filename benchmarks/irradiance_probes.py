@@ -3,7 +3,7 @@
 Three measurements on ``cornell-box``, each printed as markdown tables (docs/irradiance-probes.md explains them),
 all from :func:`harness.workflows.converge.run_experiment` called in-process (the code ``cbox converge`` runs;
 sweeps built by :func:`harness.adapters.registry.sweep`, as ``--sweep`` does), then
-:func:`harness.workflows.converge.summary_table` (the ``summary.csv`` ``cbox converge`` writes, with the
+:func:`harness.evaluate.summary.summary_table` (the ``summary.csv`` ``cbox converge`` writes, with the
 bias²/variance split per region; ``cbox report OUT/probes`` adds the HTML report):
 
 1. **Error against time and spp** for ``probes`` at grid 4, 6, 8, 12 (rays 256), rays_per_probe 64, 256, 1024
@@ -70,7 +70,8 @@ from harness.store.atomic import atomic_path
 from harness.store.experiments import SUMMARY_FILE, cell_name, final_images
 from harness.store.exr import read_exr
 from harness.store.references import load_reference
-from harness.workflows.converge import parse_spp_list, run_experiment, summary_table
+from harness.evaluate.summary import summary_table
+from harness.workflows.converge import parse_spp_list, run_experiment
 from reports.charts import convergence_table
 from reports.plots import BarGroup, Series, bars_svg, line_plot_svg
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.adapters.registry import RenderResult
+from harness.adapters.api import RenderResult
 from harness.adapters.settings import Setting
 
 ALL = frozenset({"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"})

@@ -108,7 +108,7 @@ def run_experiment(
             for outcome in executor.run(tasks):
                 slots, cell, entry, stored = pending[outcome.task.key]
                 if outcome.error is None:
-                    rows = _store_cell(out, cell, stored, *outcome.value, spps)
+                    rows = store_cell(out, cell, stored, *outcome.value, spps)
                 else:  # recorded, not stored: a rerun renders it again
                     rows = pd.DataFrame(failed_rows(cell, entry, scene, outcome.error))
                 for slot in slots:
@@ -156,7 +156,7 @@ def _plan(out: Path, name: str, scene: Scene, spps: list[int]) -> tuple[pd.DataF
     return stored, spps_to_render(have, image_spp, spps)
 
 
-def _store_cell(out: Path, cell: Cell, stored: pd.DataFrame | None, rows_list: list[dict],
+def store_cell(out: Path, cell: Cell, stored: pd.DataFrame | None, rows_list: list[dict],
                 image: np.ndarray | None, spps: list[int]) -> pd.DataFrame:
     """Write a rendered cell (image first, then its rows, each atomically); its rows at ``spps``."""
     cell_path, image_path = out / "cells" / f"{cell.name}.parquet", out / "images" / f"{cell.name}.exr"

@@ -64,7 +64,7 @@ class RunRecord:
     regions: dict = field(default_factory=dict)  # region -> metric -> value, when the scene names regions
     image: np.ndarray | None = field(default=None, repr=False)
     variance: np.ndarray | None = field(default=None, repr=False)  # of the image, when the renderer gives it
-    checkpoints: list = field(default_factory=list, repr=False)  # harness.adapters.registry.Checkpoint
+    checkpoints: list = field(default_factory=list, repr=False)  # harness.adapters.api.Checkpoint
 
     @classmethod
     def new(cls, scene: Scene, entry: RendererEntry, spp: int, seed: int, **fields) -> "RunRecord":

@@ -72,7 +72,7 @@ def test_consistency_config_forms(tmp_path):
 def _synthetic(bias_at, spps=(4, 8, 16, 32, 64), size=16):
     """A hand-built run on a 16² synthetic reference: the image at each spp is the reference plus ``bias_at(spp)``
     on the left half (region "left") and exact on the right half (region "right")."""
-    from harness.adapters.registry import Checkpoint
+    from harness.adapters.api import Checkpoint
     from harness.evaluate import metrics
     from harness.store.references import Reference
     from harness.workflows.runner import RunRecord

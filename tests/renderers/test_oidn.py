@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 
 from tests.conftest import run_cbox
-from harness.adapters.registry import AOVS, estimator_of, resolve
+from harness.adapters.api import AOVS
+from harness.adapters.registry import estimator_of, resolve
 from harness.evaluate import metrics
 from harness.scenes.library import resolve_scene
 from harness.store.references import load_reference

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import CORNELL, ROOT
-from harness.adapters.registry import RenderResult
+from harness.adapters.api import RenderResult
 from harness.scenes.loader import load_scene
 from renderers.raster.lights import light_samples
 from renderers.raster.pyrender_adapter import Pyrender
