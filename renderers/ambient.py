@@ -109,7 +109,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from harness.adapters.api import ReferenceFit, RenderResult, Setting
+from harness.adapters.api import ReferenceFit, RenderResult, Setting, default_threads
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.geometry import SceneGeometry
@@ -118,7 +118,7 @@ from renderers.core.rays import add_unoccluded, head, shadow_buffer
 from renderers.core.sampler import SAMPLER_SETTING, Stream, independent, path_point, sample_2d
 from renderers.core.sampling import jit
 from renderers.core.schedule import render_image
-from harness.adapters.api import default_threads
+from renderers.core.settings import with_defaults
 from renderers.core.visible_points import camera_visible_points
 
 #: Ways of choosing La (module docstring).
@@ -273,7 +273,7 @@ class AOAmbient(ToolkitRenderer):
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
-        s = settings  # complete and validated by the render path
+        s = with_defaults(self.settings, settings)
         threads = self.threads or default_threads()
         if s["ambient"] == "oracle":
             raise ValueError("ambient = oracle is fitted to the stored reference by the harness's render path "

@@ -70,6 +70,7 @@ from renderers.core.rays import add_unoccluded, head, ray_buffer, shadow_buffer
 from renderers.core.sampler import CAMERA_DIMS, SAMPLER_SETTING, Stream, independent, path_point, sample_2d
 from renderers.core.sampling import jit
 from renderers.core.schedule import render_image
+from renderers.core.settings import with_defaults
 
 #: A sample's layout: the pixel jitter (CAMERA_U, CAMERA_V: dimensions 0 and 1, drawn by the toolkit's
 #: camera rays), then the AO direction's two numbers; no other decision, so AO_DIMS dimensions in all.
@@ -152,6 +153,6 @@ class AORenderer(ToolkitRenderer):
                              f"quantity is {scene.quantity}")
         geom, setup_s = warmed_geometry(scene, lambda g: trace_ao(g, scene, 0, 1, 1, independent(0)))
         result = render_image(scene, spp, seed, lambda *unit: trace_ao(geom, scene, *unit), checkpoints,
-                              self.threads, sampler=settings["sampler"])
+                              self.threads, sampler=with_defaults(self.settings, settings)["sampler"])
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
         return result

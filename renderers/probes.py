@@ -64,6 +64,7 @@ from renderers.core.sampler import SAMPLER_SETTING, Stream, independent, path_po
     sample_2d, sequence_stream
 from renderers.core.sampling import INV_PI, jit, random_rotation, spherical_fibonacci
 from renderers.core.schedule import render_image, run_units
+from renderers.core.settings import with_defaults
 from renderers.core.visible_points import camera_visible_points
 
 PROBE_STREAM = 3
@@ -124,7 +125,7 @@ class IrradianceProbes(ToolkitRenderer):
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
-        s = settings  # complete and validated by the render path
+        s = with_defaults(self.settings, settings)
         threads = self.threads or default_threads()
         grid = grid_of(scene, s)
         geom, setup_s = warmed_geometry(scene, lambda g: _warm_up(g, scene, grid, s))

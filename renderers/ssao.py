@@ -123,6 +123,7 @@ from renderers.core.adapter import ToolkitRenderer
 from renderers.core.gbuffer import gbuffer, view_space
 from renderers.core.geometry import SceneGeometry
 from renderers.core.sampling import jit, orthonormal_basis
+from renderers.core.settings import with_defaults
 from renderers.core.screen_space import on_screen, plane_depth, project, ray_through, to_edge
 
 VARIANTS = ("crytek", "hemisphere", "gtao")
@@ -439,9 +440,9 @@ class SSAO(ToolkitRenderer):
                 low=0.0),
     )
 
-    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (), *,
-               settings: Mapping[str, Any]) -> RenderResult:
-        s = settings  # every declared setting, resolved by the render path
+    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
+               settings: Mapping[str, Any] | None = None) -> RenderResult:
+        s = with_defaults(self.settings, settings)
         ao = scene.ambient_occlusion
         if scene.quantity != "ambient_occlusion" or ao is None:
             raise ValueError(f"ssao computes ambient occlusion; scene {scene.name!r} is of quantity {scene.quantity}")

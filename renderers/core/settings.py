@@ -1,4 +1,4 @@
-"""Settings as our renderers read them: complete and typed, validated once, by the harness.
+"""Settings as every renderer of ours reads them: complete and typed, validated once, by the harness.
 
 The render path resolves a renderer's declared settings
 (:class:`harness.adapters.api.Setting`) once and hands ``render`` the complete
