@@ -1,6 +1,6 @@
 """The one render path: the only call of a renderer's ``render``, and the checks of what it returned.
 
-Kept light (NumPy only) because the sandbox's child process imports it too:
+Kept light (no SciPy, no pandas) because the sandbox's child process imports it too:
 a time-limited render must not spend its budget loading SciPy.
 """
 
