@@ -256,7 +256,9 @@ class AOAmbient(ToolkitRenderer):
     approximations = ("indirect light is one constant ambient radiance per channel, shadowed by short-range "
                       "ambient occlusion: biased, it does not converge to the reference",)
     settings = (
-        dataclasses.replace(SAMPLER_SETTING, default="independent"),
+        dataclasses.replace(SAMPLER_SETTING, default="independent",
+                            doc="random numbers of the camera paths and the occlusion rays (per pixel): independent, "
+                            "pmj02 or sobol (renderers.core.sampler)"),
         Setting("ambient", str, "radiosity", "how the ambient radiance La is chosen: radiosity (Cohen et al. "
                 "1988's ambient term, from the scene alone), oracle (least squares against the stored "
                 "reference by the harness: two renders), none (direct light only), constant (ambient_radiance)",

@@ -87,7 +87,8 @@ class IrradianceProbes(ToolkitRenderer):
                       "mirrors and glass seen by probe rays reflect nothing into the probes")
     settings = (
         dataclasses.replace(SAMPLER_SETTING, default="independent",
-                            doc=SAMPLER_SETTING.doc + "; the probe rays: one sequence per probe over its rays"),
+                            doc="random numbers of the camera paths (per pixel) and the probe rays (one sequence per "
+                            "probe over its rays): independent, pmj02 or sobol (renderers.core.sampler)"),
         Setting("grid", int, 8, "probes per axis (RTXGI's Cornell box: 9 at spacing 0.3 for a box of 2.4)",
                 low=2, high=64),
         Setting("margin", float, 0.05, "the probe grid spans the scene's bounding box shrunk by this fraction "
