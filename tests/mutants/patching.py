@@ -285,7 +285,7 @@ def run_isolated(name: str, work: str | Path, timeout_s: float, gate: str | Path
     import json
     import subprocess
 
-    cmd = [sys.executable, "-c", _CHILD, str(Path(__file__).resolve().parents[1]), name, str(gate), str(work),
+    cmd = [sys.executable, "-c", _CHILD, str(ROOT), name, str(gate), str(work),
            "1" if until_failure else "0"]
     try:
         out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, cwd=SOURCE.parent.parent)
