@@ -43,7 +43,7 @@ START_TIMEOUT_S = 60
 
 def _env(**extra: str) -> dict:
     env = {k: v for k, v in os.environ.items() if k != "CBOX_THREADS"}
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), str(ROOT), env.get("PYTHONPATH")]))
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
     return {**env, **extra}
 
 
