@@ -291,8 +291,7 @@ def _shade_probe_rays(prim, t_sphere, rays, stream, first, per_probe, vol, geo, 
         u1, u2 = sample_2d(stream, point, NEE_U)
         found, a, sd, tfar, lc = sample_ld(x, n, mat, rho, (sample_1d(stream, point, NEE_PICK), u1, u2), geo, True)
         if found:
-            set_shadow(shadow, ns, a, sd, tfar, i)
-            shadow.c[ns, 0], shadow.c[ns, 1], shadow.c[ns, 2] = lc
+            set_shadow(shadow, ns, a, sd, tfar, i, lc)
             ns += 1
         ub1, ub2 = sample_2d(stream, point, BSDF_U)
         dx, dy, dz, cos_b = lambert_sample(n, ub1, ub2)

@@ -149,8 +149,7 @@ def _shade(hits, rays, stream, first, depth, extend, roulette, geo, out):
             found, a, sd, tfar, c = sample_ld(x, n, mat, (beta[0] * rho[0], beta[1] * rho[1], beta[2] * rho[2]),
                                               (vertex_1d(stream, pt, depth, EMITTER_PICK), u[0], u[1]), geo, True)
             if found:
-                set_shadow(out.shadow, ns, a, sd, tfar, q)
-                out.shadow.c[ns, 0], out.shadow.c[ns, 1], out.shadow.c[ns, 2] = c
+                set_shadow(out.shadow, ns, a, sd, tfar, q, c)
                 ns += 1
         u = vertex_2d(stream, pt, depth, BSDF_U)
         wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p], u[0], u[1])

@@ -56,5 +56,4 @@ def occlusion_segment(occ, k, x, n, cosine, u, tfar, offset, path, value):
     """Segment ``k`` of ``occ``: from ``x`` (offset along unit ``n``, the side to test) along the direction
     :func:`ao_direction` draws from ``u`` (u1, u2), up to ``tfar``, for ``path``, carrying the 3-tuple ``value``."""
     w = ao_direction(n, cosine, u[0], u[1])
-    set_shadow(occ, k, offset_origin(x, n, offset), w, tfar, path)
-    occ.c[k, 0], occ.c[k, 1], occ.c[k, 2] = value
+    set_shadow(occ, k, offset_origin(x, n, offset), w, tfar, path, value)

@@ -109,8 +109,10 @@ def shadow_segment(a, b):
 
 
 @jit
-def set_shadow(buf, k, o, d, tfar, path):
-    """Shadow segment ``k`` of ``buf``: from ``o`` along unit ``d`` up to ``tfar``, for ``path``."""
+def set_shadow(buf, k, o, d, tfar, path, value):
+    """Shadow segment ``k`` of ``buf``: from ``o`` along unit ``d`` up to ``tfar``, for ``path``, carrying the
+    3-tuple ``value`` (what it adds to the path's estimate if unoccluded)."""
+    buf.c[k, 0], buf.c[k, 1], buf.c[k, 2] = value
     buf.o[k, 0], buf.o[k, 1], buf.o[k, 2] = o
     buf.d[k, 0], buf.d[k, 1], buf.d[k, 2] = d
     buf.t[k] = tfar

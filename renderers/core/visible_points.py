@@ -123,8 +123,7 @@ def _step(hits, rays, walk, depth, extend, roulette, geo, out):
                 found, a, sd, tfar, c = sample_ld(x, n, mat, (beta[0] * rho[0], beta[1] * rho[1], beta[2] * rho[2]),
                                                   (_vertex_1d(walk, pt, depth, EMITTER_PICK), u[0], u[1]), geo, False)
                 if found:
-                    set_shadow(out.shadow, ns, a, sd, tfar, q)
-                    out.shadow.c[ns, 0], out.shadow.c[ns, 1], out.shadow.c[ns, 2] = c
+                    set_shadow(out.shadow, ns, a, sd, tfar, q, c)
                     ns += 1
             continue
         if not extend:
