@@ -1,6 +1,7 @@
 """Mitsuba 3 adapter: the harness's reference renderer.
 
-Scenes are converted to ``mi.load_dict`` with in-memory meshes, rendered with
+Scenes are converted to ``mi.load_dict`` with in-memory meshes (the plugins of
+:mod:`harness.scenes.export.mitsuba`, which ``cbox export`` writes as XML), rendered with
 Mitsuba's unidirectional ``path`` integrator (next-event estimation + BSDF
 sampling with MIS, Russian roulette from depth 5), an ``independent`` sampler
 and a ``box`` reconstruction filter.
@@ -184,8 +185,7 @@ class Mitsuba3:
     """Mitsuba 3 path tracer (``path`` integrator); ambient occlusion by :mod:`renderers.mitsuba_ao`."""
 
     name = "mitsuba"
-    features = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
-                          "pinhole_camera", "box_filter"})
+    features = mitsuba_plugins.FEATURES  # what the translation into Mitsuba's plugins expresses
     quantities = ("radiance", "ambient_occlusion")
     approximations: tuple[str, ...] = ()
     aovs = AOVS

@@ -15,6 +15,7 @@ Both are asserted bit for bit (same variant, ``llvm_ad_rgb`` here: :func:`render
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -121,6 +122,21 @@ def test_the_file_declares_its_defaults_and_the_scene_settings(tmp_path):
         v, t = read_ply(tmp_path / shape.find("string[@name='filename']").get("value"))
         np.testing.assert_array_equal(v, export_mitsuba.unit_vertices(scene, mesh).astype(np.float64))
         np.testing.assert_array_equal(t, mesh.triangles)
+
+
+def test_names_that_xml_or_mitsuba_would_misread_are_written_safely(tmp_path, variant):
+    """A material named like a ``$`` parameter, names with ``--`` (ends an XML comment) or a newline."""
+    scene = small("cornell-box")
+    odd = {"white": "$spp", "red": "r--e\nd"}
+    scene = dataclasses.replace(
+        scene, name="x---y", materials={odd.get(k, k): dataclasses.replace(m, name=odd.get(k, k))
+                                        for k, m in scene.materials.items()},
+        meshes=tuple(dataclasses.replace(m, name=m.name + "/--$seed", material=odd.get(m.material, m.material))
+                     for m in scene.meshes))
+    xml = export_scene(scene, "mitsuba", tmp_path)
+    ET.parse(xml)
+    loaded = mi.load_file(str(xml), spp=1, seed=pass_seed(2, 0))
+    np.testing.assert_array_equal(np.asarray(mi.render(loaded), dtype=np.float32), Mitsuba3().render(scene, 1, 2).image)
 
 
 def test_an_ambient_occlusion_scene_is_refused(tmp_path):

@@ -28,7 +28,7 @@ import numpy as np
 
 from harness.scenes.export.ply import write_ply
 from harness.scenes.materials import Dielectric, Diffuse, Mirror
-from harness.scenes.model import Mesh, Scene, Sphere
+from harness.scenes.model import Mesh, Scene, Sphere, one_line
 from harness.scenes.transforms import unit_frame
 
 NAME = "mitsuba"
@@ -155,14 +155,16 @@ def write(scene: Scene, folder: Path) -> Path:
     sensor["film"]["width"], sensor["film"]["height"] = Var("resx", "integer"), Var("resy", "integer")
     d: dict = {"type": "scene", "integrator": integrator_dict(scene), "sensor": sensor}
     # Shapes in the adapter's order, under its ids (spheres, then meshes), so the two scenes are one.
-    d |= {_bsdf_id(name): bsdf_dict(m) for name, m in scene.materials.items()}
+    # Ids and file names from our names made safe: Mitsuba substitutes `$name` in any attribute.
+    bsdf_ids = {name: f"bsdf{i}-{_slug(name)}" for i, name in enumerate(scene.materials)}
+    d |= {bsdf_ids[name]: bsdf_dict(m) for name, m in scene.materials.items()}
     for i, s in enumerate(scene.spheres):
-        d[f"sphere_{i}"] = sphere_dict(scene, s) | {"bsdf": {"type": "ref", "id": _bsdf_id(s.material)}}
+        d[f"sphere_{i}"] = sphere_dict(scene, s) | {"bsdf": {"type": "ref", "id": bsdf_ids[s.material]}}
     for i, m in enumerate(scene.meshes):
-        ply = f"meshes/{i:02d}-{re.sub(r'[^A-Za-z0-9_.-]', '_', m.name)}.ply"
+        ply = f"meshes/{i:02d}-{_slug(m.name)}.ply"
         write_ply(folder / ply, unit_vertices(scene, m), m.triangles)
         d[f"mesh_{i}"] = {"type": "ply", "filename": ply, "face_normals": True,
-                          "bsdf": {"type": "ref", "id": _bsdf_id(m.material)}}
+                          "bsdf": {"type": "ref", "id": bsdf_ids[m.material]}}
         if m.is_emitter:
             d[f"mesh_{i}"]["emitter"] = emitter_dict(m.radiance)
     defaults = {"spp": DEFAULT_SPP, "seed": DEFAULT_SEED, "resx": scene.camera.width, "resy": scene.camera.height}
@@ -172,8 +174,8 @@ def write(scene: Scene, folder: Path) -> Path:
     return path
 
 
-def _bsdf_id(material: str) -> str:
-    return f"bsdf-{material}"
+def _slug(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]", "_", name)[:60]
 
 
 # --- dictionaries as XML: the subset of Mitsuba's dictionary convention the dictionaries above use ------------
@@ -191,8 +193,8 @@ def to_xml(d: dict, defaults: dict[str, int], comment: str = "") -> str:
     shortest round-trip text, so Mitsuba reads the same doubles the dictionary holds.
     """
     root = ET.Element("scene", version="3.0.0")
-    if comment:
-        root.append(ET.Comment(f" {comment} "))
+    if comment:  # one line, and no "--", which ends an XML comment
+        root.append(ET.Comment(f" {re.sub(r'-(?=-)', '- ', one_line(comment))} "))
     for name, value in defaults.items():
         ET.SubElement(root, "default", name=name, value=str(value))
     for key, value in d.items():

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.scenes.materials import Dielectric, Diffuse, Mirror
-from harness.scenes.model import Scene
+from harness.scenes.model import Scene, one_line
 
 NAME = "pbrt-v4"
 FEATURES = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
@@ -152,7 +152,7 @@ def scene_text(scene: Scene, image: str = "scene.exr") -> str:
     """The whole ``scene.pbrt``: options, camera, then the world."""
     cam = scene.camera
     lines = [
-        f"# {scene.name} ({scene.content_hash()}), exported by cornell-harness for pbrt-v4",
+        f"# {one_line(scene.name)} ({scene.content_hash()}), exported by cornell-harness for pbrt-v4",
         f"# render: pbrt scene.pbrt [--spp N] [--seed S]   (writes {image})",
         f'Film "rgb" "integer xresolution" [ {cam.width} ] "integer yresolution" [ {cam.height} ]',
         f'    "string filename" [ "{image}" ] "bool savefp16" false',
@@ -166,14 +166,14 @@ def scene_text(scene: Scene, image: str = "scene.exr") -> str:
         "WorldBegin",
     ]
     for m in scene.meshes:
-        lines += ["", f"# mesh {m.name}", "AttributeBegin"]
+        lines += ["", f"# mesh {one_line(m.name)}", "AttributeBegin"]
         lines += ["    " + line for line in material_lines(scene.materials[m.material])]
         if m.is_emitter:
             lines.append(f'    AreaLightSource "diffuse" "rgb L" {_nums(m.radiance)}')
         lines += [f'    Shape "trianglemesh" "point3 P" {_nums(m.vertices)}',
                   f'        "integer indices" {_ints(m.triangles)}', "AttributeEnd"]
     for s in scene.spheres:
-        lines += ["", f"# sphere {s.name}", "AttributeBegin", "    Translate " + " ".join(_num(c) for c in s.center)]
+        lines += ["", f"# sphere {one_line(s.name)}", "AttributeBegin", "    Translate " + " ".join(_num(c) for c in s.center)]
         lines += ["    " + line for line in material_lines(scene.materials[s.material])]
         lines += [f'    Shape "sphere" "float radius" [ {_num(s.radius)} ]', "AttributeEnd"]
     return "\n".join(lines) + "\n"
