@@ -19,8 +19,8 @@ The render is split into independent batches (:func:`batch_plan`), batch k seede
 spread of the batch means (:func:`renderers.luxcore_cli.mean_and_variance`).
 
 Not bit-reproducible: LuxCore halts a batch on the film's total sample count, checked while its threads
-run, so each pixel gets about the batch's spp (measured: 15 to 17 samples at 16 spp, with 1 or 2
-threads), which pixels get one more depends on thread timing, and two renders with the same seed differ
+run, so each pixel gets about the batch's spp (measured: 15 to 17 samples at 16 spp at 256², with 1 or
+2 threads; up to 15 more on a 16 × 16 film), which pixels get one more depends on thread timing, and two renders with the same seed differ
 at the noise level (each pixel is still the mean of its own samples: unbiased). ``info`` records the
 range of samples per pixel.
 """

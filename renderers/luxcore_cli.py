@@ -42,8 +42,9 @@ def parser() -> argparse.ArgumentParser:
                     "pyluxcore's PATHCPU engine; write the mean radiance as a float32 EXR, top row first.")
     p.add_argument("cfg", help="the exported scene.cfg (it names its scene.scn; paths resolve from its folder)")
     p.add_argument("--out", required=True, help="output EXR: the mean linear-sRGB radiance per pixel")
-    p.add_argument("--spp", type=int, required=True, help="samples per pixel in all, exactly (each batch halts "
-                                                          "at its share with batch.haltspp)")
+    p.add_argument("--spp", type=int, required=True, help="samples per pixel in all (each batch halts at its share "
+                                                          "with batch.haltspp; LuxCore misses it by a sample or two "
+                                                          "per pixel, see batches.json)")
     p.add_argument("--seed", type=int, required=True, help="the render's seed (non-negative); batch k is seeded "
                                                            "with pass_seed(seed, k), LuxCore's renderengine.seed")
     p.add_argument("--threads", type=int, default=None,
