@@ -1,6 +1,6 @@
 """Each export format's mapping table, written into ``docs/export.md`` between its markers.
 
-    .venv/bin/python benchmarks/export_mapping.py --markdown docs/export.md
+    .venv/bin/python -m benchmarks.export_mapping --markdown docs/export.md
 
 The tables are :func:`harness.scenes.export.mapping_table`, the format modules' ``MAPPING`` rows: written
 here so the page cannot drift from the code (``tests/scenes/test_export_docs.py`` checks that it has not).

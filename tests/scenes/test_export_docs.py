@@ -25,7 +25,7 @@ def test_every_format_has_a_block():
 def test_the_page_shows_the_formats_mapping_table(block, fmt):
     if importlib.util.find_spec(FORMATS[fmt]) is None:
         pytest.skip(f"{FORMATS[fmt]} is not in this tree (another branch writes it); its table is written "
-                    f"when it is: .venv/bin/python benchmarks/export_mapping.py --markdown docs/export.md")
+                    f"when it is: .venv/bin/python -m benchmarks.export_mapping --markdown docs/export.md")
     text = PAGE.read_text(encoding="utf-8")
     _, blocks = markdown_blocks.parse(text)
     (b,) = [b for b in blocks if b.name == block]
