@@ -74,6 +74,22 @@ SceneOpt = typer.Option(..., "--scene", "-s", help="Stored scene name (see `cbox
 SppOpt = typer.Option(64, "--spp", min=1, help="Samples per pixel.")
 RenderersOpt = typer.Option(None, "--renderer", "-r", help="Renderer to run (repeatable), with settings as "
                             "NAME\\[setting=value,...]; default: every registered renderer.")
+
+
+def _use_renderer_files(ctx: Any, value: list[Path] | None) -> list[Path] | None:
+    if value and not ctx.resilient_parsing:  # resilient: completion and --help, nothing runs
+        from harness.adapters.registry import use_renderer_files
+
+        use_renderer_files(value)  # read and checked now: a misspelt placeholder fails before anything runs
+    return value
+
+
+#: The help of ``--renderers`` (gate's takes the value itself, to report a bad file in its CI files).
+RENDERER_FILES_HELP = ("Renderers file (TOML, repeatable) declaring command-line renderers as [renderer.NAME] "
+                       "tables (see examples/renderers.toml): their names can then be given to -r; also "
+                       "$CBOX_RENDERERS (paths separated by ':').")
+RendererFilesOpt = typer.Option(None, "--renderers", metavar="FILE", callback=_use_renderer_files,
+                                expose_value=False, help=RENDERER_FILES_HELP)
 SeedOpt = typer.Option(0, "--seed", min=0, help="Random seed; the same seed gives the same image.")
 TitleOpt = typer.Option(None, "--title", help="Title of the report (default: \"Renderer comparison — SCENE\").")
 SetOpt = typer.Option(None, "--set", metavar="KEY=VALUE", help=(
