@@ -354,7 +354,8 @@ def _read(path: Path, expected: tuple[int, int, int], failed, what: str):
     except ImageFileError as e:
         raise failed(f"its {what} cannot be read: {e}") from None
     if image.shape != expected:
-        raise failed(f"wrote a {what} of {image.shape[1]}x{image.shape[0]}, expected {expected[1]}x{expected[0]}")
+        raise failed(f"its {what} is {image.shape[1]}x{image.shape[0]}, expected {expected[1]}x{expected[0]} "
+                     "(the scene's resolution)")
     return image
 
 
