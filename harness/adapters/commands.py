@@ -67,7 +67,6 @@ from pathlib import Path
 from typing import Sequence
 
 from harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, default_threads
-from harness.adapters.registry import RendererError
 from harness.scenes.model import FEATURES, Scene
 from harness.scenes.quantities import DEFAULT_QUANTITY, QUANTITIES
 from harness.suggest import did_you_mean
@@ -85,8 +84,11 @@ NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
 TAIL_LINES, TAIL_CHARS = 6, 600
 
 
-class RenderersFileError(RendererError):
-    """A renderers file is wrong; ``str()`` is one line naming the file and the field (a user error, exit 2)."""
+class RenderersFileError(RuntimeError):
+    """A renderers file is wrong; ``str()`` is one line naming the file and the field (a user error, exit 2).
+
+    Not a ValueError: a command that turns ValueErrors into errors of one of its options must not blame
+    that option for a renderers file (``$CBOX_RENDERERS``' too) that is read inside it."""
 
     def __init__(self, file: Path | str, field: str, message: str):
         self.file, self.field, self.message = str(file), field, message

@@ -1,7 +1,7 @@
 """What every ``cbox`` command shares: the typer apps, common options, user errors, progress bars.
 
 Bad input (a malformed scene, an unknown renderer or setting, a stale
-reference, a bad option value, an unusable ``--out``, a bad ``$CBOX_THREADS``)
+reference, a bad option value, an unusable ``--out``, a bad ``$CBOX_THREADS``, a bad renderers file)
 ends with a one-line ``cbox: error: ...`` on stderr and exit code 2, never a
 traceback: commands raise one of :data:`USER_ERRORS` or a typer usage error
 (``typer.BadParameter``), and :func:`harness.cli.app.main` prints it.
@@ -40,6 +40,7 @@ import numpy as np
 import typer
 from tqdm import tqdm
 
+from harness.adapters.commands import RenderersFileError
 from harness.adapters.registry import RendererError
 from harness.adapters.settings import SettingsError
 from harness.gate.config import GateConfigError
@@ -64,8 +65,8 @@ app = typer.Typer(
 reference_app = typer.Typer(help="Build and inspect stored reference images.", no_args_is_help=True)
 app.add_typer(reference_app, name="reference")
 
-USER_ERRORS = (SceneError, ReferenceError, RendererError, ImageFileError, ExperimentError, GateConfigError,
-               SettingsError, ExecutorError)
+USER_ERRORS = (SceneError, ReferenceError, RendererError, RenderersFileError, ImageFileError, ExperimentError,
+               GateConfigError, SettingsError, ExecutorError)
 #: OS errors about a path the user named (an output folder that is a file, no permission), reported as one
 #: line; outputs are checked before a command runs, so these are for what changes during the run.
 PATH_ERRORS = (PermissionError, NotADirectoryError, IsADirectoryError, FileExistsError)
