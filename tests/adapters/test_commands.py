@@ -9,10 +9,8 @@ re-reads the renderers file in a child process, where only the real formats exis
 
 from __future__ import annotations
 
-import importlib
 import json
 import sys
-import textwrap
 import time
 from pathlib import Path
 
@@ -322,43 +320,6 @@ def test_a_declared_name_must_not_hide_a_registered_renderer_or_another_file(tmp
         registry.use_renderer_files([renderers_file(one), renderers_file(two)])
 
 
-def cbox(capsys, *args: str) -> tuple[int, str, str]:
-    from harness.cli.app import main
-
-    with pytest.raises(SystemExit) as e:
-        main(list(args))
-    out, err = capsys.readouterr()
-    return e.value.code, out, err
-
-
-def test_a_misspelt_placeholder_stops_the_command_before_anything_runs(tmp_path, fake_format, capsys, no_files):
-    path = renderers_file(tmp_path, command_extra=("--seed={sede}",))
-    code, out, err = cbox(capsys, "compare", "--scene", "furnace", "--renderers", str(path), "-r", "fake-cli",
-                          "--spp", "1", "--out", str(tmp_path / "out"))
-    assert code == 2 and out == ""
-    assert err == (f"cbox: error: {path}: renderer.fake-cli.command[11]: unknown placeholder {{sede}} (did you "
-                   "mean {seed}?); placeholders: {scene}, {out}, {spp}, {seed}, {width}, {height}, {threads}\n")
-    assert runs(tmp_path) == [] and not (tmp_path / "out").exists()
-
-
-def test_cbox_renderers_lists_the_declared_ones(tmp_path, fake_format, capsys, no_files):
-    code, out, _ = cbox(capsys, "renderers", "--renderers", str(renderers_file(tmp_path)), "--json")
-    assert code == 0
-    (mine,) = [r for r in json.loads(out) if r["name"] == "fake-cli"]
-    assert mine["available"] and mine["computes"] == ["radiance"] and "fake-cli.toml#fake-cli" in mine["version"]
-    code, out, _ = cbox(capsys, "renderers", "--json")  # the next command forgets the file
-    assert "fake-cli" not in [r["name"] for r in json.loads(out)]
-
-
-def test_compare_records_the_failure_with_stderr(tmp_path, fake_format, capsys, no_files):
-    path = renderers_file(tmp_path, "fail")
-    code, out, _ = cbox(capsys, "compare", "--scene", "furnace", "--renderers", str(path), "-r", "fake-cli",
-                        "--spp", "2", "--out", str(tmp_path / "out"))
-    assert code == 1
-    assert "fake-cli: failed: CommandFailed: fake-cli at 2 spp: exited with code 3; stderr: loading the scene | " \
-           "fatal: no GPU here" in out
-
-
 # --- the shipped examples ----------------------------------------------------------------------------------------
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -371,39 +332,3 @@ def test_the_example_file_declares_the_two_programs():
     assert declared["mitsuba-cli"].command[0] == "mitsuba" and declared["mitsuba-cli"].scene_format == "mitsuba"
     assert declared["luxcore-cli"].command[:2] == ("cbox-luxcore", "{scene}")
     assert commands.find_program("mitsuba", EXAMPLES) is not None  # the Mitsuba wheel's, beside this Python
-
-
-def _has(module: str) -> bool:
-    try:
-        importlib.import_module(module)
-        return True
-    except ImportError:
-        return False
-
-
-GATE = textwrap.dedent("""\
-    alpha = 0.01
-    [[expect]]
-    scene = "{scene}"
-    renderer = "mitsuba-cli"
-    spp = 256
-    seed = 0
-    unbiased = true
-    tile = {tile}
-    time_limit = "5m"
-""")
-
-
-@pytest.mark.skipif(not _has("harness.scenes.export.mitsuba"), reason="the Mitsuba XML exporter "
-                    "(harness.scenes.export.mitsuba) is not here yet")
-@pytest.mark.parametrize("scene, tile", [
-    "furnace 8".split(),
-    pytest.param("cornell-box", "16", marks=pytest.mark.slow),  # gate.toml's expectation for mitsuba
-])
-def test_mitsuba_cli_passes_the_gate_that_mitsuba_passes(tmp_path, capsys, no_files, scene, tile):
-    config = tmp_path / "gate.toml"
-    config.write_text(GATE.format(scene=scene, tile=tile))
-    code, out, err = cbox(capsys, "gate", "--renderers", str(EXAMPLES), "--config", str(config),
-                          "--out", str(tmp_path / "out"))
-    assert code == 0, out + err
-    assert "PASS  " in out and "agreement" in out and "gate passed" in out
