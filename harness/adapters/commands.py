@@ -47,7 +47,9 @@ the program runs in the sandbox worker's process group and is killed with it.
 A declared renderer is known to the registry (:mod:`harness.adapters.registry`)
 by its name, and travels to other processes (the sandbox, Dask workers) as
 the self-contained spec ``/abs/path/renderers.toml#NAME`` (:func:`spec_of`),
-which the registry resolves without any option or environment variable.
+which the registry resolves without any option or environment variable. On a
+Dask cluster of other machines (``--scheduler``) the renderers file and the
+program must be at the same paths there.
 """
 
 from __future__ import annotations
