@@ -113,3 +113,20 @@ def test_mitsuba_cli_passes_the_gate_that_mitsuba_passes(tmp_path, capsys, scene
                           "--out", str(tmp_path / "out"))
     assert code == 0, out + err
     assert "PASS  " in out and "agreement" in out and "gate passed" in out
+
+
+@pytest.mark.slow  # ~18 s on 2 cores, most of it the cluster's start; entry_for(spec) is tested by default
+@pytest.mark.skipif(fakes._sandbox_format() is None, reason="no export format module yet (harness.scenes.export.*): "
+                    "a Dask worker must export the scene for real")
+def test_converge_on_dask_workers_runs_the_declared_program_by_its_spec(tmp_path, capsys):
+    """The workers get the renderer's spec alone (no --renderers there): each cell a run of the program per spp."""
+    import pandas as pd
+
+    pytest.importorskip("distributed")
+    path = renderers_file(tmp_path, scene_format=fakes._sandbox_format())
+    code, _, err = cbox(capsys, "converge", "--scene", "furnace", "--renderers", str(path), "-r", "fake-cli",
+                        "--spp", "1,2", "--seeds", "2", "--workers", "2", "--out", str(tmp_path / "out"))
+    assert code == 0, err
+    table = pd.read_parquet(tmp_path / "out" / "results.parquet")
+    assert (table["status"] == "ok").all() and sorted(zip(table["spp"], table["seed"])) == sorted(runs(tmp_path))
+    assert sorted(runs(tmp_path)) == [(1, 0), (1, 1), (2, 0), (2, 1)]
