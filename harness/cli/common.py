@@ -1,9 +1,9 @@
 """What every ``cbox`` command shares: the typer apps, common options, user errors, progress bars.
 
 Bad input (a malformed scene, an unknown renderer or setting, a stale
-reference, a bad option value, an unusable ``--out``, a bad ``$CBOX_THREADS``, a bad renderers file)
-ends with a one-line ``cbox: error: ...`` on stderr and exit code 2, never a
-traceback: commands raise one of :data:`USER_ERRORS` or a typer usage error
+reference, a bad option value, an unusable ``--out``, a bad ``$CBOX_THREADS``,
+a bad renderers file) ends with a one-line ``cbox: error: ...`` on stderr
+and exit code 2, never a traceback: commands raise one of :data:`USER_ERRORS` or a typer usage error
 (``typer.BadParameter``), and :func:`harness.cli.app.main` prints it.
 
 Outputs are checked before any rendering: :func:`check_output_file` for
@@ -74,7 +74,8 @@ PATH_ERRORS = (PermissionError, NotADirectoryError, IsADirectoryError, FileExist
 SceneOpt = typer.Option(..., "--scene", "-s", help="Stored scene name (see `cbox scenes`) or path to a scene .toml file or folder.")
 SppOpt = typer.Option(64, "--spp", min=1, help="Samples per pixel.")
 RenderersOpt = typer.Option(None, "--renderer", "-r", help="Renderer to run (repeatable), with settings as "
-                            "NAME\\[setting=value,...]; default: every registered renderer.")
+                            "NAME\\[setting=value,...]; default: every registered renderer (and every one --renderers "
+                            "declares).")
 
 
 def _use_renderer_files(ctx: Any, value: list[Path] | None) -> list[Path] | None:

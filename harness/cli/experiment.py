@@ -9,8 +9,9 @@ import typer
 
 from harness.adapters.api import attribute
 from harness.adapters.registry import missing_features, resolve
-from harness.cli.common import (DashboardOpt, Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SchedulerOpt, SetOpt, TitleOpt,
-                                WorkersOpt, app, command_line, executor_for, info, out_folder_option, print_json)
+from harness.cli.common import (DashboardOpt, Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SchedulerOpt,
+                                SetOpt, TitleOpt, WorkersOpt, app, command_line, executor_for, info,
+                                out_folder_option, print_json)
 from harness.scenes.library import resolve_scene
 from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results
 from harness.store.references import load_reference
