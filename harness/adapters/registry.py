@@ -5,6 +5,10 @@ what it may declare, :class:`~harness.adapters.api.Declarations`) is
 :mod:`harness.adapters.api`'s. Renderers are found through the entry-point
 group ``cbox.renderers`` (ours are registered in ``pyproject.toml`` the same
 way a third party's would be), or given directly as ``package.module:ClassName``.
+Programs declared in renderers files (:mod:`harness.adapters.commands`: ``--renderers
+FILE`` through :func:`use_renderer_files`, and ``$CBOX_RENDERERS``) are found
+by their names too; their spec, ``/abs/path/renderers.toml#NAME``, names them
+in any process without either.
 A declared ``estimator`` that is not one of :data:`~harness.adapters.api.ESTIMATORS`
 is a :class:`RendererError` when the renderer is loaded.
 """
@@ -16,6 +20,7 @@ import importlib.metadata
 import os
 import sys
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Sequence
 
 # AOVS, Checkpoint and RenderResult are re-exported for code written before the API had its own module.
@@ -25,6 +30,10 @@ from harness.scenes.model import Scene
 from harness.suggest import did_you_mean
 
 ENTRY_POINT_GROUP = "cbox.renderers"
+#: Renderers files (:mod:`harness.adapters.commands`) whose renderers every command knows by name, as
+#: ``--renderers`` adds them: paths separated by ``os.pathsep``.
+RENDERERS_VARIABLE = "CBOX_RENDERERS"
+_renderer_files: list[Path] = []  # --renderers of the running command (use_renderer_files)
 
 
 class RendererError(RuntimeError):
@@ -158,6 +167,49 @@ def _load_entry_point(ep) -> RendererEntry:
     return _entry(ep.name, ep.value, load)
 
 
+def use_renderer_files(paths: Sequence[Path | str]) -> None:
+    """Make the renderers of these files (``--renderers``) known by name, besides ``$CBOX_RENDERERS``'s; each
+    file is read and checked now (:class:`~harness.adapters.commands.RenderersFileError`), before anything runs.
+    An empty list forgets the files given before (and reads nothing)."""
+    _renderer_files[:] = [Path(p).resolve() for p in paths]
+    if paths:
+        declared_commands()
+
+
+def renderer_files() -> list[Path]:
+    """The renderers files in use: ``$CBOX_RENDERERS``'s, then ``--renderers``'s; each once."""
+    env = [Path(p).resolve() for p in os.environ.get(RENDERERS_VARIABLE, "").split(os.pathsep) if p.strip()]
+    return list(dict.fromkeys([*env, *_renderer_files]))
+
+
+def declared_commands() -> dict[str, str]:
+    """The renderers the renderers files in use declare: name -> spec (``/abs/path/renderers.toml#NAME``).
+
+    A name declared twice, or that is also a registered renderer's, is a RenderersFileError: ``-r NAME``
+    must mean one renderer, and a file must not replace the reference renderer unnoticed.
+    """
+    from harness.adapters.commands import RenderersFileError, read_file
+
+    out: dict[str, str] = {}
+    registered = _entry_points()
+    for path in renderer_files():
+        for name, declaration in read_file(path).items():
+            if name in registered:
+                raise RenderersFileError(path, f"renderer.{name}", f"{name!r} is a registered renderer "
+                                         f"({registered[name].value}); give the program another name")
+            if name in out:
+                raise RenderersFileError(path, f"renderer.{name}", f"also declared in "
+                                         f"{out[name].rpartition('#')[0]}; give one of them another name")
+            out[name] = declaration.spec
+    return out
+
+
+def _load_command(name: str, spec: str) -> RendererEntry:
+    from harness.adapters.commands import load
+
+    return _entry(name, spec, lambda: load(spec))
+
+
 def registered_names() -> list[str]:
     """Names registered under ``cbox.renderers``, without loading anything."""
     return list(_entry_points())
@@ -169,7 +221,8 @@ def discover() -> dict[str, RendererEntry]:
 
 
 def resolve(specs: Sequence[str] | None) -> list[RendererEntry]:
-    """Renderers named by ``specs`` (registered names or module:Class), or all registered.
+    """Renderers named by ``specs`` (registered or declared names, module:Class, or a declared renderer's
+    spec ``/abs/path/renderers.toml#NAME``), or all registered and declared (:func:`declared_commands`).
 
     A spec may carry settings, ``pathtracer[rr_depth=3]``; they are validated
     against the renderer's declared settings (SettingsError, a usage error).
@@ -178,23 +231,31 @@ def resolve(specs: Sequence[str] | None) -> list[RendererEntry]:
     usage error); a renderer that loads but cannot run here (its
     ``unavailable_reason()``) comes back unavailable, with its reason.
     """
+    from harness.adapters.commands import is_spec
+
     eps = _entry_points()
+    commands = declared_commands()
     if not specs:
-        return [_load_entry_point(ep) for ep in eps.values()]
+        return [_load_entry_point(ep) for ep in eps.values()] + [_load_command(n, s) for n, s in commands.items()]
     out = []
     for spec in specs:
         name, given = split_spec(spec)
         if name in eps:
             entry = _load_entry_point(eps[name])
+        elif name in commands or is_spec(name):
+            entry = _load_command(name, commands.get(name, name))
+            if entry.renderer is None:
+                raise RendererError(entry.reason)
         elif ":" in name:
             # Named explicitly: one that cannot be imported or found is a usage error, never "unavailable".
             entry = _entry(name, name, lambda name=name: load_spec(name))
             if entry.renderer is None:
                 raise RendererError(entry.reason)
         else:
-            known = ", ".join(eps) or "(none)"
-            raise RendererError(f"unknown renderer {name!r}" + did_you_mean(name, eps)
-                                + f"; registered: {known}; or give package.module:ClassName")
+            known = ", ".join([*eps, *commands]) or "(none)"
+            raise RendererError(f"unknown renderer {name!r}" + did_you_mean(name, [*eps, *commands])
+                                + f"; registered: {known}; or give package.module:ClassName, or declare it in a "
+                                "renderers file (--renderers FILE)")
         out.append(entry.with_settings(given) if given else entry)
     return out
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 
+from harness.adapters.registry import use_renderer_files
 # Importing a command module registers its commands, in this order in `cbox --help` (so not sorted).
 from harness.cli import listing, run, compare_image, experiment, gate, stress, reference, export  # isort: skip
 from harness.cli.common import (PATH_ERRORS, USER_ERRORS, ClickException, NoArgsIsHelpError, UsageError, Verbosity,
@@ -28,6 +29,7 @@ def main(args: list[str] | None = None) -> None:
     command's own exit code pass through unchanged.
     """
     set_verbosity(Verbosity.NORMAL)  # until --quiet or --verbose says otherwise (tests call main() again and again)
+    use_renderer_files(())  # until --renderers gives some (as above)
     try:
         check_environment()
         rv = command_tree().main(args=args, prog_name="cbox", standalone_mode=False)

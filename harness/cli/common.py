@@ -1,9 +1,9 @@
 """What every ``cbox`` command shares: the typer apps, common options, user errors, progress bars.
 
 Bad input (a malformed scene, an unknown renderer or setting, a stale
-reference, a bad option value, an unusable ``--out``, a bad ``$CBOX_THREADS``)
-ends with a one-line ``cbox: error: ...`` on stderr and exit code 2, never a
-traceback: commands raise one of :data:`USER_ERRORS` or a typer usage error
+reference, a bad option value, an unusable ``--out``, a bad ``$CBOX_THREADS``,
+a bad renderers file) ends with a one-line ``cbox: error: ...`` on stderr
+and exit code 2, never a traceback: commands raise one of :data:`USER_ERRORS` or a typer usage error
 (``typer.BadParameter``), and :func:`harness.cli.app.main` prints it.
 
 Outputs are checked before any rendering: :func:`check_output_file` for
@@ -40,6 +40,7 @@ import numpy as np
 import typer
 from tqdm import tqdm
 
+from harness.adapters.commands import RenderersFileError
 from harness.adapters.registry import RendererError
 from harness.adapters.settings import SettingsError
 from harness.gate.config import GateConfigError
@@ -64,8 +65,8 @@ app = typer.Typer(
 reference_app = typer.Typer(help="Build and inspect stored reference images.", no_args_is_help=True)
 app.add_typer(reference_app, name="reference")
 
-USER_ERRORS = (SceneError, ReferenceError, RendererError, ImageFileError, ExperimentError, GateConfigError,
-               SettingsError, ExecutorError)
+USER_ERRORS = (SceneError, ReferenceError, RendererError, RenderersFileError, ImageFileError, ExperimentError,
+               GateConfigError, SettingsError, ExecutorError)
 #: OS errors about a path the user named (an output folder that is a file, no permission), reported as one
 #: line; outputs are checked before a command runs, so these are for what changes during the run.
 PATH_ERRORS = (PermissionError, NotADirectoryError, IsADirectoryError, FileExistsError)
@@ -73,7 +74,24 @@ PATH_ERRORS = (PermissionError, NotADirectoryError, IsADirectoryError, FileExist
 SceneOpt = typer.Option(..., "--scene", "-s", help="Stored scene name (see `cbox scenes`) or path to a scene .toml file or folder.")
 SppOpt = typer.Option(64, "--spp", min=1, help="Samples per pixel.")
 RenderersOpt = typer.Option(None, "--renderer", "-r", help="Renderer to run (repeatable), with settings as "
-                            "NAME\\[setting=value,...]; default: every registered renderer.")
+                            "NAME\\[setting=value,...]; default: every registered renderer (and every one --renderers "
+                            "declares).")
+
+
+def _use_renderer_files(ctx: Any, value: list[Path] | None) -> list[Path] | None:
+    if value and not ctx.resilient_parsing:  # resilient: completion and --help, nothing runs
+        from harness.adapters.registry import use_renderer_files
+
+        use_renderer_files(value)  # read and checked now: a misspelt placeholder fails before anything runs
+    return value
+
+
+#: The help of ``--renderers`` (gate's takes the value itself, to report a bad file in its CI files).
+RENDERER_FILES_HELP = ("Renderers file (TOML, repeatable) declaring command-line renderers as [renderer.NAME] "
+                       "tables (see examples/renderers.toml): their names can then be given to -r; also "
+                       "$CBOX_RENDERERS (paths separated by ':').")
+RendererFilesOpt = typer.Option(None, "--renderers", metavar="FILE", callback=_use_renderer_files,
+                                expose_value=False, help=RENDERER_FILES_HELP)
 SeedOpt = typer.Option(0, "--seed", min=0, help="Random seed; the same seed gives the same image.")
 TitleOpt = typer.Option(None, "--title", help="Title of the report (default: \"Renderer comparison — SCENE\").")
 SetOpt = typer.Option(None, "--set", metavar="KEY=VALUE", help=(

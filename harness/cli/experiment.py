@@ -9,8 +9,9 @@ import typer
 
 from harness.adapters.api import attribute
 from harness.adapters.registry import missing_features, resolve
-from harness.cli.common import (DashboardOpt, Progress, RenderersOpt, SceneOpt, SchedulerOpt, SetOpt, TitleOpt,
-                                WorkersOpt, app, command_line, executor_for, info, out_folder_option, print_json)
+from harness.cli.common import (DashboardOpt, Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SchedulerOpt,
+                                SetOpt, TitleOpt, WorkersOpt, app, command_line, executor_for, info,
+                                out_folder_option, print_json)
 from harness.scenes.library import resolve_scene
 from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results
 from harness.store.references import load_reference
@@ -31,6 +32,7 @@ def converge(
     scene: str = SceneOpt,
     overrides: Optional[List[str]] = SetOpt,
     renderer: Optional[List[str]] = RenderersOpt,
+    renderer_files: Optional[List[Path]] = RendererFilesOpt,
     spp: str = typer.Option("1,2,4,...,256", "--spp", help=SPP_HELP),
     seeds: int = typer.Option(4, "--seeds", min=1, help="Number of seeds (0 .. N-1); bias and variance need 2 or more."),
     out: Path = out_folder_option(Path("out/converge"), "Experiment folder: results.parquet, "

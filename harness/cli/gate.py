@@ -9,8 +9,8 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.common import (USER_ERRORS, DashboardOpt, Progress, SchedulerOpt, WorkersOpt, app, command_line,
-                                executor_for, info, out_folder_option, print_json)
+from harness.cli.common import (RENDERER_FILES_HELP, USER_ERRORS, DashboardOpt, Progress, SchedulerOpt, WorkersOpt,
+                                app, command_line, executor_for, info, out_folder_option, print_json)
 from harness.cli.run import write_compare_outputs
 from harness.gate.config import GateConfigError, load_config
 from harness.scenes.library import resolve_scene
@@ -25,6 +25,8 @@ from harness.store.references import load_reference
 def gate(
     config: Path = typer.Option(Path("gate.toml"), "--config", "-c", help="Gate config (TOML): expectations per "
                                                                         "scene, renderer and budget; see harness/gate/config.py."),
+    renderer_files: Optional[List[Path]] = typer.Option(None, "--renderers", metavar="FILE",
+                                                        help=RENDERER_FILES_HELP),
     out: Path = out_folder_option(Path("out/gate"), "Folder for report.html (index.html when "
                                                                   "there are several scenes), gate-junit.xml and "
                                                                   "gate-summary.md."),
@@ -67,6 +69,10 @@ def gate(
     if overrides and update_baseline:
         raise typer.BadParameter("--update-baseline records the config's own scenes; not with --set", param_hint="--set")
     try:
+        if renderer_files:  # here, not as it is parsed: a bad file is reported in the CI files too
+            from harness.adapters.registry import use_renderer_files
+
+            use_renderer_files(renderer_files)
         cfg = load_config(config)
         if update_baseline and cfg.baseline is None:
             raise GateConfigError(cfg.path, "baseline", "--update-baseline needs baseline = \"FILE.json\"")

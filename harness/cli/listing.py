@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import List, Optional
 
 import typer
 
 from harness.adapters.api import attribute
 from harness.adapters.registry import quantities_of, resolve
 from harness.adapters.settings import declared, describe
-from harness.cli.common import app, print_json
+from harness.cli.common import RendererFilesOpt, app, print_json
 from harness.scenes.library import references_root, resolve_scene, scene_names
 from harness.scenes.model import FEATURES, SceneError
 from harness.store.references import ReferenceError, load_reference
@@ -77,12 +78,14 @@ def _shown(path: Path) -> str:
 
 @app.command()
 def renderers(
+    renderer_files: Optional[List[Path]] = RendererFilesOpt,
     settings: bool = typer.Option(False, "--settings", help="Also list each renderer's settings: name, default, "
                                                             "allowed values and what it does."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON array of objects on stdout instead of the "
                                                        "text, settings always included."),
 ) -> None:
-    """List the registered renderers, whether each can run here, and why not."""
+    """List the registered renderers (and those --renderers and $CBOX_RENDERERS declare), whether each can run
+    here, and why not."""
     entries = resolve(None)
     listing = [_renderer_entry(entry) for entry in entries]
     if as_json:

@@ -10,7 +10,7 @@ import typer
 
 from harness.adapters.registry import RendererError, missing_features, resolve
 from harness.adapters.settings import canonical
-from harness.cli.common import (Progress, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt, TitleOpt, app,
+from harness.cli.common import (Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt, TitleOpt, app,
                                 check_output_file, command_line, info, out_folder_option)
 from harness.scenes.library import resolve_scene
 from harness.store.exr import write_exr
@@ -30,6 +30,7 @@ def render(
     overrides: Optional[List[str]] = SetOpt,
     renderer: str = typer.Option(..., "--renderer", "-r", help="Registered renderer name or package.module:ClassName, "
                                                              "with settings as NAME\\[setting=value,...]."),
+    renderer_files: Optional[List[Path]] = RendererFilesOpt,
     spp: int = SppOpt,
     seed: int = SeedOpt,
     out: Path = typer.Option(..., "--out", "-o", help="Output OpenEXR file (float32 linear sRGB); its name must "
@@ -118,6 +119,7 @@ def compare(
     scene: str = SceneOpt,
     overrides: Optional[List[str]] = SetOpt,
     renderer: Optional[List[str]] = RenderersOpt,
+    renderer_files: Optional[List[Path]] = RendererFilesOpt,
     spp: int = SppOpt,
     seed: int = SeedOpt,
     out: Path = out_folder_option(Path("out"), "Folder for report.html, metrics.csv, metrics.json, "
@@ -167,6 +169,7 @@ def demo(
                                                    "it, and cornell-box-caustics is compared at it."),
     seeds: int = typer.Option(2, "--seeds", min=1, help="Seeds of the convergence run (bias and variance need 2)."),
     renderer: Optional[List[str]] = RenderersOpt,
+    renderer_files: Optional[List[Path]] = RendererFilesOpt,
 ) -> None:
     """What the tool is for, in about three minutes on 2 cores: every available renderer converging on
     cornell-box (error against spp and time, speed/accuracy, bias and variance) and compared on

@@ -7,13 +7,14 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.common import REFERENCE_RENDERER, Progress, app, command_line, out_folder_option
+from harness.cli.common import REFERENCE_RENDERER, Progress, RendererFilesOpt, app, command_line, out_folder_option
 
 
 @app.command()
 def stress(
     renderer: Optional[List[str]] = typer.Option(
         None, "--renderer", "-r", help="Renderer to stress (repeatable); default: every registered renderer."),
+    renderer_files: Optional[List[Path]] = RendererFilesOpt,
     variant: Optional[List[str]] = typer.Option(
         None, "--variant", "-v", help="Variant to run (repeatable); default: all (see harness/stress/variants.py)."),
     out: Path = out_folder_option(Path("out/stress"), "Folder for stress.csv and stress.html."),

@@ -16,7 +16,8 @@ memory, and the images (with variances and render times) it made::
         print(out.ended, out.message)  # "timeout", "memory", "error" (the renderer raised) or "crashed"
 
 ``spec`` is anything :func:`harness.adapters.registry.resolve` takes (a
-registered name or ``module:Class``); the parent's ``sys.path`` is passed on,
+registered name, ``module:Class``, or a declared command-line renderer's
+``/abs/path/renderers.toml#NAME``); the parent's ``sys.path`` is passed on,
 so a ``module:Class`` importable here is importable in the child. Scenes
 travel by pickle, images come back as ``.npz`` files in a temporary folder.
 
@@ -26,13 +27,15 @@ Bounds
   LLVM compilation, scene set-up, every render and writing the result. When
   it passes ``time_bound_s`` the process group is killed (SIGKILL; the worker
   runs in a session of its own, so anything it started dies with it).
-- **memory**: the process's resident set (``VmRSS``) is polled every
-  :data:`POLL_S` seconds; when it passes ``rss_bound_mb`` the process group is
-  killed. Its peak is the kernel's high-water mark of its resident set,
-  ``VmHWM``: read by the worker itself as its last act, and polled by the
-  parent (which covers a killed worker). ``ru_maxrss`` from ``wait4`` is not
-  used on Linux: it carries the parent's resident set at fork into the child,
-  so it would count the parent's memory. Without ``/proc`` (macOS) the peak is
+- **memory**: the resident set (``VmRSS``) of the process and of the
+  processes it started (a command-line renderer's program,
+  :mod:`harness.adapters.commands`), summed, is polled every :data:`POLL_S`
+  seconds; when it passes ``rss_bound_mb`` the process group is killed. Its
+  peak is the larger of the kernel's high-water mark of the worker's resident
+  set, ``VmHWM`` (read by the worker itself as its last act, and polled by the
+  parent, which covers a killed worker), and the largest polled sum.
+  ``ru_maxrss`` from ``wait4`` is not used on Linux: it carries the parent's
+  resident set at fork into the child, so it would count the parent's memory. Without ``/proc`` (macOS) the peak is
   ``ru_maxrss`` and only the time bound is enforced.
 
 An interrupt (Ctrl-C) in the parent kills the worker before it propagates.
@@ -131,6 +134,21 @@ def _proc_status_mb(pid: int | str, field: str) -> float:
     return 0.0
 
 
+def _family(pid: int) -> list[int]:
+    """``pid`` and every process it started, and they started (a command-line renderer's program: its memory
+    counts against the bound); ``pid`` alone where ``/proc/PID/task/PID/children`` is not kept."""
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        out.append(p)
+        try:
+            with open(f"/proc/{p}/task/{p}/children") as f:
+                todo += [int(c) for c in f.read().split()]
+        except (OSError, ValueError):
+            pass
+    return out
+
+
 def _kill_group(pid: int) -> None:
     """SIGKILL the worker's process group (it was started in a session of its own)."""
     try:
@@ -167,7 +185,7 @@ def _poll(pid: int, t0: float, time_bound_s: float, rss_bound_mb: float):
         if done:
             return status, usage, killed, peak
         elapsed = time.perf_counter() - t0
-        rss = _proc_status_mb(pid, "VmRSS")
+        rss = sum(_proc_status_mb(p, "VmRSS") for p in _family(pid))
         peak = max(peak, _proc_status_mb(pid, "VmHWM"), rss)
         if killed is None and elapsed > time_bound_s:
             killed = "timeout"
