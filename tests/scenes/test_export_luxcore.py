@@ -15,6 +15,7 @@ from harness.scenes.export import luxcore
 from harness.scenes.export.ply import read_ply, write_ply
 from harness.scenes.loader import load_scene
 from harness.scenes.model import SceneError, Sphere
+from harness.scenes.transforms import unit_frame
 from tests.conftest import CORNELL, ROOT
 
 
@@ -72,7 +73,7 @@ def test_materials_are_one_sided_and_the_emitter_gives_its_rgb(cornell_export):
 def test_meshes_are_plys_in_the_unit_frame(cornell_export):
     scene, cfg = cornell_export
     p = _props(cfg.parent / "scene.scn")
-    centre, k = luxcore.unit_frame(scene)
+    centre, k = unit_frame(scene)
     for i, mesh in enumerate(scene.meshes):
         assert p[f"scene.objects.object{i}.shape"] == f'"shape{i}"'
         v, t = read_ply(cfg.parent / p[f"scene.shapes.shape{i}.ply"].strip('"'))

@@ -18,7 +18,7 @@ test_luxcore.py checks each):
 - ``path.pathdepth.total = D`` is our (Mitsuba's) ``max_depth = D``.
 
 Geometry is moved and scaled so the bounding box is centred on the origin with a diagonal of 1, as the
-Mitsuba adapter does (:func:`renderers.mitsuba3.unit_frame`): LuxCore offsets new rays by a fixed
+Mitsuba adapter does (:func:`harness.scenes.transforms.unit_frame`): LuxCore offsets new rays by a fixed
 epsilon, which would let light leak through the walls of a tiny scene; a uniform change of units leaves
 radiance images unchanged.
 """
@@ -33,6 +33,7 @@ import numpy as np
 from harness.scenes.export.ply import write_ply
 from harness.scenes.materials import Dielectric, Diffuse, Mirror
 from harness.scenes.model import Scene, Sphere
+from harness.scenes.transforms import unit_frame
 
 NAME = "luxcore"
 FEATURES = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
@@ -68,12 +69,6 @@ MAPPING = (
      "the analytic normals at its vertices (chord error 1.9e-5 of the radius, far below a pixel)"),
     ("units", "scene units", "moved and scaled to a bounding-box diagonal of 1 (radiance unchanged)"),
 )
-
-
-def unit_frame(scene: Scene) -> tuple[np.ndarray, float]:
-    """(centre, scale) that map the scene's bounding box to the origin with diagonal 1."""
-    lo, hi = scene.bounds()
-    return (lo + hi) / 2.0, 1.0 / scene.extent()
 
 
 def lux_depth(max_depth: int) -> int:
