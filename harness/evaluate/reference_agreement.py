@@ -230,7 +230,7 @@ def reference_agreement(reference: np.ndarray, reference_variance: np.ndarray, o
         regions.append(RegionAgreement(name, n, m_ref, m_other, z, two_sided_p(z), sd))
     tests = 3 * len(regions)
     zs = np.concatenate([r.z for r in regions]) if regions else np.zeros(0)
-    chi2 = float(np.sum(np.nan_to_num(zs, nan=np.inf) ** 2))
+    chi2 = float(np.sum(np.where(np.isnan(zs), np.inf, zs) ** 2))  # a NaN test counts as infinitely far
     chi2_p = float(chi2_dist.sf(chi2, tests)) if tests else 1.0
     sd, spread, tail, count = pixel_z_stats(z_pix, usable)
     return ReferenceAgreement(regions, alpha, tests, sidak_level(alpha, tests), chi2, tests, chi2_p, sd, spread,
