@@ -67,7 +67,7 @@ def verify_section(scene, reference, verification) -> str:
         bad = (r.p < a.level).any()
         cells = [escape(r.name), str(r.pixels), *(f"{m:.4g}" for m in r.mean_reference),
                  *(f"{100 * d:+.3f}" for d in r.relative_difference), *(f"{z:+.2f}" for z in r.z),
-                 f"{float(r.p.min()):.3g}", f"{r.pixel_z_sd:.3f}"]
+                 f"{float(r.p.min()):.3g}", "-" if np.isnan(r.pixel_z_sd) else f"{r.pixel_z_sd:.3f}"]
         rows.append(f'<tr class="{"fail" if bad else "pass"}">' + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     note = (f"Per region and channel, z = (engine mean − reference mean) / √(V_ref + V_engine), a region mean's "
             f"variance being the sum of its pixels' variances / n². A test fails below the Šidák per-test level "

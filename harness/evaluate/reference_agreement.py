@@ -125,7 +125,7 @@ class ReferenceAgreement:
         return max((r.max_abs_z for r in self.regions), default=0.0)
 
     def message(self) -> str:
-        head = (f"{len(self.regions)} regions × 3 channels = {self.tests} tests at family-wise α = {self.alpha:g} "
+        head = (f"{len(self.regions)} region{'s' if len(self.regions) != 1 else ''} × 3 channels = {self.tests} tests at family-wise α = {self.alpha:g} "
                 f"(Šidák per-test level {self.level:.3g}); max |z| {self.max_abs_z:.2f}, "
                 f"χ² {self.chi2:.1f} on {self.dof} dof (p {self.chi2_p:.3g})")
         if self.passed:
@@ -142,7 +142,7 @@ class ReferenceAgreement:
                          " ".join(f"{100 * d:+.3f}" for d in r.relative_difference),
                          " ".join(f"{z:+.2f}" for z in r.z), f"{float(r.p.min()):.3g}"
                          + (" *" if (r.p < self.level).any() else ""),
-                         f"{r.pixel_z_sd:.3f}"))
+                         "-" if math.isnan(r.pixel_z_sd) else f"{r.pixel_z_sd:.3f}"))
         widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
         return ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
 

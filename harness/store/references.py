@@ -216,6 +216,6 @@ def verdict_line(provenance: dict) -> str:
         z = r.get("max_abs_z")
         z_text = "inf" if z is None else f"{z:.2g}" if z < 10 else f"{z:.0f}"
         word = "verified" if r.get("passed") else "DISAGREES"
-        parts.append(f"{word} by {engine}: max |z| {z_text} ({len(r.get('regions', {}))} regions, "
-                     f"{r.get('spp')} spp)")
+        n = len(r.get("regions", {}))
+        parts.append(f"{word} by {engine}: max |z| {z_text} ({n} region{'s' if n != 1 else ''}, {r.get('spp')} spp)")
     return "; ".join(parts)
