@@ -214,7 +214,7 @@ def verdict_line(provenance: dict) -> str:
     parts = []
     for engine, r in verified.items():
         z = r.get("max_abs_z")
-        z_text = "inf" if z is None else f"{z:.2g}" if z < 10 else f"{z:.0f}"
+        z_text = "inf" if z is None else f"{z:.1f}" if z < 100 else f"{z:.0f}"
         word = "verified" if r.get("passed") else "DISAGREES"
         n = len(r.get("regions", {}))
         parts.append(f"{word} by {engine}: max |z| {z_text} ({n} region{'s' if n != 1 else ''}, {r.get('spp')} spp)")

@@ -21,8 +21,13 @@ STORED = ROOT / "harness" / "references" / "cornell-box"
 
 @pytest.fixture
 def references(tmp_path):
+    """A copy of the stored cornell-box without the verdicts its provenance carries: each test starts unverified."""
     root = tmp_path / "refs"
     shutil.copytree(STORED, root / "cornell-box")
+    path = root / "cornell-box" / "provenance.json"
+    prov = json.loads(path.read_text())
+    prov.pop("verified", None)
+    path.write_text(json.dumps(prov, indent=1) + "\n")
     return root
 
 
@@ -34,6 +39,7 @@ def _cbox(references, *args: str) -> subprocess.CompletedProcess:
 
 def test_mitsuba_at_other_seeds_agrees_and_the_verdict_is_recorded_and_listed(references, tmp_path):
     stored = (STORED / "provenance.json").read_bytes()
+    assert "not verified" in _cbox(references, "scenes").stdout
     proc = _cbox(references, "reference", "verify", "--scene", "cornell-box", "--engine", "mitsuba", "--spp", "64",
                  "--batches", "4", "--report", str(tmp_path / "rep"))
     assert proc.returncode == 0, proc.stderr + proc.stdout
@@ -49,7 +55,7 @@ def test_mitsuba_at_other_seeds_agrees_and_the_verdict_is_recorded_and_listed(re
     assert page.count("<img ") == 3 and "back-edge" in page and "agree" in page
     listing = _cbox(references, "scenes")
     assert listing.returncode == 0, listing.stderr
-    assert f"reference: verified by mitsuba: max |z| {rec['max_abs_z']:.2g} (6 regions, 64 spp)" in listing.stdout
+    assert f"reference: verified by mitsuba: max |z| {rec['max_abs_z']:.1f} (6 regions, 64 spp)" in listing.stdout
     entry = json.loads(_cbox(references, "scenes", "--json").stdout)[0]
     assert entry["reference"]["verified"]["mitsuba"]["passed"] is True
 
@@ -61,7 +67,7 @@ def test_a_one_percent_darker_engine_exits_1_and_no_record_leaves_the_provenance
     assert proc.returncode == 1, proc.stderr + proc.stdout
     assert "the engines DISAGREE" in proc.stdout and " * " in proc.stdout  # a failing row is starred
     assert (references / "cornell-box" / "provenance.json").read_bytes() == before
-    assert "not verified" in _cbox(references, "scenes").stdout
+    assert "reference: not verified" in _cbox(references, "scenes").stdout
 
 
 def test_bad_options_are_refused_before_rendering(references):

@@ -43,7 +43,7 @@ def test_an_independent_render_of_the_same_scene_passes_and_the_verdict_keeps_th
     assert again.provenance == prov and json.loads((tmp_path / "provenance.json").read_text()) == prov
     rec = prov[VERIFIED_KEY]["seeded-noise"]
     assert rec["passed"] and rec["spp"] == 64 and rec["engine"] == "seeded-noise" and "command" in rec
-    assert verdict_line(prov) == f"verified by seeded-noise: max |z| {rec['max_abs_z']:.2g} (1 region, 64 spp)"
+    assert verdict_line(prov) == f"verified by seeded-noise: max |z| {rec['max_abs_z']:.1f} (1 region, 64 spp)"
     assert verdict_line({}) == "not verified"
 
 
