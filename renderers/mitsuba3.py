@@ -1,6 +1,7 @@
 """Mitsuba 3 adapter: the harness's reference renderer.
 
-Scenes are converted to ``mi.load_dict`` with in-memory meshes, rendered with
+Scenes are converted to ``mi.load_dict`` with in-memory meshes (the plugins of
+:mod:`harness.scenes.export.mitsuba`, which ``cbox export`` writes as XML), rendered with
 Mitsuba's unidirectional ``path`` integrator (next-event estimation + BSDF
 sampling with MIS, Russian roulette from depth 5), an ``independent`` sampler
 and a ``box`` reconstruction filter.
@@ -39,8 +40,10 @@ from typing import Sequence
 import numpy as np
 
 from harness.adapters.api import AOVS, Checkpoint, RenderResult, pass_seed, spp_passes
-from harness.scenes.materials import Dielectric, Diffuse, Mirror
+from harness.scenes.export import mitsuba as mitsuba_plugins
+from harness.scenes.export.mitsuba import bsdf_dict
 from harness.scenes.model import Scene
+from harness.scenes.transforms import unit_frame
 from renderers import mitsuba_ao
 
 MIN_LLVM_MAJOR = 17
@@ -112,21 +115,16 @@ def _select_variant() -> tuple[str, str]:
     return "scalar_rgb", f"{note}; using scalar_rgb (about 4x slower)"
 
 
-def unit_frame(scene: Scene) -> tuple[np.ndarray, float]:
-    """(centre, scale) that map the scene's bounding box to the origin with diagonal 1."""
-    lo, hi = scene.bounds()
-    return (lo + hi) / 2.0, 1.0 / scene.extent()
-
-
 def scene_dict(scene: Scene, spp: int, sampler: str = "independent", aovs: bool = False) -> dict:
     """The scene as a ``mi.load_dict`` dictionary (Mitsuba must be imported).
 
-    ``sampler`` is a Mitsuba sampler plugin (the adapter renders with
-    ``independent``; ``benchmarks/pathtracer.py`` compares ``multijitter`` and
+    The plugins are :mod:`harness.scenes.export.mitsuba`'s, the ones ``cbox export --format mitsuba``
+    writes as XML; here the meshes are built in memory. ``sampler`` is a Mitsuba sampler plugin (the
+    adapter renders with ``independent``; ``benchmarks/pathtracer.py`` compares ``multijitter`` and
     ``ldsampler``, which round spp up to a square or a power of two).
 
     Geometry and camera are first moved and scaled so the scene's bounding
-    box is centred on the origin with a diagonal of 1. With ``aovs`` the
+    box is centred on the origin with a diagonal of 1 (:func:`unit_frame`). With ``aovs`` the
     integrator is wrapped in ``aov`` (albedo, then shading normal, after RGB). Mitsuba offsets new
     rays by about 1e-4·(1 + |p|) scene units whatever the scene's size, which
     lets light leak through the walls of a box 1e-3 units wide (cbox stress
@@ -135,67 +133,31 @@ def scene_dict(scene: Scene, spp: int, sampler: str = "independent", aovs: bool 
     """
     import mitsuba as mi
 
-    centre, k = unit_frame(scene)
-    cam = scene.camera
-
-    def point(p) -> list[float]:
-        return ((np.asarray(p, dtype=np.float64) - centre) * k).tolist()
-
+    look = mitsuba_plugins.camera_look_at(scene)
     d: dict = {
         "type": "scene",
-        # Our max_depth convention is Mitsuba's own: no translation needed.
-        "integrator": {"type": "path", "max_depth": scene.max_depth},
-        "sensor": {
-            "type": "perspective",
-            "fov": cam.fov_deg,
-            "fov_axis": cam.fov_axis,
-            "near_clip": 1e-4,
-            "far_clip": 1e4,
-            "to_world": mi.ScalarTransform4f().look_at(origin=point(cam.position), target=point(cam.look_at),
-                                                       up=cam.up),
-            "sampler": {"type": sampler, "sample_count": spp},
-            "film": {
-                "type": "hdrfilm",
-                "width": cam.width,
-                "height": cam.height,
-                "rfilter": {"type": scene.pixel_filter},
-                "pixel_format": "rgb",
-                "component_format": "float32",
-            },
-        },
+        "integrator": mitsuba_plugins.integrator_dict(scene),
+        "sensor": mitsuba_plugins.sensor_dict(
+            scene, spp, mi.ScalarTransform4f().look_at(origin=look.origin, target=look.target, up=look.up), sampler),
     }
     if aovs:
         d["integrator"] = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": d["integrator"]}
     bsdfs = {name: mi.load_dict(bsdf_dict(m)) for name, m in scene.materials.items()}
     for i, s in enumerate(scene.spheres):
-        d[f"sphere_{i}"] = {"type": "sphere", "center": point(s.center), "radius": s.radius * k,
-                            "bsdf": bsdfs[s.material]}
+        d[f"sphere_{i}"] = mitsuba_plugins.sphere_dict(scene, s) | {"bsdf": bsdfs[s.material]}
     for i, m in enumerate(scene.meshes):
         props = mi.Properties()
         props["bsdf"] = bsdfs[m.material]
         if m.is_emitter:
-            props["emitter"] = mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": list(m.radiance)}})
+            props["emitter"] = mi.load_dict(mitsuba_plugins.emitter_dict(m.radiance))
         mesh = mi.Mesh(m.name, len(m.vertices), len(m.triangles), has_vertex_normals=False,
                        has_vertex_texcoords=False, props=props)
         params = mi.traverse(mesh)
-        params["vertex_positions"] = mi.Float(((m.vertices - centre) * k).astype(np.float32).ravel())
+        params["vertex_positions"] = mi.Float(mitsuba_plugins.unit_vertices(scene, m).ravel())
         params["faces"] = mi.UInt32(m.triangles.astype(np.uint32).ravel())
         params.update()
         d[f"mesh_{i}"] = mesh
     return d
-
-
-def bsdf_dict(material) -> dict:
-    """A scene material as a Mitsuba 3 BSDF dictionary (harness.scenes.materials names the match)."""
-    if isinstance(material, Diffuse):
-        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(material.reflectance)}}
-    if isinstance(material, Mirror):
-        # material "none": Fresnel factor 1, so the reflectance is exactly specular_reflectance.
-        return {"type": "conductor", "material": "none",
-                "specular_reflectance": {"type": "rgb", "value": list(material.reflectance)}}
-    if isinstance(material, Dielectric):
-        return {"type": "dielectric", "int_ior": material.int_ior, "ext_ior": material.ext_ior}
-    raise ValueError(f"material {material.name!r}: {type(material).__name__} has no Mitsuba translation")
 
 
 def run_passes(spp: int, seed: int, per_pass: int, checkpoints: Sequence[int], sums, image, aovs=None):
@@ -223,8 +185,7 @@ class Mitsuba3:
     """Mitsuba 3 path tracer (``path`` integrator); ambient occlusion by :mod:`renderers.mitsuba_ao`."""
 
     name = "mitsuba"
-    features = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
-                          "pinhole_camera", "box_filter"})
+    features = mitsuba_plugins.FEATURES  # what the translation into Mitsuba's plugins expresses
     quantities = ("radiance", "ambient_occlusion")
     approximations: tuple[str, ...] = ()
     aovs = AOVS

@@ -24,7 +24,7 @@ samples, grey in three channels, with the variance of that mean from the
 per-pixel sums of values and squares (as :mod:`renderers.core.film`).
 
 Distances: the scene is loaded in the adapter's unit frame
-(:func:`renderers.mitsuba3.unit_frame`: moved and scaled by ``k`` = 1/extent),
+(:func:`harness.scenes.transforms.unit_frame`: moved and scaled by ``k`` = 1/extent),
 so the maximum distance in scene units becomes ``max_distance · k`` there.
 
 Determinism: sample j of a pass looks through pixel ``j // n`` (n samples per

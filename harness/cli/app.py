@@ -10,14 +10,14 @@ from __future__ import annotations
 import sys
 
 # Importing a command module registers its commands, in this order in `cbox --help` (so not sorted).
-from harness.cli import listing, run, compare_image, experiment, gate, stress, reference  # isort: skip
+from harness.cli import listing, run, compare_image, experiment, gate, stress, reference, export  # isort: skip
 from harness.cli.common import (PATH_ERRORS, USER_ERRORS, ClickException, NoArgsIsHelpError, UsageError, Verbosity,
                                 check_environment, close_progress_bars, command_tree, fail, set_verbosity,
                                 usage_message)
 
 
 #: The command modules, registered on the app by their import above.
-COMMAND_MODULES = (listing, run, compare_image, experiment, gate, stress, reference)
+COMMAND_MODULES = (listing, run, compare_image, experiment, gate, stress, reference, export)
 
 
 def main(args: list[str] | None = None) -> None:

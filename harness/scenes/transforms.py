@@ -4,7 +4,8 @@ Each transform returns a new :class:`~harness.scenes.model.Scene` (renamed so
 its variant shows in its name) and leaves the input untouched; the meshes it
 does not change are shared, not copied. The measures (:func:`emitter_area`,
 :func:`emitter_power`, :func:`emitter_footprint`) are what the transforms are
-checked by, and what a comparison restricted to part of the image needs. The
+checked by, and what a comparison restricted to part of the image needs.
+:func:`unit_frame` is the change of units the Mitsuba adapter and its export share. The
 stress suite (:mod:`harness.stress.variants`) builds its variants with them.
 """
 
@@ -21,6 +22,17 @@ from harness.scenes.model import Camera, Mesh, Scene
 def _triangle_areas(mesh: Mesh) -> np.ndarray:
     a, b, c = (mesh.vertices[mesh.triangles[:, k]] for k in range(3))
     return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+def unit_frame(scene: Scene) -> tuple[np.ndarray, float]:
+    """(centre, scale) that map the scene's bounding box to the origin with diagonal 1: ``(p - centre) * scale``.
+
+    What Mitsuba 3 renders and exports (:mod:`harness.scenes.export.mitsuba`): its ray offsets are
+    about 1e-4·(1 + |p|) scene units whatever the scene's size, so a scene far from unit size leaks
+    light; a uniform change of units leaves radiance images unchanged.
+    """
+    lo, hi = scene.bounds()
+    return (lo + hi) / 2.0, 1.0 / scene.extent()
 
 
 def emitter_area(scene: Scene) -> float:

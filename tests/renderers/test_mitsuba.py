@@ -8,7 +8,9 @@ import pytest
 from tests.conftest import CORNELL
 from harness.evaluate import noise as stats
 from harness.store.references import load_reference
+from harness.scenes.export.mitsuba import bsdf_dict
 from harness.scenes.loader import load_scene
+from harness.scenes.transforms import unit_frame
 from renderers import mitsuba3
 from renderers.mitsuba3 import Mitsuba3
 
@@ -118,13 +120,13 @@ def test_caustics_scene_conversion():
 
     Shapes are found by the ids ``scene_dict`` gives them (``mesh_i``,
     ``sphere_i``); sphere geometry is mapped back from the unit frame
-    (:func:`renderers.mitsuba3.unit_frame`) to scene units.
+    (:func:`harness.scenes.transforms.unit_frame`) to scene units.
     """
     from harness.scenes.materials import Dielectric, Diffuse, Mirror
 
     scene = load_scene(CAUSTICS)
     Mitsuba3().variant()
-    centre, k = mitsuba3.unit_frame(scene)
+    centre, k = unit_frame(scene)
     shapes = {sh.id(): sh for sh in mi.load_dict(mitsuba3.scene_dict(scene, 4)).shapes()}
     objects = {f"mesh_{i}": m for i, m in enumerate(scene.meshes)}
     objects |= {f"sphere_{i}": s for i, s in enumerate(scene.spheres)}
@@ -182,11 +184,11 @@ def test_mitsuba_specular_bsdfs_sample_as_ours(cos):
     ctx = mi.BSDFContext()
 
     rho = (0.95, 0.5, 0.2)
-    mirror = mi.load_dict(mitsuba3.bsdf_dict(Mirror("m", rho)))
+    mirror = mi.load_dict(bsdf_dict(Mirror("m", rho)))
     _, w = mirror.sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5))
     np.testing.assert_allclose(np.ravel(w), rho if cos > 0 else (0.0, 0.0, 0.0), rtol=1e-5, atol=1e-7)
 
-    glass = mi.load_dict(mitsuba3.bsdf_dict(Dielectric("g", 1.5, 1.0)))
+    glass = mi.load_dict(bsdf_dict(Dielectric("g", 1.5, 1.0)))
     r = fresnel_dielectric(cos, 1.5)[0]
     for u in (0.001, 0.999):
         bs, w = glass.sample(ctx, si, u, mi.Point2f(0.5, 0.5))
@@ -205,4 +207,4 @@ def test_bsdf_dict_refuses_an_unknown_material():
         name: str
 
     with pytest.raises(ValueError, match="material 'shiny': Plastic has no Mitsuba translation"):
-        mitsuba3.bsdf_dict(Plastic("shiny"))
+        bsdf_dict(Plastic("shiny"))
