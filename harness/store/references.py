@@ -215,7 +215,7 @@ def verdict_line(provenance: dict) -> str:
     for engine, r in verified.items():
         z = r.get("max_abs_z")
         z_text = "inf" if z is None else f"{z:.1f}" if z < 100 else f"{z:.0f}"
-        word = "verified" if r.get("passed") else "DISAGREES"
+        word = "verified by" if r.get("passed") else "DISAGREES with"
         n = len(r.get("regions", {}))
-        parts.append(f"{word} by {engine}: max |z| {z_text} ({n} region{'s' if n != 1 else ''}, {r.get('spp')} spp)")
+        parts.append(f"{word} {engine}: max |z| {z_text} ({n} region{'s' if n != 1 else ''}, {r.get('spp')} spp)")
     return "; ".join(parts)

@@ -55,7 +55,7 @@ def test_a_second_engine_adds_its_verdict_beside_the_first(write_scene):
     record_verdict(ref.folder, {**v.record, "engine": "first"})
     prov = record_verdict(ref.folder, {**v.record, "engine": "second", "passed": False})
     assert list(prov[VERIFIED_KEY]) == ["first", "second"]
-    assert "verified by first" in verdict_line(prov) and "DISAGREES by second" in verdict_line(prov)
+    assert "verified by first" in verdict_line(prov) and "DISAGREES with second" in verdict_line(prov)
 
 
 def test_one_batch_takes_the_engines_own_variance_and_is_refused_without_one(write_scene):
