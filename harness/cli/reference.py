@@ -85,7 +85,7 @@ def reference_verify(
     and z from both variances (a region mean's variance is the sum of its pixels' variances / n²); χ² over
     the regions; the spread of the per-pixel z. Exits 1 when any region-channel p is below the Šidák-corrected
     level at family-wise false-alarm rate 0.01 (the engines disagree beyond noise), 0 otherwise. `cbox scenes`
-    shows the recorded verdicts.
+    shows the recorded verdicts; docs/references.md has the stored references' verdicts and what they found.
     """
     if spp % batches:
         raise typer.BadParameter(f"--spp ({spp}) must be a multiple of --batches ({batches})")
