@@ -62,7 +62,7 @@ app = typer.Typer(
     add_completion=True,  # --install-completion / --show-completion; typer builds them without slow imports
     pretty_exceptions_enable=False,
 )
-reference_app = typer.Typer(help="Build and inspect stored reference images.", no_args_is_help=True)
+reference_app = typer.Typer(help="Build, inspect and verify stored reference images.", no_args_is_help=True)
 app.add_typer(reference_app, name="reference")
 
 USER_ERRORS = (SceneError, ReferenceError, RendererError, RenderersFileError, ImageFileError, ExperimentError,

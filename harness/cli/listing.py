@@ -13,7 +13,7 @@ from harness.adapters.settings import declared, describe
 from harness.cli.common import RendererFilesOpt, app, print_json
 from harness.scenes.library import references_root, resolve_scene, scene_names
 from harness.scenes.model import FEATURES, SceneError
-from harness.store.references import ReferenceError, load_reference
+from harness.store.references import VERIFIED_KEY, ReferenceError, load_reference, verdict_line
 
 
 JsonOpt = typer.Option(False, "--json", help="Print a JSON array of objects on stdout instead of the text.")
@@ -21,7 +21,8 @@ JsonOpt = typer.Option(False, "--json", help="Print a JSON array of objects on s
 
 @app.command()
 def scenes(as_json: bool = JsonOpt) -> None:
-    """List the stored scenes: file, size, what is computed, features, named regions and reference."""
+    """List the stored scenes: file, size, what is computed, features, named regions, reference and its verdicts
+    (`cbox reference verify`)."""
     listing = [_scene_entry(name) for name in scene_names()]
     if as_json:
         print_json(listing)
@@ -43,6 +44,8 @@ def scenes(as_json: bool = JsonOpt) -> None:
         typer.echo(f"{'':{w}s} features: {', '.join(s['features'])}")
         if s["regions"]:
             typer.echo(f"{'':{w}s} regions: {', '.join(s['regions'])}")
+        if ref:
+            typer.echo(f"{'':{w}s} reference: {ref['verdict']}")
         typer.echo(f"{'':{w}s} file: {s['path']}")
 
 
@@ -55,7 +58,8 @@ def _scene_entry(name: str) -> dict:
         return {**entry, "error": str(e)}
     try:
         ref = load_reference(scene)
-        reference, problem = {"spp": ref.spp, "renderer_version": ref.provenance.get("renderer_version")}, None
+        reference, problem = {"spp": ref.spp, "renderer_version": ref.provenance.get("renderer_version"),
+                              "verdict": verdict_line(ref.provenance), "verified": _verdicts(ref.provenance)}, None
     except ReferenceError as e:
         reference, problem = None, str(e).split(";")[0].split(": ", 1)[-1]
     ao = scene.ambient_occlusion
@@ -65,6 +69,14 @@ def _scene_entry(name: str) -> dict:
                                                           "normal": ao.normal, "miss_value": ao.miss_value},
             "features": sorted(scene.features), "regions": list(scene.regions),
             "reference": reference, "reference_problem": problem}
+
+
+def _verdicts(provenance: dict) -> dict:
+    """Each engine's recorded verdict in brief (``cbox reference verify``): passed, max |z|, regions, spp."""
+    verified = provenance.get(VERIFIED_KEY)
+    return {engine: {k: r.get(k) for k in ("passed", "max_abs_z", "chi2", "dof", "chi2_p", "spp", "date")}
+            | {"regions": len(r.get("regions", {}))}
+            for engine, r in (verified.items() if isinstance(verified, dict) else ())}
 
 
 def _shown(path: Path) -> str:

@@ -12,7 +12,9 @@
   correlations and tails make the noise yardsticks of :mod:`harness.evaluate.noise`
   match real renders where a Gaussian model would not;
 - ``provenance.json``: renderer, version, variant, spp, seeds, wall time, the
-  scene's content hash, date, command line.
+  scene's content hash, date, command line; and, under ``verified.<engine>``,
+  the verdict of each ``cbox reference verify`` (:func:`record_verdict`,
+  :mod:`harness.workflows.reference_verify`), which a rebuild drops.
 
 A scene derived by ``--set`` (:mod:`harness.scenes.overrides`) keeps its
 reference in ``derived/<content hash>/`` of its file's folder
@@ -36,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.store.atomic import write_json_atomic
 from harness.store.exr import ImageFileError, read_exr
 from harness.scenes.library import references_root
 from harness.scenes.model import Scene
@@ -48,6 +51,8 @@ PROVENANCE_FILE = "provenance.json"
 DERIVED_FOLDER = "derived"
 #: The spp ``cbox reference build`` is suggested with when no earlier build says better.
 DEFAULT_SPP = 16384
+#: Where a reference's provenance keeps the verdicts of ``cbox reference verify``, one per engine.
+VERIFIED_KEY = "verified"
 
 
 class ReferenceError(RuntimeError):
@@ -185,3 +190,32 @@ def load_reference(scene: Scene, folder: Path | None = None) -> Reference:
             f"rebuild with: {_build_hint(scene, folder)}"
         )
     return Reference(image, variance, noise, prov, folder, scene.quantity)
+
+
+def record_verdict(folder: Path, record: dict) -> dict:
+    """Store ``record`` as ``verified.<engine>`` in ``folder``'s provenance.json (atomically); the new provenance.
+
+    The rest of the provenance is kept as it is, read from the file just before writing."""
+    path = Path(folder) / PROVENANCE_FILE
+    prov = json.loads(path.read_text())
+    verified = prov.get(VERIFIED_KEY)
+    verified = dict(verified) if isinstance(verified, dict) else {}
+    verified[record["engine"]] = record
+    prov[VERIFIED_KEY] = verified
+    write_json_atomic(path, prov)
+    return prov
+
+
+def verdict_line(provenance: dict) -> str:
+    """One line of a reference's verdicts: ``verified by luxcore: max |z| 1.9 (7 regions)``, or ``not verified``."""
+    verified = provenance.get(VERIFIED_KEY)
+    if not isinstance(verified, dict) or not verified:
+        return "not verified"
+    parts = []
+    for engine, r in verified.items():
+        z = r.get("max_abs_z")
+        z_text = "inf" if z is None else f"{z:.1f}" if z < 100 else f"{z:.0f}"
+        word = "verified by" if r.get("passed") else "DISAGREES with"
+        n = len(r.get("regions", {}))
+        parts.append(f"{word} {engine}: max |z| {z_text} ({n} region{'s' if n != 1 else ''}, {r.get('spp')} spp)")
+    return "; ".join(parts)

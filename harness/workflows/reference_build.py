@@ -14,6 +14,7 @@ import os
 import platform
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -49,10 +50,9 @@ def build_reference(
     every batch is done, each atomically, provenance last; by default into the
     scene's reference folder (:func:`~harness.store.references.reference_folder`).
 
-    The batches render on ``executor`` (default: in this process, in order), finished ones in any order;
-    they are combined here in batch order, so every backend gives the same reference, bit for bit, for
-    a renderer whose image depends only on its seed. ``progress(done, total, label)`` follows finished
-    batches (``batch 3``, ``noise image``).
+    The batches render on ``executor`` (:func:`render_batches`: combined in batch order, so every backend gives
+    the same reference, bit for bit); ``progress(done, total, label)`` follows finished batches (``batch 3``,
+    ``noise image``).
     """
     if batches < 2:
         raise ValueError("need at least 2 batches to estimate the variance")
@@ -62,29 +62,71 @@ def build_reference(
     batch_spp = spp // batches
     seeds = [REFERENCE_SEED_BASE + b for b in range(batches)]
     noise_seed = REFERENCE_SEED_BASE + batches
+    done = render_batches(scene, entry, batch_spp, seeds, executor, progress, extra_seed=noise_seed)
+    mean, variance_of_mean, noise, wall, info = done.mean, done.variance, done.extra, done.wall_s, done.info
+    prov = _provenance(scene, entry, info, spp, batches, seeds, noise_seed, wall)
+    if scene.overrides:  # a derived scene's reference: what it was derived with (harness.scenes.overrides)
+        prov["overrides"] = list(scene.overrides)
+    if scene.regions:
+        prov["region_noise"] = region_noise(mean, variance_of_mean, region_masks(scene))
+    meta = {"cbox:scene_hash": prov["scene_hash"], SPP_ATTRIBUTE: str(spp), "cbox:renderer": prov["renderer_version"]}
+    write_exr(folder / REFERENCE_FILE, mean, meta)
+    write_exr(folder / VARIANCE_FILE, variance_of_mean, meta)
+    write_exr(folder / NOISE_FILE, noise, meta)
+    write_json_atomic(folder / PROVENANCE_FILE, prov)
+    return Reference(mean.astype(np.float32), variance_of_mean.astype(np.float32), noise, prov, folder)
+
+
+@dataclass
+class Batches:
+    """What :func:`render_batches` gives: the batches' mean, the variance of that mean, the extra image (if one was
+    asked for), the summed render time and the last batch's renderer info."""
+
+    mean: np.ndarray  # float64
+    variance: np.ndarray  # float64, variance of the mean: unbiased sample variance over batches / batches
+    extra: np.ndarray | None
+    wall_s: float
+    info: dict
+
+
+def render_batches(scene: Scene, entry: RendererEntry, batch_spp: int, seeds: list[int],
+                   executor: InProcess | DaskExecutor | None = None,
+                   progress: Callable[[int, int, str], None] | None = None, extra_seed: int | None = None) -> Batches:
+    """One render of ``batch_spp`` per seed with ``entry`` (and one more at ``extra_seed``, kept apart), combined
+    into the mean and the variance of the mean (Welford's running sums).
+
+    The batches render on ``executor`` (default: in this process, in order), finished ones in any order; they are
+    combined here in seed order, so every backend gives the same mean, bit for bit, for a renderer whose image
+    depends only on its seed. ``progress(done, total, label)`` follows finished batches (``batch 3``, ``noise
+    image`` for the extra one).
+    """
+    batches = len(seeds)
+    if batches < 2:
+        raise ValueError("need at least 2 batches to estimate the variance")
     executor = executor or InProcess()
     shared = executor.share(scene)
+    all_seeds = seeds + ([] if extra_seed is None else [extra_seed])
     tasks = [Task(task_key("batch", scene.content_hash(), entry.spec, canonical(entry.settings), batch_spp, seed),
                   f"batch {b + 1}" if b < batches else "noise image", render_batch,
                   (entry.spec, dict(entry.settings), shared, batch_spp, seed, entry if executor.local else None))
-             for b, seed in enumerate(seeds + [noise_seed])]
+             for b, seed in enumerate(all_seeds)]
     index = {t.key: b for b, t in enumerate(tasks)}
     shape = (scene.camera.height, scene.camera.width, 3)
     mean, m2 = np.zeros(shape), np.zeros(shape)  # Welford's running mean and sum of squares
     wall = 0.0
     info: dict = {}
-    noise = None
+    extra = None
     waiting: dict[int, np.ndarray] = {}  # batches that finished before one ahead of them: folded in order
     folded = done = 0
     for outcome in executor.run(tasks):
         b = index[outcome.task.key]
         if outcome.error is not None:
-            raise ExecutorError(f"reference batch {b + 1} of {batches + 1} (seed {tasks[b].args[4]}) failed: "
+            raise ExecutorError(f"{entry.name} batch {b + 1} of {len(tasks)} (seed {tasks[b].args[4]}) failed: "
                                 f"{outcome.error}")
         image, time_s, batch_info = outcome.value
         wall += time_s
         if b == batches:
-            noise = image
+            extra = image
         else:
             waiting[b] = image
             if b == batches - 1:
@@ -97,19 +139,8 @@ def build_reference(
             folded += 1
         done += 1
         if progress:
-            progress(done, batches + 1, outcome.task.label)
-    variance_of_mean = m2 / (batches - 1) / batches
-    prov = _provenance(scene, entry, info, spp, batches, seeds, noise_seed, wall)
-    if scene.overrides:  # a derived scene's reference: what it was derived with (harness.scenes.overrides)
-        prov["overrides"] = list(scene.overrides)
-    if scene.regions:
-        prov["region_noise"] = region_noise(mean, variance_of_mean, region_masks(scene))
-    meta = {"cbox:scene_hash": prov["scene_hash"], SPP_ATTRIBUTE: str(spp), "cbox:renderer": prov["renderer_version"]}
-    write_exr(folder / REFERENCE_FILE, mean, meta)
-    write_exr(folder / VARIANCE_FILE, variance_of_mean, meta)
-    write_exr(folder / NOISE_FILE, noise, meta)
-    write_json_atomic(folder / PROVENANCE_FILE, prov)
-    return Reference(mean.astype(np.float32), variance_of_mean.astype(np.float32), noise, prov, folder)
+            progress(done, len(tasks), outcome.task.label)
+    return Batches(mean, m2 / (batches - 1) / batches, extra, wall, info)
 
 
 def render_batch(spec: str, settings: dict, scene: Scene, spp: int, seed: int,

@@ -203,6 +203,21 @@ def test_reference_batches_across_workers_equal_single_process_build(cluster, wo
     assert here.provenance["seeds"] == there.provenance["seeds"]
 
 
+
+def test_reference_verify_across_workers_equals_in_process(cluster, small_scene):
+    """``cbox reference verify --workers``: the engine's batches on two workers give the in-process verdict, bit
+    for bit (render_batches folds them in seed order), for the same per-region table."""
+    from harness.store.references import load_reference
+    from harness.workflows.reference_verify import verify_reference
+
+    (mitsuba,) = resolve(["mitsuba"])
+    ref = load_reference(small_scene)
+    here = verify_reference(small_scene, ref, mitsuba, spp=8, batches=4)
+    with open_executor(scheduler=cluster.address) as executor:
+        there = verify_reference(small_scene, ref, mitsuba, spp=8, batches=4, executor=executor)
+    assert np.array_equal(here.image, there.image) and np.array_equal(here.variance, there.variance)
+    assert here.agreement.table() == there.agreement.table()
+
 def test_killed_worker_loses_no_cell_and_duplicates_none(cluster, workdir, small_scene, render_log):
     """SIGKILL a worker while it renders a cell: the cell is rendered again elsewhere, every cell is in the
     table once, none is missing, and the run goes on."""

@@ -1,0 +1,111 @@
+"""The two-engine comparison of ``cbox reference verify``: region means, z from both variances, Šidák, χ²."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from harness.evaluate.agreement import sidak_level
+from harness.evaluate.reference_agreement import (FAMILY_ALPHA, WHOLE_IMAGE, reference_agreement, region_mean,
+                                                  z_scores)
+
+SHAPE = (32, 48, 3)
+
+
+def _masks():
+    left = np.zeros(SHAPE[:2], bool)
+    left[:, :16] = True
+    right = np.zeros(SHAPE[:2], bool)
+    right[8:24, 30:] = True
+    return {"left": left, "right": right}
+
+
+def _pair(rng, sd_ref=0.01, sd_other=0.02, bias=None):
+    """A reference and an independent image of the same truth, each with its true variance of the mean."""
+    truth = 0.2 + 0.6 * rng.random(SHAPE)
+    var_ref, var_other = np.full(SHAPE, sd_ref**2), np.full(SHAPE, sd_other**2)
+    ref = truth + sd_ref * rng.standard_normal(SHAPE)
+    other = truth + sd_other * rng.standard_normal(SHAPE)
+    if bias is not None:
+        other = other * bias
+    return ref, var_ref, other, var_other
+
+
+def test_region_mean_and_its_variance_are_sums_over_n_squared():
+    image = np.arange(2 * 3 * 3, dtype=float).reshape(2, 3, 3)
+    variance = np.ones((2, 3, 3)) * [1.0, 2.0, 4.0]
+    mask = np.array([[True, False, True], [False, True, False]])
+    mean, var = region_mean(image, variance, mask)
+    np.testing.assert_allclose(mean, image[mask].mean(axis=0))
+    np.testing.assert_allclose(var, np.array([3.0, 6.0, 12.0]) / 9)  # Σ var / n², n = 3
+
+
+def test_agreeing_images_pass_and_z_is_the_difference_over_both_variances():
+    ref, var_ref, other, var_other = _pair(np.random.default_rng(1))
+    a = reference_agreement(ref, var_ref, other, var_other, _masks())
+    assert a.passed, a.message()
+    assert [r.name for r in a.regions] == [WHOLE_IMAGE, "left", "right"]
+    assert a.tests == a.dof == 9 and a.level == pytest.approx(sidak_level(FAMILY_ALPHA, 9))
+    left = a.regions[1]
+    n = 32 * 16
+    expected = (other[:, :16].mean(axis=(0, 1)) - ref[:, :16].mean(axis=(0, 1))) / np.sqrt((0.01**2 + 0.02**2) / n)
+    np.testing.assert_allclose(left.z, expected)
+    assert a.chi2 == pytest.approx(sum(float((r.z**2).sum()) for r in a.regions))
+    # Correct variances on both sides: per-pixel z is standard normal.
+    assert a.pixel_z_sd == pytest.approx(1.0, abs=0.03) and a.pixel_z_spread == pytest.approx(1.0, abs=0.05)
+    assert a.pixel_z_tail < 0.01
+
+
+def test_a_two_percent_bias_in_one_region_fails_there():
+    rng = np.random.default_rng(2)
+    ref, var_ref, other, var_other = _pair(rng)
+    masks = _masks()
+    other[masks["right"]] *= 1.02  # 16 × 18 pixels of sd 0.022 around 0.5: the region mean's relative sd is 0.26%
+    a = reference_agreement(ref, var_ref, other, var_other, masks)
+    assert not a.passed
+    assert a.failures[0][0] == "right" and "left" not in {f[0] for f in a.failures}
+    assert a.failures[0][2] > 0  # the engine is the brighter one
+    assert a.chi2_p < 1e-6
+
+
+def test_false_alarms_stay_below_the_family_wise_rate():
+    """200 verifications of agreeing images: failures follow Binomial(200, ≤ 0.01); 6 or more has p < 0.02."""
+    rng = np.random.default_rng(3)
+    fails = sum(not reference_agreement(*_pair(rng), _masks()).passed for _ in range(200))
+    assert fails <= 5
+
+
+def test_no_information_passes_and_a_noise_free_difference_or_nan_fails():
+    z = z_scores(np.array([0.0, 1.0, -1.0, np.nan]), np.array([0.0, 0.0, 0.0, 1.0]))
+    assert z[0] == 0 and z[1] == math.inf and z[2] == -math.inf and np.isnan(z[3])
+    zeros = np.zeros(SHAPE)
+    assert reference_agreement(zeros, zeros, zeros, zeros, {}).passed  # a black, noise-free image: nothing to test
+    other = zeros.copy()
+    other[0, 0, 1] = 1e-6
+    a = reference_agreement(zeros, zeros, other, zeros, {})
+    assert not a.passed and a.max_abs_z == math.inf
+    ref, var_ref, other, var_other = _pair(np.random.default_rng(4))
+    other[3, 3, 0] = np.nan
+    assert not reference_agreement(ref, var_ref, other, var_other, {}).passed
+
+
+def test_empty_regions_are_left_out_and_the_whole_image_name_is_reserved():
+    ref, var_ref, other, var_other = _pair(np.random.default_rng(5))
+    a = reference_agreement(ref, var_ref, other, var_other, {"none": np.zeros(SHAPE[:2], bool)})
+    assert [r.name for r in a.regions] == [WHOLE_IMAGE]
+    with pytest.raises(ValueError, match="whole image"):
+        reference_agreement(ref, var_ref, other, var_other, {WHOLE_IMAGE: np.ones(SHAPE[:2], bool)})
+
+
+def test_summary_is_strict_json_and_the_table_has_a_row_per_region():
+    import json
+
+    ref, var_ref, other, var_other = _pair(np.random.default_rng(6))
+    a = reference_agreement(ref, var_ref, other, var_other, _masks())
+    s = a.summary()
+    json.dumps(s, allow_nan=False)
+    assert s["passed"] and s["tests"] == 9 and list(s["regions"]) == [WHOLE_IMAGE, "left", "right"]
+    lines = a.table()
+    assert len(lines) == 4 and lines[0].startswith("region") and lines[2].startswith("left")
