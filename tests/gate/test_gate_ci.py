@@ -14,6 +14,7 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from tests.conftest import ROOT, run_cbox
+from harness.adapters.registry import registered_names
 from harness.gate.config import GateConfigError, load_config
 
 #: The issue's example: every key misspelt; it used to pass a flat-grey renderer (ΔE 45) with exit 0.
@@ -82,9 +83,9 @@ def test_unknown_renderer_is_found_before_anything_renders(tmp_path):
     proc = run_cbox("gate", "--config", _write(tmp_path, text), "--out", str(out), env_path=ROOT)
     assert proc.returncode == 2 and time.perf_counter() - t0 < 60  # Slow would sleep 120 s
     assert proc.stderr.strip().splitlines()[-1].endswith(
-        "expect[1].renderer: unknown renderer 'pathtracr' (did you mean 'pathtracer'?); registered: ambient, ao, "
-        "mitsuba, mitsuba+oidn, pathtracer, pathtracer+oidn, photonmap, probes, pyrender, sppm, ssao; or give "
-        "package.module:ClassName")
+        "expect[1].renderer: unknown renderer 'pathtracr' (did you mean 'pathtracer'?); registered: "
+        f"{', '.join(registered_names())}; or give package.module:ClassName, or declare it in a renderers file "
+        "(--renderers FILE)")
     assert len(proc.stderr.strip().splitlines()) == 1
     assert (out / "gate-junit.xml").exists() and (out / "gate-summary.md").exists()
 
