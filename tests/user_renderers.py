@@ -151,12 +151,14 @@ class MemoryHog(FlatGrey):
     """Touches 1 GiB of memory before it returns: over a lowered stress memory bound."""
 
     name = "memory-hog"
+    #: Seconds it holds the memory: far past any load's delay, so a kill before it ends is the memory bound's.
+    SLEEP_S = 300.0
 
     def render(self, scene, spp, seed, checkpoints=()):
         import time
 
         hog = np.ones(1 << 27)  # 1 GiB of float64, every page touched
-        time.sleep(5)
+        time.sleep(self.SLEEP_S)
         del hog
         return super().render(scene, spp, seed, checkpoints)
 
