@@ -104,10 +104,11 @@ def diffuse_depth(scene: Scene, truncation: float = TRUNCATION) -> int:
     Why it bounds the light lost: in basic radiance (radiance / n², which mirrors and lossless glass do not
     increase: their reflectance and transmittance are at most 1), each diffuse reflection scales the largest
     radiance by at most ρ. The light of the paths with n or more diffuse bounces is at most ρⁿ times the
-    scene's largest basic radiance, n² times that inside glass (Veach's thesis, 1997, section 5.2, for
-    radiance / n² being invariant). Without Russian roulette every path of a closed scene runs the n bounces:
-    the cost (measured on the white furnace, ρ 0.8, n 52: 4.3× the time per sample, with 7× less variance
-    than LuxCore's roulette from depth 3).
+    scene's largest basic radiance, n² times that inside glass (Veach 1997, §5.2, for radiance / n² being
+    invariant). What it costs: without Russian roulette every path of a closed scene runs all n bounces
+    (measured on the white furnace, ρ 0.8, n 52, 16², 256 spp: 3.9 s against 0.9 s with LuxCore's roulette
+    from depth 3, and a 7× smaller standard error, 0.0017 against 0.0125); paths that leave an open scene
+    end as before.
     """
     rho = max((max(m.reflectance) for m in scene.materials.values() if isinstance(m, Diffuse)), default=0.0)
     if rho >= 1.0:
