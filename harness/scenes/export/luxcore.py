@@ -19,16 +19,19 @@ test_luxcore.py checks each):
   (see :func:`depths`); at D = 1 LuxCore also samples the lights at the first hit, so max_depth 1 is refused.
 
 Russian roulette is off (``path.russianroulette.cap = 1``): LuxCore 2.11's is biased together with its MIS.
-Its next-event estimation weights the BSDF's pdf by the roulette's survival probability, computed from the
-BSDF's value f·cos (src/slg/engines/pathtracer.cpp, ``DirectLightSampling``: ``bsdfPdfW *=
-RenderEngine::RussianRouletteProb(bsdfEval, rrImportanceCap)``, i.e. ``Clamp(bsdfEval.Filter(), cap, 1)``,
-0.5 for any matte below albedo π/2 at the default cap 0.5), while a BSDF-sampled ray that hits the light weights
-by the pdf alone (``DirectHitFiniteLight``: ``PowerHeuristic(pathInfo.lastBSDFPdfW, ...)``, stored by
-``EyePathInfo::AddVertex`` before the roulette). The two MIS weights of one light path then sum to more than 1:
-every light reached at a vertex past the roulette depth is counted too much (the white furnace +9.5% with
-roulette from depth 3). With a cap of 1 the survival probability is 1 on both sides: no roulette, and
-consistent weights. Paths then end only at the depth limit, so an unbounded scene is cut after
-:func:`diffuse_depth` diffuse bounces, where the light it loses is provably below ``TRUNCATION``.
+Its next-event estimation weights the BSDF's pdf by a roulette survival probability computed from the
+BSDF's value f·cos (src/slg/engines/pathtracer.cpp, ``DirectLightSampling``, line 208: ``bsdfPdfW *=
+RenderEngine::RussianRouletteProb(bsdfEval, rrImportanceCap)``, i.e. ``Clamp(bsdfEval.Filter(), cap, 1)``;
+a matte's f·cos is at most 1/π, so this is the cap, 0.5 by default), while a BSDF-sampled ray that hits the
+light is weighted by the pdf alone (``DirectHitFiniteLight``, line 299: ``PowerHeuristic(
+pathInfo.lastBSDFPdfW, ...)``, stored by ``EyePathInfo::AddVertex`` before the roulette; the roulette itself
+survives with the mean albedo, 0.8 in the furnace). The two MIS weights of a light path then sum to more than
+1 at every vertex whose light sample is past the roulette depth: light is counted too much (the white
+furnace +9.5% with roulette from depth 3; at max_depth 6, +6.4% with the cap 0.5 and +1.0% with a cap of
+0.9). Line numbers are LuxCoreRender/LuxCore's master (d624e04; the file is unchanged since 2021, 984b63d).
+With a cap of 1 the survival probability is 1 on both sides: no roulette, and consistent weights. Paths
+then end only at the depth limit, so an unbounded scene is cut after :func:`diffuse_depth` diffuse bounces,
+where the light it loses is provably below ``TRUNCATION`` of the brightest radiance.
 
 Geometry is moved and scaled so the bounding box is centred on the origin with a diagonal of 1, as the
 Mitsuba adapter does (:func:`harness.scenes.transforms.unit_frame`): LuxCore offsets new rays by a fixed
