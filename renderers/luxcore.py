@@ -5,7 +5,8 @@ The scene is exported with :mod:`harness.scenes.export.luxcore` (its ``MAPPING``
 written: one-sided diffuse, mirror and emitters, glass, box filter, depth; spheres as fine meshes) into a
 temporary folder and rendered by :mod:`renderers.luxcore_cli` in a child process, LuxCore's ``PATHCPU``
 engine with its ``RANDOM`` sampler: unidirectional path tracing with next-event estimation and MIS,
-Russian roulette from depth 3.
+without Russian roulette (LuxCore 2.11's biases its MIS weights: see the export's docstring); unbounded
+paths are cut where the light lost is below 1e-5 of the brightest radiance.
 
 Why a child process, started as ``python -m renderers.luxcore_cli``: pyluxcore aborts the process at
 interpreter exit once initialised, and aborts when OpenImageIO (which the harness uses for every image

@@ -41,8 +41,11 @@ def test_cfg_names_the_scene_and_sets_film_filter_depth(cornell_export):
     assert p["scene.file"] == '"scene.scn"'
     assert (p["film.width"], p["film.height"]) == ("256", "256")
     assert p["film.filter.type"] == '"BOX"' and float(p["film.filter.width"]) == 0.5
-    # max_depth = -1 (unbounded): LuxCore's largest depth, Russian roulette ends paths
-    assert int(p["path.pathdepth.total"]) == luxcore.UNBOUNDED_DEPTH
+    # max_depth = -1 (unbounded): LuxCore's largest total depth, diffuse bounces cut where the light lost is
+    # below the bound, and no Russian roulette (a cap of 1: LuxCore 2.11's roulette biases its MIS)
+    assert int(p["path.pathdepth.total"]) == int(p["path.pathdepth.specular"]) == luxcore.UNBOUNDED_DEPTH
+    assert int(p["path.pathdepth.diffuse"]) == int(p["path.pathdepth.glossy"]) == luxcore.diffuse_depth(scene)
+    assert float(p["path.russianroulette.cap"]) == 1.0
     assert p["renderengine.type"] == '"PATHCPU"' and p["path.clamping.variance.maxvalue"] == "0"
 
 
@@ -50,6 +53,36 @@ def test_depth_is_passed_through(tmp_path):
     scene = load_scene(CORNELL).with_max_depth(3)
     p = _props(export_scene(scene, "luxcore", tmp_path))
     assert all(p[f"path.pathdepth.{k}"] == "3" for k in ("total", "diffuse", "glossy", "specular"))
+
+
+@pytest.mark.parametrize("scene_name, depth", [("furnace", 52), ("cornell-box", 95), ("furnace-glass", 52)])
+def test_unbounded_paths_are_cut_where_the_light_lost_is_below_the_bound(scene_name, depth):
+    """n = ⌈ln ε / ln ρ⌉ diffuse bounces, ρ the largest diffuse reflectance in any channel: ρⁿ <= ε < ρⁿ⁻¹
+    (furnace 0.8 -> 52; cornell-box's white, 0.885809 in red -> 95; the furnace-glass mirror of
+    reflectance 1 is specular and does not count)."""
+    scene = load_scene(ROOT / "harness" / "references" / scene_name)
+    rho = max(max(m.reflectance) for m in scene.materials.values() if type(m).__name__ == "Diffuse")
+    n = luxcore.diffuse_depth(scene)
+    assert n == depth and rho**n <= luxcore.TRUNCATION < rho ** (n - 1)
+    assert luxcore.depths(scene) == {"total": luxcore.UNBOUNDED_DEPTH, "diffuse": n, "glossy": n,
+                                     "specular": luxcore.UNBOUNDED_DEPTH}
+    # a bounded max_depth within n is kept as it is (exact, with no roulette), a larger one cut at n
+    assert luxcore.depths(scene.with_max_depth(6))["diffuse"] == 6
+    assert luxcore.depths(scene.with_max_depth(n + 10)) == {"total": n + 10, "diffuse": n, "glossy": n,
+                                                           "specular": n + 10}
+
+
+def test_max_depth_1_is_refused_naming_file_and_field(tmp_path):
+    """LuxCore's path depth 1 adds direct light at the first hit: our emission-only max_depth 1 is refused
+    before anything is written, depth 2 is not."""
+    scene = load_scene(CORNELL)
+    why = refusal(scene.with_max_depth(1), "luxcore")
+    assert isinstance(why, SceneError) and "render.max_depth" in str(why) and str(scene.path) in str(why)
+    with pytest.raises(SceneError, match="render.max_depth"):
+        export_scene(scene.with_max_depth(1), "luxcore", tmp_path / "one")
+    assert not (tmp_path / "one" / "scene.cfg").exists()
+    assert refusal(scene.with_max_depth(2), "luxcore") is None
+    assert refusal(scene.with_max_depth(1), "mitsuba") is None
 
 
 def test_materials_are_one_sided_and_the_emitter_gives_its_rgb(cornell_export):

@@ -10,6 +10,8 @@ One module per format (``mitsuba``, ``luxcore``, ``pbrt_v4``), each with the sam
   format's page in ``docs/export.md`` shows it);
 - ``write(scene, folder) -> Path``: writes the scene into ``folder`` (which exists and is empty) and
   returns the main file a renderer is given (``scene.xml``, ``scene.cfg``, ``scene.pbrt``).
+- optionally ``refusal(scene) -> SceneError | None``: why the format cannot express a scene whose
+  features it has (e.g. luxcore and ``render.max_depth = 1``).
 
 A scene the format cannot express (a feature it lacks, a quantity other than radiance) is refused
 before anything is written, with one :class:`~harness.scenes.model.SceneError` naming the scene file
@@ -50,6 +52,8 @@ def refusal(scene: Scene, name: str) -> SceneError | None:
                                                   "the format renders radiance only")
     if missing := sorted(scene.features - set(module.FEATURES)):
         return SceneError(scene.path, "features", f"{name} cannot express {', '.join(missing)}")
+    if hasattr(module, "refusal"):
+        return module.refusal(scene)
     return None
 
 
