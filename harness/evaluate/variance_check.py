@@ -77,9 +77,11 @@ any dependence between a pixel's channels; with
 the tolerance with probability at most α/2. No assumption on the tails of z enters. With the
 understatement test at α/2, a correct renderer fails the check with probability at most α.
 
-A pixel-channel whose z is 0/0 (no variance and no difference, e.g. black
-background) says nothing and is left out; one with no variance but a
-difference (|z| = ∞) or a NaN counts as a large |z|.
+A pixel-channel that agrees with the reference exactly (d = 0: a black
+background, AO exactly 1 beyond its maximum distance, where both renderers
+are exact) says nothing of the variance, whatever variance it reports, and
+is left out of both tests; one with no variance but a difference
+(|z| = ∞) or a NaN counts as a large |z|.
 """
 
 from __future__ import annotations
@@ -180,7 +182,7 @@ def variance_check(img: np.ndarray, var_img: np.ndarray, ref: np.ndarray, var_re
     diff = img - ref
     with np.errstate(divide="ignore", invalid="ignore"):
         absz = np.abs(diff) / np.sqrt(var)
-    usable = ~((var == 0) & (diff == 0))  # 0/0: no information
+    usable = diff != 0  # exact agreement: no information (module docstring); NaN stays usable, as a large |z|
     absz = np.where(np.isnan(absz), np.inf, absz)  # a NaN counts as a large |z|
     s_lo, s_hi = spread_bounds(tolerance, spp)
     c_lo, c_hi = Q3 * s_lo, Q3 * s_hi
@@ -206,10 +208,10 @@ def understatement_test(diff: np.ndarray, var: np.ndarray, level: float,
                         c: float = UNDERSTATEMENT) -> tuple[float, float, float]:
     """(R = Σd²/Σv, t of u = Σ_c d² − c·Σ_c v per pixel, Student's critical value at ``level``): module docstring.
 
-    Pixel-channels with a non-finite difference or variance, and 0/0 ones, are left out; t is 0 where u is
+    Pixel-channels with a non-finite difference or variance, and exact ones (d = 0), are left out; t is 0 where u is
     constant and not positive, inf where it is constant and positive (v = 0 everywhere and d not).
     """
-    ok = np.isfinite(diff) & np.isfinite(var) & ~((var == 0) & (diff == 0))
+    ok = np.isfinite(diff) & np.isfinite(var) & (diff != 0)
     a = np.where(ok, diff * diff, 0.0).sum(axis=-1)
     b = np.where(ok, var, 0.0).sum(axis=-1)
     pix = ok.any(axis=-1)
