@@ -143,7 +143,7 @@ def trace_ao(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: i
     return A
 
 
-#: Half-widths of the windows of :func:`pooled_variance`: the mean's (3×3) and the stratification gain's (5×5).
+#: Half-widths of the windows of :func:`pooled_variance`: the neighbours' mean's (3×3) and the gain's (5×5).
 MEAN_RADIUS = 1
 GAIN_RADIUS = 2
 
@@ -158,8 +158,8 @@ def box_sum(a: np.ndarray, radius: int) -> np.ndarray:
     return c[y1][:, x1] - c[y0][:, x1] - c[y1][:, x0] + c[y0][:, x0]
 
 
-def pooled_variance(mean: np.ndarray, batch_var: np.ndarray, n: int, mean_radius: int = MEAN_RADIUS,
-                    gain_radius: int = GAIN_RADIUS) -> np.ndarray:
+def pooled_variance(mean: np.ndarray, batch_var: np.ndarray, n: int, exact: np.ndarray | None = None,
+                    mean_radius: int = MEAN_RADIUS, gain_radius: int = GAIN_RADIUS) -> np.ndarray:
     """The variance of each pixel's AO mean of ``n`` samples, from its mean and the film's unbiased estimate.
 
     Why not the film's estimate itself: with the pmj02 sampler it comes from 8
@@ -170,47 +170,54 @@ def pooled_variance(mean: np.ndarray, batch_var: np.ndarray, n: int, mean_radius
 
     What it reports: v = ĝ · B, with
 
-    - B = max(p̃(1 − p̃), p̄(1 − p̄)) / n, the Bernoulli form. By the
-      Bhatia-Davis inequality (Bhatia & Davis 2000, Amer. Math. Monthly 107,
-      353-357) p(1 − p)/n is the largest variance of the mean of n
-      independent samples in [0, 1] with mean p: our estimates are 0, 1 or the
-      miss value. p̃ = (k + ½)/(n + 1) is the pixel's own mean with k = n·Ā
-      "successes", moved off 0 and 1 by half a sample (Jeffreys' prior), so n
-      equal samples do not claim a variance of 0; p̄ is the same over the
-      3×3 pixels about it, which gives a variance to a pixel whose samples
-      happened to agree where its neighbours' did not (AO 0.998 reads 1 in
-      88% of 64-sample pixels), and the max keeps the larger where a pixel's
-      own mean sits between neighbours at 0 or 1 (an edge).
-    - ĝ = Σ v̂ / Σ B over the 5×5 pixels about it whose v̂ > 0: the
-      stratification gain. pmj02 samples are stratified, so the true
-      variance of the mean is *below* the independent bound (measured on
-      cornell-box-ao at 64 spp, by AO band: 0.26-0.75 of it); reporting B
-      alone would overstate it up to 4×, which the gate's variance check
-      fails and which hides biases. v̂ is unbiased (the spread of
-      independent batch means), so ĝ is a ratio estimate with about 25 × 7
-      degrees of freedom, and over each window Σ v ≈ Σ v̂: the pooling moves
-      variance between neighbours but neither adds nor removes any, the
-      honest part. Pixels whose batches all agree carry no evidence of the
-      gain (their v̂ = 0 is the batches' luck or an exact pixel) and are left
-      out of ĝ, which is the conservative side: that only raises ĝ.
+    - B = p̄(1 − p̄)/n, the Bernoulli form. By the Bhatia-Davis inequality
+      (Bhatia & Davis 2000, Amer. Math. Monthly 107, 353-357) p(1 − p)/n is
+      the largest variance of the mean of n independent samples in [0, 1]
+      with mean p: our estimates are 0, 1 or the miss value. p̄ is the mean
+      of the 8 pixels about it (3×3 less itself), moved off 0 and 1 by half a
+      sample (Jeffreys' prior): p̄ = (k + ½)/(8n + 1) with k = n·ΣĀ over
+      them. Not the pixel's own mean: near 0 and 1 its own draw decides its
+      error and, through p̂(1 − p̂), its variance together (a pixel at AO
+      0.995 reads 1 with 73% chance at 64 spp, error 0.005 and variance 0;
+      one that drew a 0 has error 0.011 and 3 times the true variance), so z
+      would be small where the error is large and infinite where it is small.
+      The neighbours' mean is independent of the pixel's samples, and where
+      they are not all 0 or 1 the pixel gets a variance even when all its own
+      samples agreed.
+    - ĝ = Σ v̂ / Σ B over the 5×5 pixels about it: the stratification gain.
+      pmj02 samples are stratified, so the true variance of the mean is
+      *below* the independent bound (measured on cornell-box-ao at 64 spp, by
+      AO band: 0.26-0.75 of it); reporting B alone would overstate it up to
+      4×, which the gate's variance check fails and which hides biases. v̂ is
+      unbiased (the spread of independent batch means, 0 where the batches
+      happened to agree), so ĝ is a ratio estimate with about 25 × 7 degrees
+      of freedom, and over each window Σ v ≈ Σ v̂: the pooling moves variance
+      between neighbours but neither adds nor removes any, which is what
+      makes it honest on average. Pixels known to be ``exact`` (every sample
+      a miss) carry no variance and are left out. A window where no v̂ is
+      above 0 has no evidence of the gain: ĝ is then the whole image's, and
+      1 where nothing varies anywhere (the independent bound: conservative).
 
     A pixel that is exact (AO exactly 1 beyond ``max_distance``) still
-    reports the small variance of p̃ where its neighbours are not exact (the
-    renderer reports 0 at the miss value, as every sample of such a pixel
-    missed in practice); it agrees with the reference
+    reports the variance of half a sample in its neighbours' 8n,
+    ĝ·(½/(8n+1))((8n+½)/(8n+1))/n (ĝ × 1.5e-5 at 64 spp), as a pixel at AO
+    0.9995 that happened to read 1 must; it agrees with the reference
     exactly, and the variance check leaves pixels with d = 0 out. Measured
-    (``benchmarks/ao_variance.py``, docs/gate-detection.md): the spread of
-    z per AO band over 8 seeds is 0.94-1.00 in every band from 0.2 up.
+    (``benchmarks/variance_honesty.py``, docs/gate-detection.md): the spread
+    of z per AO band over 8 seeds on cornell-box-ao is 0.92-1.01 in every band
+    from 0.2 up; 1.29 in [0.1, 0.2), 39 pixels along the ceiling's front edge
+    half outside the box, whose neighbours' gain is lower than theirs.
     """
     mean = np.asarray(mean, np.float64)
     batch_var = np.asarray(batch_var, np.float64)
-    count = n * box_sum(np.ones(mean.shape[:2] + (1,) * (mean.ndim - 2)), mean_radius)
-    p_bar = (n * box_sum(mean, mean_radius) + 0.5) / (count + 1.0)
-    p_own = (n * mean + 0.5) / (n + 1.0)
-    bound = np.clip(np.maximum(p_own * (1.0 - p_own), p_bar * (1.0 - p_bar)), 0.0, None) / n
-    num = box_sum(batch_var, gain_radius)
-    den = box_sum(np.where(batch_var > 0, bound, 0.0), gain_radius)
-    gain = np.divide(num, den, out=np.zeros_like(num), where=den > 0)
+    count = n * (box_sum(np.ones(mean.shape[:2] + (1,) * (mean.ndim - 2)), mean_radius) - 1.0)
+    p_bar = (n * (box_sum(mean, mean_radius) - mean) + 0.5) / (count + 1.0)  # the neighbours' mean, not its own
+    bound = np.clip(p_bar * (1.0 - p_bar), 0.0, None) / n
+    exact = np.zeros(mean.shape, bool) if exact is None else np.asarray(exact, bool)
+    bound = np.where(exact, 0.0, bound)
+    num, den = box_sum(batch_var, gain_radius), box_sum(bound, gain_radius)
+    fallback = batch_var.sum() / bound.sum() if batch_var.sum() > 0 else 1.0  # the image's gain; none without evidence
+    gain = np.divide(num, den, out=np.full_like(num, fallback), where=(den > 0) & (num > 0))
     return gain * bound
 
 
@@ -232,9 +239,9 @@ class AORenderer(ToolkitRenderer):
         result = render_image(scene, spp, seed, lambda *unit: trace_ao(geom, scene, *unit), checkpoints,
                               self.threads, sampler=with_defaults(self.settings, settings)["sampler"])
         if result.variance is not None and result.info.get("batches", 1) > 1:  # independent: Bernoulli already
-            pooled = pooled_variance(result.image, result.variance, spp)
-            # A pixel at the miss value whose samples all agree saw nothing: exact, whatever its neighbours.
+            # A pixel at the miss value whose samples all agree saw nothing (an occluded surface point reads
+            # the miss value 0 only inside a closed pocket): exact, variance 0, whatever its neighbours.
             exact = (result.image == scene.ambient_occlusion.miss_value) & (result.variance == 0)
-            result.variance = np.where(exact, 0.0, pooled).astype(np.float32)
+            result.variance = pooled_variance(result.image, result.variance, spp, exact).astype(np.float32)
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
         return result
