@@ -124,7 +124,8 @@ def ao_bands(seeds: int, spp: int = 64) -> list[str]:
     spread, rms, counts, worst = band_spreads(z, r0)
     inf = np.any(np.isinf(z), axis=0)
     lost = [int((inf & (r0 >= lo) & ((r0 < lo + 0.1) if lo < 0.9 else (r0 <= 1.0))).sum()) for lo in BANDS]
-    rows = [f"| [{lo:.1f}, {lo + 0.1:.1f}{']' if lo == 0.9 else ')'} | {n} | {sp:.3f} | {rm:.3f} | {w:.1f} | {x} |"
+    rows = [f"| [{lo:.1f}, {lo + 0.1:.1f}{']' if lo == 0.9 else ')'} | "
+            + (f"{n} | {sp:.3f} | {rm:.3f} | {w:.1f} | {x} |" if n else f"0 (every pixel exact: misses) | - | - | - | {x} |")
             for lo, n, sp, rm, w, x in zip(BANDS, counts, spread, rms, worst, lost)]
     return ([f"`ao` on cornell-box-ao, 64 spp, 256×256, seeds 0-{seeds - 1}: spread of z per band of the "
              "reference's AO (pixels with a finite z at every seed):", "",
