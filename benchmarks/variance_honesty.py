@@ -1,6 +1,6 @@
 """Variance honesty both ways (issue 29): the variance check's false alarms and power, and AO's z spread per band.
 
-Run (about 6 minutes on the shared 2-core machine)::
+Run (7 minutes on the shared 2-core machine)::
 
     .venv/bin/python -m benchmarks.variance_honesty --seeds 20 --ao-seeds 8 --markdown docs/gate-detection.md
 

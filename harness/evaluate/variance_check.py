@@ -53,8 +53,10 @@ t = ū/(s_u/√N) exceeds the Student quantile at α/2 (the pixels are
 independent; N ≥ 1024 in every gate scene, so the CLT holds for the mean
 of u). A correct renderer has E u = (1 − c)·E v < 0, a margin of 0.41
 Σv; one that reports half its variance has E u = (2 − c)·E v, and t grows
-as √N: on the gate's expectations t ≥ 2.7 at ÷2 and ≥ 5 at ÷4 at every
-seed measured (``docs/gate-detection.md``). Fireflies, which dominate sums
+as √N: over 20 seeds (``docs/gate-detection.md``) the furnace, light panel,
+glass furnace and AO expectations fail ÷2 at every seed; the Cornell box
+rendered at 64×64 (4096 pixels, its fireflies in Σd²) fails ÷4 at 17 of 20
+and ÷2 at none, so the gate's power there comes from the other scenes. Fireflies, which dominate sums
 of squares, raise v̂ of their pixel about as much as d², so they push u
 down, not up; the measured false-alarm rate over 20 seeds of every
 unbiased renderer that reports a variance is in ``docs/gate-detection.md``.
