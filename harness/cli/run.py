@@ -35,9 +35,17 @@ def render(
     seed: int = SeedOpt,
     out: Path = typer.Option(..., "--out", "-o", help="Output OpenEXR file (float32 linear sRGB); its name must "
                                                       "end in .exr (other formats are refused, not converted)."),
+    variance_out: Optional[Path] = typer.Option(None, "--variance-out", help="Also write the per-pixel variance of "
+                                                "the image (of the mean, float32 EXR, per channel) where the renderer "
+                                                "gives one; one line says so where it does not, and no file is written."),
 ) -> None:
-    """Render one scene with one renderer and write the HDR image."""
+    """Render one scene with one renderer and write the HDR image (and, with --variance-out, its variance)."""
     check_output_file(out)  # before any rendering: .exr, not a folder, writable
+    if variance_out is not None:
+        check_output_file(variance_out, "--variance-out")
+        if Path(variance_out).resolve() == Path(out).resolve():
+            raise typer.BadParameter(f"{variance_out}: is the --out file too; give the variance a name of its own",
+                                     param_hint="--variance-out")
     sc = resolve_scene(scene, overrides)
     (entry,) = resolve([renderer])
     if not entry.available:
@@ -47,9 +55,19 @@ def render(
     from harness.workflows.render import render_checked
 
     result = render_checked(entry, sc, spp, seed)
-    write_exr(out, result.image, {"cbox:renderer": entry.name, "cbox:settings": canonical(entry.settings), SPP_ATTRIBUTE: str(spp), "cbox:seed": str(seed),
-                                  "cbox:scene_hash": sc.content_hash()})
+    meta = {"cbox:renderer": entry.name, "cbox:settings": canonical(entry.settings), SPP_ATTRIBUTE: str(spp),
+            "cbox:seed": str(seed), "cbox:scene_hash": sc.content_hash()}
+    write_exr(out, result.image, meta)
     info(f"wrote {out} ({sc.camera.width}x{sc.camera.height}, {spp} spp, {result.time_s:.2f} s)")
+    if variance_out is None:
+        return
+    if result.variance is None:
+        # Not info(): asked for a file that is not there, the user must hear why, even with --quiet.
+        typer.echo(f"cbox: no variance written: renderer {entry.name!r} reports no variance of its image "
+                   f"at {spp} spp, so {variance_out} was not written", err=True)
+        return
+    write_exr(variance_out, result.variance, {**meta, "cbox:quantity": "variance of the mean"})
+    info(f"wrote {variance_out} (per-pixel variance of the image's mean)")
 
 
 def write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(), title=None) -> Path:

@@ -148,6 +148,11 @@ def _params() -> list:
     return out
 
 
+#: Mutants that misreport the variance of a correct image, and what the variance check's message says of them.
+VARIANCE_MUTANTS = {"variance_understated_4x": "× too little over the whole image",
+                    "variance_overstated_4x": "× too much over the whole image"}
+
+
 @pytest.mark.parametrize("name", _params())
 def test_gate_detects_mutant(work, name):
     """The gate fails the mutant at the CI budget: for an unbiased renderer on an agreement test or a
@@ -168,7 +173,9 @@ def test_gate_detects_mutant(work, name):
         assert all(o.record.status == "ok" for o in outcomes), [o.record.reason for o in outcomes]
         v = mutants.verdict(outcomes)
     assert not v.passed, f"the gate missed {name}: {mutants.BY_NAME[name].description}; smallest p = {v.p_min:.3g}"
-    if mutants.BY_NAME[name].renderer == "pathtracer":
+    if name in VARIANCE_MUTANTS:  # the image is the clean one: only the variance check can see it
+        assert "variance" in v.checks and VARIANCE_MUTANTS[name] in v.evidence, f"{name}: {v.failing}: {v.evidence}"
+    elif mutants.BY_NAME[name].renderer == "pathtracer":
         assert {"agreement", "finite"} & v.checks, f"{name} fails only {v.failing}: {v.evidence}"
     else:  # a re-recorded baseline would hide a bug: a budget or consistency check must fail
         assert {c for c in v.checks if not c.startswith("baseline.")}, f"{name} fails only {v.failing}"

@@ -165,4 +165,20 @@ MUTANTS: tuple[Mutant, ...] = (
           "def _emission_weight(pdf_bsdf, pa, t, cos_o, depth) -> float:"),
          ("w = _emission_weight(rays.pdf[i], pa, t, cos_o)", "w = _emission_weight(rays.pdf[i], pa, t, cos_o, depth)")),
     ),
+    Mutant(
+        "variance_understated_4x",
+        "the reported variance of the mean 4 times too small (e.g. a divisor applied twice): every z, confidence "
+        "interval and bias/variance split shown to users twice too narrow",
+        (("        result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))\n",
+          "        result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))\n"
+          "        result.variance = result.variance / 4\n"),),
+    ),
+    Mutant(
+        "variance_overstated_4x",
+        "the reported variance of the mean multiplied by 4 (e.g. the variance of one sample over n/4): "
+        "errors up to twice the noise pass every z-test",
+        (("        result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))\n",
+          "        result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))\n"
+          "        result.variance = result.variance * 4\n"),),
+    ),
 )
