@@ -95,6 +95,19 @@ class CountingNoise(SeededNoise):
         return super().render(scene, spp, seed, checkpoints)
 
 
+class Clocked(SeededNoise):
+    """Seeded noise that reports a clock of its own, not the wall's: OVERHEAD_S of set-up plus PER_SPP_S per
+    sample (both exact in binary). The spp a time budget buys is then exact whatever the machine's load."""
+
+    name = "clocked"
+    OVERHEAD_S, PER_SPP_S = 0.25, 0.0625
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        result = super().render(scene, spp, seed, checkpoints)
+        result.time_s = self.OVERHEAD_S + self.PER_SPP_S * spp
+        return result
+
+
 class ScaledMitsubaNoise(FlatGrey):
     """The stored reference plus noise of the reference's own model, times SCALE: unbiased when SCALE is 1.
 
