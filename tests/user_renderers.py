@@ -108,6 +108,18 @@ class Clocked(SeededNoise):
         return result
 
 
+class Stalled(SeededNoise):
+    """Reports a 1-spp render as slower than a 4-spp one (1 s against 0.5 s), as a render stalled by a busy
+    machine reads: a time budget's calibration must not take the difference for the per-sample cost."""
+
+    name = "stalled"
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        result = super().render(scene, spp, seed, checkpoints)
+        result.time_s = 1.0 if spp == 1 else 0.125 * spp
+        return result
+
+
 class ScaledMitsubaNoise(FlatGrey):
     """The stored reference plus noise of the reference's own model, times SCALE: unbiased when SCALE is 1.
 

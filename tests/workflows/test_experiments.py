@@ -115,6 +115,20 @@ def test_equal_time_mode_reports_spp_and_respects_the_budget(tmp_path):
     assert recs["clocked"]["spp"] == 28 and recs["clocked"]["time_s"] == 2.0, recs["clocked"]
 
 
+def test_time_budget_calibration_survives_a_stalled_render():
+    """A 1-spp calibration render that reads longer than the 4-spp one (load stalled it): the per-sample cost
+    falls back to t4 / 4 = 1/8 s, so a 2 s budget buys 16 spp (it once bought 2·10⁹: a render without end).
+    Clocked's consistent clock still gives (2 - 0.25) / (1/16) = 28."""
+    from harness.adapters.registry import resolve
+    from harness.scenes.library import resolve_scene
+    from harness.workflows.compare import spp_for_time_budget
+
+    scene = resolve_scene("cornell-box").with_resolution(8, 8)
+    stalled, clocked = resolve(["tests.user_renderers:Stalled", "tests.user_renderers:Clocked"])
+    assert spp_for_time_budget(stalled, scene, 2.0, 0) == 16
+    assert spp_for_time_budget(clocked, scene, 2.0, 0) == 28
+
+
 def test_equal_quality_mode_reports_time_to_target(tmp_path):
     proc = run_cbox("compare", "--scene", "cornell-box", "--renderer", "mitsuba", "--target-error",
                     "delta_e2000_mean=6", "--json", "--out", str(tmp_path))
