@@ -80,17 +80,24 @@ class SeededNoise(FlatGrey):
 class CountingNoise(SeededNoise):
     """Seeded noise that logs each render to $CBOX_TEST_RENDER_LOG and takes a little time.
 
-    Lets a test kill a run midway and see which cells were rendered again.
+    Lets a test kill a run midway and see which cells were rendered again. With
+    $CBOX_TEST_RENDER_HOLD_AFTER = N, a render that finds N renders logged already waits HOLD_S
+    (unlogged) instead: the run stops after exactly those N, however busy the machine, until it is killed.
     """
 
     name = "counting-noise"
+    HOLD_S = 600.0
 
     def render(self, scene, spp, seed, checkpoints=()):
         import os
         import time
 
+        log = os.environ["CBOX_TEST_RENDER_LOG"]
+        hold = os.environ.get("CBOX_TEST_RENDER_HOLD_AFTER")
+        if hold is not None and os.path.exists(log) and len(open(log).read().splitlines()) >= int(hold):
+            time.sleep(self.HOLD_S)
         time.sleep(float(os.environ.get("CBOX_TEST_RENDER_SLEEP", "0")))
-        with open(os.environ["CBOX_TEST_RENDER_LOG"], "a") as f:
+        with open(log, "a") as f:
             f.write(f"{seed} {spp}\n")
         return super().render(scene, spp, seed, checkpoints)
 

@@ -22,9 +22,8 @@ def _converge_cmd(out, seeds=SEEDS):
             "tests.user_renderers:CountingNoise", "--spp", "1,2", "--seeds", str(seeds), "--out", str(out)]
 
 
-def _env(log, sleep="0"):
-    env = dict(os.environ, PYTHONPATH=str(ROOT), CBOX_TEST_RENDER_LOG=str(log), CBOX_TEST_RENDER_SLEEP=sleep)
-    return env
+def _env(log, **extra):
+    return dict(os.environ, PYTHONPATH=str(ROOT), CBOX_TEST_RENDER_LOG=str(log), **extra)
 
 
 def _rendered_seeds(lines):
@@ -32,20 +31,25 @@ def _rendered_seeds(lines):
 
 
 def test_killed_run_resumes_without_losing_or_repeating_cells(tmp_path):
-    """SIGKILL a converge run after two cells; the rerun keeps them and renders only the rest."""
+    """SIGKILL a converge run after two cells; the rerun keeps them and renders only the rest.
+
+    The renderer holds (unlogged) once four renders, two cells of spp 1 and 2, are logged, so the kill
+    lands after exactly two cells whenever this test gets to send it (it once raced a 0.4 s sleep per render).
+    The 300 s wait only guards against a hang: the two cells take seconds."""
     out, log = tmp_path / "exp", tmp_path / "renders.log"
-    proc = subprocess.Popen(_converge_cmd(out), cwd=ROOT, env=_env(log, sleep="0.4"),
+    proc = subprocess.Popen(_converge_cmd(out), cwd=ROOT, env=_env(log, CBOX_TEST_RENDER_HOLD_AFTER="4"),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     cells = out / "cells"
-    deadline = time.time() + 120
-    while time.time() < deadline and len(list(cells.glob("*.parquet"))) < 2:
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and len(list(cells.glob("*.parquet"))) < 2 and proc.poll() is None:
         time.sleep(0.05)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     finished = {int(p.stem.rsplit("seed", 1)[1]) for p in cells.glob("*.parquet")}
-    assert 2 <= len(finished) < SEEDS, finished
+    assert len(finished) == 2, finished
     before = {s: pd.read_parquet(cells / f"counting-noise__seed{s}.parquet") for s in finished}
     first_run = log.read_text().splitlines()
+    assert len(first_run) == 4 and _rendered_seeds(first_run) == finished, first_run  # the held render: unlogged
 
     again = subprocess.run(_converge_cmd(out), cwd=ROOT, env=_env(log), capture_output=True, text=True, timeout=300)
     assert again.returncode == 0, again.stderr
