@@ -284,9 +284,12 @@ class BadEstimator(FlatGrey):
 
 class LoggedNoise(SeededNoise):
     """Seeded noise that logs ``start PID SEED`` and ``end PID SEED`` to $CBOX_TEST_RENDER_LOG around a sleep of
-    $CBOX_TEST_RENDER_SLEEP seconds: a test can kill the process rendering a cell while it renders."""
+    $CBOX_TEST_RENDER_SLEEP seconds: a test can kill the process rendering a cell while it renders. A process
+    whose PID is a line of the file $CBOX_TEST_RENDER_HOLD_PIDS sleeps HOLD_S instead: held mid-cell until killed,
+    however late the kill."""
 
     name = "logged-noise"
+    HOLD_S = 600.0
 
     def render(self, scene, spp, seed, checkpoints=()):
         import os
@@ -297,6 +300,8 @@ class LoggedNoise(SeededNoise):
                 f.write(f"{what} {os.getpid()} {seed}\n")
 
         log("start")
-        time.sleep(float(os.environ.get("CBOX_TEST_RENDER_SLEEP", "0")))
+        hold = os.environ.get("CBOX_TEST_RENDER_HOLD_PIDS", "")
+        held = bool(hold) and os.path.exists(hold) and str(os.getpid()) in open(hold).read().split()
+        time.sleep(self.HOLD_S if held else float(os.environ.get("CBOX_TEST_RENDER_SLEEP", "0")))
         log("end")
         return super().render(scene, spp, seed, checkpoints)
