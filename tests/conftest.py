@@ -62,9 +62,11 @@ def write_scene(tmp_path):
     return write
 
 
-def run_cbox(*args: str, timeout: float = 600, env_path: Path | None = None) -> subprocess.CompletedProcess:
-    """Run the CLI in a fresh interpreter, as a user would; ``env_path`` joins PYTHONPATH."""
-    env = dict(os.environ)
+def run_cbox(*args: str, timeout: float = 600, env_path: Path | None = None,
+             env_extra: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """Run the CLI in a fresh interpreter, as a user would; ``env_path`` joins PYTHONPATH, ``env_extra`` is
+    set in its environment (the test renderers' log file, say)."""
+    env = {**os.environ, **(env_extra or {})}
     if env_path is not None:
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(env_path), env.get("PYTHONPATH")]))
     return subprocess.run([sys.executable, "-m", "harness", *args], capture_output=True, text=True,

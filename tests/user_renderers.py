@@ -80,19 +80,51 @@ class SeededNoise(FlatGrey):
 class CountingNoise(SeededNoise):
     """Seeded noise that logs each render to $CBOX_TEST_RENDER_LOG and takes a little time.
 
-    Lets a test kill a run midway and see which cells were rendered again.
+    Lets a test kill a run midway and see which cells were rendered again. With
+    $CBOX_TEST_RENDER_HOLD_AFTER = N, a render that finds N renders logged already waits HOLD_S
+    (unlogged) instead: the run stops after exactly those N, however busy the machine, until it is killed.
     """
 
     name = "counting-noise"
+    HOLD_S = 600.0
 
     def render(self, scene, spp, seed, checkpoints=()):
         import os
         import time
 
+        log = os.environ["CBOX_TEST_RENDER_LOG"]
+        hold = os.environ.get("CBOX_TEST_RENDER_HOLD_AFTER")
+        if hold is not None and os.path.exists(log) and len(open(log).read().splitlines()) >= int(hold):
+            time.sleep(self.HOLD_S)
         time.sleep(float(os.environ.get("CBOX_TEST_RENDER_SLEEP", "0")))
-        with open(os.environ["CBOX_TEST_RENDER_LOG"], "a") as f:
+        with open(log, "a") as f:
             f.write(f"{seed} {spp}\n")
         return super().render(scene, spp, seed, checkpoints)
+
+
+class Clocked(SeededNoise):
+    """Seeded noise that reports a clock of its own, not the wall's: OVERHEAD_S of set-up plus PER_SPP_S per
+    sample (both exact in binary). The spp a time budget buys is then exact whatever the machine's load."""
+
+    name = "clocked"
+    OVERHEAD_S, PER_SPP_S = 0.25, 0.0625
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        result = super().render(scene, spp, seed, checkpoints)
+        result.time_s = self.OVERHEAD_S + self.PER_SPP_S * spp
+        return result
+
+
+class Stalled(SeededNoise):
+    """Reports a 1-spp render as slower than a 4-spp one (1 s against 0.5 s), as a render stalled by a busy
+    machine reads: a time budget's calibration must not take the difference for the per-sample cost."""
+
+    name = "stalled"
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        result = super().render(scene, spp, seed, checkpoints)
+        result.time_s = 1.0 if spp == 1 else 0.125 * spp
+        return result
 
 
 class ScaledMitsubaNoise(FlatGrey):
@@ -252,9 +284,12 @@ class BadEstimator(FlatGrey):
 
 class LoggedNoise(SeededNoise):
     """Seeded noise that logs ``start PID SEED`` and ``end PID SEED`` to $CBOX_TEST_RENDER_LOG around a sleep of
-    $CBOX_TEST_RENDER_SLEEP seconds: a test can kill the process rendering a cell while it renders."""
+    $CBOX_TEST_RENDER_SLEEP seconds: a test can kill the process rendering a cell while it renders. A process
+    whose PID is a line of the file $CBOX_TEST_RENDER_HOLD_PIDS sleeps HOLD_S instead: held mid-cell until killed,
+    however late the kill."""
 
     name = "logged-noise"
+    HOLD_S = 600.0
 
     def render(self, scene, spp, seed, checkpoints=()):
         import os
@@ -265,6 +300,8 @@ class LoggedNoise(SeededNoise):
                 f.write(f"{what} {os.getpid()} {seed}\n")
 
         log("start")
-        time.sleep(float(os.environ.get("CBOX_TEST_RENDER_SLEEP", "0")))
+        hold = os.environ.get("CBOX_TEST_RENDER_HOLD_PIDS", "")
+        held = bool(hold) and os.path.exists(hold) and str(os.getpid()) in open(hold).read().split()
+        time.sleep(self.HOLD_S if held else float(os.environ.get("CBOX_TEST_RENDER_SLEEP", "0")))
         log("end")
         return super().render(scene, spp, seed, checkpoints)

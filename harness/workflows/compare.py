@@ -24,13 +24,19 @@ def spp_for_time_budget(entry: RendererEntry, scene: Scene, budget_s: float, see
     """The spp that should take ``budget_s`` seconds, from two short timed renders (1 and 4 spp).
 
     Per-render overhead (scene set-up) and per-sample cost are separated by
-    the two timings. The calibration renders are not counted in the budget;
+    the two timings. Where the 1-spp render reads as long as the 4-spp one
+    (stalled by a busy machine: load only adds time), the difference says nothing
+    about the per-sample cost (floored at 1e-9 s it gives ~10⁹ spp, a
+    render without end); t4 / 4 is then used, an upper bound on
+    the per-sample cost (the overhead is ≥ 0): fewer samples than the budget
+    buys, never more. The calibration renders are not counted in the budget;
     the final render's own time is what is reported.
     """
     t1 = render_checked(entry, scene, 1, seed).time_s
     t4 = render_checked(entry, scene, 4, seed).time_s
-    per_spp = max((t4 - t1) / 3.0, 1e-9)
-    overhead = max(t1 - per_spp, 0.0)
+    per_spp = (t4 - t1) / 3.0 if t4 > t1 else t4 / 4.0
+    per_spp = max(per_spp, 1e-9)  # a renderer that reports no time at all
+    overhead = max(t4 - 4.0 * per_spp, 0.0)  # (4·t1 - t4) / 3 when t4 > t1; 0 in the fallback
     return max(1, int((budget_s - overhead) / per_spp))
 
 

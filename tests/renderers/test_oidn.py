@@ -114,23 +114,30 @@ def caustics():
     return scene, load_reference(scene)
 
 
-def test_denoised_renderer_denoises_every_checkpoint_and_counts_its_time(caustics):
+def test_denoised_renderer_denoises_every_checkpoint_and_counts_its_time(caustics, monkeypatch):
     """Each checkpoint is the denoise of the path tracer's image at that spp (not only the last), the time adds
-    the denoise, no variance is claimed; 8 spp denoised is much closer to the reference than 8 spp path traced."""
+    the denoise, no variance is claimed; 8 spp denoised is much closer to the reference than 8 spp path traced.
+
+    The times are compared with those of the path-trace the wrapper itself ran (kept by a spy), not with a
+    second render's: two renders' wall times differ with the machine's load, by more than the denoise."""
     scene, ref = caustics
     entry = resolve(["pathtracer+oidn"])[0]
     assert entry.available and estimator_of(entry.renderer) == "biased"
     base_settings = {k: v for k, v in entry.settings.items() if k not in ("quality", "aux")}
     raw = PathTracer(threads=2).render(scene, 8, 5, checkpoints=[2, 8], settings=base_settings, aovs=AOVS)
+    inner, base_render = [], entry.renderer.base.render
+    monkeypatch.setattr(entry.renderer.base, "render", lambda *a, **k: inner.append(base_render(*a, **k)) or inner[-1])
     r = entry.renderer.render(scene, 8, 5, checkpoints=[2, 8], settings=dict(entry.settings))
+    (traced,) = inner
     assert r.variance is None and r.info["denoise_s"] > 0
     assert [c.spp for c in r.checkpoints] == [2, 8]
-    for shot, noisy in zip(r.checkpoints, raw.checkpoints):
+    for shot, noisy, own in zip(r.checkpoints, raw.checkpoints, traced.checkpoints):
+        assert np.array_equal(own.image, noisy.image), shot.spp  # the same path-trace, bit for bit
         want = oidn.denoise(noisy.image, noisy.aovs["albedo"], noisy.aovs["normal"])
         assert np.array_equal(shot.image, want), shot.spp
-        assert shot.time_s > noisy.time_s
+        assert shot.time_s > own.time_s  # its path-trace's time plus its denoise's
     assert np.array_equal(r.image, r.checkpoints[-1].image)
-    assert r.time_s == pytest.approx(raw.time_s + r.info["denoise_s"], rel=0.5)
+    assert r.time_s == pytest.approx(traced.time_s + r.info["denoise_s"], abs=1e-4)  # denoise_s: 4 decimals
     assert metrics.delta_e2000(r.image, ref.image) < 0.3 * metrics.delta_e2000(raw.image, ref.image)
 
 

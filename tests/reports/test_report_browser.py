@@ -48,6 +48,12 @@ def report_url(tmp_path_factory, case):
     return path.as_uri()
 
 
+#: Playwright's limit on launching Chromium and on each page action (its default: 30 s). Only a hang guard: the
+#: report loads and every action ends within a second or two on a quiet machine; Chromium's start under two CPU
+#: burners or on a shared CI runner takes several times that, never this.
+PAGE_TIMEOUT_MS = 180_000
+
+
 @pytest.fixture(scope="module")
 def browser():
     try:
@@ -58,7 +64,7 @@ def browser():
     if exe is None:
         pytest.skip("chromium is not installed (apt-get install -y chromium; or set CBOX_CHROMIUM to its path)")
     with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS, headless=True)
+        b = p.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS, headless=True, timeout=PAGE_TIMEOUT_MS)
         try:
             yield b
         finally:
@@ -68,6 +74,7 @@ def browser():
 @pytest.fixture
 def page(browser, report_url):
     ctx = browser.new_context(viewport={"width": 1400, "height": 1000}, device_scale_factor=1)
+    ctx.set_default_timeout(PAGE_TIMEOUT_MS)
     pg = ctx.new_page()
     pg.errors = []  # console errors and uncaught exceptions
     pg.on("console", lambda m: pg.errors.append(f"console.{m.type}: {m.text}") if m.type == "error" else None)
@@ -282,6 +289,7 @@ def _lum(css: str) -> float:
 
 def _context_page(browser, url: str, **options):
     ctx = browser.new_context(viewport={"width": 1400, "height": 1000}, device_scale_factor=1, **options)
+    ctx.set_default_timeout(PAGE_TIMEOUT_MS)
     pg = ctx.new_page()
     pg.errors = []
     pg.on("pageerror", lambda e: pg.errors.append(f"pageerror: {e}"))

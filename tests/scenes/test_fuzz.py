@@ -50,7 +50,8 @@ SCENE_NAMES = ("cornell-box", "furnace", "light-panel", "cornell-box-caustics", 
 SCENES = {name: (ROOT / "harness" / "references" / name / "scene.toml").read_bytes() for name in SCENE_NAMES}
 TEXT_CASES = 30
 DOC_CASES = 150
-#: A single load taking longer than this is a hang (they take milliseconds).
+#: A single load taking more CPU time than this is a hang (they take milliseconds). CPU time of this process,
+#: not wall time: a busy machine (CI shares one) slows a load's wall clock, never adds to its CPU time.
 CASE_TIME_LIMIT_S = 10.0
 
 NUMBERS = ["1e308", "-1e308", "nan", "-nan", "inf", "-inf", "1e31", "-1e31", "1e30", "-1", "0", "-0.0", "1e-320",
@@ -186,7 +187,7 @@ def _check_loaded(scene: Scene) -> None:
 
 def _outcome(fn) -> str | None:
     """None if ``fn()`` gives a sane Scene or a one-line SceneError in time, else what went wrong."""
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     try:
         _check_loaded(fn())
     except SceneError as e:
@@ -194,8 +195,8 @@ def _outcome(fn) -> str | None:
             return f"SceneError not one line / incomplete: {str(e)[:300]!r}"
     except Exception:  # exactly what the test is for: anything else is a bug
         return traceback.format_exc(limit=-4)
-    if (dt := time.perf_counter() - t0) > CASE_TIME_LIMIT_S:
-        return f"took {dt:.1f} s"
+    if (dt := time.process_time() - t0) > CASE_TIME_LIMIT_S:
+        return f"took {dt:.1f} s of CPU"
     return None
 
 

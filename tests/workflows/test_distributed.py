@@ -38,7 +38,9 @@ RUN_COLUMNS = ["time_s", "efficiency", "info_setup_s", "info_threads", "info_var
 RENDERERS = ["pathtracer", "tests.user_renderers:SeededNoise"]
 SPP = "1-16"
 SEEDS = [0, 1]
-START_TIMEOUT_S = 60
+#: Only a guard against a hang: a scheduler or worker starts in seconds on a quiet machine, more under load
+#: (two CPU burners, a shared CI runner), never near this.
+START_TIMEOUT_S = 300
 
 
 def _env(**extra: str) -> dict:
@@ -57,12 +59,20 @@ class LoopbackCluster:
         self.procs: list[subprocess.Popen] = []
         self.scheduler = self._start([str(DASK), "scheduler", "--host", "127.0.0.1", "--port", "0",
                                       "--no-dashboard", "--scheduler-file", str(self.file)], "scheduler")
-        deadline = time.time() + START_TIMEOUT_S
-        while not self.file.exists() and time.time() < deadline:
+        deadline = time.monotonic() + START_TIMEOUT_S
+        # The file is written after it is created: on a busy machine it can be read empty, so wait for its address.
+        while (address := self._address()) is None and time.monotonic() < deadline:
             time.sleep(0.1)
+        assert address, f"no scheduler address in {self.file} after {START_TIMEOUT_S} s"
+        self.address = address
+
+    def _address(self) -> str | None:
         import json
 
-        self.address = json.loads(self.file.read_text())["address"]
+        try:
+            return json.loads(self.file.read_text())["address"]
+        except (OSError, ValueError, KeyError):
+            return None
 
     def _start(self, cmd: list[str], name: str) -> subprocess.Popen:
         log = open(self.folder / f"{name}-{len(self.procs)}.log", "w")
@@ -104,7 +114,8 @@ def render_log(workdir) -> Path:
 
 @pytest.fixture(scope="module")
 def cluster(workdir, render_log):
-    c = LoopbackCluster(workdir, _env(CBOX_TEST_RENDER_LOG=str(render_log), CBOX_TEST_RENDER_SLEEP="0.5"))
+    c = LoopbackCluster(workdir, _env(CBOX_TEST_RENDER_LOG=str(render_log), CBOX_TEST_RENDER_SLEEP="0.5",
+                                      CBOX_TEST_RENDER_HOLD_PIDS=str(workdir / "hold-pids")))
     try:
         c.add_worker()
         c.add_worker()
@@ -220,11 +231,15 @@ def test_reference_verify_across_workers_equals_in_process(cluster, small_scene)
 
 def test_killed_worker_loses_no_cell_and_duplicates_none(cluster, workdir, small_scene, render_log):
     """SIGKILL a worker while it renders a cell: the cell is rendered again elsewhere, every cell is in the
-    table once, none is missing, and the run goes on."""
+    table once, none is missing, and the run goes on.
+
+    The victim's PID is in the hold file, so its first cell waits 600 s after logging its start: the kill
+    lands mid-cell whenever this test gets to send it (a 0.5 s window once, which a busy machine could miss)."""
     victim = cluster.workers[0]
     seeds = list(range(6))
     out, result = workdir / "killed", {}
     render_log.unlink(missing_ok=True)
+    (workdir / "hold-pids").write_text(f"{victim.pid}\n")
 
     def sweep():
         with open_executor(scheduler=cluster.address) as executor:
@@ -234,13 +249,13 @@ def test_killed_worker_loses_no_cell_and_duplicates_none(cluster, workdir, small
 
     thread = threading.Thread(target=sweep)
     thread.start()
-    deadline = time.time() + START_TIMEOUT_S
-    while time.time() < deadline and f"start {victim.pid} " not in (render_log.read_text()
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while time.monotonic() < deadline and f"start {victim.pid} " not in (render_log.read_text()
                                                                     if render_log.exists() else ""):
         time.sleep(0.02)
-    os.kill(victim.pid, signal.SIGKILL)  # mid-cell: it sleeps 0.5 s between start and end
+    os.kill(victim.pid, signal.SIGKILL)  # mid-cell: it holds between start and end
     victim.wait()
-    thread.join(timeout=120)
+    thread.join(timeout=START_TIMEOUT_S)  # a hang guard: the other worker's six cells take seconds
     cluster.add_worker()  # in its place, for any test after this one
     assert not thread.is_alive()
     log = [line.split() for line in render_log.read_text().splitlines()]
