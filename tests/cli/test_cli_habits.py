@@ -16,26 +16,10 @@ import sys
 
 import pytest
 
-from tests.conftest import ROOT, run_cbox
+from tests.conftest import cbox_in_process as cbox, ROOT, run_cbox
 from harness.cli import common
-from harness.cli.app import main
 from harness.suggest import closest
 from harness.workflows.converge import parse_spp_list
-
-
-@pytest.fixture(autouse=True)
-def _normal_verbosity():
-    """``cbox -q`` in this process sets the verbosity for the process: back to normal after each test."""
-    yield
-    common.set_verbosity(common.Verbosity.NORMAL)
-
-
-def cbox(capsys, *args: str) -> tuple[int, str, str]:
-    """``cbox ARGS`` in this process: (exit code, stdout, stderr)."""
-    with pytest.raises(SystemExit) as e:
-        main(list(args))
-    out, err = capsys.readouterr()
-    return e.value.code, out, err
 
 
 def _converge(out, *extra: str) -> list[str]:

@@ -10,6 +10,7 @@ import textwrap
 
 import pytest
 
+from tests.conftest import cbox_in_process as cbox
 from harness.adapters import registry
 from harness.scenes import export
 from tests.adapters import test_commands as fakes
@@ -26,15 +27,6 @@ def no_files():
     """A test's --renderers and $CBOX_RENDERERS end with it."""
     yield
     registry.use_renderer_files(())
-
-
-def cbox(capsys, *args: str) -> tuple[int, str, str]:
-    from harness.cli.app import main
-
-    with pytest.raises(SystemExit) as e:
-        main(list(args))
-    out, err = capsys.readouterr()
-    return e.value.code, out, err
 
 
 def test_a_misspelt_placeholder_stops_the_command_before_anything_runs(tmp_path, fake_format, capsys):

@@ -10,24 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import run_cbox
-from harness.cli import common
-from harness.cli.app import main
+from tests.conftest import cbox_in_process as cbox, run_cbox
 from harness.scenes.export import FORMATS
-
-
-@pytest.fixture(autouse=True)
-def _normal_verbosity():
-    yield
-    common.set_verbosity(common.Verbosity.NORMAL)
-
-
-def cbox(capsys, *args: str) -> tuple[int, str, str]:
-    """``cbox ARGS`` in this process: (exit code, stdout, stderr)."""
-    with pytest.raises(SystemExit) as e:
-        main(list(args))
-    out, err = capsys.readouterr()
-    return e.value.code, out, err
 
 
 @pytest.mark.parametrize("fmt, main_file", [("mitsuba", "scene.xml"), ("pbrt-v4", "scene.pbrt")])

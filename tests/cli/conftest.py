@@ -1,0 +1,12 @@
+"""What the CLI's tests share."""
+
+import pytest
+
+from harness.cli import common
+
+
+@pytest.fixture(autouse=True)
+def _normal_verbosity():
+    """``cbox -q`` in this process sets the verbosity for the process: back to normal after each test."""
+    yield
+    common.set_verbosity(common.Verbosity.NORMAL)
