@@ -4,6 +4,10 @@ Run (7 minutes on the shared 2-core machine)::
 
     .venv/bin/python -m benchmarks.variance_honesty --seeds 20 --ao-seeds 8 --markdown docs/gate-detection.md
 
+``--part check`` or ``--part ao`` runs one of the two; ``--expectation NAME``
+(repeatable) runs (1) for those expectations only, and with ``--markdown``
+replaces only their rows of the table, saying so under it.
+
 (1) Every unbiased expectation of ``gate.toml`` whose renderer reports a
     variance (Mitsuba's radiance adapter reports none, so its expectations are
     skipped, said in the table), at its spp, seeds ``0 .. seeds-1`` (added to
@@ -24,9 +28,11 @@ Run (7 minutes on the shared 2-core machine)::
     bias, which the agreement test judges, does not enter), and the root mean
     square of z. Pixels that agree with the reference exactly (d = 0: misses,
     AO exactly 1) say nothing and are left out, as the variance check does.
+    Each band's spread is held to :func:`band_window`.
 
-With ``--markdown``, the block ``variance_honesty.py`` of the file is rewritten
-(``benchmarks/markdown_blocks.py``).
+With ``--markdown``, the blocks ``variance_honesty.py`` (1) and
+``variance_honesty.py#ao`` (2) of the file are rewritten, each by the part
+that ran (``benchmarks/markdown_blocks.py``).
 """
 
 from __future__ import annotations
@@ -36,8 +42,10 @@ import sys
 import time
 from collections import defaultdict
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
+from scipy.stats import chi2
 
 from benchmarks import markdown_blocks
 from harness.adapters.registry import resolve
@@ -49,9 +57,12 @@ from harness.store.references import load_reference
 
 ROOT = Path(__file__).resolve().parent.parent
 BLOCK = "variance_honesty.py"
+AO_BLOCK = "variance_honesty.py#ao"
 SIDE = 64  # largest side rendered for (1)
 FACTORS = (1.0, 0.5, 0.25, 4.0)  # reported / true variance
 BANDS = np.round(np.arange(0.0, 1.0, 0.1), 1)
+WINDOW = (0.9, 1.1)  # issue 29: the z spread per band, over 8 seeds
+WINDOW_LEVEL = 1e-3  # chance, each side, that a band whose true spread is at the window's edge falls outside it
 
 
 def block_mean(a: np.ndarray, k: int) -> np.ndarray:
@@ -72,11 +83,12 @@ def reduced(exp) -> tuple:
     return scene, block_mean(ref.image.astype(np.float64), k), var, k
 
 
-def false_alarms(seeds: int) -> list[str]:
+def false_alarms(seeds: int, only: Sequence[str] = ()) -> tuple[list[str], list[str]]:
+    """(1), for every unbiased expectation or those named in ``only``: the text around the table, and its rows."""
     cfg = load_config(ROOT / "gate.toml")
     level = statistical_alpha(cfg.alpha)
     rows, skipped = [], []
-    for exp in (e for e in cfg.expectations if e.unbiased):
+    for exp in (e for e in cfg.expectations if e.unbiased and (not only or e.name in only)):
         entry = resolve([exp.renderer])[0]
         scene, ref, ref_var, k = reduced(exp)
         fails = defaultdict(lambda: [0, 0])  # factor -> [understated, overstated]
@@ -104,8 +116,48 @@ def false_alarms(seeds: int) -> list[str]:
             "largest t at F = 1 |", "|---|---|---|---|---|---|---|---|"]
     return ([f"Variance check at the gate's level (α = {cfg.alpha:g}, Šidák share {level:.3g}; understatement "
              f"t-test at half of it), seeds 0-{seeds - 1}: runs failed, by reported/true variance F:", ""]
-            + head + rows
-            + ["", "Skipped, no reported variance: " + ", ".join(sorted(set(skipped))) + "." if skipped else ""])
+            + head + ["ROWS"]
+            + ["", "Skipped, no reported variance: " + ", ".join(sorted(set(skipped))) + "." if skipped else ""]), rows
+
+
+def with_rows(old_body: str, rows: list[str], note: str) -> str:
+    """The check block's ``old_body`` with the table rows of the same expectations replaced by ``rows``, and
+    ``note`` (saying which rows ran again, and how) under the table, in place of any such note before."""
+    new = {r.split(" | ")[0]: r for r in rows}
+    out, missing = [], dict(new)
+    for line in old_body.splitlines():
+        if line.startswith("Rows run again"):
+            continue
+        key = line.split(" | ")[0]
+        out.append(new.get(key, line))
+        missing.pop(key, None)
+    if missing:
+        raise SystemExit(f"not in the table, run everything: {sorted(missing)}")
+    end = max(i for i, line in enumerate(out) if line.startswith("| "))
+    return "\n".join(out[:end + 1] + ["", note] + out[end + 1:])
+
+
+def band_window(pixels: int, seeds: int, level: float = WINDOW_LEVEL) -> tuple[float, float]:
+    """The range a band's z spread over ``seeds`` seeds is held to: :data:`WINDOW`, widened by the spread's
+    own sampling error where the band is small.
+
+    With normal z of spread σ at every pixel, the band's S² (the mean over
+    its N pixels of each pixel's sample variance over the seeds) is
+    σ²·χ²_k/k, k = N(seeds − 1); q_lo and q_hi are χ²_k/k's quantiles at
+    ``level`` and 1 − ``level``. Where a spread of exactly 1 stays inside
+    0.9-1.1 with probability 1 − ``level`` each side (√q_lo ≥ 0.9 and
+    √q_hi ≤ 1.1: from N = 62 pixels up at 8 seeds) the window is 0.9-1.1
+    itself. A smaller band's is [0.9·√q_lo, 1.1·√q_hi]: a renderer whose
+    spread is anywhere in 0.9-1.1 falls outside it with probability below
+    ``level`` each side. For the 39 pixels of [0.1, 0.2) on cornell-box-ao:
+    [0.78, 1.25]. (Tails heavier than normal, as z has near AO 1, widen S's
+    own spread; the bands there hold thousands of pixels.)
+    """
+    k = pixels * (seeds - 1)
+    q_lo, q_hi = chi2.ppf([level, 1.0 - level], k) / k
+    lo, hi = WINDOW
+    exact_one = np.sqrt(q_lo) >= lo and np.sqrt(q_hi) <= hi
+    return (lo, hi) if exact_one else (lo * float(np.sqrt(q_lo)), hi * float(np.sqrt(q_hi)))
 
 
 def ao_bands(seeds: int, spp: int = 64) -> list[str]:
@@ -124,14 +176,22 @@ def ao_bands(seeds: int, spp: int = 64) -> list[str]:
     spread, rms, counts, worst = band_spreads(z, r0)
     inf = np.any(np.isinf(z), axis=0)
     lost = [int((inf & (r0 >= lo) & ((r0 < lo + 0.1) if lo < 0.9 else (r0 <= 1.0))).sum()) for lo in BANDS]
-    rows = [f"| [{lo:.1f}, {lo + 0.1:.1f}{']' if lo == 0.9 else ')'} | "
-            + (f"{n} | {sp:.3f} | {rm:.3f} | {w:.1f} | {x} |" if n else f"0 (every pixel exact: misses) | - | - | - | {x} |")
-            for lo, n, sp, rm, w, x in zip(BANDS, counts, spread, rms, worst, lost)]
+    rows = []
+    for lo, n, sp, rm, w, x in zip(BANDS, counts, spread, rms, worst, lost):
+        band = f"| [{lo:.1f}, {lo + 0.1:.1f}{']' if lo == 0.9 else ')'} | "
+        if n:
+            win = band_window(n, seeds)
+            rows.append(band + f"{n} | {sp:.3f} | {win[0]:.2f}-{win[1]:.2f} | "
+                        f"{'yes' if win[0] <= sp <= win[1] else '**no**'} | {rm:.3f} | {w:.1f} | {x} |")
+        else:
+            rows.append(band + f"0 (every pixel exact: misses) | - | - | - | - | - | {x} |")
     return ([f"`ao` on cornell-box-ao, 64 spp, 256×256, seeds 0-{seeds - 1}: spread of z per band of the "
-             "reference's AO (pixels with a finite z at every seed):", "",
-             "| AO band | pixels | spread (within pixel, over seeds) | rms z | largest abs(z) | "
+             "reference's AO (pixels with a finite z at every seed), and the window it is held to "
+             f"(`band_window`: {WINDOW[0]}-{WINDOW[1]}, widened by the spread's own sampling error in a band "
+             f"too small for it, {WINDOW_LEVEL:g} each side):", "",
+             "| AO band | pixels | spread (within pixel, over seeds) | window | within | rms z | largest abs(z) | "
              "pixels left out: variance 0 and d ≠ 0 at some seed |",
-             "|---|---|---|---|---|---|"] + rows)
+             "|---|---|---|---|---|---|---|---|"] + rows)
 
 
 def band_spreads(z: np.ndarray, ref: np.ndarray):
@@ -153,15 +213,41 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--ao-seeds", type=int, default=8)
+    ap.add_argument("--part", choices=("all", "check", "ao"), default="all",
+                    help="(1) the variance check, (2) ao's z spread per band, or both")
+    ap.add_argument("--expectation", action="append", default=[],
+                    help="run (1) for this expectation only (repeatable); --markdown replaces its rows")
     ap.add_argument("--markdown", type=Path)
     args = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    lines = false_alarms(args.seeds) + [""] + ao_bands(args.ao_seeds)
-    lines += ["", f"Command: `.venv/bin/python -m benchmarks.variance_honesty --seeds {args.seeds} --ao-seeds "
-                  f"{args.ao_seeds} --markdown docs/gate-detection.md` ({(time.perf_counter() - t0) / 60:.0f} min)."]
-    print("\n".join(lines), flush=True)
+    command = markdown_blocks.command_line([sys.argv[0]] + list(sys.argv[1:] if argv is None else argv))
+    command = command.replace(".venv/bin/python benchmarks/variance_honesty.py", ".venv/bin/python -m benchmarks.variance_honesty")
+    bodies, commands = {}, {}
+    if args.part in ("all", "check"):
+        t0 = time.perf_counter()
+        text, rows = false_alarms(args.seeds, args.expectation)
+        took = f"`{command}` ({(time.perf_counter() - t0) / 60:.0f} min)"
+        if args.expectation:
+            note = f"Rows run again: {', '.join(args.expectation)}, by {took}."
+            print("\n".join(rows + ["", note]), flush=True)
+            if args.markdown:
+                old = {b.name: b for b in markdown_blocks.parse(args.markdown.read_text(encoding="utf-8"))[1]}
+                lines = args.markdown.read_text(encoding="utf-8").splitlines()
+                bodies[BLOCK] = with_rows("\n".join(lines[old[BLOCK].begin + 1:old[BLOCK].end]), rows, note)
+                commands[BLOCK] = old[BLOCK].command  # the rest of the table is still that command's
+        else:
+            i = text.index("ROWS")
+            bodies[BLOCK] = "\n".join(text[:i] + rows + text[i + 1:] + ["", f"Command: {took}."])
+            commands[BLOCK] = command
+            print(bodies[BLOCK], flush=True)
+    if args.part in ("all", "ao"):
+        t0 = time.perf_counter()
+        lines = ao_bands(args.ao_seeds)
+        bodies[AO_BLOCK] = "\n".join(lines + ["", f"Command: `{command}` ({(time.perf_counter() - t0) / 60:.0f} min)."])
+        commands[AO_BLOCK] = command
+        print(bodies[AO_BLOCK], flush=True)
     if args.markdown:
-        markdown_blocks.write_blocks([args.markdown], {BLOCK: "\n".join(lines)})
+        for name, body in bodies.items():
+            markdown_blocks.write_blocks([args.markdown], {name: body}, commands[name])
     return 0
 
 
