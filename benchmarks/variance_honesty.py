@@ -134,7 +134,8 @@ def with_rows(old_body: str, rows: list[str], note: str) -> str:
     if missing:
         raise SystemExit(f"not in the table, run everything: {sorted(missing)}")
     end = max(i for i, line in enumerate(out) if line.startswith("| "))
-    return "\n".join(out[:end + 1] + ["", note] + out[end + 1:])
+    out = out[:end + 1] + ["", note] + out[end + 1:]
+    return "\n".join(line for i, line in enumerate(out) if line or i == 0 or out[i - 1])  # one blank between
 
 
 def band_window(pixels: int, seeds: int, level: float = WINDOW_LEVEL) -> tuple[float, float]:
@@ -209,6 +210,10 @@ def band_spreads(z: np.ndarray, ref: np.ndarray):
     return out
 
 
+def duration(seconds: float) -> str:
+    return f"{seconds / 60:.0f} min" if seconds >= 90 else f"{seconds:.0f} s"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, default=20)
@@ -225,10 +230,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.part in ("all", "check"):
         t0 = time.perf_counter()
         text, rows = false_alarms(args.seeds, args.expectation)
-        took = f"`{command}` ({(time.perf_counter() - t0) / 60:.0f} min)"
+        took = f"`{command}` ({duration(time.perf_counter() - t0)})"
         if args.expectation:
             note = f"Rows run again: {', '.join(args.expectation)}, by {took}."
-            print("\n".join(rows + ["", note]), flush=True)
+            print(note, flush=True)
             if args.markdown:
                 old = {b.name: b for b in markdown_blocks.parse(args.markdown.read_text(encoding="utf-8"))[1]}
                 lines = args.markdown.read_text(encoding="utf-8").splitlines()
@@ -242,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.part in ("all", "ao"):
         t0 = time.perf_counter()
         lines = ao_bands(args.ao_seeds)
-        bodies[AO_BLOCK] = "\n".join(lines + ["", f"Command: `{command}` ({(time.perf_counter() - t0) / 60:.0f} min)."])
+        bodies[AO_BLOCK] = "\n".join(lines + ["", f"Command: `{command}` ({duration(time.perf_counter() - t0)})."])
         commands[AO_BLOCK] = command
         print(bodies[AO_BLOCK], flush=True)
     if args.markdown:
