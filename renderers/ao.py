@@ -146,27 +146,84 @@ def trace_ao(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: i
 #: Half-widths of the windows of :func:`pooled_variance`: the neighbours' mean's (3×3) and the gain's (5×5).
 MEAN_RADIUS = 1
 GAIN_RADIUS = 2
+#: Two pixels are alike when their stabilised means differ by at most this many standard deviations of the
+#: difference (:func:`alike_pixels`).
+ALIKE_SIGMAS = 3.0
 
 
-def box_sum(a: np.ndarray, radius: int) -> np.ndarray:
-    """Sum of ``a`` over the (2·radius + 1)² window about each pixel (axes 0-1), clipped at the image border."""
-    pad = ((1, 0), (1, 0)) + ((0, 0),) * (a.ndim - 2)
-    c = np.cumsum(np.cumsum(np.pad(np.asarray(a, np.float64), pad), axis=0), axis=1)
+def shifted(a: np.ndarray, dy: int, dx: int) -> tuple[np.ndarray, np.ndarray]:
+    """``a`` (axes 0-1 an image) moved so that ``out[y, x] = a[y + dy, x + dx]``, 0 where that is outside the
+    image; and where it is inside (a mask that broadcasts against ``a``)."""
     h, w = a.shape[:2]
-    y0, y1 = np.clip(np.arange(h) - radius, 0, h), np.clip(np.arange(h) + radius + 1, 0, h)
-    x0, x1 = np.clip(np.arange(w) - radius, 0, w), np.clip(np.arange(w) + radius + 1, 0, w)
-    return c[y1][:, x1] - c[y0][:, x1] - c[y1][:, x0] + c[y0][:, x0]
+    out = np.zeros_like(a)
+    inside = np.zeros((h, w) + (1,) * (a.ndim - 2), bool)
+    src = slice(max(dy, 0), h + min(dy, 0)), slice(max(dx, 0), w + min(dx, 0))
+    dst = slice(max(-dy, 0), h + min(-dy, 0)), slice(max(-dx, 0), w + min(-dx, 0))
+    out[dst] = a[src]
+    inside[dst] = True
+    return out, inside
+
+
+def stabilised(mean: np.ndarray, n: int) -> np.ndarray:
+    """Anscombe's arcsine root of a mean of ``n`` samples in [0, 1], asin √((n·mean + 3/8)/(n + 3/4)).
+
+    Anscombe (1948, "The transformation of Poisson, binomial and
+    negative-binomial data", Biometrika 35, 246-254): for a binomial count its
+    variance is about 1/(4n) whatever the mean, near 0 and 1 too, where the
+    mean's own variance vanishes. Samples of variance below the Bernoulli one
+    (Bhatia-Davis, :func:`pooled_variance`), or stratified, give less.
+    """
+    return np.arcsin(np.sqrt(np.clip((n * np.asarray(mean, np.float64) + 0.375) / (n + 0.75), 0.0, 1.0)))
+
+
+def alike_pixels(mean: np.ndarray, n: int, radius: int, sigmas: float = ALIKE_SIGMAS) -> dict:
+    """For each offset (dy, dx) of the (2·radius + 1)² window: where pixel (y + dy, x + dx) is inside the image,
+    alike pixel (y, x), and joined to it by a path of such pixels that steps between 4-neighbours.
+
+    Two pixels are alike when their :func:`stabilised` means differ by at
+    most ``sigmas``·√(2/(4n)), ``sigmas`` standard deviations of the
+    difference of two independent ones: two pixels of the same AO are called
+    unlike with probability at most 0.27% at 3 (normal approximation), and
+    less where stratification helps. In the stabilised scale a step near 1
+    weighs more than one near ½, as it does in the Bernoulli form: AO 0.9
+    against 1 is 3.6 σ apart at 64 spp, 0.19 against 0.9 is 8.9 σ. The path:
+    4-neighbour steps cannot cross a line of unlike pixels, even a diagonal
+    one a pixel wide (an edge as a renderer draws it, 8-connected), so the
+    two sides of an edge stay apart even where their AO is alike. Each
+    pixel's own window; the centre is always its own.
+    """
+    ry, rx = min(radius, mean.shape[0] - 1), min(radius, mean.shape[1] - 1)
+    offsets = [(dy, dx) for dy in range(-ry, ry + 1) for dx in range(-rx, rx + 1)]
+    a = stabilised(mean, n)
+    like = {}
+    for dy, dx in offsets:
+        a_j, inside = shifted(a, dy, dx)
+        like[dy, dx] = inside & (np.abs(a - a_j) <= sigmas / np.sqrt(2.0 * n))
+    reach = {o: np.zeros_like(like[o]) for o in offsets}
+    reach[0, 0] = like[0, 0]
+    grew = True
+    while grew:  # each round adds a step to the paths: at most (2·radius + 1)² rounds, a few in practice
+        grew = False
+        for dy, dx in offsets:
+            near = [reach[o] for o in ((dy - 1, dx), (dy + 1, dx), (dy, dx - 1), (dy, dx + 1)) if o in reach]
+            more = like[dy, dx] & ~reach[dy, dx] & np.logical_or.reduce(near)
+            if more.any():
+                reach[dy, dx], grew = reach[dy, dx] | more, True
+    return reach
 
 
 def pooled_variance(mean: np.ndarray, batch_var: np.ndarray, n: int, exact: np.ndarray | None = None,
-                    mean_radius: int = MEAN_RADIUS, gain_radius: int = GAIN_RADIUS) -> np.ndarray:
+                    mean_radius: int = MEAN_RADIUS, gain_radius: int = GAIN_RADIUS,
+                    sigmas: float = ALIKE_SIGMAS) -> np.ndarray:
     """The variance of each pixel's AO mean of ``n`` samples, from its mean and the film's unbiased estimate.
 
-    Why not the film's estimate itself: with the pmj02 sampler it comes from 8
-    independent batches, 7 degrees of freedom, so z = d/√v̂ has Student-t
-    tails (E z² = 7/5 even where v̂ is right); and where AO is nearly 0 or 1 a
-    pixel's batches often all agree, v̂ = 0 while the truth is not, and |z|
-    reaches 10 and more (issue 29).
+    Why not the film's estimate itself: with the pmj02 sampler (Christensen,
+    Kensler & Kilpatrick 2018, "Progressive Multi-Jittered Sample Sequences",
+    Computer Graphics Forum 37(4)) it comes from 8 independent batches (batch
+    means: the spread of independently randomised replicates), 7 degrees of
+    freedom, so z = d/√v̂ has Student-t tails (E z² = 7/5 even where v̂ is
+    right); and where AO is nearly 0 or 1 a pixel's batches often all agree,
+    v̂ = 0 while the truth is not, and |z| reaches 10 and more (issue 29).
 
     What it reports: v = ĝ · B, with
 
@@ -174,29 +231,57 @@ def pooled_variance(mean: np.ndarray, batch_var: np.ndarray, n: int, exact: np.n
       (Bhatia & Davis 2000, Amer. Math. Monthly 107, 353-357) p(1 − p)/n is
       the largest variance of the mean of n independent samples in [0, 1]
       with mean p: our estimates are 0, 1 or the miss value. p̄ is the mean
-      of the 8 pixels about it (3×3 less itself), moved off 0 and 1 by half a
-      sample (Jeffreys' prior): p̄ = (k + ½)/(8n + 1) with k = n·ΣĀ over
-      them. Not the pixel's own mean: near 0 and 1 its own draw decides its
-      error and, through p̂(1 − p̂), its variance together (a pixel at AO
-      0.995 reads 1 with 73% chance at 64 spp, error 0.005 and variance 0;
-      one that drew a 0 has error 0.011 and 3 times the true variance), so z
-      would be small where the error is large and infinite where it is small.
-      The neighbours' mean is independent of the pixel's samples, and where
-      they are not all 0 or 1 the pixel gets a variance even when all its own
-      samples agreed.
-    - ĝ = Σ v̂ / Σ B over the 5×5 pixels about it: the stratification gain.
-      pmj02 samples are stratified, so the true variance of the mean is
-      *below* the independent bound (measured on cornell-box-ao at 64 spp, by
-      AO band: 0.26-0.75 of it); reporting B alone would overstate it up to
-      4×, which the gate's variance check fails and which hides biases. v̂ is
-      unbiased (the spread of independent batch means, 0 where the batches
-      happened to agree), so ĝ is a ratio estimate with about 25 × 7 degrees
-      of freedom, and over each window Σ v ≈ Σ v̂: the pooling moves variance
-      between neighbours but neither adds nor removes any, which is what
-      makes it honest on average. Pixels known to be ``exact`` (every sample
-      a miss) carry no variance and are left out. A window where no v̂ is
-      above 0 has no evidence of the gain: ĝ is then the whole image's, and
-      1 where nothing varies anywhere (the independent bound: conservative).
+      of the pixels about it (3×3 less itself) that are alike it
+      (:func:`alike_pixels`) and not ``exact``, moved off 0 and 1 by half a sample (Jeffreys' prior):
+      p̄ = (k + ½)/(mn + 1) with k = n·ΣĀ over those m. Not the pixel's own
+      mean: near 0 and 1 its own draw decides its error and, through
+      p̂(1 − p̂), its variance together (a pixel at AO 0.995 reads 1 with 73%
+      chance at 64 spp, error 0.005 and variance 0; one that drew a 0 has
+      error 0.011 and 3 times the true variance), so z would be small where
+      the error is large and infinite where it is small. The neighbours'
+      mean is independent of the pixel's samples, and where they are not all
+      0 or 1 the pixel gets a variance even when all its own samples agreed.
+      A pixel with no alike neighbour (a one-pixel feature, or one whose
+      own draw was far off) takes all its neighbours that are not exact,
+      still independent of its own samples, and one without any its own
+      mean, (nĀ + ½)/(n + 1).
+    - ĝ = Σ v̂ / Σ B over the pixels of the 5×5 window about it that are
+      alike it (:func:`alike_pixels`; itself included): the stratification
+      gain. pmj02 samples are stratified, so the true variance of the mean
+      is *below* the independent bound (measured on cornell-box-ao at 64
+      spp, by AO band: 0.26-0.75 of it); reporting B alone would overstate
+      it up to 4×, which the gate's variance check fails and which hides
+      biases. v̂ is unbiased (the spread of independent batch means, 0
+      where the batches happened to agree), so ĝ is a ratio estimate with
+      up to 25 × 7 degrees of freedom, and over a group of alike pixels Σ v ≈ Σ v̂: the pooling
+      moves variance between them but neither adds nor removes any, which is
+      what makes it honest on average. Pixels known to be ``exact`` (every
+      sample a miss) carry no variance and are left out. A window where no
+      v̂ is above 0 has no evidence of the gain: ĝ is then the whole image's,
+      and 1 where nothing varies anywhere (the independent bound:
+      conservative).
+
+    Why only alike pixels: the gain depends on what a pixel covers, and the
+    Bernoulli form on its AO. Measured on cornell-box-ao (64 seeds, 64 spp),
+    the pixels the ceiling's front edge crosses (AO 0.19) gain 0.55 from
+    stratification, their neighbours on either side (AO 0.94 and 0.90) about
+    0.7 and 0.2. Pooled over the whole window, as this did before, the edge
+    pixels reported half their variance (z spread 1.38 over 8 seeds), the
+    pixels beside an edge took a Bernoulli form from the other side's AO
+    (2-3× too large), and pixels near AO 1 two rows from the floor's edge had
+    their gain pooled down to 0.06 by it and read |z| up to 31 where they
+    drew a rare 0. Pooling over the alike pixels joined to it, a pixel pools
+    along an edge and not across it.
+
+    Its limits. Two surfaces of alike AO but different gains that meet
+    without a line of unlike pixels between them still pool together; and
+    within two pixels of an edge where AO rises steeply to 1 (0.94, 0.994,
+    0.998 in three rows under the ceiling) pixels are alike (1.8σ) while
+    their Bernoulli forms differ 10×, so those rows still over- or
+    understate about 4× and 1.6× one by one, which their band's spread
+    averages. The pixels of a diagonal line a pixel wide are joined to none
+    of each other (4-neighbour steps): each takes its gain from its own
+    batches, 7 degrees of freedom, unbiased but with Student-t tails.
 
     A pixel that is exact (AO exactly 1 beyond ``max_distance``) still
     reports the variance of half a sample in its neighbours' 8n,
@@ -204,18 +289,30 @@ def pooled_variance(mean: np.ndarray, batch_var: np.ndarray, n: int, exact: np.n
     0.9995 that happened to read 1 must; it agrees with the reference
     exactly, and the variance check leaves pixels with d = 0 out. Measured
     (``benchmarks/variance_honesty.py``, docs/gate-detection.md): the spread
-    of z per AO band over 8 seeds on cornell-box-ao is 0.92-1.01 in every band
-    from 0.2 up; 1.29 in [0.1, 0.2), 39 pixels along the ceiling's front edge
-    half outside the box, whose neighbours' gain is lower than theirs.
+    of z per AO band over 8 seeds on cornell-box-ao is 0.950-1.031 in every
+    band, 1.023 in [0.1, 0.2) (1.38 pooled across edges), largest |z| 18.4
+    (26.5 before).
     """
     mean = np.asarray(mean, np.float64)
     batch_var = np.asarray(batch_var, np.float64)
-    count = n * (box_sum(np.ones(mean.shape[:2] + (1,) * (mean.ndim - 2)), mean_radius) - 1.0)
-    p_bar = (n * (box_sum(mean, mean_radius) - mean) + 0.5) / (count + 1.0)  # the neighbours' mean, not its own
-    bound = np.clip(p_bar * (1.0 - p_bar), 0.0, None) / n
     exact = np.zeros(mean.shape, bool) if exact is None else np.asarray(exact, bool)
-    bound = np.where(exact, 0.0, bound)
-    num, den = box_sum(batch_var, gain_radius), box_sum(bound, gain_radius)
+    total, count = np.zeros_like(mean), np.zeros_like(mean)  # over the alike neighbours
+    total_all, count_all = np.zeros_like(mean), np.zeros_like(mean)  # over all of them
+    for (dy, dx), joined in alike_pixels(mean, n, mean_radius, sigmas).items():
+        if (dy, dx) != (0, 0):
+            m_j, inside = shifted(mean, dy, dx)
+            inside = inside & ~shifted(exact, dy, dx)[0]
+            total, count = total + np.where(joined & inside, m_j, 0.0), count + (joined & inside)
+            total_all, count_all = total_all + np.where(inside, m_j, 0.0), count_all + inside
+    alone = count == 0  # no alike neighbour: all of them; none at all: its own mean
+    total, count = np.where(alone, total_all, total), np.where(alone, count_all, count)
+    total, count = np.where(count == 0, mean, total), np.where(count == 0, 1.0, count)
+    p_bar = (n * total + 0.5) / (n * count + 1.0)
+    bound = np.where(exact, 0.0, np.clip(p_bar * (1.0 - p_bar), 0.0, None) / n)
+    num, den = np.zeros_like(mean), np.zeros_like(mean)
+    for (dy, dx), joined in alike_pixels(mean, n, gain_radius, sigmas).items():
+        num += np.where(joined, shifted(batch_var, dy, dx)[0], 0.0)
+        den += np.where(joined, shifted(bound, dy, dx)[0], 0.0)
     fallback = batch_var.sum() / bound.sum() if batch_var.sum() > 0 else 1.0  # the image's gain; none without evidence
     gain = np.divide(num, den, out=np.full_like(num, fallback), where=(den > 0) & (num > 0))
     return gain * bound
