@@ -21,7 +21,11 @@ photons, so no per-pixel variance gives b∞'s standard error. The seeds
 do: each seed's b∞ is an independent draw, so the mean of k of them
 against 0 is a one-sample Student t-test with k − 1 degrees of freedom,
 valid whatever the correlation between one seed's efforts. Several
-metrics share the family-wise level by Šidák's correction. The fitted
+metrics share the family-wise level by Šidák's correction. Where the
+efforts CI affords have not reached the asymptotic rate everywhere (a
+photon map's corners, whose bias falls more slowly than inside a face), a
+``tolerance`` allows a measured small limit: the test then fails only a
+limit significantly beyond it. The fitted
 c (the bias at the first effort beyond the limit) is reported with its
 t-interval too: the consistency slope, whose sign and size say that the
 error falls with effort as the rate says.
@@ -103,17 +107,30 @@ class LimitTest:
     coefficient: TInterval  # c: the bias at the first effort above the limit
     level: float  # the test's level (its Šidák share)
     seeds: int
+    tolerance: float = 0.0  # |b∞| up to this is allowed
+
+    @property
+    def t(self) -> float:
+        """(|mean limit| − tolerance) / standard error: the test statistic against the nearer allowed limit."""
+        if not self.limit.se > 0:
+            return 0.0 if self.limit.p == 1.0 or abs(self.limit.mean) <= self.tolerance else math.inf
+        return (abs(self.limit.mean) - self.tolerance) / self.limit.se
 
     @property
     def passed(self) -> bool:
-        return self.limit.p >= self.level
+        """The limit's (1 − level) t-interval reaches into [−tolerance, tolerance] (with tolerance 0: p ≥ level)."""
+        return not self.t > self.t_critical
 
     @property
     def t_critical(self) -> float:
         return float(stats.t.isf(self.level / 2, self.seeds - 1))
 
 
-def limit_test(errors, efforts, rate: float, level: float) -> LimitTest:
-    """Fit each seed's limit (:func:`extrapolate`) and t-test their mean against 0 at ``level`` (two-sided)."""
+def limit_test(errors, efforts, rate: float, level: float, tolerance: float = 0.0) -> LimitTest:
+    """Fit each seed's limit (:func:`extrapolate`) and t-test their mean against 0 at ``level`` (two-sided).
+
+    With a ``tolerance`` the test fails only a limit significantly beyond ±tolerance: the (1 − level)
+    t-interval of the mean limit lies wholly above ``tolerance`` or below −``tolerance``.
+    """
     b, c = extrapolate(errors, efforts, rate)
-    return LimitTest(t_interval(b, 1.0 - level), t_interval(c), level, len(b))
+    return LimitTest(t_interval(b, 1.0 - level), t_interval(c), level, len(b), tolerance)

@@ -189,14 +189,16 @@ def _bias_limit_checks(exp: Expectation, errors: Mapping[str, np.ndarray] | str 
     level = agreement.sidak_level(alpha, len(b.metrics))
     out = []
     for m in b.metrics:
-        r = bias_extrapolation.limit_test(errors[m], b.efforts, b.rate, level)
+        tol = b.tolerance.get(m, 0.0)
+        r = bias_extrapolation.limit_test(errors[m], b.efforts, b.rate, level, tol)
         k, effort = r.seeds, f"{'/'.join(b.setting) or 'spp'} {', '.join(map(str, b.efforts))}"
+        against = f"(|limit| − {tol:.3%}) / se" if tol else "t"
         out.append(Check(exp.name, f"bias_limit.{m}", r.passed,
                          f"{m} extrapolated to infinite effort (rate {b.rate:g}, {effort}; {k} seeds): limit "
-                         f"{r.limit.text()} ({1 - level:.4g} t-interval), t = {r.limit.t:+.2f}, |t| limit "
-                         f"{r.t_critical:.2f} (p {r.limit.p:.3g}, level {level:.3g}: α = {alpha:g} Šidák-split over "
-                         f"{len(b.metrics)}); bias at the first effort above the limit {r.coefficient.text()} (95%)",
-                         r.limit.t, r.t_critical))
+                         f"{r.limit.text()} ({1 - level:.4g} t-interval), {against} = {r.t:+.2f}, limit "
+                         f"{r.t_critical:.2f} (level {level:.3g}: α = {alpha:g} Šidák-split over {len(b.metrics)}); "
+                         f"bias at the first effort above the limit {r.coefficient.text()} (95%)",
+                         r.t, r.t_critical))
     return out
 
 

@@ -100,7 +100,10 @@ b∞ + c·(E/E₀)^(−rate) (Richardson extrapolation with the estimator's know
 rate) and the seeds' b∞ are t-tested against 0 at the expectation's ``alpha``,
 Šidák-split over ``metrics``: one check ``bias_limit.<metric>`` each. The
 metrics are signed mean errors: ``mean_radiance_rel_error``, image-wide or a
-region's (default: image-wide only).
+region's (default: image-wide only). ``tolerance = { <metric> = x }`` allows
+a limit up to ±x (default 0): the check then fails only a limit whose
+t-interval lies wholly beyond it, for where the efforts a gate affords have
+not reached the asymptotic rate (measure the clean renderer's limit first).
 
 Every expectation also checks that the image has no NaN and no Inf pixel.
 Baseline checks compare runs at the seed the baseline was recorded with
@@ -127,7 +130,7 @@ TOP_KEYS = ("alpha", "baseline", "regression_margin", "regression_metrics", "tim
 EXPECT_KEYS = ("name", "scene", "renderer", "spp", "time", "seed", "unbiased", "tile", "slope", "max", "min",
                "abs_max", "settings", "time_limit", "finite_only", "consistency", "bias_limit")
 CONSISTENCY_KEYS = ("metric", "slope", "from_spp", "max_ratio", "smaller")
-BIAS_LIMIT_KEYS = ("efforts", "setting", "rate", "seeds", "spp", "metrics")
+BIAS_LIMIT_KEYS = ("efforts", "setting", "rate", "seeds", "spp", "metrics", "tolerance")
 #: The signed error a bias limit extrapolates, image-wide or as a region's ``region.<region>.<metric>``.
 BIAS_LIMIT_METRIC = "mean_radiance_rel_error"
 #: Image metrics a consistency check may follow: errors, which fall towards 0 (not PSNR or SSIM).
@@ -167,6 +170,7 @@ class BiasLimit:
     seeds: int = 8
     spp: int = 16  # with ``setting``: the spp of every render
     metrics: tuple[str, ...] = (BIAS_LIMIT_METRIC,)
+    tolerance: dict = field(default_factory=dict)  # metric -> |limit| allowed (default 0)
 
     def seed_list(self, seed: int) -> list[int]:
         """The seeds of an expectation at ``seed``: k·seed .. k·seed + k − 1 (disjoint sets for distinct seeds)."""
@@ -393,7 +397,16 @@ def _bias_limit(path: Path, t: dict, w: str) -> BiasLimit | None:
                                   f"error: {BIAS_LIMIT_METRIC!r} or 'region.<region>.{BIAS_LIMIT_METRIC}'")
     if len(set(metrics)) != len(metrics):
         raise GateConfigError(path, f"{where}metrics", "a metric is named twice")
-    return BiasLimit(tuple(efforts), tuple(setting), rate, seeds, spp, tuple(metrics))
+    tolerance = b.get("tolerance", {})
+    if not isinstance(tolerance, dict):
+        raise GateConfigError(path, f"{where}tolerance", "expected a table of metric = allowed |limit|")
+    _check_keys(path, tolerance, metrics, f"{where}tolerance.", "metric (not in metrics)")
+    for key in tolerance:
+        v = _number(path, tolerance, key, f"{where}tolerance.", None)
+        if v < 0:
+            raise GateConfigError(path, f"{where}tolerance.{key}", "must be >= 0")
+    return BiasLimit(tuple(efforts), tuple(setting), rate, seeds, spp, tuple(metrics),
+                     {k: float(v) for k, v in tolerance.items()})
 
 
 def _consistency(path: Path, t: dict, w: str, spp: int | None) -> Consistency | None:

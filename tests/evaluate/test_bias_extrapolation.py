@@ -73,3 +73,15 @@ def test_identical_seeds_pass_a_zero_limit_and_fail_any_other():
 def test_t_critical_is_students():
     r = bx.limit_test(_errors(np.random.default_rng(4), 0.0), EFFORTS, 1.0, 0.005)
     assert r.t_critical == pytest.approx(4.029, abs=1e-3)  # two-sided 0.005 at 7 degrees of freedom
+
+
+def test_a_tolerance_passes_a_small_lasting_limit_and_fails_a_larger_one():
+    """A limit of −0.07% (photonmap's image at 62 500/250 000 photons, measured) fails at tolerance 0 once the
+    seeds are many (48: t ≈ 4.7) and passes at tolerance 0.1%; −0.6% fails at tolerance 0.1% too, on its side."""
+    rng = np.random.default_rng(5)
+    small = _errors(rng, -0.0007, k=48, shared=0.0005, own=0.0002)
+    assert not bx.limit_test(small, EFFORTS, 1.0, 0.005).passed
+    r = bx.limit_test(small, EFFORTS, 1.0, 0.005, tolerance=0.001)
+    assert r.passed and r.t < 0
+    big = bx.limit_test(_errors(rng, -0.006), EFFORTS, 1.0, 0.005, tolerance=0.001)
+    assert not big.passed and big.limit.high < -0.001
