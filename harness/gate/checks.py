@@ -192,13 +192,14 @@ def _bias_limit_checks(exp: Expectation, errors: Mapping[str, np.ndarray] | str 
         tol = b.tolerance.get(m, 0.0)
         r = bias_extrapolation.limit_test(errors[m], b.efforts, b.rate, level, tol)
         k, effort = r.seeds, f"{'/'.join(b.setting) or 'spp'} {', '.join(map(str, b.efforts))}"
-        against = f"(|limit| − {tol:.3%}) / se" if tol else "t"
+        # Against 0 the signed t; with a tolerance, how far beyond it the limit lies in standard errors.
+        against, t = (f"(|limit| − {tol:.3%}) / se", r.t) if tol else ("t", r.limit.t)
         out.append(Check(exp.name, f"bias_limit.{m}", r.passed,
                          f"{m} extrapolated to infinite effort (rate {b.rate:g}, {effort}; {k} seeds): limit "
-                         f"{r.limit.text()} ({1 - level:.4g} t-interval), {against} = {r.t:+.2f}, limit "
+                         f"{r.limit.text()} ({1 - level:.4g} t-interval), {against} = {t:+.2f}, critical ±"
                          f"{r.t_critical:.2f} (level {level:.3g}: α = {alpha:g} Šidák-split over {len(b.metrics)}); "
                          f"bias at the first effort above the limit {r.coefficient.text()} (95%)",
-                         r.t, r.t_critical))
+                         t, r.t_critical))
     return out
 
 
