@@ -305,3 +305,27 @@ class LoggedNoise(SeededNoise):
         time.sleep(self.HOLD_S if held else float(os.environ.get("CBOX_TEST_RENDER_SLEEP", "0")))
         log("end")
         return super().render(scene, spp, seed, checkpoints)
+
+
+class SeededShrinkingBias(FlatGrey):
+    """The stored reference times 1 + ``offset`` + 1/``photons`` + noise: consistent for ``offset`` = 0, with a
+    bias that does not vanish otherwise.
+
+    The noise is a per-seed factor shared by every photon count (as a photon
+    mapper's camera samples are: one seed's efforts share them) of standard
+    deviation 0.003, plus 0.001 drawn anew per (seed, photons): what the gate's
+    bias limit t-tests over seeds.
+    """
+
+    name = "seeded-shrinking-bias"
+    estimator = "consistent"
+    settings = (Setting("photons", int, 100, "photons: the relative bias is 1/photons", low=1),
+                Setting("offset", float, 0.0, "a relative bias that more photons do not remove", low=-0.5, high=0.5))
+
+    def render(self, scene, spp, seed, checkpoints=(), settings=None):
+        from harness.store.references import load_reference
+
+        shared = np.random.default_rng(seed).normal(0.0, 0.003)
+        own = np.random.default_rng([seed, settings["photons"]]).normal(0.0, 0.001)
+        scale = 1.0 + settings["offset"] + 1.0 / settings["photons"] + shared + own
+        return RenderResult((load_reference(scene).image * scale).astype(np.float32), 0.01, spp, seed)

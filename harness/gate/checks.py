@@ -15,7 +15,7 @@ from typing import Mapping
 
 import numpy as np
 
-from harness.evaluate import agreement, convergence, metrics, noise, outliers, variance_check
+from harness.evaluate import agreement, bias_extrapolation, convergence, metrics, noise, outliers, variance_check
 from harness.evaluate import regions as named_regions
 from harness.evaluate.registry import HIGHER_IS_BETTER, region_metric
 from harness.gate.config import Consistency, Expectation, GateConfig
@@ -178,6 +178,31 @@ def _consistency_ratio(exp: Expectation, c: Consistency, rec: runner.RunRecord,
                  f"limit ≤ {c.max_ratio:g}", ratio, c.max_ratio)
 
 
+def _bias_limit_checks(exp: Expectation, errors: Mapping[str, np.ndarray] | str | None,
+                       alpha: float) -> list[Check]:
+    """One check per ``bias_limit`` metric: each seed's error extrapolated to infinite effort, the limits
+    t-tested against 0 over seeds (:mod:`harness.evaluate.bias_extrapolation`), Šidák-split over the metrics."""
+    b = exp.bias_limit
+    if errors is None or isinstance(errors, str):
+        why = errors or "the bias limit's renders were not made"
+        return [Check(exp.name, f"bias_limit.{m}", False, why, error=True) for m in b.metrics]
+    level = agreement.sidak_level(alpha, len(b.metrics))
+    out = []
+    for m in b.metrics:
+        tol = b.tolerance.get(m, 0.0)
+        r = bias_extrapolation.limit_test(errors[m], b.efforts, b.rate, level, tol)
+        k, effort = r.seeds, f"{'/'.join(b.setting) or 'spp'} {', '.join(map(str, b.efforts))}"
+        # Against 0 the signed t; with a tolerance, how far beyond it the limit lies in standard errors.
+        against, t = (f"(|limit| − {tol:.3%}) / se", r.t) if tol else ("t", r.limit.t)
+        out.append(Check(exp.name, f"bias_limit.{m}", r.passed,
+                         f"{m} extrapolated to infinite effort (rate {b.rate:g}, {effort}; {k} seeds): limit "
+                         f"{r.limit.text()} ({1 - level:.4g} t-interval), {against} = {t:+.2f}, critical ±"
+                         f"{r.t_critical:.2f} (level {level:.3g}: α = {alpha:g} Šidák-split over {len(b.metrics)}); "
+                         f"bias at the first effort above the limit {r.coefficient.text()} (95%)",
+                         t, r.t_critical))
+    return out
+
+
 #: The statistical tests of an ``unbiased`` expectation; they share its family-wise ``alpha`` (Šidák).
 STATISTICAL_TESTS = ("agreement", "variance", "outliers")
 
@@ -214,12 +239,14 @@ def _outlier_check(exp: Expectation, rec: runner.RunRecord, clean: np.ndarray, r
 
 def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateConfig,
              baseline: dict | None = None, smaller: runner.RunRecord | None = None,
-             masks: Mapping[str, np.ndarray] | None = None) -> Outcome:
+             masks: Mapping[str, np.ndarray] | None = None,
+             bias: Mapping[str, np.ndarray] | str | None = None) -> Outcome:
     """All checks of one expectation on its run (no rendering).
 
     ``smaller`` is the smaller-budget run of a ``max_ratio`` consistency check;
     ``masks`` the scene's region masks (:func:`harness.evaluate.regions.region_masks`), needed by a consistency
-    slope on a region metric.
+    slope on a region metric; ``bias`` a ``bias_limit``'s errors per metric ((seeds, efforts) arrays,
+    :func:`harness.gate.run.render_bias_efforts`), or why they are missing.
     """
     if rec.status != "ok":
         if rec.info.get("timed_out"):  # a failed check with its time, not a crash
@@ -252,6 +279,8 @@ def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateC
     if (c := exp.consistency) is not None:
         checks.append(_consistency_slope(exp, c, rec, ref, masks) if c.slope else
                       _consistency_ratio(exp, c, rec, smaller))
+    if exp.bias_limit is not None:
+        checks += _bias_limit_checks(exp, bias, cfg.alpha)
     checks += _regression_checks(exp, m, baseline, cfg)
     return Outcome(exp, rec, checks, agr)
 

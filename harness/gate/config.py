@@ -20,6 +20,7 @@ A gate config (TOML) lists expectations::
     min = { ssim = 0.7 }
     abs_max = { mean_radiance_rel_error = 0.3, "region.caustic.mean_radiance_rel_error" = 0.05 }  # ... or region's
     consistency = { metric = "mse", slope = [-0.9, -0.4] }  # optional, for a consistent renderer (below)
+    bias_limit = { efforts = [62500, 250000], setting = ["global_photons"], rate = 1 }  # optional (below)
     settings = { rr_depth = 3 }       # optional: the renderer's settings (`cbox renderers --settings`)
     time_limit = "10m"                # optional: kill the render after this long (default: time_limit above)
     finite_only = true                # only to allow an expectation with no accuracy check (see below)
@@ -83,6 +84,27 @@ approach"; Kaplanyan & Dachsbacher 2013, "Adaptive progressive photon
 mapping"), so its MSE slope settles near -2/3 once the checkpoints are
 past the start, where bias and variance still trade.
 
+``bias_limit`` tests a consistent renderer's error in the limit of infinite
+effort against 0, across seeds (:mod:`harness.evaluate.bias_extrapolation`)::
+
+    bias_limit = { efforts = [62500, 250000], setting = ["global_photons", "caustic_photons"],
+                   rate = 1, seeds = 8, spp = 16,
+                   metrics = ["mean_radiance_rel_error", "region.caustic.mean_radiance_rel_error"] }
+
+Each of ``seeds`` seeds (k·seed .. k·seed + k − 1, so the seed sets of
+different ``seed``s are disjoint) is rendered at every effort: with
+``setting``, the named settings set to each effort in turn at ``spp``
+(default 16); without it, the efforts are spps, checkpoints of one render
+(SPPM's iterations). Per seed, each metric's error is fitted as
+b∞ + c·(E/E₀)^(−rate) (Richardson extrapolation with the estimator's known
+rate) and the seeds' b∞ are t-tested against 0 at the expectation's ``alpha``,
+Šidák-split over ``metrics``: one check ``bias_limit.<metric>`` each. The
+metrics are signed mean errors: ``mean_radiance_rel_error``, image-wide or a
+region's (default: image-wide only). ``tolerance = { <metric> = x }`` allows
+a limit up to ±x (default 0): the check then fails only a limit whose
+t-interval lies wholly beyond it, for where the efforts a gate affords have
+not reached the asymptotic rate (measure the clean renderer's limit first).
+
 Every expectation also checks that the image has no NaN and no Inf pixel.
 Baseline checks compare runs at the seed the baseline was recorded with
 only (a metric's spread between seeds can exceed any useful margin).
@@ -106,8 +128,11 @@ DEFAULT_REGRESSION_METRICS = ("delta_e2000_mean", "rel_mse_trimmed", "ssim")
 DEFAULT_TIME_LIMIT_S = 1800.0
 TOP_KEYS = ("alpha", "baseline", "regression_margin", "regression_metrics", "time_limit", "expect")
 EXPECT_KEYS = ("name", "scene", "renderer", "spp", "time", "seed", "unbiased", "tile", "slope", "max", "min",
-               "abs_max", "settings", "time_limit", "finite_only", "consistency")
+               "abs_max", "settings", "time_limit", "finite_only", "consistency", "bias_limit")
 CONSISTENCY_KEYS = ("metric", "slope", "from_spp", "max_ratio", "smaller")
+BIAS_LIMIT_KEYS = ("efforts", "setting", "rate", "seeds", "spp", "metrics", "tolerance")
+#: The signed error a bias limit extrapolates, image-wide or as a region's ``region.<region>.<metric>``.
+BIAS_LIMIT_METRIC = "mean_radiance_rel_error"
 #: Image metrics a consistency check may follow: errors, which fall towards 0 (not PSNR or SSIM).
 CONSISTENCY_METRICS = tuple(m for m in IMAGE_METRICS if m not in HIGHER_IS_BETTER)
 
@@ -136,6 +161,23 @@ class Consistency:
 
 
 @dataclass
+class BiasLimit:
+    """Renders at several efforts over seeds, each seed's error extrapolated to infinite effort and t-tested."""
+
+    efforts: tuple[int, ...]
+    setting: tuple[str, ...] = ()  # settings set to each effort; () : the efforts are spp checkpoints
+    rate: float = 1.0
+    seeds: int = 8
+    spp: int = 16  # with ``setting``: the spp of every render
+    metrics: tuple[str, ...] = (BIAS_LIMIT_METRIC,)
+    tolerance: dict = field(default_factory=dict)  # metric -> |limit| allowed (default 0)
+
+    def seed_list(self, seed: int) -> list[int]:
+        """The seeds of an expectation at ``seed``: k·seed .. k·seed + k − 1 (disjoint sets for distinct seeds)."""
+        return [self.seeds * seed + j for j in range(self.seeds)]
+
+
+@dataclass
 class Expectation:
     name: str
     scene: str
@@ -152,6 +194,7 @@ class Expectation:
     settings: dict = field(default_factory=dict)  # the renderer's settings (validated when the gate resolves it)
     time_limit_s: float = DEFAULT_TIME_LIMIT_S
     consistency: Consistency | None = None
+    bias_limit: BiasLimit | None = None
 
     def region_metrics(self) -> list[tuple[str, str]]:
         """(field, ``region.<region>.<metric>``) of every region metric it names: the gate checks the regions."""
@@ -159,6 +202,8 @@ class Expectation:
                if region_metric(key)]
         if self.consistency and region_metric(self.consistency.metric):
             out.append(("consistency.metric", self.consistency.metric))
+        if self.bias_limit:
+            out += [("bias_limit.metrics", m) for m in self.bias_limit.metrics if region_metric(m)]
         return out
 
 
@@ -296,7 +341,8 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
     if not isinstance(finite_only, bool):
         raise GateConfigError(path, f"{w}finite_only", "expected true or false")
     consistency = _consistency(path, t, w, spp)
-    if not (unbiased or slope or any(budgets.values()) or consistency or finite_only):
+    bias_limit = _bias_limit(path, t, w)
+    if not (unbiased or slope or any(budgets.values()) or consistency or bias_limit or finite_only):
         raise GateConfigError(path, f"expect[{i}]", "no accuracy check: give unbiased = true, a budget (max, min, "
                               "abs_max), a slope or a consistency check; or finite_only = true to check only for "
                               "NaN and Inf")
@@ -308,7 +354,59 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
     name = t.get("name") or f"{t['scene']}/{t['renderer']}{shown}@{budget}"
     return Expectation(name, t["scene"], t["renderer"], spp, time_s, _number(path, t, "seed", w, 0, int), unbiased,
                        tile, slope, budgets["max"], budgets["min"], budgets["abs_max"], settings,
-                       _duration(path, t, "time_limit", w, time_limit), consistency)
+                       _duration(path, t, "time_limit", w, time_limit), consistency, bias_limit)
+
+
+def _bias_limit(path: Path, t: dict, w: str) -> BiasLimit | None:
+    """The ``bias_limit`` table of an expectation (None without one); see the module docstring."""
+    if "bias_limit" not in t:
+        return None
+    b, where = t["bias_limit"], f"{w}bias_limit."
+    if not isinstance(b, dict):
+        raise GateConfigError(path, f"{w}bias_limit", "expected a table, e.g. { efforts = [8, 32], rate = 0.333 }")
+    _check_keys(path, b, BIAS_LIMIT_KEYS, where)
+    efforts = b.get("efforts")
+    if not (isinstance(efforts, list) and len(efforts) >= 2
+            and all(isinstance(e, int) and not isinstance(e, bool) and e >= 1 for e in efforts)
+            and efforts == sorted(set(efforts))):
+        raise GateConfigError(path, f"{where}efforts", "expected two or more increasing integers >= 1 (photon "
+                              "counts with setting, else spp checkpoints)")
+    setting = b.get("setting", [])
+    if isinstance(setting, str):
+        setting = [setting]
+    if not (isinstance(setting, list) and all(isinstance(s, str) for s in setting)):
+        raise GateConfigError(path, f"{where}setting", "expected a setting name or a list of them")
+    rate = float(_number(path, b, "rate", where, 1.0))
+    if not 0 < rate <= 4:
+        raise GateConfigError(path, f"{where}rate", f"must be in (0, 4], got {rate:g}")
+    seeds = _number(path, b, "seeds", where, 8, int)
+    if seeds < 3:
+        raise GateConfigError(path, f"{where}seeds", "must be >= 3: the t-test needs a spread over seeds")
+    spp = _number(path, b, "spp", where, 16, int)
+    if spp < 1:
+        raise GateConfigError(path, f"{where}spp", "must be >= 1")
+    if "spp" in b and not setting:
+        raise GateConfigError(path, f"{where}spp", "goes with setting; without it the efforts are the spps")
+    metrics = b.get("metrics", [BIAS_LIMIT_METRIC])
+    if not (isinstance(metrics, list) and metrics and all(isinstance(m, str) for m in metrics)):
+        raise GateConfigError(path, f"{where}metrics", "expected a list of metric names")
+    for m in metrics:
+        parts = region_metric(m)
+        if (m if parts is None else parts[1]) != BIAS_LIMIT_METRIC or (parts is not None and not parts[0]):
+            raise GateConfigError(path, f"{where}metrics", f"{m!r}: a bias limit extrapolates a signed mean "
+                                  f"error: {BIAS_LIMIT_METRIC!r} or 'region.<region>.{BIAS_LIMIT_METRIC}'")
+    if len(set(metrics)) != len(metrics):
+        raise GateConfigError(path, f"{where}metrics", "a metric is named twice")
+    tolerance = b.get("tolerance", {})
+    if not isinstance(tolerance, dict):
+        raise GateConfigError(path, f"{where}tolerance", "expected a table of metric = allowed |limit|")
+    _check_keys(path, tolerance, metrics, f"{where}tolerance.", "metric (not in metrics)")
+    for key in tolerance:
+        v = _number(path, tolerance, key, f"{where}tolerance.", None)
+        if v < 0:
+            raise GateConfigError(path, f"{where}tolerance.{key}", "must be >= 0")
+    return BiasLimit(tuple(efforts), tuple(setting), rate, seeds, spp, tuple(metrics),
+                     {k: float(v) for k, v in tolerance.items()})
 
 
 def _consistency(path: Path, t: dict, w: str, spp: int | None) -> Consistency | None:

@@ -16,8 +16,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+import numpy as np
+
 from harness.adapters.registry import ESTIMATORS, RendererEntry, RendererError, estimator_of, resolve
 from harness.adapters.settings import SettingsError
+from harness.evaluate import metrics as image_metrics
 from harness.evaluate.regions import region_masks
 from harness.evaluate.registry import region_metric
 from harness.gate.checks import Outcome, doubling, evaluate
@@ -30,6 +33,8 @@ from harness.workflows import runner
 from harness.workflows.cells import entry_for
 from harness.workflows.compare import spp_for_time_budget
 from harness.workflows.executor import DaskExecutor, InProcess, Task, task_key
+from harness.workflows.render import RenderError, RenderTimeout, render_checked
+from harness.workflows.sandbox import run_sandboxed
 
 
 def _checkpoints(exp: Expectation, spp: int) -> list[int]:
@@ -107,7 +112,20 @@ def _resolve(cfg: GateConfig, i: int, exp: Expectation, overrides: dict[str, Ren
         raise GateConfigError(cfg.path, f"expect[{i}].{field}", str(e)) from None
     _check_regions(cfg, i, exp, scene)
     _check_estimator(cfg, i, exp, entry)
+    _check_bias_settings(cfg, i, exp, entry)
     return scene, ref, entry, _smaller_entry(cfg, i, exp, entry)
+
+
+def _check_bias_settings(cfg: GateConfig, i: int, exp: Expectation, entry: RendererEntry) -> None:
+    """A ``bias_limit``'s settings must be the renderer's and take every effort."""
+    if (b := exp.bias_limit) is None:
+        return
+    for key in b.setting:
+        for effort in b.efforts:
+            try:
+                entry.with_settings({key: effort})
+            except SettingsError as e:
+                raise GateConfigError(cfg.path, f"expect[{i}].bias_limit.setting", str(e)) from None
 
 
 @dataclass(frozen=True)
@@ -123,9 +141,63 @@ class GateJob:
     time_limit_s: float | None
 
 
+def signed_error(image, ref, metric: str, masks) -> float:
+    """A bias limit's metric of one image: the relative error of its mean radiance, image-wide or a region's."""
+    img = image_metrics.zero_broken_pixels(np.asarray(image, np.float64))
+    refimg = np.asarray(ref.image, np.float64)
+    if (parts := region_metric(metric)) is not None:
+        img, refimg = image_metrics.masked_pixels(img, masks[parts[0]]), image_metrics.masked_pixels(refimg,
+                                                                                                      masks[parts[0]])
+    return image_metrics.mean_radiance_rel_error(img, refimg)
+
+
+def render_bias_efforts(job: GateJob, scene, ref, entry: RendererEntry) -> dict[str, np.ndarray] | str:
+    """A ``bias_limit``'s renders: per metric, its error at every (seed, effort), a (seeds, efforts) array; or why
+    they could not be made (a string).
+
+    With ``setting`` each effort is one render per seed with those settings at the bias limit's spp; without,
+    each seed is one render at the last effort's spp with the others as checkpoints. Sandboxed (a time limit):
+    one child process per effort setting renders every seed.
+    """
+    b = job.expectation.bias_limit
+    seeds = b.seed_list(job.seed)
+    masks = region_masks(scene) if any(region_metric(m) for m in b.metrics) else None
+    if b.setting:
+        runs = [(entry.with_settings({k: e for k in b.setting}), b.spp, ()) for e in b.efforts]
+    else:
+        runs = [(entry, b.efforts[-1], b.efforts[:-1])]
+    images: dict[tuple[int, int], np.ndarray] = {}  # (seed index, effort index) -> image
+    try:
+        for r, (e, spp, checkpoints) in enumerate(runs):
+            if job.time_limit_s is None:
+                done = [render_checked(e, scene, spp, s, list(checkpoints)) for s in seeds]
+                results = [(d.image, {c.spp: c.image for c in d.checkpoints}) for d in done]
+            else:
+                out = run_sandboxed(e.spec, [(scene, spp, s, list(checkpoints)) for s in seeds], job.time_limit_s,
+                                    settings=dict(e.settings))
+                if out.ended == "timeout":
+                    raise RenderTimeout(f"killed at its time limit of {job.time_limit_s:g} s", out.time_s)
+                if (why := out.problem()) is not None:
+                    raise RenderError(why)
+                results = [(out.images[j], {c[0]: c[1] for c in out.checkpoints[j]}) for j in range(len(seeds))]
+            for j, (final, shots) in enumerate(results):
+                shots[spp] = final
+                for i, effort in enumerate(b.efforts):
+                    if b.setting and i == r:
+                        images[j, i] = final
+                    elif not b.setting:
+                        images[j, i] = shots[effort]
+    except (RenderError, RenderTimeout, KeyError) as ex:
+        return f"the bias limit's renders failed: {ex}"
+    return {m: np.array([[signed_error(images[j, i], ref, m, masks) for i in range(len(b.efforts))]
+                         for j in range(len(seeds))]) for m in b.metrics}
+
+
 def render_expectation(job: GateJob, scene, ref, entry: RendererEntry | None = None,
-                       small: RendererEntry | None = None) -> tuple[runner.RunRecord, runner.RunRecord | None]:
-    """The expectation's run (and its smaller-budget run), scored: the task a backend runs.
+                       small: RendererEntry | None = None) -> tuple[runner.RunRecord, runner.RunRecord | None, dict
+                                                                    | str | None]:
+    """The expectation's run (and its smaller-budget run, and its bias limit's errors), scored: the task a
+    backend runs.
 
     In-process the caller's ``entry`` and ``small`` render it (a test's override among them); on a worker
     the job's spec is loaded there. A time budget is turned into spp here, on the machine that renders.
@@ -143,7 +215,10 @@ def render_expectation(job: GateJob, scene, ref, entry: RendererEntry | None = N
     if small is not None and rec.status == "ok":  # the same renderer and seed at the smaller budget
         smaller = runner.run_one(small, scene, exp.consistency.smaller_spp or spp, seed, ref,
                                  time_limit_s=job.time_limit_s)
-    return rec, smaller
+    bias = None
+    if exp.bias_limit is not None and rec.status == "ok":
+        bias = render_bias_efforts(job, scene, ref, entry)
+    return rec, smaller, bias
 
 
 def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None, seed_offset: int = 0,
@@ -191,15 +266,16 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
         i = index[result.task.key]
         exp, (scene, ref, entry, _) = cfg.expectations[i], resolved[i]
         if result.error is None:
-            rec, smaller = result.value
+            rec, smaller, bias = result.value
         else:  # its worker died or it raised, past its retries: a failed run, checked as one
-            rec, smaller = runner.RunRecord.new(scene, entry, exp.spp or 0, tasks[i].args[0].seed), None
+            rec, smaller, bias = runner.RunRecord.new(scene, entry, exp.spp or 0, tasks[i].args[0].seed), None, None
             rec.status, rec.reason = "failed", f"not rendered: {result.error}"
         masks = region_masks(scene) if exp.region_metrics() else None
         # A baseline compares like with like: the same seed, so the same noise. Runs at other seeds
         # (false-alarm measurements) are not compared: a metric's spread between seeds can exceed the margin.
         same_seed = seeds.get(exp.name, rec.seed) == rec.seed
-        outcomes[i] = evaluate(exp, rec, ref, cfg, metrics.get(exp.name) if same_seed else None, smaller, masks)
+        outcomes[i] = evaluate(exp, rec, ref, cfg, metrics.get(exp.name) if same_seed else None, smaller, masks,
+                               bias)
         if on_done:
             on_done(outcomes[i])
         if on_start and (following := next((j for j in range(len(tasks)) if outcomes[j] is None), None)) is not None:

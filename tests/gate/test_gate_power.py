@@ -155,6 +155,12 @@ VARIANCE_MUTANTS = {"variance_understated_4x": "× too little over the whole ima
                     "variance_overstated_4x": "× too much over the whole image"}
 
 
+#: Photon-mapper mutants whose bias only the bias limit sees (issue 29): within every budget of gate.toml (photon_flux_98
+#: moves the caustic -2.2% against 5%, the image -0.6% against 1%; sppm_flux_added_after_shrink the image +0.93% against
+#: 1%, measured at the gate's seeds), so the bias_limit check must be among the failing ones.
+BIAS_LIMIT_MUTANTS = {"photon_flux_98", "sppm_flux_98", "sppm_flux_added_after_shrink"}
+
+
 @pytest.mark.parametrize("name", _params())
 def test_gate_detects_mutant(work, name):
     """The gate fails the mutant at the CI budget: for an unbiased renderer on an agreement test or a
@@ -164,7 +170,10 @@ def test_gate_detects_mutant(work, name):
     30 standard deviations on its most affected test of the gate (a NaN: a
     certainty), so the gate's power on it is > 0.999 for any seed
     (docs/gate-detection.md); the verdict at the gate's fixed seeds is
-    reproducible.
+    reproducible. The exceptions are BIAS_LIMIT_MUTANTS, caught only by the
+    bias limit's t-test over 8 seeds, whose power over seed sets
+    benchmarks/biased_gate.py measures (docs/gate-detection.md, "Biased
+    renderers"); at the gate's seeds they fail it.
     """
     if name in mutants.ISOLATED:  # it once hung the gate: a child process, killed after the time limit
         v = mutants.run_isolated(name, work, ISOLATED_TIMEOUT_S, until_failure=True)
@@ -177,6 +186,8 @@ def test_gate_detects_mutant(work, name):
     assert not v.passed, f"the gate missed {name}: {mutants.BY_NAME[name].description}; smallest p = {v.p_min:.3g}"
     if name in VARIANCE_MUTANTS:  # the image is the clean one: only the variance check can see it
         assert "variance" in v.checks and VARIANCE_MUTANTS[name] in v.evidence, f"{name}: {v.failing}: {v.evidence}"
+    elif name in BIAS_LIMIT_MUTANTS:
+        assert any(c.startswith("bias_limit.") for c in v.checks), f"{name} fails only {v.failing}: {v.evidence}"
     elif mutants.BY_NAME[name].renderer == "pathtracer":
         assert {"agreement", "finite"} & v.checks, f"{name} fails only {v.failing}: {v.evidence}"
     else:  # a re-recorded baseline would hide a bug: a budget or consistency check must fail

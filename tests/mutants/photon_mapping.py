@@ -45,6 +45,31 @@ MUTANTS: tuple[Mutant, ...] = (
         "photonmap",
     ),
     Mutant(
+        "photon_flux_98",
+        "the photons emitted counted 2% high, so every photon's flux is 2% low (the flux divided by 1.02 times the "
+        "photons emitted): an emitted count that also counts photons that never left the light, e.g. samples "
+        "re-drawn after a zero-pdf emission, or batches traced and then dropped",
+        (('    emitted = state["emitted"]\n', '    emitted = state["emitted"] + state["emitted"] // 50\n',
+          f"{CORE}/photons.py"),),
+        "photonmap",
+    ),
+    Mutant(
+        "sppm_flux_98",
+        "SPPM's photons per iteration counted 2% high, so the gathered flux is 2% low (the flux divided by 1.02 "
+        "times the photons shot), as photon_flux_98 in the photon mapper",
+        (("            phi /= photons\n", "            phi /= photons + photons // 50\n", SPPM),),
+        "sppm",
+    ),
+    Mutant(
+        "sppm_flux_added_after_shrink",
+        "SPPM's flux update adds the iteration's flux after scaling the sum to the new radius "
+        "(τ' = τ·r'²/r² + Φ instead of (τ + Φ)·r'²/r²): the photons gathered in the old disc are counted in the "
+        "smaller new one, a bias that falls only as log(i)/i",
+        (("        self.tau[hit] = (self.tau[hit] + phi[hit]) * (r_new ** 2 / self.radius[hit] ** 2)[:, None]\n",
+          "        self.tau[hit] = self.tau[hit] * (r_new ** 2 / self.radius[hit] ** 2)[:, None] + phi[hit]\n", SPPM),),
+        "sppm",
+    ),
+    Mutant(
         "no_radius_shrinking",
         "SPPM's α left out of the photon-count update (N' = N + M): the radius never shrinks, and the image "
         "converges to a blurred one",
