@@ -259,6 +259,10 @@ def test_alpha_is_split_over_the_three_statistical_tests(tmp_path):
     assert 1 - (1 - share) ** 3 == pytest.approx(0.01)
     out = run_gate(load_config(_config(tmp_path, _unbiased("tests.user_renderers:ScaledMitsubaNoise", spp=64))))[0]
     assert out.agreement.alpha == pytest.approx(share)
+    # The scene's named regions are agreement tests too (3 channels each), in the same Šidák family.
+    assert set(out.agreement.z_regions) == {"walls", "boxes", "floor", "light", "back-edge"}
+    assert out.agreement.tests == out.agreement.z_tiles.size + 3 + 3 * 5
+    assert "15 on 5 regions" in out.checks[1].message
     names = [c.name for c in out.checks]
     assert names[:4] == ["finite", "agreement", "variance", "outliers"]
     assert all("α = 0.01 per expectation, Šidák-split over agreement, variance, outliers: 0.00334 each" in c.message
