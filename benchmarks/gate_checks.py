@@ -48,6 +48,7 @@ from scipy.stats import binom
 from benchmarks import markdown_blocks
 from harness.adapters.registry import resolve
 from harness.evaluate import outliers, variance_check
+from harness.evaluate.regions import region_masks
 from harness.gate.checks import STATISTICAL_TESTS, evaluate, statistical_alpha
 from harness.gate.config import Expectation, load_config
 from harness.gate.run import run_gate
@@ -79,7 +80,7 @@ def _run(cfg, exp: Expectation):
     entry = resolve([exp.renderer])[0]
     entry = entry.with_settings(exp.settings) if exp.settings else entry
     rec = runner.run_one(entry, scene, exp.spp, exp.seed, None)
-    return rec, evaluate(exp, rec, load_reference(scene), cfg)
+    return rec, evaluate(exp, rec, load_reference(scene), cfg, masks=region_masks(scene))  # regions: agreement tests
 
 
 def _check(outcome, name):

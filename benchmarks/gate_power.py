@@ -47,7 +47,8 @@ from scipy.stats import binom, norm
 
 from benchmarks import markdown_blocks
 from tests import mutants
-from harness.evaluate.agreement import tile_sums
+from harness.evaluate.agreement import region_sums, tile_sums
+from harness.evaluate.regions import region_masks
 from harness.evaluate.registry import HIGHER_IS_BETTER
 from harness.gate.run import load_baseline, run_gate
 from harness.store.references import load_reference
@@ -76,19 +77,24 @@ class Tests:
     names: list[str]
 
 
-def _tests(label: str, mut_image, clean_image, clean_var, ref, tile: int) -> Tests:
+def _tests(label: str, mut_image, clean_image, clean_var, ref, tile: int, masks: dict) -> Tests:
+    """The agreement test's tests (tiles, the scene's named regions, the whole image; its order of names)."""
     mut = np.where(np.isfinite(mut_image), mut_image, 0.0).astype(np.float64)  # as the gate cleans it
     diff = mut - clean_image.astype(np.float64)
     vi, vr, r = clean_var.astype(np.float64), ref.variance.astype(np.float64), ref.image.astype(np.float64)
+    regions = list(region_sums(diff, masks))  # the non-empty ones
 
     def flat(a):
-        return np.concatenate([tile_sums(a, tile).ravel(), a.sum(axis=(0, 1))])
+        sums = region_sums(a, masks)
+        return np.concatenate([tile_sums(a, tile).ravel(), *(sums[n] for n in regions), a.sum(axis=(0, 1))])
 
     h, w, _ = diff.shape
     rows, cols = -(-h // tile), -(-w // tile)
     names = [f"{label}: pixels x {c * tile}-{min(c * tile + tile, w) - 1}, "
              f"y {r_ * tile}-{min(r_ * tile + tile, h) - 1}, channel {ch}"
              for r_ in range(rows) for c in range(cols) for ch in "RGB"]
+    names += [f"{label}: region {n} ({int(np.count_nonzero(masks[n]))} pixels), channel {ch}"
+              for n in regions for ch in "RGB"]
     names += [f"{label}: whole image, channel {ch}" for ch in "RGB"]
     return Tests(flat(diff), flat(vi), flat(vr), flat(r), names)
 
@@ -165,6 +171,7 @@ def main(argv=None) -> int:
     cfg = mutants.pathtracer_gate_config(args.gate)
     exps = cfg.expectations
     refs = {e.name: load_reference(resolve_scene(e.scene)) for e in exps}
+    masks = {e.name: region_masks(resolve_scene(e.scene)) for e in exps}  # each region is an agreement test
     spp = {e.name: e.spp for e in exps}
     work = Path(args.work) if args.work else Path(tempfile.mkdtemp(prefix="cbox-mutants-"))
     names = args.mutant or [m.name for m in mutants.MUTANTS]
@@ -231,7 +238,7 @@ def main(argv=None) -> int:
                 continue
             nonfinite += int((~np.all(np.isfinite(o.record.image), axis=-1)).sum())
             tests.append(_tests(mutants.label(o.expectation), o.record.image, clean0[n].image, clean0[n].variance,
-                                refs[n], o.expectation.tile))
+                                refs[n], o.expectation.tile, masks[n]))
         z_crit = float(norm.isf(min(levels.values()) / 2))  # per-test levels differ a little between scenes
         e = effect(tests, z_crit, nonfinite)
         rows.append((mutants.BY_NAME[name], v, e))

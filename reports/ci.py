@@ -57,7 +57,7 @@ def markdown_summary(outcomes: Sequence[Outcome], alpha: float, config_error: st
     failed = [c for o in outcomes for c in o.checks if not c.passed]
     verdict = "✅ **gate passed**" if not failed else f"❌ **gate failed**: {len(failed)} check(s)"
     lines = [f"## cbox gate: {verdict}", "",
-             f"Agreement tests at family-wise α = {alpha:g} (Šidák over tiles and channels).", "",
+             f"Agreement tests at family-wise α = {alpha:g} (Šidák over tiles, named regions, the whole image and channels).", "",
              "| expectation | spp | seed | check | result | detail |", "|---|---|---|---|---|---|"]
     for o in outcomes:
         for c in o.checks:

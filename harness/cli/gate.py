@@ -55,9 +55,9 @@ def gate(
     """CI quality gate: exit 0 if every expectation holds, 1 if one fails, 2 for a bad config or input.
 
     Unbiased renderers are tested for statistical agreement with the reference
-    (tiled z-tests), for a reported variance that matches their residuals, and
-    for single outlier pixels (family-wise false-alarm rate alpha over the
-    three); others against metric
+    (z-tests on tiles, the scene's named regions and the whole image), for a
+    reported variance that matches their residuals, and for single outlier
+    pixels (family-wise false-alarm rate alpha over the three); others against metric
     budgets (image-wide or per named region) and, for consistent renderers
     (photon mapping, SPPM), a check that their error falls as the budget grows;
     all must have zero NaN/Inf pixels; optionally, convergence slopes

@@ -244,8 +244,9 @@ def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateC
     """All checks of one expectation on its run (no rendering).
 
     ``smaller`` is the smaller-budget run of a ``max_ratio`` consistency check;
-    ``masks`` the scene's region masks (:func:`harness.evaluate.regions.region_masks`), needed by a consistency
-    slope on a region metric; ``bias`` a ``bias_limit``'s errors per metric ((seeds, efforts) arrays,
+    ``masks`` the scene's region masks (:func:`harness.evaluate.regions.region_masks`): each region is a test of
+    an ``unbiased`` expectation's agreement test, and a consistency slope on a region metric needs its mask;
+    ``bias`` a ``bias_limit``'s errors per metric ((seeds, efforts) arrays,
     :func:`harness.gate.run.render_bias_efforts`), or why they are missing.
     """
     if rec.status != "ok":
@@ -268,7 +269,7 @@ def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateC
         var = model if rec.variance is None else np.maximum(rec.variance, model)
         clean = metrics.zero_broken_pixels(rec.image)
         share = statistical_alpha(cfg.alpha)
-        agr = agreement.agreement_test(clean, var, ref.image, ref.variance, exp.tile, share)
+        agr = agreement.agreement_test(clean, var, ref.image, ref.variance, exp.tile, share, masks)
         checks.append(Check(exp.name, "agreement", agr.passed, agr.message() + _alpha_note(cfg.alpha),
                             agr.p_min, agr.level))
         checks.append(_variance_check(exp, rec, clean, ref, cfg.alpha))

@@ -270,7 +270,7 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
         else:  # its worker died or it raised, past its retries: a failed run, checked as one
             rec, smaller, bias = runner.RunRecord.new(scene, entry, exp.spp or 0, tasks[i].args[0].seed), None, None
             rec.status, rec.reason = "failed", f"not rendered: {result.error}"
-        masks = region_masks(scene) if exp.region_metrics() else None
+        masks = region_masks(scene) if exp.region_metrics() or exp.unbiased else None  # regions are agreement tests
         # A baseline compares like with like: the same seed, so the same noise. Runs at other seeds
         # (false-alarm measurements) are not compared: a metric's spread between seeds can exceed the margin.
         same_seed = seeds.get(exp.name, rec.seed) == rec.seed

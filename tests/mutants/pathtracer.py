@@ -166,6 +166,17 @@ MUTANTS: tuple[Mutant, ...] = (
          ("w = _emission_weight(rays.pdf[i], pa, t, cos_o)", "w = _emission_weight(rays.pdf[i], pa, t, cos_o, depth)")),
     ),
     Mutant(
+        "caustic_95",
+        "a 'caustic damping' constant meant to tame fireflies, left in: emission found by a mirror- or glass-sampled "
+        "ray from the third path segment on (taken to be a caustic: a diffuse bounce, then the specular chain to the "
+        "light) weighted 0.95. The caustic (L S+ D) comes out 5% dark, and so does the light seen through both "
+        "faces of the glass; the light's image in the mirror (second segment) is untouched",
+        (("            w = _emission_weight(rays.pdf[i], pa, t, cos_o)\n",
+          "            w = _emission_weight(rays.pdf[i], pa, t, cos_o)\n"
+          "            if rays.pdf[i] == 0.0 and depth > 2:  # a caustic: damp its fireflies\n"
+          "                w *= 0.95\n"),),
+    ),
+    Mutant(
         "variance_understated_4x",
         "the reported variance of the mean 4 times too small (e.g. a divisor applied twice): every z, confidence "
         "interval and bias/variance split shown to users twice too narrow",
