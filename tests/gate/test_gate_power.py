@@ -27,6 +27,9 @@ every expectation, 20 seeds, effect sizes): see ``docs/gate-detection.md``.
 
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
 import pytest
 from scipy.stats import binom, norm
 
@@ -272,3 +275,30 @@ def test_unmutated_path_tracer_region_means_within_noise_on_caustics(clean_run):
     assert {"caustic", "glass-shadow", "mirror", "glass", "walls"} <= set(rows[0])
     worst = max(((abs(m["mean_z"]), off, name) for off, r in rows.items() for name, m in r.items()))
     assert worst[0] < crit, (worst, crit)
+
+
+def test_a_caustic_five_percent_dark_fails_the_gate_on_its_region(cfg, clean_run):
+    """Issue 29's case: the clean path tracer's caustic written ×0.95 (its variance ×0.95²) fails the agreement test.
+
+    The gate's own render (cornell-box-caustics, 512 spp, seed 0) re-checked, so no rendering here. Before region
+    tests the 147 caustic pixels fell across two 16×16 tiles and the smallest p was 5.7e-6 against the level
+    4.35e-6 (a pass); as a region of the agreement test it is z = −5.3 (measured 2026-12-03), beyond the level's
+    4.6. Over fresh seeds the test has power 0.98 on this error (docs/gate-detection.md, Results); at this seed
+    the verdict is reproducible.
+    """
+    from harness.evaluate.regions import region_masks
+    from harness.gate.checks import evaluate
+    from harness.scenes.library import resolve_scene
+    from harness.store.references import load_reference
+
+    outcome = next(o for o in clean_run if o.expectation.scene == "cornell-box-caustics")
+    scene = resolve_scene("cornell-box-caustics")
+    masks = region_masks(scene)
+    rec = outcome.record
+    factor = np.where(masks["caustic"][..., None], 0.95, 1.0)
+    dark = dataclasses.replace(rec, image=rec.image * factor,
+                               variance=None if rec.variance is None else rec.variance * factor ** 2)
+    checks = {c.name: c for c in evaluate(outcome.expectation, dark, load_reference(scene), cfg, None, None,
+                                          masks).checks}
+    assert outcome.passed and not checks["agreement"].passed, checks["agreement"].message
+    assert "region caustic" in checks["agreement"].message, checks["agreement"].message
