@@ -21,6 +21,14 @@ Run (13 minutes on the shared 2-core machine, most of it the 20 clean runs of th
     pixel |z| against the outlier threshold).
 (4) The spread ŝ of our path tracer's z at 8-64 spp (256 comes from (3)),
     which sets the variance check's tolerance.
+(5) ``--budgets-only``: the clean runs of (3) for the budget expectations
+    alone (those without ``unbiased``: budgets, slopes, consistency), their
+    ``bias_limit`` left out (``benchmarks/biased_gate.py`` counts its false
+    alarms over disjoint seed sets), written to the block
+    ``gate_checks.py#budgets``; the whole gate's 20 runs take two hours since
+    the bias limits (issue 29), these about half an hour::
+
+        .venv/bin/python -m benchmarks.gate_checks --seeds 20 --budgets-only --markdown docs/gate-detection.md
 
 Tests (1)-(2) and (4) call ``runner.run_one`` and ``harness.gate.checks.evaluate``
 directly (``run_gate`` minus the image metrics, which these checks do not
@@ -204,12 +212,59 @@ def clean_part(seeds: int) -> tuple[list[str], list[float]]:
     return out, wall
 
 
+def budgets_part(seeds: int) -> list[str]:
+    """(5): every budget expectation (no ``unbiased``), its bias limit left out, at seed offsets 0 .. seeds-1."""
+    cfg = load_config(GATE)
+    chosen = [dataclasses.replace(e, bias_limit=None) for e in cfg.expectations if not e.unbiased]
+    cfg = dataclasses.replace(cfg, expectations=chosen)
+    fails, worst, wall = defaultdict(list), defaultdict(dict), []
+    for off in range(seeds):
+        t0 = time.perf_counter()
+        outcomes = run_gate(cfg, seed_offset=off, sandbox=False)
+        wall.append(time.perf_counter() - t0)
+        for o in outcomes:
+            for c in o.checks:
+                if not c.passed:
+                    fails[o.expectation.name].append((off, c.name))
+                kind = c.name.split(".")[0]
+                if kind in ("max", "abs_max", "min") and c.value and c.limit:  # the share of its budget used
+                    use = abs(c.value) / abs(c.limit) if kind != "min" else abs(c.limit) / abs(c.value)
+                    worst[o.expectation.name][c.name] = max(use, worst[o.expectation.name].get(c.name, 0.0))
+        print(f"  budget expectations, seed offset {off}: {sum(len(v) for v in fails.values())} failures so far "
+              f"({wall[-1]:.0f} s)", file=sys.stderr)
+    out = [f"**Clean runs of the budget expectations** (`gate.toml`: the {len(chosen)} without `unbiased`, every "
+           f"check but the bias limit, which `biased_gate.py` counts; seed offsets 0-{seeds - 1}; baseline checks "
+           f"at offset 0 only). Budgets have no stated false-alarm rate: the column *most used* is the largest "
+           f"share of its budget a budget check used over the seeds (|value| / |limit|; limit / value for a "
+           f"`min`).", "",
+           "| expectation | runs failed | failing checks | most used (check: share) |", "|---|---|---|---|"]
+    for e in chosen:
+        f = fails.get(e.name, [])
+        top = sorted(worst[e.name].items(), key=lambda kv: -kv[1])[:2]
+        out.append(f"| {e.name} | {len({off for off, _ in f})} of {seeds} | "
+                   f"{'; '.join(f'offset {off}: {c}' for off, c in f) or 'none'} | "
+                   f"{', '.join(f'{c}: {v:.2f}' for c, v in top) or '-'} |")
+    out += ["", f"Time per run of these expectations: median {np.median(wall):.0f} s, max {max(wall):.0f} s."]
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--markdown", type=Path, help="write the results into this file (between the markers)")
     ap.add_argument("--skip-clean", action="store_true", help="leave out (3), the clean gate runs (slow)")
+    ap.add_argument("--budgets-only", action="store_true",
+                    help="only (5): the budget expectations' clean runs, into the block gate_checks.py#budgets")
     args = ap.parse_args(argv)
+    if args.budgets_only:
+        t0 = time.perf_counter()
+        lines = [f"Measured {date.today().isoformat()} on {platform.machine()}.", ""] + budgets_part(args.seeds)
+        lines += ["", f"Command: `.venv/bin/python -m benchmarks.gate_checks --seeds {args.seeds} --budgets-only "
+                      f"--markdown docs/gate-detection.md` ({(time.perf_counter() - t0) / 60:.0f} min)."]
+        print("\n".join(lines), flush=True)
+        if args.markdown:
+            markdown_blocks.write_blocks([args.markdown], {BLOCK + "#budgets": "\n".join(lines)})
+        return 0
     cfg = dataclasses.replace(load_config(GATE), baseline=None)
     t0 = time.perf_counter()
     lines = [f"Measured {date.today().isoformat()} on {platform.machine()}, α = {cfg.alpha:g} per expectation "
