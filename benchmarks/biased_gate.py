@@ -1,9 +1,9 @@
 """The gate's bias limit on the photon mappers (issue 29): false alarms of the clean renderers, power against bias.
 
-Run (collection cached in ``--cache``, so a rerun only analyses; 40 minutes of collection on the 2-core
-machine shared with three other jobs, 2026-12-03: 5 clean seed sets, 3 per flux mutant, 1 of no_normal_test)::
+Run (collection cached in ``--cache``, so a rerun only analyses; 101 minutes of collection on the 2-core
+machine beside other jobs, 2026-12-03: 20 clean seed sets, 3 per flux mutant, 1 of no_normal_test)::
 
-    .venv/bin/python -m benchmarks.biased_gate --sets 5 --mutant-sets 3 --other-sets 1 --markdown docs/gate-detection.md
+    .venv/bin/python -m benchmarks.biased_gate --sets 20 --mutant-sets 3 --other-sets 1 --markdown docs/gate-detection.md
 
 For each of photonmap and sppm, the ``bias_limit`` of its ``cornell-box-caustics`` expectation in
 ``gate.toml`` (efforts, rate, seeds k, metrics) is evaluated over ``--sets`` disjoint seed sets (set j:
