@@ -67,6 +67,7 @@ from harness.workflows import runner
 ROOT = Path(__file__).resolve().parent.parent
 
 BLOCK = "gate_checks.py"  # the block of docs/gate-detection.md this writes (benchmarks/markdown_blocks.py)
+BUDGETS_BLOCK = "gate_checks.py#budgets"  # the block --budgets-only writes
 GATE = ROOT / "gate.toml"
 SPP = 256
 FACTORS = (100.0, 10.0, 2.0)
@@ -263,7 +264,7 @@ def main(argv=None) -> int:
                       f"--markdown docs/gate-detection.md` ({(time.perf_counter() - t0) / 60:.0f} min)."]
         print("\n".join(lines), flush=True)
         if args.markdown:
-            markdown_blocks.write_blocks([args.markdown], {BLOCK + "#budgets": "\n".join(lines)})
+            markdown_blocks.write_blocks([args.markdown], {BUDGETS_BLOCK: "\n".join(lines)})
         return 0
     cfg = dataclasses.replace(load_config(GATE), baseline=None)
     t0 = time.perf_counter()
