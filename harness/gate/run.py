@@ -20,10 +20,9 @@ import numpy as np
 
 from harness.adapters.registry import ESTIMATORS, RendererEntry, RendererError, estimator_of, resolve
 from harness.adapters.settings import SettingsError
-from harness.evaluate import metrics as image_metrics
 from harness.evaluate.regions import region_masks
 from harness.evaluate.registry import region_metric
-from harness.gate.checks import Outcome, doubling, evaluate
+from harness.gate.checks import Outcome, doubling, evaluate, metric_at
 from harness.gate.config import Expectation, GateConfig, GateConfigError
 from harness.scenes.library import resolve_scene
 from harness.scenes.model import SceneError
@@ -141,16 +140,6 @@ class GateJob:
     time_limit_s: float | None
 
 
-def signed_error(image, ref, metric: str, masks) -> float:
-    """A bias limit's metric of one image: the relative error of its mean radiance, image-wide or a region's."""
-    img = image_metrics.zero_broken_pixels(np.asarray(image, np.float64))
-    refimg = np.asarray(ref.image, np.float64)
-    if (parts := region_metric(metric)) is not None:
-        img, refimg = image_metrics.masked_pixels(img, masks[parts[0]]), image_metrics.masked_pixels(refimg,
-                                                                                                      masks[parts[0]])
-    return image_metrics.mean_radiance_rel_error(img, refimg)
-
-
 def render_bias_efforts(job: GateJob, scene, ref, entry: RendererEntry) -> dict[str, np.ndarray] | str:
     """A ``bias_limit``'s renders: per metric, its error at every (seed, effort), a (seeds, efforts) array; or why
     they could not be made (a string).
@@ -189,7 +178,8 @@ def render_bias_efforts(job: GateJob, scene, ref, entry: RendererEntry) -> dict[
                         images[j, i] = shots[effort]
     except (RenderError, RenderTimeout, KeyError) as ex:
         return f"the bias limit's renders failed: {ex}"
-    return {m: np.array([[signed_error(images[j, i], ref, m, masks) for i in range(len(b.efforts))]
+    # The signed error, as every report has it (a mean radiance skips broken pixels).
+    return {m: np.array([[metric_at(images[j, i], ref, b.spp or effort, m, masks) for i, effort in enumerate(b.efforts)]
                          for j in range(len(seeds))]) for m in b.metrics}
 
 
