@@ -252,6 +252,8 @@ class BarGroup:
     name: str
     values: list[float]  # one per bar kind
     note: str = ""  # text above the group
+    lo: list[float] | None = None  # each bar's 95% CI, drawn as an error bar where known
+    hi: list[float] | None = None
 
 
 def bars_svg(
@@ -267,8 +269,10 @@ def bars_svg(
 
     A value that is not positive (a bias² estimate below zero: no measurable
     bias; see :func:`reports.tables.format_value`) or not finite gets no bar but a small "≈ 0" or "n/a" mark.
+    A group's ``lo`` / ``hi`` draw error bars (``class="whisker"``), from the axis where the low end is not
+    positive.
     """
-    vals = [v for g in groups for v in g.values]
+    vals = [v for g in groups for v in (*g.values, *(g.hi or ()))]
     ydom = log_domain(vals, pad=0.1)
     if ydom is None or not groups:
         return '<p class="note">No positive values to plot.</p>'
@@ -293,6 +297,16 @@ def bars_svg(
                     f'x="{_f(bx + 1)}" y="{_f(top)}" width="{_f(bw - 2)}" height="{_f(base - top)}" fill="{color}">'
                     f"<title>{escape(g.name)}: {escape(label)} = {v:.3e}</title></rect>"
                 )
+            hi = g.hi[bi] if g.hi is not None else None
+            if hi is not None and math.isfinite(hi) and hi > 0:
+                lo = g.lo[bi] if g.lo is not None else None
+                y_lo = ax.y(lo) if lo is not None and math.isfinite(lo) and lo > 0 else base
+                y_hi, mx = ax.y(hi), bx + bw / 2
+                tops.append(y_hi)
+                ax.parts.append(
+                    f'<path class="whisker" data-renderer="{escape(g.name)}" data-kind="{escape(label)}" '
+                    f'd="M {_f(mx)} {_f(y_lo)} L {_f(mx)} {_f(y_hi)} M {_f(mx - 3)} {_f(y_hi)} L {_f(mx + 3)} '
+                    f'{_f(y_hi)}" stroke="#555" stroke-width="1.2" fill="none"/>')
             else:
                 mark = "n/a" if v is None or not math.isfinite(v) else ("0" if v == 0 else "≈ 0")
                 ax.parts.append(

@@ -143,4 +143,19 @@ def _var(v: np.ndarray) -> float:
     total = v.size
     v = v[np.isfinite(v)]
     # A figure most resamples cannot compute (a target most resampled seeds miss) has no usable spread.
-    return float(v.var(ddof=1)) if v.size >= max(2, total // 2) else math.nan
+    if v.size < max(2, total // 2):
+        return math.nan
+    return 0.0 if np.ptp(v) == 0 else float(v.var(ddof=1))  # identical values: exactly no spread, not round-off
+
+
+def median_interval(values, samples: list[np.ndarray] | None = None, log: bool = True) -> tuple[float, float, float]:
+    """(median, low, high) over seeds of per-seed ``values`` (e.g. one checkpoint's error or time), with the
+    interval of :func:`interval`; ``samples``: per seed, the timing repeats whose median its value is."""
+    values = np.asarray(values, float)
+    if not np.isfinite(values).any():
+        return math.nan, math.nan, math.nan
+    point = float(np.nanmedian(values))
+    gen = rng()
+    repeats = max((s.size for s in samples), default=1) if samples is not None else 1
+    timing = resampled_times(samples, RESAMPLES, gen) if repeats >= 2 else None
+    return (point, *interval(point, values, timing, np.nanmedian, repeats, log, gen))

@@ -413,7 +413,7 @@ def test_convergence_plots_one_line_per_renderer_and_guide(report, case):
             series = re.findall(r'<path class="series" data-renderer="([^"]+)"', svg)
             assert series == list(OK_NAMES), (metric, axis)
             assert len(re.findall(rf'<path class="guide" data-slope="{slope}"', svg)) == 1
-            # 3 seeds: a min–max band for each renderer whose seeds differ (the raster is deterministic)
+            # 3 seeds: a 95% CI band for each renderer whose seeds differ (the raster is deterministic)
             bands = re.findall(r'<path class="band" data-renderer="([^"]+)"', svg)
             assert bands == ["alpha-tracer", "beta-photons"], (metric, axis)
             assert "samples per pixel" in svg if axis == "spp" else "wall time (s)" in svg
@@ -499,9 +499,9 @@ def test_bias_variance_bars(report, case):
 def test_region_bias_variance_table(tmp_path, case):
     """An experiment's summary on a scene with regions (cornell-box's four): a bias²/variance table per (renderer,
     region) in the bias/variance section, with the numbers of convergence.region_bias_variance."""
-    from harness.evaluate.convergence import region_bias_variance
+    from harness.evaluate.convergence import bias_significant, region_bias_variance
     from harness.evaluate.regions import region_masks
-    from harness.evaluate.summary import summary_table
+    from harness.evaluate.summary import REGION_SPLIT, summary_table
 
     ref, sc = case["reference"], case["scene"]
     images = {n: [case["raw"][n, s, 64] for s in (0, 1, 2)] for n in OK_NAMES}
@@ -520,10 +520,21 @@ def test_region_bias_variance_table(tmp_path, case):
         assert f'data-sort="{name}"' in row and f'data-sort="{region}"' in row
         for key, v in values.items():
             assert summary.set_index("renderer").loc[name, f"region.{region}.{key}"] == pytest.approx(v, nan_ok=True)
+            if key not in REGION_SPLIT:  # the bounds: shown inside the cells, not as columns
+                assert f'data-key="{key}"' not in row
+                continue
             sort = re.search(rf'data-key="{key}" data-sort="([^"]*)"', row).group(1)
             assert sort == (repr(float(v)) if math.isfinite(v) else "")
-    # The noise-free raster's variance is 0: all of its error is bias.
+        share = re.search(r'data-key="bias2_fraction"[^>]*>([^<]*)</td>', row).group(1)
+        # A share whose 95% interval reaches 0 reads "not significant", never a number.
+        assert (share == "not significant") == (bias_significant(values["bias2_fraction_low"]) is False), (name, region)
+        if share != "not significant" and math.isfinite(values["bias2_fraction_low"]):
+            assert "–" in share  # the share with its interval
+    # The noise-free raster's variance is 0: all of its error is bias, significant; the unbiased tracer's is not.
     assert summary.set_index("renderer").loc["gamma-raster", "region.walls.bias2_fraction"] == 1.0
+    assert bias_significant(summary.set_index("renderer").loc["gamma-raster", "region.walls.bias2_fraction_low"])
+    assert not bias_significant(summary.set_index("renderer").loc["alpha-tracer", "bias2_fraction_low"])
+    assert "not significant" in section
     # Without region columns (a summary from before them): no table, the bars alone.
     plain = rf.write_case(tmp_path / "p.html", case).read_text(encoding="utf-8")
     assert 'id="region-bias-variance-table"' not in plain and 'id="bias-variance"' in plain
@@ -701,7 +712,7 @@ def test_standalone_svg_styles_itself_for_print(report, case):
     assert [s.get("data-renderer") for s in series] == list(OK_NAMES)
     assert len(root.findall(f".//{SVG_NS}path[@class='guide']")) == 1
     labels = root.findall(f".//{SVG_NS}text[@class='legend-label']")
-    assert [el.text for el in labels] == [*OK_NAMES, "min–max over seeds", "slope −½ (∝ 1/√N)"]
+    assert [el.text for el in labels] == [*OK_NAMES, "95% CI over seeds", "slope −½ (∝ 1/√N)"]
     plot_bottom = max(float(r.get("y")) + float(r.get("height")) for r in root.iter(f"{SVG_NS}rect")
                       if r.get("class") == "axis")
     for el in labels:  # below the plot, inside the viewBox, with room for the longest label's estimated width
