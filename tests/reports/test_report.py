@@ -15,6 +15,7 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from PIL import Image
 
@@ -802,3 +803,77 @@ def test_title_option_reaches_the_report(tmp_path, capsys, monkeypatch):
     cbox("converge", "--scene", "cornell-box", "-r", "tests.user_renderers:FlatGrey", "--spp", "1,2", "--seeds", "1",
          "--out", str(tmp_path / "conv"), "--title", "Converged")
     assert titles == ["Paper <figure> 1", "Rebuilt", None, "Converged"]
+
+
+# --------------------------------------------------------------------------
+# Intervals and timing quality (issue 30)
+# --------------------------------------------------------------------------
+
+
+def _timed(runs: pd.DataFrame, load: float, repeats: bool = True) -> pd.DataFrame:
+    """The case's runs with the timing columns of issue 30: loads of ``load`` runnable threads, one thread per
+    render, a steady calibration kernel, and (``repeats``) three timings of each row around its time_s."""
+    ok = runs["status"] == "ok"
+    out = runs.assign(cpu_time_s=runs["time_s"] * 1.5, setup_s=0.1, threads=1.0, calibration_s=0.01,
+                      load_before=load, load_after=load)
+    if repeats:
+        out["time_samples_s"] = [json.dumps([t * 0.95, t, t * 1.1]) if k else None for t, k in zip(runs["time_s"], ok)]
+        out["cpu_time_samples_s"] = [json.dumps([t * 1.4, t * 1.5, t * 1.6]) if k else None
+                                     for t, k in zip(runs["time_s"], ok)]
+    return out
+
+
+def test_timing_badge_good_contended_unknown(tmp_path, case):
+    """The header and the run panel carry the timing-quality badge with timing_quality's figures behind it."""
+    unknown = _parse(rf.write_case(tmp_path / "u.html", case).read_text(encoding="utf-8"))
+    assert [a["data-timing"] for a in unknown.find("span", data_timing=True)] == ["unknown", "unknown"]
+    for load, state in ((1.0, "good"), (9.0, "contended")):
+        text = rf.write_case(tmp_path / f"{state}.html", case, runs=_timed(case["runs"], load), cores=4)\
+            .read_text(encoding="utf-8")
+        badges = _parse(text).find("span", data_timing=True)
+        assert [a["data-timing"] for a in badges] == [state, state]
+        n = int((case["runs"]["status"] == "ok").sum())
+        contended = n if state == "contended" else 0
+        assert f"{contended} of {n} timed renders contended; load up to {load:.1f} runnable threads beside " \
+               "renders of 1 on 4 cores" in text
+        assert ("warning: the machine was busy" in badges[0]["title"]) == (state == "contended")
+
+
+def test_intervals_in_table_charts_and_summary_csv(tmp_path, case):
+    """A summary from summary_table: summary.csv holds every figure's bounds; the table shows them beside the
+    figure; the time charts draw 95% CI bands and time whiskers, labelled so; an unbiased renderer's bias share
+    reads "not significant"."""
+    from harness.evaluate.convergence import bias_significant, target_column
+    from harness.evaluate.summary import summary_table
+
+    runs = _timed(case["runs"], 1.0)
+    images = {n: [case["raw"][n, s, 64] for s in (0, 1, 2)] for n in OK_NAMES}
+    summary = summary_table(runs, images, case["reference"], case["scene"])
+    summary.to_csv(tmp_path / "summary.csv", index=False)
+    csv = pd.read_csv(tmp_path / "summary.csv").set_index("renderer")
+    for fig in ("efficiency", "slope_rmse_time", "time_at_max_spp", target_column("rel_mse", 1e-2), "bias2",
+                "variance", "bias2_fraction"):
+        for end in ("low", "high"):
+            assert f"{fig}_{end}" in csv.columns, (fig, end)
+    assert set(csv["interval_basis"]) == {"seeds and timing repeats"}
+    tracer = csv.loc["alpha-tracer"]
+    assert tracer["efficiency_low"] < tracer["efficiency"] < tracer["efficiency_high"]
+    text = rf.write_case(tmp_path / "r.html", case, runs=runs, summary=summary).read_text(encoding="utf-8")
+    eff = _cell(text, "alpha-tracer", "efficiency")
+    assert re.fullmatch(r"[0-9.e+-]+ \([0-9.e+-]+–[0-9.e+-]+\)", eff["text"]), eff
+    assert "95% confidence intervals over seeds and timing repeats; times are wall time (time_s)" in text
+    share = _cell(text, "alpha-tracer", "bias2_fraction")["text"]
+    assert bias_significant(tracer["bias2_fraction_low"]) is False and share == "not significant"
+    assert _cell(text, "gamma-raster", "bias2_fraction")["text"].startswith("100.0 %")  # all bias, significant
+    svg = _svg(text, "conv-time-rmse")
+    assert ">95% CI over seeds<" in svg and ">95% CI of the time<" in svg and "min–max" not in svg
+    assert len(re.findall(r'<path class="whisker" data-renderer="alpha-tracer" data-axis="x"', svg)) == 3
+    pareto = _svg(text, "pareto-rmse")
+    assert re.search(r'<path class="whisker" data-renderer="beta-photons" data-axis="y"', pareto)
+    bars = _svg(text, "bias-variance")
+    assert "bias not significant" in bars and re.search(r'<path class="whisker" data-renderer="alpha-tracer"', bars)
+    # --time-basis cpu: the figures and the time axes follow the CPU clock
+    cpu = summary_table(runs, images, case["reference"], case["scene"], time_column="cpu_time_s")
+    assert cpu.set_index("renderer").loc["alpha-tracer", "efficiency"] == pytest.approx(tracer["efficiency"] / 1.5)
+    text = rf.write_case(tmp_path / "c.html", case, runs=runs, summary=cpu).read_text(encoding="utf-8")
+    assert "CPU time (s)" in _svg(text, "conv-time-rmse") and "times are CPU time (cpu_time_s)" in text
