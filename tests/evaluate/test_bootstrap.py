@@ -131,3 +131,18 @@ def test_region_split_has_intervals():
     out = cv.region_bias_variance(images, ref, ref_var, masks)
     assert cv.bias_significant(out["left"]["bias2_fraction_low"])
     assert not cv.bias_significant(out["right"]["bias2_fraction_low"])
+
+
+def test_compare_rows_equal_time_and_equal_quality():
+    """``cbox compare``: one row per renderer (one seed, one spp) re-timed K = 3 times. Equal quality: the time
+    the target cost, with the repeats' interval; equal time: the spp the budget buys at the measured speed."""
+    ts = [1.9, 2.0, 2.3]
+    row = {"renderer": "r", "status": "ok", "seed": 0, "spp": 64, "mse": 1e-3, "rmse": 1e-3**0.5, "rel_mse": 1e-3,
+           "time_s": 2.0, "time_repeats": 3, "time_samples_s": json.dumps(ts), "info_time_budget_s": 4.0}
+    s = cv.summarize(pd.DataFrame([row])).iloc[0]
+    assert s["interval_basis"] == "timing repeats only (one seed)"
+    assert s["time_at_max_spp"] == 2.0 and s["time_at_max_spp_low"] < 1.9 and s["time_at_max_spp_high"] > 2.3
+    assert s["spp_in_budget"] == pytest.approx(128)
+    assert s["spp_in_budget_low"] < 4 * 64 / 2.3 and s["spp_in_budget_high"] > 4 * 64 / 1.9
+    assert s["efficiency"] == pytest.approx(1 / (1e-3 * 2.0))
+    assert s["efficiency_low"] < 1 / (1e-3 * 2.3) and s["efficiency_high"] > 1 / (1e-3 * 1.9)
