@@ -226,4 +226,4 @@ def bias_variance_chart(summary, names, colors, prefix: str = "") -> Figure | No
         return None
     return Figure(_prefixed(prefix, "bias-variance"), partial(
         plots.bars_svg, groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")),
-        uid=_prefixed(prefix, "bias-variance"), ylabel="mean over pixels and channels (error bars: 95% CI)"))
+        uid=_prefixed(prefix, "bias-variance"), ylabel="mean over pixels and channels"))

@@ -323,5 +323,6 @@ def bars_svg(
             f'<text class="tick x" x="{_f(cx)}" y="{_f(base + 18)}" text-anchor="middle">'
             f"<title>{escape(g.name)}</title>{escape(_short(g.name, max(6, int(slot / (0.65 * layout.font)))))}</text>"
         )
-    ax.legend([("rect", color, label) for label, color in kinds])
+    bars = any(g.hi is not None for g in groups)
+    ax.legend([("rect", color, label) for label, color in kinds] + ([("whisker", "#555", "95% CI")] if bars else []))
     return ax.svg(uid, "bar-plot", ylabel, extra_attrs)
