@@ -24,6 +24,11 @@ spp; see :mod:`harness.workflows.converge`) and on images.
   inside each named region (:mod:`harness.evaluate.regions`): a photon
   map's bias sits in its caustics and shadow edges, where an image-wide
   mean dilutes it.
+- **Uncertainty**: every time-derived figure comes with a 95% interval over
+  seeds and timing repeats (:func:`figure_interval`, the method in
+  :mod:`harness.evaluate.bootstrap`); bias², variance and the bias share
+  with one over the pixels (:func:`_split`). Times are read from a
+  ``time_column``: ``time_s`` (wall) or ``cpu_time_s`` (``--time-basis cpu``).
 """
 
 from __future__ import annotations
