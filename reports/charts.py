@@ -63,7 +63,7 @@ FIGURE_KINDS = ("convergence-spp", "convergence-time", "speed-accuracy", "bias-v
 def convergence_table(runs: pd.DataFrame, metric_keys: Sequence[str], time_column: str = "time_s") -> pd.DataFrame:
     """One row per (renderer, spp) of the ok runs: median over seeds of each metric and of the time
     (``time_column``, shown as ``time_s``), each with its 95% interval (``_low`` / ``_high``; the time's
-    over seeds and its timing repeats)."""
+    over seeds and its timing repeats); and each metric's range over seeds (``_min`` / ``_max``)."""
     ok = ok_runs(runs)
     rows = []
     samples = bootstrap.samples_column(time_column)
@@ -73,7 +73,10 @@ def convergence_table(runs: pd.DataFrame, metric_keys: Sequence[str], time_colum
         row = {"renderer": str(name), "spp": float(spp), "n": len(g)}
         row["time_s"], row["time_s_low"], row["time_s_high"] = bootstrap.median_interval(t, reps)
         for k in metric_keys:
-            row[k], row[k + "_low"], row[k + "_high"] = bootstrap.median_interval(numeric_column(g, k).to_numpy(float))
+            v = numeric_column(g, k).to_numpy(float)
+            row[k], row[k + "_low"], row[k + "_high"] = bootstrap.median_interval(v)
+            finite = v[np.isfinite(v)]  # the range over seeds, which benchmarks/ draw as their bands
+            row[k + "_min"], row[k + "_max"] = (finite.min(), finite.max()) if finite.size else (math.nan, math.nan)
         rows.append(row)
     df = pd.DataFrame(rows)
     if not len(df):
