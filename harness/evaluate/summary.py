@@ -73,3 +73,32 @@ def region_split(summary: pd.DataFrame) -> pd.DataFrame:
                 rows.append({"renderer": rec["renderer"], "region": region,
                              **{k: values.get(k, math.nan) for k in keys}})
     return pd.DataFrame(rows, columns=["renderer", "region", *keys])
+
+
+def with_intervals(table: pd.DataFrame) -> pd.DataFrame:
+    """A summary (or :func:`region_split`) for printing: each figure with a 95% interval as one text cell,
+    ``value (low–high)``; the bound columns (``_low``, ``_high``, ``_ci``) dropped; a bias share whose
+    interval reaches 0 as "not significant" (:func:`harness.evaluate.convergence.bias_significant`)."""
+    out = {}
+    bounds = {c for c in table.columns if c.endswith(("_low", "_high", "_ci"))
+              and c.rsplit("_", 1)[0] in table.columns}
+    for col in table.columns:
+        if col in bounds:
+            continue
+        if f"{col}_low" not in table.columns or f"{col}_high" not in table.columns:
+            out[col] = table[col]
+            continue
+        cells = []
+        for v, lo, hi in zip(table[col], table[f"{col}_low"], table[f"{col}_high"]):
+            if col.endswith("bias2_fraction") and convergence.bias_significant(lo) is False:
+                cells.append("not significant")
+            elif _finite(v) and _finite(lo) and _finite(hi):
+                cells.append(f"{v:.4g} ({lo:.4g}–{hi:.4g})")
+            else:
+                cells.append(f"{v:.4g}" if _finite(v) else "NaN")
+        out[col] = cells
+    return pd.DataFrame(out, index=table.index)
+
+
+def _finite(v) -> bool:
+    return isinstance(v, (int, float, np.integer, np.floating)) and math.isfinite(float(v))

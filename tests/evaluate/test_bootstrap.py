@@ -146,3 +146,16 @@ def test_compare_rows_equal_time_and_equal_quality():
     assert s["spp_in_budget_low"] < 4 * 64 / 2.3 and s["spp_in_budget_high"] > 4 * 64 / 1.9
     assert s["efficiency"] == pytest.approx(1 / (1e-3 * 2.0))
     assert s["efficiency_low"] < 1 / (1e-3 * 2.3) and s["efficiency_high"] > 1 / (1e-3 * 1.9)
+
+
+def test_with_intervals_for_printing():
+    from harness.evaluate.summary import with_intervals
+
+    table = pd.DataFrame({"renderer": ["a", "b"], "efficiency": [10.0, 20.0], "efficiency_low": [5.0, math.nan],
+                          "efficiency_high": [20.0, math.nan], "bias2_fraction": [0.145, 0.5],
+                          "bias2_fraction_low": [0.0, 0.2], "bias2_fraction_high": [0.35, 0.7],
+                          "slope_rmse_spp": [-0.5, -0.5], "slope_rmse_spp_ci": [0.1, 0.1]})
+    out = with_intervals(table)
+    assert list(out.columns) == ["renderer", "efficiency", "bias2_fraction", "slope_rmse_spp"]
+    assert list(out["efficiency"]) == ["10 (5–20)", "20"]
+    assert list(out["bias2_fraction"]) == ["not significant", "0.5 (0.2–0.7)"]
