@@ -149,7 +149,8 @@ def page_charts(runs, names, colors, prefix: str = "", time_column: str = "time_
     clock = "CPU time (s)" if time_column == "cpu_time_s" else "wall time (s)"
     metric_keys = _plot_metrics(conv)
     charts: dict[str, Any] = {"metrics": [{"key": k, "label": PLOT_METRICS[k][0]} for k in metric_keys],
-                              "convergence": [], "pareto": [], "has_convergence": has_convergence(runs)}
+                              "convergence": [], "pareto": [], "has_convergence": has_convergence(runs),
+                              "clock": clock.removesuffix(" (s)")}
     for i, k in enumerate(metric_keys):
         label, slope = PLOT_METRICS[k]
         hidden = "" if i == 0 else ' style="display:none"'
@@ -200,7 +201,7 @@ def chart_rows(charts: dict, bias_variance: Figure | None) -> list[dict]:
     rows = []
     for p in charts["pareto"]:  # one per plotted metric, in the selector's order
         c = convergence.get(p["key"])
-        boxes = [("against samples per pixel", c["spp"]), ("against wall time", c["time"])] if c else []
+        boxes = [("against samples per pixel", c["spp"]), (f"against {charts['clock']}", c["time"])] if c else []
         rows.append({"cls": "charts", "attrs": p["attrs"], "boxes": boxes + [("speed / accuracy", p["svg"])]})
     if bias_variance is not None:
         rows.append({"cls": "chart-wrap", "attrs": Markup(""), "boxes": [("bias² and variance", bias_variance)]})

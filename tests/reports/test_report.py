@@ -877,3 +877,4 @@ def test_intervals_in_table_charts_and_summary_csv(tmp_path, case):
     assert cpu.set_index("renderer").loc["alpha-tracer", "efficiency"] == pytest.approx(tracer["efficiency"] / 1.5)
     text = rf.write_case(tmp_path / "c.html", case, runs=runs, summary=cpu).read_text(encoding="utf-8")
     assert "CPU time (s)" in _svg(text, "conv-time-rmse") and "times are CPU time (cpu_time_s)" in text
+    assert "<h3>against CPU time</h3>" in text and "<h3>against wall time</h3>" not in text
