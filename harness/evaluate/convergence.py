@@ -86,6 +86,13 @@ def time_to_target(runs: pd.DataFrame, metric: str, target: float, time_column: 
     return _aggregate(np.nanmedian, values)
 
 
+def efficiency(runs: pd.DataFrame, time_column: str = "time_s") -> float:
+    """Median over seeds of 1 / (MSE · time) at each seed's highest spp; NaN without ``time_column``."""
+    values = [_efficiency(c.t, c.frame["mse"].to_numpy(float), c.frame["spp"].to_numpy(float))
+              for c in _curves(runs, time_column)]
+    return _aggregate(np.nanmedian, values)
+
+
 class _Curve(NamedTuple):
     """One seed's rows, in time order: the rows, their times and each row's timing repeats."""
 

@@ -82,6 +82,8 @@ def test_time_column_selects_the_clock():
     wall, cpu = cv.summarize(runs).iloc[0], cv.summarize(runs, time_column="cpu_time_s").iloc[0]
     assert cpu["time_column"] == "cpu_time_s"
     assert cpu["efficiency"] == pytest.approx(wall["efficiency"] / 2)  # the CPU clock reads twice the wall here
+    assert cv.efficiency(runs, "cpu_time_s") == pytest.approx(cpu["efficiency"])
+    assert cv.efficiency(runs) == pytest.approx(wall["efficiency"]) and math.isnan(cv.efficiency(runs, "nope_s"))
     assert cpu["efficiency_high"] == pytest.approx(wall["efficiency_high"] / 2, rel=0.05)
     assert cv.time_to_target(runs, "rel_mse", TARGET, "cpu_time_s") == pytest.approx(
         2 * cv.time_to_target(runs, "rel_mse", TARGET))
