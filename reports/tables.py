@@ -158,6 +158,8 @@ def interval_note(key: str, row: Mapping) -> tuple[str, str]:
     over = f" over {basis}" if isinstance(basis, str) and basis else ""
     if is_finite(lo) and is_finite(hi):
         lo, hi = float(lo), float(hi)
+        if key.endswith("bias2") and lo < 0:
+            lo = 0.0  # a bias² is not negative: its interval ends at 0 (the estimate itself may dip below)
         title = f"95% confidence interval {format_value(key, lo)} to {format_value(key, hi)}{over}"
         if key.startswith("slope_"):
             return f" ± {(hi - lo) / 2:.2f}", title
