@@ -1,13 +1,16 @@
 """The report's charts: convergence, speed/accuracy (Pareto) and bias²/variance, as inline SVG.
 
 - **Convergence plots** (error against spp and against time, log-log,
-  median over seeds with a min–max band, slope guide), one pair per metric
+  median over seeds with its 95% confidence band, and on the time axis the
+  time's 95% CI as whiskers, over seeds and timing repeats:
+  :func:`harness.evaluate.bootstrap.median_interval`; slope guide), one pair per metric
   of :data:`PLOT_METRICS` with a metric selector. With a single spp per
   renderer they are omitted with a one-line note (:data:`SINGLE_SPP_NOTE`).
 - **Speed/accuracy chart**: every (renderer, spp) point, medians over seeds
-  (:func:`convergence_table`), with the Pareto frontier
+  (:func:`convergence_table`) with 95% CI whiskers in time and error, and the Pareto frontier
   (:func:`reports.plotmath.pareto_front`).
-- **Bias² and variance bars** per renderer from ``summary``.
+- **Bias² and variance bars** per renderer from ``summary``, the bias share above them, or "bias not
+  significant" where its interval reaches 0.
 
 Each chart is a :class:`Figure`: its data bound to a :mod:`reports.plots`
 function, drawn once for the page (:data:`reports.plots.PAGE`) and once as a
@@ -26,11 +29,14 @@ import numpy as np
 import pandas as pd
 from markupsafe import Markup
 
-from harness.evaluate import registry
+from harness.evaluate import bootstrap, registry
+from harness.evaluate.convergence import bias_significant
 from reports import plots
-from reports.tables import is_finite, nan_stat, numeric_column, ok_runs
+from reports.tables import column_or_nan, is_finite, numeric_column, ok_runs
 
 SINGLE_SPP_NOTE = "single spp: run `cbox converge` for convergence plots"
+#: What the convergence plots' bands are.
+BAND_LABEL = "95% CI over seeds"
 
 # Metrics that the convergence and speed/accuracy charts offer: key -> (axis label, guide slope).
 PLOT_METRICS: dict[str, tuple[str, float | None]] = {
@@ -54,18 +60,23 @@ class Figure:
 FIGURE_KINDS = ("convergence-spp", "convergence-time", "speed-accuracy", "bias-variance")
 
 
-def convergence_table(runs: pd.DataFrame, metric_keys: Sequence[str]) -> pd.DataFrame:
-    """One row per (renderer, spp) of the ok runs: median, min and max over seeds of each metric, median time."""
+def convergence_table(runs: pd.DataFrame, metric_keys: Sequence[str], time_column: str = "time_s") -> pd.DataFrame:
+    """One row per (renderer, spp) of the ok runs: median over seeds of each metric and of the time
+    (``time_column``, shown as ``time_s``), each with its 95% interval (``_low`` / ``_high``; the time's
+    over seeds and its timing repeats); and each metric's range over seeds (``_min`` / ``_max``)."""
     ok = ok_runs(runs)
     rows = []
+    samples = bootstrap.samples_column(time_column)
     for (name, spp), g in ok.groupby(["renderer", "spp"], sort=False):
-        row = {"renderer": str(name), "spp": float(spp), "n": len(g),
-               "time_s": nan_stat(np.nanmedian, numeric_column(g, "time_s"))}
+        t = numeric_column(g, time_column).to_numpy(float)
+        reps = [bootstrap.parse_samples(x, ti) for x, ti in zip(column_or_nan(g, samples), t)]
+        row = {"renderer": str(name), "spp": float(spp), "n": len(g)}
+        row["time_s"], row["time_s_low"], row["time_s_high"] = bootstrap.median_interval(t, reps)
         for k in metric_keys:
-            v = numeric_column(g, k)
-            row[k] = nan_stat(np.nanmedian, v)
-            row[k + "_min"] = nan_stat(np.nanmin, v)
-            row[k + "_max"] = nan_stat(np.nanmax, v)
+            v = numeric_column(g, k).to_numpy(float)
+            row[k], row[k + "_low"], row[k + "_high"] = bootstrap.median_interval(v)
+            finite = v[np.isfinite(v)]  # the range over seeds, which benchmarks/ draw as their bands
+            row[k + "_min"], row[k + "_max"] = (finite.min(), finite.max()) if finite.size else (math.nan, math.nan)
         rows.append(row)
     df = pd.DataFrame(rows)
     if not len(df):
@@ -86,19 +97,29 @@ def _series_for(conv: pd.DataFrame, metric: str, x: str, names: Sequence[str], c
         g = conv[conv["renderer"] == name].sort_values(x if x == "spp" else "spp")
         if not len(g) or not np.isfinite(g[metric].to_numpy(float)).any():
             continue
-        labels = [
-            f"{name}: {int(r['spp'])} spp, {r['time_s']:.3g} s, {metric} = {r[metric]:.4g} "
-            f"(median of {int(r['n'])} seed{'s' if r['n'] != 1 else ''}; range {r[metric + '_min']:.4g}–"
-            f"{r[metric + '_max']:.4g})"
-            for _, r in g.iterrows()
-        ]
+        labels = [_point_label(name, r, metric) for _, r in g.iterrows()]
         multi = (g["n"] > 1).any()
+        timed = x == "time_s" and np.isfinite(g["time_s_low"].to_numpy(float)).any()
         out.append(plots.Series(
             name=name, color=colors[name], x=g[x].astype(float).tolist(), y=g[metric].astype(float).tolist(),
-            lo=g[metric + "_min"].astype(float).tolist() if multi else None,
-            hi=g[metric + "_max"].astype(float).tolist() if multi else None, labels=labels,
+            lo=g[metric + "_low"].astype(float).tolist() if multi else None,
+            hi=g[metric + "_high"].astype(float).tolist() if multi else None, labels=labels,
+            xlo=g["time_s_low"].astype(float).tolist() if timed else None,
+            xhi=g["time_s_high"].astype(float).tolist() if timed else None,
         ))
     return out
+
+
+def _ci_text(r, key: str, fmt: str) -> str:
+    lo, hi = r.get(key + "_low"), r.get(key + "_high")
+    return f" (95% CI {lo:{fmt}}–{hi:{fmt}})" if is_finite(lo) and is_finite(hi) else ""
+
+
+def _point_label(name: str, r, metric: str) -> str:
+    """A point's tooltip: its figures with their 95% intervals, and how many seeds."""
+    n = int(r["n"])
+    return (f"{name}: {int(r['spp'])} spp, {r['time_s']:.3g} s{_ci_text(r, 'time_s', '.3g')}, "
+            f"{metric} = {r[metric]:.4g}{_ci_text(r, metric, '.4g')} (median of {n} seed{'s' if n != 1 else ''})")
 
 
 def _plot_metrics(conv: pd.DataFrame) -> list[str]:
@@ -119,14 +140,17 @@ def _prefixed(prefix: str, name: str) -> str:
     return f"{prefix}-{name}" if prefix else name
 
 
-def page_charts(runs, names, colors, prefix: str = "") -> dict:
+def page_charts(runs, names, colors, prefix: str = "", time_column: str = "time_s") -> dict:
     """The page's charts, as :class:`Figure` objects, with what the template needs around them; ``prefix``
-    starts their file stems and element ids (:func:`_prefixed`)."""
+    starts their file stems and element ids (:func:`_prefixed`); ``time_column``: the clock of the time
+    axes (``time_s``, wall, or ``cpu_time_s``)."""
     ok = ok_runs(runs)
-    conv = convergence_table(runs, [k for k in PLOT_METRICS if k in ok.columns])
+    conv = convergence_table(runs, [k for k in PLOT_METRICS if k in ok.columns], time_column)
+    clock = "CPU time (s)" if time_column == "cpu_time_s" else "wall time (s)"
     metric_keys = _plot_metrics(conv)
     charts: dict[str, Any] = {"metrics": [{"key": k, "label": PLOT_METRICS[k][0]} for k in metric_keys],
-                              "convergence": [], "pareto": [], "has_convergence": has_convergence(runs)}
+                              "convergence": [], "pareto": [], "has_convergence": has_convergence(runs),
+                              "clock": clock.removesuffix(" (s)")}
     for i, k in enumerate(metric_keys):
         label, slope = PLOT_METRICS[k]
         hidden = "" if i == 0 else ' style="display:none"'
@@ -136,23 +160,29 @@ def page_charts(runs, names, colors, prefix: str = "") -> dict:
             spp = Figure(_prefixed(prefix, f"convergence-spp-{k}"), partial(
                 plots.line_plot_svg, _series_for(conv, k, "spp", names, colors),
                 uid=_prefixed(prefix, f"conv-spp-{k}"),
-                xlabel="samples per pixel", ylabel=label, guide_slope=slope, guide_label=guide, xbase2=True))
+                xlabel="samples per pixel", ylabel=label, guide_slope=slope, guide_label=guide, xbase2=True,
+                band_label=BAND_LABEL))
             tim = Figure(_prefixed(prefix, f"convergence-time-{k}"), partial(
                 plots.line_plot_svg, _series_for(conv, k, "time_s", names, colors),
                 uid=_prefixed(prefix, f"conv-time-{k}"),
-                xlabel="wall time (s)", ylabel=label, guide_slope=slope, guide_label=guide))
+                xlabel=clock, ylabel=label, guide_slope=slope, guide_label=guide, band_label=BAND_LABEL))
             charts["convergence"].append({"key": k, "attrs": Markup(attrs), "spp": spp, "time": tim})
         points = [
             plots.Point(name=r["renderer"], color=colors[r["renderer"]], x=float(r["time_s"]), y=float(r[k]),
-                        label=f"{r['renderer']}: {int(r['spp'])} spp, {r['time_s']:.3g} s, {k} = {r[k]:.4g}",
-                        tag=f"{int(r['spp'])}")
+                        label=_point_label(r["renderer"], r, k), tag=f"{int(r['spp'])}",
+                        xlo=_finite(r["time_s_low"]), xhi=_finite(r["time_s_high"]),
+                        ylo=_finite(r[k + "_low"]), yhi=_finite(r[k + "_high"]))
             for _, r in conv.iterrows()
         ]
         charts["pareto"].append({"key": k, "attrs": Markup(attrs), "svg": Figure(
             _prefixed(prefix, f"speed-accuracy-{k}"), partial(plots.scatter_svg, points,
                                                              uid=_prefixed(prefix, f"pareto-{k}"),
-                                                             xlabel="wall time (s)", ylabel=label))})
+                                                             xlabel=clock, ylabel=label))})
     return charts
+
+
+def _finite(v) -> float | None:
+    return float(v) if is_finite(v) else None
 
 
 def chart_figures(charts: dict, bias_variance: Figure | None) -> list[Figure]:
@@ -171,7 +201,7 @@ def chart_rows(charts: dict, bias_variance: Figure | None) -> list[dict]:
     rows = []
     for p in charts["pareto"]:  # one per plotted metric, in the selector's order
         c = convergence.get(p["key"])
-        boxes = [("against samples per pixel", c["spp"]), ("against wall time", c["time"])] if c else []
+        boxes = [("against samples per pixel", c["spp"]), (f"against {charts['clock']}", c["time"])] if c else []
         rows.append({"cls": "charts", "attrs": p["attrs"], "boxes": boxes + [("speed / accuracy", p["svg"])]})
     if bias_variance is not None:
         rows.append({"cls": "chart-wrap", "attrs": Markup(""), "boxes": [("bias² and variance", bias_variance)]})
@@ -191,8 +221,11 @@ def bias_variance_chart(summary, names, colors, prefix: str = "") -> Figure | No
         if not (math.isfinite(b2) or math.isfinite(var)):
             continue
         frac = r.get("bias2_fraction")
-        note = f"bias {100 * float(frac):.0f} %" if is_finite(frac) else ""
-        groups.append(plots.BarGroup(name, [b2, var], note))
+        significant = bias_significant(r.get("bias2_fraction_low"))
+        note = ("bias not significant" if significant is False else
+                f"bias {100 * float(frac):.0f} %" if is_finite(frac) else "")
+        bounds = [[float(r.get(f"{k}_{end}", math.nan)) for k in ("bias2", "variance")] for end in ("low", "high")]
+        groups.append(plots.BarGroup(name, [b2, var], note, *bounds))
     if not groups:
         return None
     return Figure(_prefixed(prefix, "bias-variance"), partial(

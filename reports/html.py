@@ -44,6 +44,7 @@ from reports.charts import SINGLE_SPP_NOTE, bias_variance_chart, chart_figures, 
 from reports.figures import WrittenFigures, write_figures
 from reports.images import JND
 from reports.regions import bias_variance_table, region_section
+from reports.timing import timing_badge
 from reports.tables import (OPERATOR_SIGNS, column_label, column_or_nan, ok_runs, renderer_info, renderer_order,
                             summary_rows)
 from reports.viewer import image_viewer, viewer_legends
@@ -154,6 +155,24 @@ def _runs_text(runs: pd.DataFrame) -> str:
     return f"{spp_text}, {seed_text}"
 
 
+def _summary_text(summary: pd.DataFrame | None, key: str) -> str:
+    """The summary's ``key`` (a text column, one value for all its renderers; the first), "" without it."""
+    if summary is None or key not in summary.columns:
+        return ""
+    values = [str(v) for v in summary[key] if isinstance(v, str) and v]
+    return values[0] if values else ""
+
+
+def _intervals_text(summary: pd.DataFrame | None, time_column: str) -> str:
+    """What the figures' intervals are, for the "This run" panel; "" for a summary without them."""
+    basis = sorted({str(v) for v in summary["interval_basis"] if isinstance(v, str)}) \
+        if summary is not None and "interval_basis" in summary.columns else []
+    if not basis:
+        return ""
+    clock = "CPU time" if time_column == "cpu_time_s" else "wall time"
+    return f"95% confidence intervals over {'; '.join(basis)}; times are {clock} ({time_column})"
+
+
 def _checked_thresholds(thresholds) -> dict:
     thresholds = dict(thresholds or {})
     for key, spec in thresholds.items():
@@ -196,6 +215,7 @@ def _context(
     title: str | None = None,
     sections: Sequence[tuple] = (),
     labels: Sequence[str] = (),
+    cores: int | None = None,
 ) -> dict:
     """What the template shows (see :func:`write_report`), with the charts as ``figures``; not the links to
     figure files, which exist only once written.
@@ -218,7 +238,8 @@ def _context(
     colors = renderer_colors(runs, images, names)
     info = renderer_info(runs, names, colors)
     table_head, table_rows = summary_rows(runs, summary, names, info, thresholds)
-    charts = page_charts(runs, names, colors)
+    time_column = _summary_text(summary, "time_column") or "time_s"
+    charts = page_charts(runs, names, colors, time_column=time_column)
     bias_variance = bias_variance_chart(summary, names, colors)
     run_seeds = provenance.get("seeds") or []
     viewer, viewer_notes = image_viewer(ref_img, exposure, images, names, colors, runs, run_seeds)
@@ -240,6 +261,9 @@ def _context(
         "run": _run_provenance(provenance),
         "command": command,
         "runs_text": _runs_text(runs),
+        "timing_badge": timing_badge(runs, cores, figures=False),
+        "timing_line": timing_badge(runs, cores),
+        "intervals": _intervals_text(summary, time_column),
         "generated": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "harness_version": _harness_version(),
         "exposure": f"{exposure:.4g}",
@@ -293,6 +317,7 @@ def write_report(
     sections: Sequence[tuple] = (),
     labels: Sequence[str] = (),
     figures: bool = True,
+    cores: int | None = None,
 ) -> Path:
     """Write the self-contained HTML report to ``path`` atomically; return the path.
 
@@ -313,7 +338,9 @@ def write_report(
       sections, shown after the summary (the gate's verdicts, ``cbox demo``'s
       second scene and a merged report's experiments use this);
     - ``labels``: the names of the experiments shown, for the header
-      (``cbox report --label``).
+      (``cbox report --label``);
+    - ``cores``: the cores of the machine the runs were timed on, for the timing-quality badge
+      (:mod:`reports.timing`); default this machine's.
 
     Every chart is also written as a standalone SVG, PDF and PNG into
     ``figures/`` beside ``path`` (:func:`reports.figures.write_figures`), and
@@ -323,7 +350,7 @@ def write_report(
     path = Path(path)
     ctx = _context(
         scene=scene, reference=reference, runs=runs, images=images, summary=summary, thresholds=thresholds,
-        provenance=provenance, command=command, title=title, sections=sections, labels=labels,
+        provenance=provenance, command=command, title=title, sections=sections, labels=labels, cores=cores,
     )
     written = write_figures(path.parent, ctx["figures"]) if figures else WrittenFigures()
     write_text_atomic(path, _render(ctx, written))

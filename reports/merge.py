@@ -1,7 +1,7 @@
 """Several experiment folders in one report (``cbox report DIR1 DIR2 ... --out OUT``); no rendering.
 
 Each experiment becomes a section of the report (:func:`experiment_section`):
-its scene, its reference and images side by side, its per-renderer table
+its timing-quality badge (:mod:`reports.timing`), its scene, its reference and images side by side, its per-renderer table
 (:func:`reports.scenes.scene_section`), its charts, and a link to its own full
 report. The report leads with the experiments of the first folder's scene,
 their results concatenated: one summary table, one image viewer and one set of
@@ -32,6 +32,7 @@ from reports.charts import bias_variance_chart, chart_rows, page_charts
 from reports.html import renderer_colors, write_report
 from reports.scenes import scene_section
 from reports.tables import renderer_order
+from reports.timing import timing_badge
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,8 +100,11 @@ def experiment_section(exp: Experiment, report_dir: Path, prefix: str, colors: d
     link = os.path.relpath(exp.folder / "report.html", report_dir)
     html = scene_section(exp.scene, exp.reference.image, exp.runs.to_dict("records"), images, link,
                          summary=exp.summary, link_text=f"Full report of {exp.label}")
+    html = f'<p class="timing-line">{timing_badge(exp.runs)}</p>\n{html}'  # each experiment's own timing verdict
     names = renderer_order(exp.runs, images)
-    charts = page_charts(exp.runs, names, colors, prefix=prefix)
+    time_column = str(exp.summary["time_column"].iloc[0]) if exp.summary is not None and \
+        "time_column" in exp.summary.columns else "time_s"
+    charts = page_charts(exp.runs, names, colors, prefix=prefix, time_column=time_column)
     bias_variance = bias_variance_chart(exp.summary, names, colors, prefix=prefix)
     return (f"experiment-{prefix}", f"{exp.label} · {exp.scene.name}", html, chart_rows(charts, bias_variance))
 

@@ -9,196 +9,27 @@ its legend goes: :data:`PAGE` for the report, styled by the page; one with a
 ``style`` of its own makes a standalone SVG (:mod:`reports.figures`).
 
 - :func:`line_plot_svg`: log-log error curves, one line per renderer with a
-  min–max band across seeds and an optional slope guide (convergence plots);
-- :func:`scatter_svg`: log-log speed/accuracy points with the Pareto frontier;
+  band across seeds (the report's: 95% confidence intervals), horizontal
+  whiskers where x is uncertain too (time) and an optional slope guide (convergence plots);
+- :func:`scatter_svg`: log-log speed/accuracy points, with 95% CI whiskers where given, and the Pareto frontier;
 - :func:`bars_svg`: grouped bars on a log axis (bias² and variance);
-- the numbers behind them (ticks, domains, the Pareto front) are :mod:`reports.plotmath`'s.
+- the frame they are drawn in (layout, axes, legend) is :mod:`reports.axes`'; the numbers behind them
+  (ticks, domains, the Pareto front) are :mod:`reports.plotmath`'s.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from html import escape
 from typing import Sequence
 
-from reports.plotmath import format_tick, log_domain, log_ticks, pareto_front
-
-#: Okabe & Ito (2008) colour-blind-safe palette, then Tableau's for more renderers.
-PALETTE = (
-    "#56b4e9", "#e69f00", "#009e73", "#f0e442", "#cc79a7", "#d55e00", "#0072b2",
-    "#9aa1ad", "#8c564b", "#bcbd22", "#17becf", "#e377c2",
-)
-
-
-@dataclass(frozen=True)
-class Layout:
-    """A chart's size (viewBox units), margins, text size and legend place; with a ``style``, standalone."""
-
-    width: int = 640
-    height: int = 400  # without a legend below the plot, which adds to it
-    left: int = 70
-    right: int = 180  # the legend's column, unless it is below
-    top: int = 30
-    bottom: int = 52
-    font: float = 11.5  # size of tick and legend text: to estimate how wide a label is
-    legend_row: float = 19
-    legend_below: bool = False
-    style: str = ""  # a stylesheet to embed: the SVG then stands alone (xmlns, its own background)
-    width_in: float | None = None  # printed width of a standalone SVG
-
-
-#: The report page's charts: the page's stylesheet themes them.
-PAGE = Layout()
+from reports.axes import PAGE as PAGE, PALETTE as PALETTE, Axes as _Axes, Layout as Layout
+from reports.axes import color_for as color_for, num as _f, short as _short
+from reports.plotmath import log_domain, pareto_front
 
 #: The slope guide starts this factor above the highest first point.
 GUIDE_OFFSET = 1.5
-
-
-def color_for(index: int) -> str:
-    return PALETTE[index % len(PALETTE)]
-
-
-def _f(v: float) -> str:
-    return f"{v:.2f}".rstrip("0").rstrip(".")
-
-
-def _short(name: str, n: int = 20) -> str:
-    return name if len(name) <= n else name[: n - 1] + "…"
-
-
-# --------------------------------------------------------------------------
-# Axes
-# --------------------------------------------------------------------------
-
-
-@dataclass
-class _Axes:
-    xdom: tuple[float, float]
-    ydom: tuple[float, float]
-    layout: Layout = PAGE
-    extra_bottom: int = 0  # more room below the plot (the bars' names)
-    parts: list[str] = field(default_factory=list)
-    legend_height: float = 0.0  # what a legend below the plot adds to the height
-
-    def __post_init__(self) -> None:
-        lay = self.layout
-        self.width, self.height = lay.width, lay.height
-        self.left, self.right, self.top, self.bottom = lay.left, lay.right, lay.top, lay.bottom + self.extra_bottom
-
-    @property
-    def pw(self) -> float:
-        return self.width - self.left - self.right
-
-    @property
-    def ph(self) -> float:
-        return self.height - self.top - self.bottom
-
-    def x(self, v: float) -> float:
-        return self.left + (math.log10(v) - self.xdom[0]) / (self.xdom[1] - self.xdom[0]) * self.pw
-
-    def y(self, v: float) -> float:
-        return self.top + (1 - (math.log10(v) - self.ydom[0]) / (self.ydom[1] - self.ydom[0])) * self.ph
-
-    def frame(self, uid: str, xlabel: str, ylabel: str, xbase2: bool = False, xticks: bool = True) -> None:
-        l, t, pw, ph = self.left, self.top, self.pw, self.ph
-        self.parts.append(
-            f'<clipPath id="{uid}-clip"><rect x="{l}" y="{t}" width="{_f(pw)}" height="{_f(ph)}"/></clipPath>'
-        )
-        # Fallback presentation attributes (a stylesheet overrides them) so that an SVG cut out of the page
-        # shows its plot area, grid and axes without the page's stylesheet.
-        self.parts.append(f'<rect class="plot-bg" x="{l}" y="{t}" width="{_f(pw)}" height="{_f(ph)}" fill="none"/>')
-        if xticks:
-            # as many ticks as labels of ~3.6 characters fit side by side: 9 on the page, fewer in print
-            for v in log_ticks(*self.xdom, base2=xbase2, max_ticks=max(3, int(pw / (3.6 * self.layout.font)))):
-                px = self.x(v)
-                self.parts.append(
-                    f'<line class="grid" x1="{_f(px)}" y1="{t}" x2="{_f(px)}" y2="{_f(t + ph)}" stroke="#bbb"/>')
-                self.parts.append(
-                    f'<text class="tick x" x="{_f(px)}" y="{_f(t + ph + 16)}" text-anchor="middle">'
-                    f"{escape(format_tick(v))}</text>"
-                )
-        for v in log_ticks(*self.ydom, max_ticks=7):
-            py = self.y(v)
-            self.parts.append(
-                f'<line class="grid" x1="{l}" y1="{_f(py)}" x2="{_f(l + pw)}" y2="{_f(py)}" stroke="#bbb"/>')
-            self.parts.append(
-                f'<text class="tick y" x="{l - 6}" y="{_f(py + 4)}" text-anchor="end">{escape(format_tick(v))}</text>'
-            )
-        self.parts.append(
-            f'<rect class="axis" x="{l}" y="{t}" width="{_f(pw)}" height="{_f(ph)}" fill="none" stroke="#888"/>')
-        self.parts.append(
-            f'<text class="label x" x="{_f(l + pw / 2)}" y="{self.height - 12}" text-anchor="middle">'
-            f"{escape(xlabel)}</text>"
-        )
-        self.parts.append(
-            f'<text class="label y" transform="translate(16 {_f(t + ph / 2)}) rotate(-90)" text-anchor="middle">'
-            f"{escape(ylabel)}</text>"
-        )
-
-    def legend(self, entries: list[tuple[str, str, str]]) -> None:
-        """entries: (kind, colour, label); kind is 'line', 'dash', 'band', 'dot', 'ring' or 'rect'.
-
-        One per row right of the plot; or, with ``layout.legend_below``, in as many columns as fit under
-        it, the chart growing to hold them: a standalone figure's legend is inside its viewBox.
-        """
-        lay = self.layout
-        if lay.legend_below:
-            col = 28 + 0.62 * lay.font * max((len(_short(e[2], 22)) for e in entries), default=0) + 8
-            cols = max(1, int((self.width - 8) // col))
-            spots = [(8 + (i % cols) * col, self.height + 6 + (i // cols) * lay.legend_row)
-                     for i in range(len(entries))]
-            self.legend_height = spots[-1][1] + 10 - self.height if spots else 0.0
-        else:
-            spots = [(self.width - self.right + 14, self.top + 6 + i * lay.legend_row) for i in range(len(entries))]
-        for (kind, color, label), (x0, y) in zip(entries, spots):
-            x1 = _f(x0 + 22)
-            if kind in ("line", "dash"):
-                # the dashed entry is the slope guide: its class lets a theme colour it as the guide
-                dash = ' stroke-dasharray="6 4"' if kind == "dash" else ""
-                self.parts.append(
-                    f'<line class="legend-mark{" guide-mark" if dash else ""}" x1="{_f(x0)}" y1="{_f(y)}" x2="{x1}" '
-                    f'y2="{_f(y)}" stroke="{color}" stroke-width="2.5"{dash}/>'
-                )
-            elif kind == "band":
-                self.parts.append(
-                    f'<rect class="legend-mark" x="{_f(x0)}" y="{_f(y - 5)}" width="22" height="10" '
-                    f'fill="{color}" fill-opacity="0.25"/>'
-                )
-            elif kind == "rect":
-                self.parts.append(
-                    f'<rect class="legend-mark" x="{_f(x0 + 5)}" y="{_f(y - 6)}" width="12" height="12" '
-                    f'fill="{color}"/>'
-                )
-            elif kind == "ring":
-                self.parts.append(
-                    f'<line class="legend-mark frontier-mark" x1="{_f(x0)}" y1="{_f(y)}" x2="{x1}" y2="{_f(y)}" '
-                    f'stroke="{color}" stroke-width="6" stroke-opacity="0.45" stroke-linecap="round"/>'
-                )
-            else:
-                self.parts.append(
-                    f'<circle class="legend-mark" cx="{_f(x0 + 11)}" cy="{_f(y)}" r="4" fill="{color}"/>')
-            title = f"<title>{escape(label)}</title>" if len(label) > 22 else ""
-            self.parts.append(
-                f'<text class="legend-label" x="{_f(x0 + 28)}" y="{_f(y + 4)}">'
-                f"{title}{escape(_short(label, 22))}</text>"
-            )
-
-    def svg(self, uid: str, cls: str, aria: str, extra_attrs: str = "") -> str:
-        lay, h = self.layout, self.height + self.legend_height
-        own = ""
-        if lay.style:  # standalone: namespaced, sized for print, its own stylesheet and a light background
-            size = f' width="{lay.width_in:g}in" height="{lay.width_in * h / self.width:.3f}in"' if lay.width_in else ""
-            extra_attrs = f' xmlns="http://www.w3.org/2000/svg"{size}{extra_attrs}'
-            own = (f'<style>{lay.style}</style>'
-                   f'<rect class="figure-bg" width="{self.width}" height="{_f(h)}" fill="#fff"/>')
-        return (
-            f'<svg id="{uid}" class="chart {cls}" viewBox="0 0 {self.width} {_f(h)}" role="img" '
-            f'aria-label="{escape(aria)}" font-family="sans-serif" font-size="{lay.font:g}"{extra_attrs}>'
-            + own
-            + "".join(self.parts)
-            + "</svg>"
-        )
 
 
 # --------------------------------------------------------------------------
@@ -208,7 +39,8 @@ class _Axes:
 
 @dataclass
 class Series:
-    """One renderer's curve: median ``y`` at each ``x``, optional per-point band [lo, hi]."""
+    """One renderer's curve: median ``y`` at each ``x``, optional per-point band [lo, hi] and x whiskers
+    [xlo, xhi] (a time's interval)."""
 
     name: str
     color: str
@@ -217,6 +49,8 @@ class Series:
     lo: list[float] | None = None
     hi: list[float] | None = None
     labels: list[str] | None = None  # tooltip of each point
+    xlo: list[float] | None = None
+    xhi: list[float] | None = None
 
 
 def _usable(*vals: float) -> bool:
@@ -237,8 +71,25 @@ def _guide_anchor(series: Sequence[Series]) -> tuple[float, float] | None:
     return x_first, y_first * GUIDE_OFFSET
 
 
+def _whisker(ax: "_Axes", name: str, color: str, x: float, y: float, lo: float | None, hi: float | None,
+             clip: str, axis: str = "x") -> None:
+    """An interval [lo, hi] through (x, y) along ``axis``, with end caps; nothing where it is unknown or flat."""
+    if not (_usable(x, y) and lo is not None and hi is not None and _usable(lo, hi) and hi > lo):
+        return
+    if axis == "x":
+        a, b, c = ax.x(lo), ax.x(hi), ax.y(y)
+        d = f"M {_f(a)} {_f(c)} L {_f(b)} {_f(c)} M {_f(a)} {_f(c - 3)} L {_f(a)} {_f(c + 3)} " \
+            f"M {_f(b)} {_f(c - 3)} L {_f(b)} {_f(c + 3)}"
+    else:
+        a, b, c = ax.y(lo), ax.y(hi), ax.x(x)
+        d = f"M {_f(c)} {_f(a)} L {_f(c)} {_f(b)} M {_f(c - 3)} {_f(a)} L {_f(c + 3)} {_f(a)} " \
+            f"M {_f(c - 3)} {_f(b)} L {_f(c + 3)} {_f(b)}"
+    ax.parts.append(f'<path class="whisker" data-renderer="{escape(name)}" data-axis="{axis}" d="{d}" '
+                    f'stroke="{color}" stroke-opacity="0.7" stroke-width="1.2" fill="none" {clip}/>')
+
+
 def _draw_band(ax: "_Axes", s: Series, clip: str) -> None:
-    """The series' min-max band over seeds, where it has one that is not flat."""
+    """The series' band over seeds (the report's: a 95% CI), where it has one that is not flat."""
     if s.lo is None or s.hi is None:
         return
     pts = [(x, lo, hi) for x, lo, hi in zip(s.x, s.lo, s.hi) if _usable(x, lo, hi)]
@@ -262,8 +113,13 @@ def line_plot_svg(
     xbase2: bool = False,
     extra_attrs: str = "",
     layout: Layout = PAGE,
+    band_label: str = "min–max over seeds",
+    whisker_label: str = "95% CI of the time",
 ) -> str:
-    """Log-log lines (one ``<path class="series">`` per series), bands and a slope guide."""
+    """Log-log lines (one ``<path class="series">`` per series), bands, x whiskers and a slope guide.
+
+    The axes span the points and the bands; whiskers are clipped to them (an interval of 2 seeds can be wide).
+    """
     xs = [v for s in series for v in s.x]
     ys = [v for s in series for v in (*s.y, *(s.lo or ()), *(s.hi or ()))]
     anchor = _guide_anchor(series) if guide_slope is not None else None
@@ -277,6 +133,9 @@ def line_plot_svg(
     clip = f'clip-path="url(#{uid}-clip)"'
     for s in series:
         _draw_band(ax, s, clip)
+        if s.xlo is not None and s.xhi is not None:
+            for x, y, lo, hi in zip(s.x, s.y, s.xlo, s.xhi):
+                _whisker(ax, s.name, s.color, x, y, lo, hi, clip)
     if anchor is not None:
         x_first, y_first = anchor
         lx0, lx1 = xdom
@@ -305,7 +164,9 @@ def line_plot_svg(
             )
     entries = [("line", s.color, s.name) for s in series]
     if any(s.lo is not None for s in series):
-        entries.append(("band", "#9aa1ad", "min–max over seeds"))
+        entries.append(("band", "#9aa1ad", band_label))
+    if any(s.xlo is not None for s in series):
+        entries.append(("whisker", "#9aa1ad", whisker_label))
     if anchor is not None:
         entries.append(("dash", "#c8ccd4", guide_label))
     ax.legend(entries)
@@ -320,6 +181,10 @@ class Point:
     y: float
     label: str = ""  # tooltip
     tag: str = ""  # short text drawn beside the point (e.g. its spp)
+    xlo: float | None = None  # 95% CI whiskers, where known
+    xhi: float | None = None
+    ylo: float | None = None
+    yhi: float | None = None
 
 
 def scatter_svg(
@@ -331,7 +196,8 @@ def scatter_svg(
     extra_attrs: str = "",
     layout: Layout = PAGE,
 ) -> str:
-    """Log-log scatter with the Pareto frontier (lower x and lower y are better) drawn and marked."""
+    """Log-log scatter with the Pareto frontier (lower x and lower y are better) drawn and marked, and each
+    point's 95% CI whiskers where it has them (clipped to the axes, which span the points)."""
     pts = [p for p in points if _usable(p.x, p.y)]
     xdom, ydom = log_domain([p.x for p in pts]), log_domain([p.y for p in pts])
     if not pts or xdom is None or ydom is None:
@@ -357,6 +223,9 @@ def scatter_svg(
                 f'<path class="trail" data-renderer="{escape(name)}" d="M {d}" fill="none" '
                 f'stroke="{ps[0].color}" stroke-opacity="0.45" stroke-width="1.2" {clip}/>'
             )
+    for p in pts:
+        _whisker(ax, p.name, p.color, p.x, p.y, p.xlo, p.xhi, clip)
+        _whisker(ax, p.name, p.color, p.x, p.y, p.ylo, p.yhi, clip, axis="y")
     for i, p in enumerate(pts):
         cls = "point on-front" if i in on_front else "point"
         tip = f"<title>{escape(p.label)}{' — on the Pareto frontier' if i in on_front else ''}</title>"
@@ -373,7 +242,8 @@ def scatter_svg(
                 )
     names = list(dict.fromkeys(p.name for p in pts))
     colors = {p.name: p.color for p in pts}
-    ax.legend([("dot", colors[n], n) for n in names] + [("ring", "#ffd166", "Pareto frontier")])
+    whiskers = [("whisker", "#9aa1ad", "95% CI")] if any(p.xlo is not None or p.ylo is not None for p in pts) else []
+    ax.legend([("dot", colors[n], n) for n in names] + [("ring", "#ffd166", "Pareto frontier")] + whiskers)
     return ax.svg(uid, "scatter-plot", f"{ylabel} against {xlabel}", extra_attrs)
 
 
@@ -382,6 +252,8 @@ class BarGroup:
     name: str
     values: list[float]  # one per bar kind
     note: str = ""  # text above the group
+    lo: list[float] | None = None  # each bar's 95% CI, drawn as an error bar where known
+    hi: list[float] | None = None
 
 
 def bars_svg(
@@ -397,8 +269,10 @@ def bars_svg(
 
     A value that is not positive (a bias² estimate below zero: no measurable
     bias; see :func:`reports.tables.format_value`) or not finite gets no bar but a small "≈ 0" or "n/a" mark.
+    A group's ``lo`` / ``hi`` draw error bars (``class="whisker"``), from the axis where the low end is not
+    positive.
     """
-    vals = [v for g in groups for v in g.values]
+    vals = [v for g in groups for v in (*g.values, *(g.hi or ()))]
     ydom = log_domain(vals, pad=0.1)
     if ydom is None or not groups:
         return '<p class="note">No positive values to plot.</p>'
@@ -423,6 +297,16 @@ def bars_svg(
                     f'x="{_f(bx + 1)}" y="{_f(top)}" width="{_f(bw - 2)}" height="{_f(base - top)}" fill="{color}">'
                     f"<title>{escape(g.name)}: {escape(label)} = {v:.3e}</title></rect>"
                 )
+            hi = g.hi[bi] if g.hi is not None else None
+            if hi is not None and math.isfinite(hi) and hi > 0:
+                lo = g.lo[bi] if g.lo is not None else None
+                y_lo = ax.y(lo) if lo is not None and math.isfinite(lo) and lo > 0 else base
+                y_hi, mx = ax.y(hi), bx + bw / 2
+                tops.append(y_hi)
+                ax.parts.append(
+                    f'<path class="whisker" data-renderer="{escape(g.name)}" data-kind="{escape(label)}" '
+                    f'd="M {_f(mx)} {_f(y_lo)} L {_f(mx)} {_f(y_hi)} M {_f(mx - 3)} {_f(y_hi)} L {_f(mx + 3)} '
+                    f'{_f(y_hi)}" stroke="#555" stroke-width="1.2" fill="none"/>')
             else:
                 mark = "n/a" if v is None or not math.isfinite(v) else ("0" if v == 0 else "≈ 0")
                 ax.parts.append(
@@ -439,5 +323,6 @@ def bars_svg(
             f'<text class="tick x" x="{_f(cx)}" y="{_f(base + 18)}" text-anchor="middle">'
             f"<title>{escape(g.name)}</title>{escape(_short(g.name, max(6, int(slot / (0.65 * layout.font)))))}</text>"
         )
-    ax.legend([("rect", color, label) for label, color in kinds])
+    bars = any(g.hi is not None for g in groups)
+    ax.legend([("rect", color, label) for label, color in kinds] + ([("whisker", "#555", "95% CI")] if bars else []))
     return ax.svg(uid, "bar-plot", ylabel, extra_attrs)

@@ -30,9 +30,9 @@ import pandas as pd
 
 from harness.evaluate import metrics
 from harness.evaluate.regions import REGION_METRICS, nested_regions, region_masks
-from harness.evaluate.summary import REGION_SPLIT, region_split
+from harness.evaluate.summary import REGION_SPLIT, REGION_SPLIT_BOUNDS, region_split
 from reports.images import png_data_uri, to_uint8
-from reports.tables import at_max_spp, column_label, format_value, value_note
+from reports.tables import at_max_spp, bias_share_note, column_label, format_value, interval_note, value_note
 
 #: Okabe-Ito colours without black (the report is dark) and grey (the overlay's background).
 REGION_COLORS = ("#E69F00", "#56B4E9", "#009E73", "#F0E442", "#0072B2", "#D55E00", "#CC79A7")
@@ -101,11 +101,15 @@ def _table(rows, colors: Mapping[str, str], renderer_colors: Mapping[str, str], 
             finite = v is not None and not pd.isna(v)
             flag = key == "mean_z" and finite and math.isfinite(v) and abs(v) > Z_FLAG
             title = f' title="|z| &gt; {Z_FLAG:g}: the region\'s mean differs by more than noise"' if flag else ""
-            if note := (value_note(key, v) if finite else ""):
+            text = format_value(key, v) if finite else "—"
+            extra, ci_title = interval_note(key, values) if finite else ("", "")
+            text += extra
+            if note := "; ".join(n for n in ((value_note(key, v) if finite else ""), ci_title) if n):
                 title = f' title="{escape(note)}"'
+            if key == "bias2_fraction" and (share := bias_share_note(values)):
+                text, title = share[0], f' title="{escape(share[1])}"'
             cells.append(f'<td data-key="{key}" data-sort="{repr(float(v)) if finite else ""}" '
-                         f'class="num{" fail" if flag else ""}"{title}>'
-                         f'{escape(format_value(key, v) if finite else "—")}</td>')
+                         f'class="num{" fail" if flag else ""}"{title}>{escape(text)}</td>')
         body.append(f'<tr class="record ok">{"".join(cells)}</tr>')
     return (f'<div class="table-wrap"><table class="summary sortable" id="{table_id}"><thead><tr class="cols">'
             f'{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>')
@@ -117,7 +121,7 @@ def bias_variance_table(summary: pd.DataFrame | None, scene, renderer_colors: Ma
     if split is None or split.empty:
         return None
     colors = {name: region_color(i) for i, name in enumerate(scene.regions)}
-    rows = [(str(r["renderer"]), str(r["region"]), {k: r[k] for k in REGION_SPLIT})
+    rows = [(str(r["renderer"]), str(r["region"]), {k: r[k] for k in (*REGION_SPLIT, *REGION_SPLIT_BOUNDS)})
             for r in split.to_dict("records")]
     return _table(rows, colors, renderer_colors, REGION_SPLIT, "region-bias-variance-table")
 

@@ -20,7 +20,8 @@ import pandas as pd
 from harness.evaluate import metrics
 from harness.evaluate.regions import REGION_PREFIX, nested_regions
 from reports.images import png_data_uri, to_uint8
-from reports.tables import at_max_spp, column_label, format_value, is_finite, renderer_info, renderer_order
+from reports.tables import (at_max_spp, bias_share_note, column_label, format_value, interval_note, is_finite,
+                            renderer_info, renderer_order)
 
 #: Columns of a convergence experiment's summary that a section's table adds where the experiment has them.
 SECTION_SUMMARY_COLUMNS = ("slope_rmse_spp", "efficiency", "bias2_fraction")
@@ -55,7 +56,8 @@ def _table(runs: pd.DataFrame, summary: pd.DataFrame | None) -> str:
     names = renderer_order(runs, {})
     medians = at_max_spp(runs)
     figures = {str(r["renderer"]): r for r in summary.to_dict("records")} if summary is not None else {}
-    values = {n: {**medians.get(n, {}), **{k: figures.get(n, {}).get(k) for k in SECTION_SUMMARY_COLUMNS}}
+    values = {n: {**medians.get(n, {}), **{k: v for k, v in figures.get(n, {}).items()
+                                            if k.startswith(SECTION_SUMMARY_COLUMNS) or k == "interval_basis"}}
               for n in names}
     cols = _columns(values)
     def th(key: str, header: str, tip: str, num: bool = True) -> str:
@@ -74,7 +76,12 @@ def _table(runs: pd.DataFrame, summary: pd.DataFrame | None) -> str:
         for key, _, _, fmt in cols:
             v = values[name].get(key) if ok else None
             text, sort = (format_value(fmt, v), repr(float(v))) if is_finite(v) else ("—", "")
-            cells.append(f'<td data-key="{escape(key)}" data-sort="{sort}" class="num">{escape(text)}</td>')
+            extra, title = interval_note(key, values[name]) if is_finite(v) else ("", "")
+            if key == "bias2_fraction" and ok and (share := bias_share_note(values[name])):
+                (text, title), extra = share, ""
+            title_attr = f' title="{escape(title)}"' if title else ""
+            cells.append(f'<td data-key="{escape(key)}" data-sort="{sort}" class="num"{title_attr}>'
+                         f'{escape(text + extra)}</td>')
         body.append(f"<tr>{''.join(cells)}</tr>")
     return (f'<table class="summary sortable"><thead><tr class="cols">{head}</tr></thead>'
             f'<tbody>{"".join(body)}</tbody></table>')

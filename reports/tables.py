@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from harness.evaluate import registry
+from harness.evaluate.convergence import bias_significant
 
 # Metric key -> (short label, definition, better: "low" | "high" | None), from the harness's one registry.
 METRICS: dict[str, tuple[str, str, str | None]] = {
@@ -43,6 +44,10 @@ TABLE_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("noise yardsticks", ("noise_*",)),
 )
 _ALWAYS = {"renderer", "status", "spp", "seeds", "time_s"}
+#: Columns that bound another (its interval), never columns of their own.
+_BOUND_SUFFIXES = ("_ci", "_low", "_high")
+#: A column whose interval the summary holds under another name.
+_BOUNDS_OF = {"time_s": "time_at_max_spp"}
 
 #: A threshold's comparison as the page prints it.
 OPERATOR_SIGNS = {"<=": "≤", ">=": "≥", "<": "<", ">": ">"}
@@ -138,6 +143,43 @@ def value_note(key: str, v: Any) -> str:
         return ""
     raw = "−" + f"{-float(v):.2g}"  # a typographic minus for the sign; the exponent's stays ASCII (−8.6e-06)
     return f"estimate {raw}: below zero by noise alone; no bias measurable above the noise"
+
+
+def interval_note(key: str, row: Mapping) -> tuple[str, str]:
+    """(text after a cell's value, tooltip) for a figure with a 95% interval in ``row`` (``<key>_low`` /
+    ``_high``, or a slope's ``_ci`` half-width); ("", "") without one.
+
+    A slope's interval is symmetric: ± its half-width. Others (times, efficiencies) are asymmetric, on the log
+    scale: the bounds in brackets. The tooltip says what the interval covers (the summary's ``interval_basis``).
+    """
+    base = _BOUNDS_OF.get(key, key)
+    lo, hi = row.get(base + "_low"), row.get(base + "_high")
+    basis = row.get("interval_basis")
+    over = f" over {basis}" if isinstance(basis, str) and basis else ""
+    if is_finite(lo) and is_finite(hi):
+        lo, hi = float(lo), float(hi)
+        if key.endswith("bias2") and lo < 0:
+            lo = 0.0  # a bias² is not negative: its interval ends at 0 (the estimate itself may dip below)
+        title = f"95% confidence interval {format_value(key, lo)} to {format_value(key, hi)}{over}"
+        if key.startswith("slope_"):
+            return f" ± {(hi - lo) / 2:.2f}", title
+        return f" ({format_value(key, lo)}–{format_value(key, hi)})", title
+    ci = row.get(key + "_ci")
+    if key.startswith("slope_") and is_finite(ci):
+        return f" ± {float(ci):.2f}", "95% confidence half-width over seeds"
+    return "", ""
+
+
+def bias_share_note(row: Mapping, key: str = "bias2_fraction") -> tuple[str, str] | None:
+    """("not significant", why) for a bias share whose 95% interval reaches 0; None otherwise (a number is then
+    shown). A share whose interval reaches 0 says nothing about bias: its point estimate (14.5% for the
+    reference renderer at 2 seeds) would suggest one."""
+    if bias_significant(row.get(key + "_low")) is not False:
+        return None
+    v, hi = row.get(key), row.get(key + "_high")
+    est = f"estimate {format_value(key, v)}, " if is_finite(v) else ""
+    upto = f"95% interval 0 to {format_value(key, hi)}" if is_finite(hi) else "its 95% interval reaches 0"
+    return "not significant", f"{est}{upto}: no bias measurable above the noise"
 
 
 def parse_time_to(key: str) -> tuple[str, str, float] | None:
@@ -313,7 +355,7 @@ def _table_columns(rows: Sequence[dict], thresholds: Mapping) -> list[dict]:
         for key in keys:
             if key.endswith("*"):
                 prefix = key[:-1]
-                found = sorted({k for r in rows for k in r if k.startswith(prefix) and not k.endswith("_ci")})
+                found = sorted({k for r in rows for k in r if k.startswith(prefix) and not k.endswith(_BOUND_SUFFIXES)})
                 # every time-to-target column is shown: "not reached" by all is a result too
                 cols.extend(k for k in found if k in present or k in thresholds or prefix == "time_to_")
             elif key in _ALWAYS or key in present or key in thresholds:
@@ -366,14 +408,16 @@ def summary_rows(runs, summary, names, info, thresholds) -> tuple[list[dict], li
                 cell["sort"] = repr(float(v))
                 cell["cls"] = "num"
                 cell["title"] = value_note(key, v)
-                ci = row.get(key + "_ci")
-                if key.startswith("slope_") and is_finite(ci):
-                    cell["text"] += f" ± {float(ci):.2f}"
+                text, title = interval_note(key, row)
+                cell["text"] += text
+                cell["title"] = "; ".join(t for t in (cell["title"], title) if t)
             else:
                 cell["cls"] = "num"
                 if key.startswith("time_to_") and inf["status"] == "ok":
                     cell["text"] = "not reached"
                     cell["title"] = "no seed reached this target"
+            if key == "bias2_fraction" and (note := bias_share_note(row)):
+                cell["text"], cell["title"] = note
             if key in thresholds and inf["status"] == "ok":
                 op, limit = thresholds[key]
                 passed = check_threshold(v, op, float(limit))

@@ -24,17 +24,25 @@ spp; see :mod:`harness.workflows.converge`) and on images.
   inside each named region (:mod:`harness.evaluate.regions`): a photon
   map's bias sits in its caustics and shadow edges, where an image-wide
   mean dilutes it.
+- **Uncertainty**: every time-derived figure comes with a 95% interval over
+  seeds and timing repeats (:func:`figure_interval`, the method in
+  :mod:`harness.evaluate.bootstrap`); bias², variance and the bias share
+  with one over the pixels (:func:`_split`). Times are read from a
+  ``time_column``: ``time_s`` (wall) or ``cpu_time_s`` (``--time-basis cpu``).
 """
 
 from __future__ import annotations
 
 import math
 import re
+import warnings
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
 from scipy import stats as _st
 
+from harness.evaluate import bootstrap
 from harness.evaluate.registry import IMAGE_METRICS, REGION_CHECK_METRICS, region_metric
 from harness.suggest import closest
 
@@ -63,28 +71,106 @@ def mean_ci(values, level: float = 0.95) -> tuple[float, float]:
 
 
 def slope_over_seeds(runs: pd.DataFrame, metric: str = "rmse", x: str = "spp") -> tuple[float, float]:
-    """Mean log-log slope of ``metric`` against ``x`` over seeds, and its 95% CI half-width."""
+    """Mean log-log slope of ``metric`` against ``x`` (``spp`` or a time column) over seeds, and its 95% CI
+    half-width over seeds; NaN when ``x`` is absent."""
+    if x not in runs:
+        return math.nan, math.nan
     per_seed = [loglog_slope(g[x], g[metric]) for _, g in runs.groupby("seed")]
     return mean_ci(per_seed)
 
 
-def time_to_target(runs: pd.DataFrame, metric: str, target: float) -> float:
-    """Median over seeds of the time at which ``metric`` first reaches ``target`` (≤); NaN if never."""
-    times = []
-    for _, g in runs.groupby("seed"):
-        g = g.sort_values("time_s")
-        t, e = g["time_s"].to_numpy(float), g[metric].to_numpy(float)
-        hit = np.flatnonzero(e <= target)
-        if hit.size == 0:
-            continue
-        k = hit[0]
-        if k == 0 or not (e[k - 1] > 0 and e[k] > 0 and t[k - 1] > 0):
-            times.append(t[k])
-            continue
-        # Interpolate log-log between the last miss and the first hit.
-        f = (math.log(target) - math.log(e[k - 1])) / (math.log(e[k]) - math.log(e[k - 1]))
-        times.append(math.exp(math.log(t[k - 1]) + f * (math.log(t[k]) - math.log(t[k - 1]))))
-    return float(np.median(times)) if times else math.nan
+def time_to_target(runs: pd.DataFrame, metric: str, target: float, time_column: str = "time_s") -> float:
+    """Median over seeds of the time (``time_column``) at which ``metric`` first reaches ``target`` (≤); NaN if
+    never or without that column."""
+    values = [_time_to(c.t, c.frame[metric].to_numpy(float), target) for c in _curves(runs, time_column)]
+    return _aggregate(np.nanmedian, values)
+
+
+def efficiency(runs: pd.DataFrame, time_column: str = "time_s") -> float:
+    """Median over seeds of 1 / (MSE · time) at each seed's highest spp; NaN without ``time_column``."""
+    values = [_efficiency(c.t, c.frame["mse"].to_numpy(float), c.frame["spp"].to_numpy(float))
+              for c in _curves(runs, time_column)]
+    return _aggregate(np.nanmedian, values)
+
+
+class _Curve(NamedTuple):
+    """One seed's rows, in time order: the rows, their times and each row's timing repeats."""
+
+    frame: pd.DataFrame
+    t: np.ndarray
+    samples: list[np.ndarray]
+
+
+def _curves(runs: pd.DataFrame, time_column: str) -> list[_Curve]:
+    out = []
+    for _, g in runs.groupby("seed", sort=True):
+        if time_column not in g:
+            t = np.full(len(g), math.nan)
+        else:
+            g = g.assign(_t=pd.to_numeric(g[time_column], errors="coerce")).sort_values("_t", kind="stable")
+            t = g["_t"].to_numpy(float)
+        col = bootstrap.samples_column(time_column)
+        texts = g[col].tolist() if col in g else [None] * len(g)
+        out.append(_Curve(g, t, [bootstrap.parse_samples(x, ti) for x, ti in zip(texts, t)]))
+    return out
+
+
+def _aggregate(fn, values) -> float:
+    v = np.asarray(values, float)
+    return float(fn(v)) if np.isfinite(v).any() else math.nan
+
+
+def _time_to(t: np.ndarray, e: np.ndarray, target: float) -> np.ndarray:
+    """Per seed (``t``: (..., rows) times, ``e``: (rows,) errors in time order): when ``e`` first reaches
+    ``target``, interpolated log-log between the last miss and the first hit; NaN if never."""
+    t = np.asarray(t, float)
+    hit = np.flatnonzero(e <= target)
+    if hit.size == 0:
+        return np.full(t.shape[:-1], math.nan)
+    k = hit[0]
+    if k == 0 or not (e[k - 1] > 0 and e[k] > 0):
+        return t[..., k]
+    f = (math.log(target) - math.log(e[k - 1])) / (math.log(e[k]) - math.log(e[k - 1]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lo, hi = np.log(t[..., k - 1]), np.log(t[..., k])
+        return np.where(t[..., k - 1] > 0, np.exp(lo + f * (hi - lo)), t[..., k])
+
+
+def _efficiency(t: np.ndarray, mse: np.ndarray, spp: np.ndarray) -> np.ndarray:
+    """Per seed: 1 / (MSE · time) at its highest spp (the median where it has several rows there)."""
+    top = spp == spp.max()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.median(1.0 / (mse[top] * np.asarray(t, float)[..., top]), axis=-1)
+
+
+def _slope(t: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Per seed: least-squares slope of log(e) against log(t) (:func:`loglog_slope`, over (..., rows) times)."""
+    t = np.asarray(t, float)
+    ok = (e > 0) & np.isfinite(e) & np.all((t > 0) & np.isfinite(t), axis=tuple(range(t.ndim - 1)))
+    if ok.sum() < 2:
+        return np.full(t.shape[:-1], math.nan)
+    x, y = np.log(t[..., ok]), np.log(e[ok])
+    dx = x - x.mean(axis=-1, keepdims=True)
+    sxx = (dx**2).sum(axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(sxx > 0, (dx * (y - y.mean())).sum(axis=-1) / sxx, math.nan)
+
+
+def figure_interval(curves: list[_Curve], per_seed, aggregate, log: bool = True) -> tuple[float, float, float]:
+    """(value, low, high) of a time-derived figure: ``aggregate`` over seeds of ``per_seed(curve, times)``,
+    with its 95% interval over seeds and timing repeats (:func:`harness.evaluate.bootstrap.interval`)."""
+    values = np.array([per_seed(c, c.t) for c in curves], float)
+    point = _aggregate(aggregate, values)
+    repeats = max((s.size for c in curves for s in c.samples), default=1)
+    gen = bootstrap.rng()
+    timing = None
+    if repeats >= 2:
+        timing = np.stack([per_seed(c, bootstrap.resampled_times(c.samples, bootstrap.RESAMPLES, gen))
+                           for c in curves], axis=1)
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN resamples: their figure is NaN
+        lo, hi = bootstrap.interval(point, values, timing, aggregate, repeats, log, gen)
+    return point, lo, hi
 
 
 def target_column(metric: str, target: float) -> str:
@@ -137,7 +223,8 @@ def bias_variance(images: list[np.ndarray], ref: np.ndarray, ref_var: np.ndarray
     return _NAN_SPLIT.copy() if maps is None else _split(*maps)
 
 
-_NAN_SPLIT = {"bias2": math.nan, "variance": math.nan, "bias2_fraction": math.nan}
+_NAN_SPLIT = {k: math.nan for k in ("bias2", "variance", "bias2_fraction", "bias2_low", "bias2_high",
+                                    "variance_low", "variance_high", "bias2_fraction_low", "bias2_fraction_high")}
 
 
 def _bias_variance_maps(images, ref, ref_var, deterministic: bool) -> tuple[np.ndarray, np.ndarray] | None:
@@ -156,14 +243,55 @@ def _bias_variance_maps(images, ref, ref_var, deterministic: bool) -> tuple[np.n
     return err2 - s2 / k - np.asarray(ref_var, np.float64), s2
 
 
-def _split(bias2_map: np.ndarray, s2_map: np.ndarray) -> dict:
-    """Means of the per-pixel maps (over the pixels given) as bias², variance and bias²'s share."""
+def _split(bias2_map: np.ndarray, s2_map: np.ndarray, level: float = 0.95) -> dict:
+    """Means of the per-pixel maps (over the pixels given) as bias², variance and bias²'s share, with intervals.
+
+    The intervals treat the pixels as the samples of the estimate (each pixel's channels averaged into one:
+    they share a path): bias² ± z · sd(per-pixel bias² estimate) / √pixels, likewise the variance. With 2
+    seeds a bootstrap over seeds has one degree of freedom and says nothing; the pixels are many and the
+    seeds' noise in each is independent of its neighbours' (a reconstruction filter wider than a pixel
+    would correlate them and make this interval too narrow). Pixel-to-pixel variation of a real bias counts
+    as spread too, so a bias confined to a few pixels needs more evidence: conservative. The share's
+    interval takes bias²'s bounds (floored at 0) against the variance's opposite bounds.
+    A bias² whose interval reaches 0 (``bias2_fraction_low`` = 0) is not significant: :func:`bias_significant`.
+    """
     if bias2_map.size == 0:
         return _NAN_SPLIT.copy()
-    bias2, variance = float(np.mean(bias2_map)), float(np.mean(s2_map))
+    per_pixel_b = _per_pixel(bias2_map)
+    per_pixel_v = _per_pixel(s2_map)
+    bias2, variance = float(np.mean(per_pixel_b)), float(np.mean(per_pixel_v))
+    z = float(_st.norm.ppf(0.5 + level / 2))
+    n = per_pixel_b.size
+    hb = z * float(per_pixel_b.std(ddof=1)) / math.sqrt(n) if n > 1 else math.nan
+    hv = z * float(per_pixel_v.std(ddof=1)) / math.sqrt(n) if n > 1 else math.nan
+    out = {"bias2": bias2, "variance": variance, "bias2_fraction": _share(bias2, variance),
+           "bias2_low": bias2 - hb, "bias2_high": bias2 + hb,
+           "variance_low": max(variance - hv, 0.0), "variance_high": variance + hv}
+    out["bias2_fraction_low"] = _share(out["bias2_low"], out["variance_high"])
+    out["bias2_fraction_high"] = _share(out["bias2_high"], out["variance_low"])
+    return out
+
+
+def bias_significant(fraction_low) -> bool | None:
+    """Whether a bias share's interval excludes 0 (from its ``bias2_fraction_low``); None when unknown."""
+    try:
+        low = float(fraction_low)
+    except (TypeError, ValueError):
+        return None
+    return None if math.isnan(low) else low > 0
+
+
+def _per_pixel(m: np.ndarray) -> np.ndarray:
+    m = np.asarray(m, np.float64)
+    return m.reshape(-1, m.shape[-1]).mean(axis=1) if m.ndim >= 2 else m.ravel()
+
+
+def _share(bias2: float, variance: float) -> float:
+    """bias² / (bias² + variance), bias² floored at 0; NaN when both are 0 or unknown."""
+    if not (math.isfinite(bias2) and math.isfinite(variance)):
+        return math.nan
     denom = max(bias2, 0.0) + variance
-    return {"bias2": bias2, "variance": variance,
-            "bias2_fraction": max(bias2, 0.0) / denom if denom > 0 else math.nan}
+    return max(bias2, 0.0) / denom if denom > 0 else math.nan
 
 
 def region_bias_variance(images, ref: np.ndarray, ref_var: np.ndarray, masks: dict[str, np.ndarray],
@@ -182,18 +310,53 @@ def region_bias_variance(images, ref: np.ndarray, ref_var: np.ndarray, masks: di
     return {name: _split(bias2_map[np.asarray(m, bool)], s2_map[np.asarray(m, bool)]) for name, m in masks.items()}
 
 
-def summarize(runs: pd.DataFrame, targets=DEFAULT_TARGETS) -> pd.DataFrame:
-    """One row per renderer: slopes with CIs, time to each target, efficiency at max spp."""
+def summarize(runs: pd.DataFrame, targets=DEFAULT_TARGETS, time_column: str = "time_s") -> pd.DataFrame:
+    """One row per renderer: slopes, time to each target, efficiency at max spp, each with its 95% interval.
+
+    Times are read from ``time_column`` (``time_s``, wall, or ``cpu_time_s``); a column that is absent or all
+    NaN gives NaN figures. Every time-derived figure ``F`` has ``F_low`` / ``F_high``, its interval over seeds
+    and timing repeats (:mod:`harness.evaluate.bootstrap`); ``interval_basis`` says which of the two the
+    rows allowed. ``slope_rmse_spp_ci`` / ``slope_rmse_time_ci`` keep the Student-t half-width over seeds.
+    """
     rows = []
     ok = runs[runs["status"] == "ok"]
     for renderer, g in ok.groupby("renderer", sort=False):
-        top = g[g["spp"] == g["spp"].max()]
-        row = {"renderer": renderer, "seeds": int(g["seed"].nunique()), "max_spp": int(g["spp"].max())}
+        curves = _curves(g, time_column)
+        repeats = max((s.size for c in curves for s in c.samples), default=1)
+        row = {"renderer": renderer, "seeds": int(g["seed"].nunique()), "max_spp": int(g["spp"].max()),
+               "time_column": time_column, "time_repeats": repeats,
+               "interval_basis": bootstrap.basis(len(curves), repeats)}
         row["slope_rmse_spp"], row["slope_rmse_spp_ci"] = slope_over_seeds(g, "rmse", "spp")
-        row["slope_rmse_time"], row["slope_rmse_time_ci"] = slope_over_seeds(g, "rmse", "time_s")
+        row["slope_rmse_spp_low"] = row["slope_rmse_spp"] - row["slope_rmse_spp_ci"]
+        row["slope_rmse_spp_high"] = row["slope_rmse_spp"] + row["slope_rmse_spp_ci"]
+        _, row["slope_rmse_time_ci"] = slope_over_seeds(g, "rmse", time_column)
+        row["slope_rmse_time"], row["slope_rmse_time_low"], row["slope_rmse_time_high"] = figure_interval(
+            curves, lambda c, t: _slope(t, c.frame["rmse"].to_numpy(float)), np.nanmean, log=False)
         for metric, value in targets:
             if metric in g:  # an AO image's rows have no colour differences, so no ΔE target
-                row[target_column(metric, value)] = time_to_target(g, metric, value)
-        row["efficiency"] = float(np.median(1.0 / (top["mse"] * top["time_s"])))
+                col = target_column(metric, value)
+                row[col], row[col + "_low"], row[col + "_high"] = figure_interval(
+                    curves, lambda c, t, m=metric, v=value: _time_to(t, c.frame[m].to_numpy(float), v), np.nanmedian)
+        row["efficiency"], row["efficiency_low"], row["efficiency_high"] = figure_interval(
+            curves, lambda c, t: _efficiency(t, c.frame["mse"].to_numpy(float), c.frame["spp"].to_numpy(float)),
+            np.nanmedian)
+        # The time of the highest spp (equal quality: what reaching the target cost) and, in equal-time mode, the
+        # spp the budget buys at the measured speed.
+        row["time_at_max_spp"], row["time_at_max_spp_low"], row["time_at_max_spp_high"] = figure_interval(
+            curves, lambda c, t: _at_top(t, c.frame["spp"].to_numpy(float)), np.nanmedian)
+        if "info_time_budget_s" in g:
+            budget = float(pd.to_numeric(g["info_time_budget_s"], errors="coerce").max())
+            row["spp_in_budget"], row["spp_in_budget_low"], row["spp_in_budget_high"] = figure_interval(
+                curves, lambda c, t: _spp_in(budget, t, c.frame["spp"].to_numpy(float)), np.nanmedian)
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def _at_top(t: np.ndarray, spp: np.ndarray) -> np.ndarray:
+    return np.median(np.asarray(t, float)[..., spp == spp.max()], axis=-1)
+
+
+def _spp_in(budget: float, t: np.ndarray, spp: np.ndarray) -> np.ndarray:
+    """The spp ``budget`` seconds buy at the speed of the highest-spp render (samples per second × budget)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return budget * spp.max() / _at_top(t, spp)

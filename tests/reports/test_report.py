@@ -15,6 +15,7 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from PIL import Image
 
@@ -413,7 +414,7 @@ def test_convergence_plots_one_line_per_renderer_and_guide(report, case):
             series = re.findall(r'<path class="series" data-renderer="([^"]+)"', svg)
             assert series == list(OK_NAMES), (metric, axis)
             assert len(re.findall(rf'<path class="guide" data-slope="{slope}"', svg)) == 1
-            # 3 seeds: a min–max band for each renderer whose seeds differ (the raster is deterministic)
+            # 3 seeds: a 95% CI band for each renderer whose seeds differ (the raster is deterministic)
             bands = re.findall(r'<path class="band" data-renderer="([^"]+)"', svg)
             assert bands == ["alpha-tracer", "beta-photons"], (metric, axis)
             assert "samples per pixel" in svg if axis == "spp" else "wall time (s)" in svg
@@ -499,9 +500,9 @@ def test_bias_variance_bars(report, case):
 def test_region_bias_variance_table(tmp_path, case):
     """An experiment's summary on a scene with regions (cornell-box's four): a bias²/variance table per (renderer,
     region) in the bias/variance section, with the numbers of convergence.region_bias_variance."""
-    from harness.evaluate.convergence import region_bias_variance
+    from harness.evaluate.convergence import bias_significant, region_bias_variance
     from harness.evaluate.regions import region_masks
-    from harness.evaluate.summary import summary_table
+    from harness.evaluate.summary import REGION_SPLIT, summary_table
 
     ref, sc = case["reference"], case["scene"]
     images = {n: [case["raw"][n, s, 64] for s in (0, 1, 2)] for n in OK_NAMES}
@@ -520,10 +521,21 @@ def test_region_bias_variance_table(tmp_path, case):
         assert f'data-sort="{name}"' in row and f'data-sort="{region}"' in row
         for key, v in values.items():
             assert summary.set_index("renderer").loc[name, f"region.{region}.{key}"] == pytest.approx(v, nan_ok=True)
+            if key not in REGION_SPLIT:  # the bounds: shown inside the cells, not as columns
+                assert f'data-key="{key}"' not in row
+                continue
             sort = re.search(rf'data-key="{key}" data-sort="([^"]*)"', row).group(1)
             assert sort == (repr(float(v)) if math.isfinite(v) else "")
-    # The noise-free raster's variance is 0: all of its error is bias.
+        share = re.search(r'data-key="bias2_fraction"[^>]*>([^<]*)</td>', row).group(1)
+        # A share whose 95% interval reaches 0 reads "not significant", never a number.
+        assert (share == "not significant") == (bias_significant(values["bias2_fraction_low"]) is False), (name, region)
+        if share != "not significant" and math.isfinite(values["bias2_fraction_low"]):
+            assert "–" in share  # the share with its interval
+    # The noise-free raster's variance is 0: all of its error is bias, significant; the unbiased tracer's is not.
     assert summary.set_index("renderer").loc["gamma-raster", "region.walls.bias2_fraction"] == 1.0
+    assert bias_significant(summary.set_index("renderer").loc["gamma-raster", "region.walls.bias2_fraction_low"])
+    assert not bias_significant(summary.set_index("renderer").loc["alpha-tracer", "bias2_fraction_low"])
+    assert "not significant" in section
     # Without region columns (a summary from before them): no table, the bars alone.
     plain = rf.write_case(tmp_path / "p.html", case).read_text(encoding="utf-8")
     assert 'id="region-bias-variance-table"' not in plain and 'id="bias-variance"' in plain
@@ -701,7 +713,7 @@ def test_standalone_svg_styles_itself_for_print(report, case):
     assert [s.get("data-renderer") for s in series] == list(OK_NAMES)
     assert len(root.findall(f".//{SVG_NS}path[@class='guide']")) == 1
     labels = root.findall(f".//{SVG_NS}text[@class='legend-label']")
-    assert [el.text for el in labels] == [*OK_NAMES, "min–max over seeds", "slope −½ (∝ 1/√N)"]
+    assert [el.text for el in labels] == [*OK_NAMES, "95% CI over seeds", "slope −½ (∝ 1/√N)"]
     plot_bottom = max(float(r.get("y")) + float(r.get("height")) for r in root.iter(f"{SVG_NS}rect")
                       if r.get("class") == "axis")
     for el in labels:  # below the plot, inside the viewBox, with room for the longest label's estimated width
@@ -791,3 +803,78 @@ def test_title_option_reaches_the_report(tmp_path, capsys, monkeypatch):
     cbox("converge", "--scene", "cornell-box", "-r", "tests.user_renderers:FlatGrey", "--spp", "1,2", "--seeds", "1",
          "--out", str(tmp_path / "conv"), "--title", "Converged")
     assert titles == ["Paper <figure> 1", "Rebuilt", None, "Converged"]
+
+
+# --------------------------------------------------------------------------
+# Intervals and timing quality (issue 30)
+# --------------------------------------------------------------------------
+
+
+def _timed(runs: pd.DataFrame, load: float, repeats: bool = True) -> pd.DataFrame:
+    """The case's runs with the timing columns of issue 30: loads of ``load`` runnable threads, one thread per
+    render, a steady calibration kernel, and (``repeats``) three timings of each row around its time_s."""
+    ok = runs["status"] == "ok"
+    out = runs.assign(cpu_time_s=runs["time_s"] * 1.5, setup_s=0.1, threads=1.0, calibration_s=0.01,
+                      load_before=load, load_after=load)
+    if repeats:
+        out["time_samples_s"] = [json.dumps([t * 0.95, t, t * 1.1]) if k else None for t, k in zip(runs["time_s"], ok)]
+        out["cpu_time_samples_s"] = [json.dumps([t * 1.4, t * 1.5, t * 1.6]) if k else None
+                                     for t, k in zip(runs["time_s"], ok)]
+    return out
+
+
+def test_timing_badge_good_contended_unknown(tmp_path, case):
+    """The header and the run panel carry the timing-quality badge with timing_quality's figures behind it."""
+    unknown = _parse(rf.write_case(tmp_path / "u.html", case).read_text(encoding="utf-8"))
+    assert [a["data-timing"] for a in unknown.find("span", data_timing=True)] == ["unknown", "unknown"]
+    for load, state in ((1.0, "good"), (9.0, "contended")):
+        text = rf.write_case(tmp_path / f"{state}.html", case, runs=_timed(case["runs"], load), cores=4)\
+            .read_text(encoding="utf-8")
+        badges = _parse(text).find("span", data_timing=True)
+        assert [a["data-timing"] for a in badges] == [state, state]
+        n = int((case["runs"]["status"] == "ok").sum())
+        contended = n if state == "contended" else 0
+        assert f"{contended} of {n} timed renders contended; load up to {load:.1f} runnable threads beside " \
+               "renders of 1 on 4 cores" in text
+        assert ("warning: the machine was busy" in badges[0]["title"]) == (state == "contended")
+
+
+def test_intervals_in_table_charts_and_summary_csv(tmp_path, case):
+    """A summary from summary_table: summary.csv holds every figure's bounds; the table shows them beside the
+    figure; the time charts draw 95% CI bands and time whiskers, labelled so; an unbiased renderer's bias share
+    reads "not significant"."""
+    from harness.evaluate.convergence import bias_significant, target_column
+    from harness.evaluate.summary import summary_table
+
+    runs = _timed(case["runs"], 1.0)
+    images = {n: [case["raw"][n, s, 64] for s in (0, 1, 2)] for n in OK_NAMES}
+    summary = summary_table(runs, images, case["reference"], case["scene"])
+    summary.to_csv(tmp_path / "summary.csv", index=False)
+    csv = pd.read_csv(tmp_path / "summary.csv").set_index("renderer")
+    for fig in ("efficiency", "slope_rmse_time", "time_at_max_spp", target_column("rel_mse", 1e-2), "bias2",
+                "variance", "bias2_fraction"):
+        for end in ("low", "high"):
+            assert f"{fig}_{end}" in csv.columns, (fig, end)
+    assert set(csv["interval_basis"]) == {"seeds and timing repeats"}
+    tracer = csv.loc["alpha-tracer"]
+    assert tracer["efficiency_low"] < tracer["efficiency"] < tracer["efficiency_high"]
+    text = rf.write_case(tmp_path / "r.html", case, runs=runs, summary=summary).read_text(encoding="utf-8")
+    eff = _cell(text, "alpha-tracer", "efficiency")
+    assert re.fullmatch(r"[0-9.e+-]+ \([0-9.e+-]+–[0-9.e+-]+\)", eff["text"]), eff
+    assert "95% confidence intervals over seeds and timing repeats; times are wall time (time_s)" in text
+    share = _cell(text, "alpha-tracer", "bias2_fraction")["text"]
+    assert bias_significant(tracer["bias2_fraction_low"]) is False and share == "not significant"
+    assert _cell(text, "gamma-raster", "bias2_fraction")["text"].startswith("100.0 %")  # all bias, significant
+    svg = _svg(text, "conv-time-rmse")
+    assert ">95% CI over seeds<" in svg and ">95% CI of the time<" in svg and "min–max" not in svg
+    assert len(re.findall(r'<path class="whisker" data-renderer="alpha-tracer" data-axis="x"', svg)) == 3
+    pareto = _svg(text, "pareto-rmse")
+    assert re.search(r'<path class="whisker" data-renderer="beta-photons" data-axis="y"', pareto)
+    bars = _svg(text, "bias-variance")
+    assert "bias not significant" in bars and re.search(r'<path class="whisker" data-renderer="alpha-tracer"', bars)
+    # --time-basis cpu: the figures and the time axes follow the CPU clock
+    cpu = summary_table(runs, images, case["reference"], case["scene"], time_column="cpu_time_s")
+    assert cpu.set_index("renderer").loc["alpha-tracer", "efficiency"] == pytest.approx(tracer["efficiency"] / 1.5)
+    text = rf.write_case(tmp_path / "c.html", case, runs=runs, summary=cpu).read_text(encoding="utf-8")
+    assert "CPU time (s)" in _svg(text, "conv-time-rmse") and "times are CPU time (cpu_time_s)" in text
+    assert "<h3>against CPU time</h3>" in text and "<h3>against wall time</h3>" not in text

@@ -88,6 +88,9 @@ def test_same_scene_merges_into_one_table_with_a_section_each(experiments, tmp_p
         for name in names:
             assert html.escape(name) in section
         assert f'id="{label}-conv-spp-rmse"' in section
+        # Its own timing-quality badge (issue 30), with timing_quality's figures beside it.
+        assert re.search(r'<span class="badge timing timing-(good|contended|unknown)" data-timing="\1"', section)
+        assert "timing-figures" in section
     # Its own figures: the combined charts, and each section's under its label.
     svgs = {p.name for p in (out / "figures").glob("*.svg")}
     for stem in ("convergence-spp-rmse", "sweep-a-convergence-spp-rmse", "sweep-b-convergence-spp-rmse",
