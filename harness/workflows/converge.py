@@ -183,17 +183,14 @@ def _run_repeats(out: Path, scene: Scene, executor, table: "_Table", timed: dict
 def _repeat_tasks(cells: dict[str, Cell], entries: dict[str, RendererEntry], have: dict[str, int], k: int,
                   executor, scene: Scene) -> dict[str, Task]:
     """The repeats still missing, as tasks in rounds over the cells: every cell's second timing, then every
-    third, ... In-process they run in that order, so a change of load hits every renderer alike; on Dask the
-    scheduler orders them (and spreads them over the workers): interleaving is then not promised."""
-    rounds = max((k - n for n in have.values()), default=0)
-    if rounds <= 0:
-        return {}
-    shared = executor.share(scene)
+    third, ... (a cell that has some already joins at the round of its next). In-process they run in that
+    order, so a change of load hits every renderer alike; on Dask the scheduler orders them (and spreads them
+    over the workers): interleaving is then not promised."""
+    shared = executor.share(scene) if any(n < k for n in have.values()) else None
     tasks = {}
-    for j in range(rounds):
+    for index in range(2, k + 1):
         for name, cell in cells.items():
-            if have[name] + j < k:
-                index = have[name] + j + 1
+            if have[name] < index:
                 key = task_key("repeat", cell.key, index)
                 tasks[key] = Task(key, f"{cell.label} repeat {index}/{k}", repeat_cell_task,
                                   (cell, shared, entries[name] if executor.local else None))

@@ -32,7 +32,9 @@ from harness.workflows.reference_build import build_reference  # noqa: E402
 DASK = Path(sys.executable).parent / "dask"
 #: Measured (times), or where the cell ran (its threads, how Mitsuba found LLVM there): the only columns
 #: allowed to differ between backends.
-RUN_COLUMNS = ["time_s", "efficiency", "info_setup_s", "info_threads", "info_variant_note"]
+RUN_COLUMNS = ["time_s", "efficiency", "info_setup_s", "info_threads", "info_variant_note",
+               # the timings behind time_s (harness.evaluate.timing_stats.repeat_columns)
+               "time_samples_s", "time_s_low", "time_s_high", "cpu_time_samples_s", "cpu_time_s_low", "cpu_time_s_high"]
 #: Ours, built on Embree in the worker, and a user's renderer loaded there by module:Class (cheap: Mitsuba, whose
 #: import and JIT cost seconds per worker, renders the reference batches and a gate expectation below).
 RENDERERS = ["pathtracer", "tests.user_renderers:SeededNoise"]
