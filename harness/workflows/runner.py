@@ -123,7 +123,7 @@ class RunRecord:
 
 
 #: Fields a results row holds as JSON text (a table cell is a scalar); objects again in JSON output.
-JSON_TEXT_FIELDS = ("settings", "scene_settings", "approximations")
+JSON_TEXT_FIELDS = ("settings", "scene_settings", "approximations", "time_samples_s", "cpu_time_samples_s")
 
 
 def json_row(row: dict) -> dict:
