@@ -120,7 +120,6 @@ def run_experiment(
                 # The same work twice (a renderer named twice) renders once and fills both places.
                 pending.setdefault(cell.key, ([], cell, entry, stored))[0].append(len(table.frames))
                 table.frames.append(None)
-        shared = None
         if pending:
             shared = executor.share(scene), executor.share(reference)
             tasks = [Task(key, cell.label, render_cell_task, (cell, *shared, entry if executor.local else None))
@@ -323,10 +322,16 @@ def experiment_results(out: Path, scene: Scene, reference: Reference,
     there as ``summary.csv`` (not when nothing ran): every experiment's summary.csv is written here.
 
     ``time_basis`` (wall or cpu; default: the one experiment.json records, else wall) is the clock the
-    summary's time-derived figures read; the returned config holds the one used."""
+    summary's time-derived figures read; the returned config holds the one used. Results without that
+    column (CPU times of an older run) get it as NaN, with a warning: never wall time passed off as CPU."""
     config, runs = load_results(out)
     basis = time_basis or config.get("time_basis", "wall")
     config = {**config, "time_basis": basis}
+    column = timing_stats.TIME_BASES[basis]
+    if basis != "wall" and (column not in runs or not runs[column].notna().any()):  # no CPU times: NaN, said
+        logging.getLogger(__name__).warning("--time-basis %s: %s holds no %s; time-derived figures are NaN",
+                                            basis, out, column)
+        runs = runs.assign(**{column: math.nan})
     images = final_images(out, runs)
     targets = [tuple(t) for t in config.get("targets", convergence.DEFAULT_TARGETS)]
     summary = summary_table(runs, images, reference, scene, targets, config.get("deterministic", ()),
