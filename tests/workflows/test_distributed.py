@@ -276,6 +276,22 @@ def test_killed_worker_loses_no_cell_and_duplicates_none(cluster, workdir, small
     assert sorted(p.name for p in (out / "cells").iterdir()) == [f"logged-noise__seed{s}.parquet" for s in seeds]
 
 
+def test_repeats_on_the_cluster_are_stored_and_not_redone(cluster, workdir, small_scene):
+    """--time-repeats on workers: every cell's final checkpoint gets its K timings (in the scheduler's order),
+    the images repeat bit for bit, and the same run again submits nothing."""
+    out, scene = workdir / "repeats", small_scene
+    with open_executor(scheduler=cluster.address) as executor:
+        table = run_experiment(out, scene, load_reference(scene), resolve(["tests.user_renderers:Clocked"]), [1, 4],
+                               SEEDS, executor=executor, time_repeats=3)
+        repeats = []
+        run_experiment(out, scene, load_reference(scene), resolve(["tests.user_renderers:Clocked"]), [1, 4], SEEDS,
+                       executor=executor, time_repeats=3, on_repeat=lambda name, stored: repeats.append(stored))
+    top = table[table["spp"] == 4]
+    assert (top["time_repeats"] == 3).all() and (table[table["spp"] == 1]["time_repeats"] == 1).all()
+    assert top["time_samples_s"].tolist() == ["[0.5, 0.5, 0.5]"] * len(SEEDS)  # Clocked's own clock
+    assert "info_repeat_images_differ" not in table and repeats == [True] * 2 * len(SEEDS)
+
+
 def test_task_that_raises_is_retried_then_recorded_and_the_rest_go_on(cluster, workdir):
     """A task that raises on a worker is tried 1 + DEFAULT_RETRIES times, then ends with its reason; the others
     finish."""
