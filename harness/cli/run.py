@@ -145,7 +145,7 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
     report = write_compare_outputs(out, sc, ref, records, command_line(), sections=sections, title=title,
                                    time_basis=time_basis, time_repeats=repeats)
     if not as_json:
-        typer.echo(compare_table([r.row() for r in records]))
+        typer.echo(compare_table([r.row() for r in records], time_basis))
         for r in records:
             if r.status != "ok":
                 typer.echo(f"{r.renderer}: {r.status}: {r.reason}")
@@ -153,25 +153,26 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
     return (1 if any(r.status == "failed" for r in records) else 0), records, sc, ref
 
 
-def compare_table(rows: list[dict]) -> str:
+def compare_table(rows: list[dict], time_basis: str = "wall") -> str:
     """The table ``cbox compare`` prints: per renderer its status, spp, time and scores; an spp chosen for a
     time budget and a time taken more than once show their 95% intervals, ``412 [380, 440]``, with a line
-    saying what they are."""
+    saying what they are. With the cpu ``time_basis``, CPU time (``cpu_time_s``) beside wall time."""
     import pandas as pd
 
     frame = pd.DataFrame(rows)
-    cols = [c for c in ("renderer", "status", "spp", "time_s", *TABLE_METRICS, "info_target_reached") if c in frame]
+    times = ("time_s", "cpu_time_s") if time_basis == "cpu" else ("time_s",)
+    cols = [c for c in ("renderer", "status", "spp", *times, *TABLE_METRICS, "info_target_reached") if c in frame]
     shown = frame[cols].copy()
     notes = []
     if "info_spp_low" in frame and frame["info_spp_low"].notna().any():
         shown["spp"] = [_with_interval(s, lo, hi, "{:.0f}") for s, lo, hi in
                         zip(frame["spp"], frame["info_spp_low"], frame["info_spp_high"])]
         notes.append("spp [95% interval of what the time budget buys, from its calibration rounds]")
-    if "time_s_low" in frame and frame["time_s_low"].notna().any():
-        shown["time_s"] = [_with_interval(t, lo, hi, "{:.3g}") for t, lo, hi in
-                           zip(frame["time_s"], frame["time_s_low"], frame["time_s_high"])]
-        k = int(frame["time_repeats"].max())
-        notes.append(f"time_s: median of {k} timings [95% interval]")
+    for col in times:
+        if col in frame and f"{col}_low" in frame and frame[f"{col}_low"].notna().any():
+            shown[col] = [_with_interval(t, lo, hi, "{:.3g}") for t, lo, hi in
+                          zip(frame[col], frame[f"{col}_low"], frame[f"{col}_high"])]
+            notes.append(f"{col}: median of {int(frame['time_repeats'].max())} timings [95% interval]")
     return shown.to_string(index=False) + "".join(f"\n{n}" for n in notes)
 
 

@@ -87,3 +87,22 @@ def test_cpu_basis_is_recorded_for_the_report(tmp_path, capsys, log):
     assert json.loads((tmp_path / "experiment.json").read_text())["time_basis"] == "cpu"
     assert row["info_time_budget_basis"] in ("cpu", "wall (no CPU time recorded)")
     assert row["info_spp_low"] is None and row["time_repeats"] == 1
+
+
+def test_compare_table_shows_cpu_time_with_the_cpu_basis():
+    """With CPU times in the rows (the capture of issue 30 records them), --time-basis cpu prints them beside
+    wall time, each with its interval; a renderer that did not run shows NaN, not an interval."""
+    from harness.cli.run import compare_table
+
+    nan = float("nan")
+    rows = [{"renderer": "a", "status": "ok", "spp": 28, "time_s": 2.0, "time_s_low": 1.5, "time_s_high": 2.5,
+             "time_repeats": 3, "cpu_time_s": 3.9, "cpu_time_s_low": 3.5, "cpu_time_s_high": 4.2,
+             "info_spp_low": 21, "info_spp_high": 37},
+            {"renderer": "b", "status": "unavailable", "spp": 64, "time_s": None, "time_s_low": nan,
+             "time_s_high": nan, "time_repeats": 0, "cpu_time_s": None, "cpu_time_s_low": nan,
+             "cpu_time_s_high": nan, "info_spp_low": None, "info_spp_high": None}]
+    cpu = compare_table(rows, "cpu").splitlines()
+    assert cpu[1].split() == ["a", "ok", "28", "[21,", "37]", "2", "[1.5,", "2.5]", "3.9", "[3.5,", "4.2]"]
+    assert cpu[2].split() == ["b", "unavailable", "64", "NaN", "NaN"]
+    assert "cpu_time_s: median of 3 timings [95% interval]" in cpu
+    assert "cpu_time_s" not in compare_table(rows)
