@@ -106,3 +106,15 @@ def test_compare_table_shows_cpu_time_with_the_cpu_basis():
     assert cpu[2].split() == ["b", "unavailable", "64", "NaN", "NaN"]
     assert "cpu_time_s: median of 3 timings [95% interval]" in cpu
     assert "cpu_time_s" not in compare_table(rows)
+
+
+def test_target_error_retimes_the_render_that_reached_it(tmp_path, capsys, log):
+    """--target-error: the doublings run once, then the last render (here at --max-spp: noise never reaches
+    ΔE 0.001) is timed twice more, by default; its time is the median of the three."""
+    code, out, err = cbox(capsys, "compare", "-s", "furnace", *JITTERY[:2], "--target-error",
+                          "delta_e2000_mean=0.001", "--max-spp", "4", "--json", "--out", str(tmp_path))
+    assert code == 0, err
+    (row,) = [json.loads(line) for line in out.splitlines()]
+    assert log() == [("jittery", "1"), ("jittery", "2"), ("jittery", "4"), ("jittery", "4"), ("jittery", "4")]
+    assert row["spp"] == 4 and row["info_target_reached"] is False and row["time_repeats"] == 3
+    assert row["time_s"] == sorted(row["time_samples_s"])[1]
