@@ -329,3 +329,46 @@ class SeededShrinkingBias(FlatGrey):
         own = np.random.default_rng([seed, settings["photons"]]).normal(0.0, 0.001)
         scale = 1.0 + settings["offset"] + 1.0 / settings["photons"] + shared + own
         return RenderResult((load_reference(scene).image * scale).astype(np.float32), 0.01, spp, seed)
+
+
+class Jittery(Clocked):
+    """Clocked whose clock runs slow or fast by turns: each pair of renders (a time budget's 1-spp and 4-spp
+    calibration) reads FACTORS[k % 3] times Clocked's time, k counting pairs; the image is Clocked's, the same
+    for the same seed. Each render appends "NAME SPP SEED" to $CBOX_TEST_RENDER_LOG when it is set (the order
+    renderers ran in). Repeated timings then spread, exactly, whatever the machine's load. ``calls`` counts
+    renders per class (reset it in an in-process test)."""
+
+    name = "jittery"
+    FACTORS = (1.0, 1.25, 0.8)
+    calls = 0
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        import os
+
+        result = super().render(scene, spp, seed, checkpoints)
+        result.time_s *= self.FACTORS[(type(self).calls // 2) % 3]
+        type(self).calls += 1
+        if log := os.environ.get("CBOX_TEST_RENDER_LOG"):
+            with open(log, "a") as f:
+                f.write(f"{self.name} {spp} {seed}\n")
+        return result
+
+
+class JitteryToo(Jittery):
+    """A second Jittery, with a count of its own: two renderers whose interleaving a test can read."""
+
+    name = "jittery-too"
+    calls = 0
+
+
+class Unrepeatable(SeededNoise):
+    """Seeded noise that is not repeatable: each render draws from a new seed (the seed plus a call count)."""
+
+    name = "unrepeatable"
+    calls = 0
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        type(self).calls += 1
+        result = super().render(scene, spp, seed + 1000 * type(self).calls, checkpoints)
+        result.seed = seed
+        return result

@@ -10,8 +10,8 @@ import typer
 from harness.adapters.api import attribute
 from harness.adapters.registry import missing_features, resolve
 from harness.cli.common import (DashboardOpt, Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SchedulerOpt,
-                                SetOpt, TitleOpt, WorkersOpt, app, command_line, executor_for, info,
-                                out_folder_option, print_json)
+                                SetOpt, TimeBasisOpt, TitleOpt, WorkersOpt, app, command_line, executor_for, info,
+                                out_folder_option, print_json, time_basis_option, time_repeats_option)
 from harness.scenes.library import resolve_scene
 from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results
 from harness.store.references import load_reference
@@ -52,6 +52,10 @@ def converge(
     workers: Optional[int] = WorkersOpt,
     scheduler: Optional[str] = SchedulerOpt,
     dashboard: Optional[str] = DashboardOpt,
+    time_repeats: Optional[int] = time_repeats_option(
+        "default 1; here the final checkpoint of each renderer and seed, after all cells, in rounds over them; "
+        "on Dask in the scheduler's order; a rerun keeps the repeats done"),
+    time_basis: str = TimeBasisOpt,
 ) -> None:
     """Convergence experiment: every metric at every spp checkpoint, per renderer and seed.
 
@@ -85,7 +89,8 @@ def converge(
     if sweep:
         entries = sweep_entries(entries, *parse_sweep(sweep))
     with executor_for(workers, scheduler, dashboard) as executor:
-        runs, report = run_convergence(out, sc, ref, entries, spps, seeds, targets, title=title, executor=executor)
+        runs, report = run_convergence(out, sc, ref, entries, spps, seeds, targets, title=title, executor=executor,
+                                       time_repeats=time_repeats or 1, time_basis=time_basis)
     if as_json:
         _print_json(out, report, runs)
     else:
@@ -95,10 +100,11 @@ def converge(
 
 
 def run_convergence(out: Path, sc, ref, entries, spps: list[int], seeds: int, targets=None, title: str | None = None,
-                    sections=(), executor=None):
+                    sections=(), executor=None, time_repeats: int = 1, time_basis: str = "wall"):
     """Run (or resume) a convergence experiment with progress, then write its report: (runs, report path).
 
-    ``executor``: where the cells render (:mod:`harness.workflows.executor`; default in this process)."""
+    ``executor``: where the cells render (:mod:`harness.workflows.executor`; default in this process);
+    ``time_repeats``: timings of each cell's final checkpoint; ``time_basis``: the clock of the summary."""
     from harness.evaluate.convergence import DEFAULT_TARGETS
     from harness.workflows.converge import experiment_results, run_experiment
     from reports.experiment import write_experiment_report
@@ -106,13 +112,19 @@ def run_convergence(out: Path, sc, ref, entries, spps: list[int], seeds: int, ta
     runnable = [e for e in entries if e.available and not missing_features(e.renderer, sc)]
     cells = sum(1 if attribute(e.renderer, "deterministic") else seeds for e in runnable)
     failed: set[str] = set()
-    with Progress(cells, f"converge {sc.name}", "cell", slots=getattr(executor, "slots", 1)) as bar:
+    # With repeats a unit is one timing: a cell's first, then each repeat of its final checkpoint.
+    with Progress(cells * time_repeats, f"converge {sc.name}", "cell" if time_repeats == 1 else "timing",
+                  slots=getattr(executor, "slots", 1)) as bar:
         def on_cell(name: str, cached: bool) -> None:  # name: a cell's file stem, pathtracer__seed2
             bar.advance(name.replace("__seed", " seed "), stored=cached, failed=name in failed)
 
+        def on_repeat(name: str, cached: bool) -> None:
+            bar.advance(f"{name.replace('__seed', ' seed ')} repeat", stored=cached)
+
         runs = run_experiment(out, sc, ref, entries, spps, list(range(seeds)), command_line(), on_cell=on_cell,
                               targets=targets or DEFAULT_TARGETS, executor=executor,
-                              on_failed=lambda name, reason: failed.add(name))
+                              on_failed=lambda name, reason: failed.add(name), time_repeats=time_repeats,
+                              time_basis=time_basis, on_repeat=on_repeat)
     results = experiment_results(out, sc, ref, summary_dir=out)
     return runs, write_experiment_report(out, sc, ref, results=results, title=title, sections=sections)
 
@@ -199,6 +211,9 @@ def report(
     label: Optional[List[str]] = typer.Option(None, "--label", help="Name of each experiment in the report, one "
                                                                     "per DIR in order (default: the folder's name); "
                                                                     "a renderer name two DIRs share gets it too."),
+    time_basis: Optional[str] = time_basis_option(
+        None, "The clock time-derived figures read: wall (time_s) or cpu (cpu_time_s). Default: the one each "
+              "experiment was run with (its experiment.json), else wall."),
 ) -> None:
     """Rebuild a report from stored results, without rendering: DIR/report.html (and summary.csv).
 
@@ -214,13 +229,14 @@ def report(
     checked = [(folder, _checked_scene(folder, overrides)) for folder in folders]
     if len(folders) == 1:
         (folder, sc), ref = checked[0], load_reference(checked[0][1])
-        results = experiment_results(folder, sc, ref, summary_dir=out or folder)
+        results = experiment_results(folder, sc, ref, summary_dir=out or folder, time_basis=time_basis)
         path = write_experiment_report(folder, sc, ref, results=results, title=title, labels=label or (),
                                        report_dir=out)
     else:
         from reports.merge import write_merged_report
 
         refs = [load_reference(sc) for _, sc in checked]
-        path = write_merged_report(out, [(name, folder, sc, ref, experiment_results(folder, sc, ref))
+        path = write_merged_report(out, [(name, folder, sc, ref, experiment_results(folder, sc, ref,
+                                                                                    time_basis=time_basis))
                                          for name, (folder, sc), ref in zip(labels, checked, refs)], title=title)
     info(f"report: {path}")

@@ -10,8 +10,9 @@ import typer
 
 from harness.adapters.registry import RendererError, missing_features, resolve
 from harness.adapters.settings import canonical
-from harness.cli.common import (Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt, TitleOpt, app,
-                                check_output_file, command_line, info, out_folder_option)
+from harness.cli.common import (Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt,
+                                TimeBasisOpt, TitleOpt, app, check_output_file, command_line, info,
+                                out_folder_option, time_repeats_option)
 from harness.scenes.library import resolve_scene
 from harness.store.exr import write_exr
 from harness.store.image_files import SPP_ATTRIBUTE
@@ -70,22 +71,33 @@ def render(
     info(f"wrote {variance_out} (per-pixel variance of the image's mean)")
 
 
-def write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(), title=None) -> Path:
+def write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(), title=None,
+                          time_basis: str = "wall", time_repeats: int = 1) -> Path:
     """Store a comparison as an experiment folder (results, images, CSV/JSON) and build its report."""
     from harness.workflows.compare import store_comparison
     from harness.workflows.converge import experiment_results
     from reports.experiment import write_experiment_report
 
-    store_comparison(out, sc, records, command)
+    store_comparison(out, sc, records, command, time_basis, time_repeats)
     results = experiment_results(out, sc, ref, summary_dir=out)
     return write_experiment_report(out, sc, ref, results=results, sections=sections, title=title)
 
 
+def default_time_repeats(time_budget, target_error) -> int:
+    """``--time-repeats`` when not given: 3 for an equal-time or equal-quality comparison (the time is the
+    result), 1 for a plain one at --spp (issue 30)."""
+    return 3 if time_budget or target_error else 1
+
+
 def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool,
                  time_budget: Optional[str] = None, target_error: Optional[str] = None, max_spp: int = 4096,
-                 sections=(), overrides: Optional[List[str]] = None,
-                 title: Optional[str] = None) -> tuple[int, list, object, object]:
-    """Compare renderers on one scene, write its folder and report; (exit code, run records, scene, reference)."""
+                 sections=(), overrides: Optional[List[str]] = None, title: Optional[str] = None,
+                 time_repeats: Optional[int] = None, time_basis: str = "wall") -> tuple[int, list, object, object]:
+    """Compare renderers on one scene, write its folder and report; (exit code, run records, scene, reference).
+
+    With ``time_budget`` each renderer's spp comes from calibration renders, ``time_repeats`` rounds of them
+    interleaved over the renderers; every final render is then timed ``time_repeats`` times in all, in rounds
+    interleaved over the renderers too (:func:`harness.workflows.compare.retime`)."""
     from harness.evaluate.convergence import parse_target
     from harness.workflows import compare as cmp
     from harness.workflows import runner
@@ -96,40 +108,83 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
         target = parse_target(target_error) if target_error else None
     except ValueError as e:
         raise typer.BadParameter(str(e)) from None
+    repeats = time_repeats or default_time_repeats(budget, target)
     sc = resolve_scene(scene, overrides)
     ref = load_reference(sc)
     entries = resolve(renderer)
+    runnable = [e.available and not missing_features(e.renderer, sc) for e in entries]
     mode = f"{budget:g} s each" if budget else f"to {target[0]}<={target[1]:g}" if target else f"{spp} spp"
-    bar = Progress(len(entries), f"{sc.name} @ {mode}", "run")
+    calibrations = 2 * repeats * sum(runnable) if budget else 0
+    bar = Progress(calibrations + len(entries) + (repeats - 1) * sum(runnable), f"{sc.name} @ {mode}", "render")
+    choices = iter(cmp.calibrate_time_budget([e for e, ok in zip(entries, runnable) if ok], sc, budget, seed,
+                                             repeats, time_basis, on_render=bar.advance) if budget else ())
     records = []
-    for entry in entries:
+    for entry, ok in zip(entries, runnable):
         bar.start(entry.name)
-        runnable = entry.available and not missing_features(entry.renderer, sc)
-        if budget and runnable:
-            rec = runner.run_one(entry, sc, cmp.spp_for_time_budget(entry, sc, budget, seed), seed, ref)
-            rec.info["time_budget_s"] = budget
-        elif target and runnable:
+        if budget and ok:
+            choice = next(choices)
+            if isinstance(choice, Exception):
+                rec = runner.RunRecord.new(sc, entry, 1, seed)
+                rec.status, rec.reason = "failed", f"time budget calibration: {type(choice).__name__}: {choice}"
+            else:
+                rec = runner.run_one(entry, sc, choice.spp, seed, ref)
+                choice.record_in(rec.info, budget)
+        elif target and ok:
             rec = cmp.render_to_target(entry, sc, ref, target[0], target[1], seed, max_spp)
         else:
             rec = runner.run_one(entry, sc, spp, seed, ref)
         records.append(rec)
         bar.advance(f"{rec.renderer} {rec.status}")
-        if as_json:
+        if as_json and repeats == 1:  # as it finishes; with repeats, once they are all in
+            bar.write(json.dumps(runner.json_record(rec), allow_nan=False))
+    cmp.retime(entries, records, sc, repeats, on_render=bar.advance)
+    if as_json and repeats > 1:
+        for rec in records:
             bar.write(json.dumps(runner.json_record(rec), allow_nan=False))
     bar.close()
-    report = write_compare_outputs(out, sc, ref, records, command_line(), sections=sections, title=title)
+    report = write_compare_outputs(out, sc, ref, records, command_line(), sections=sections, title=title,
+                                   time_basis=time_basis, time_repeats=repeats)
     if not as_json:
-        import pandas as pd
-
-        frame = pd.DataFrame([r.row() for r in records])
-        cols = [c for c in ("renderer", "status", "spp", "time_s", *TABLE_METRICS, "info_target_reached")
-                if c in frame]
-        typer.echo(frame[cols].to_string(index=False))
+        typer.echo(compare_table([r.row() for r in records], time_basis))
         for r in records:
             if r.status != "ok":
                 typer.echo(f"{r.renderer}: {r.status}: {r.reason}")
     info(f"report: {report}")
     return (1 if any(r.status == "failed" for r in records) else 0), records, sc, ref
+
+
+def compare_table(rows: list[dict], time_basis: str = "wall") -> str:
+    """The table ``cbox compare`` prints: per renderer its status, spp, time and scores; an spp chosen for a
+    time budget and a time taken more than once show their 95% intervals, ``412 [380, 440]``, with a line
+    saying what they are. With the cpu ``time_basis``, CPU time (``cpu_time_s``) beside wall time."""
+    import pandas as pd
+
+    frame = pd.DataFrame(rows)
+    times = ("time_s", "cpu_time_s") if time_basis == "cpu" else ("time_s",)
+    cols = [c for c in ("renderer", "status", "spp", *times, *TABLE_METRICS, "info_target_reached") if c in frame]
+    shown = frame[cols].copy()
+    notes = []
+    if "info_spp_low" in frame and frame["info_spp_low"].notna().any():
+        shown["spp"] = [_with_interval(s, lo, hi, "{:.0f}") for s, lo, hi in
+                        zip(frame["spp"], frame["info_spp_low"], frame["info_spp_high"])]
+        notes.append("spp [95% interval of what the time budget buys, from its calibration rounds]")
+    for col in times:
+        if col in frame and f"{col}_low" in frame and frame[f"{col}_low"].notna().any():
+            shown[col] = [_with_interval(t, lo, hi, "{:.3g}") for t, lo, hi in
+                          zip(frame[col], frame[f"{col}_low"], frame[f"{col}_high"])]
+            notes.append(f"{col}: median of {int(frame['time_repeats'].max())} timings [95% interval]")
+    return shown.to_string(index=False) + "".join(f"\n{n}" for n in notes)
+
+
+def _with_interval(value, low, high, fmt: str) -> str:
+    """``412 [380, 440]``; the value alone where there is no interval (one timing, a run that did not run)."""
+    import math
+
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "NaN"
+    if low is None or high is None or math.isnan(float(low)) or math.isnan(float(high)):
+        return fmt.format(value)
+    return f"{fmt.format(value)} [{fmt.format(low)}, {fmt.format(high)}]"
 
 
 @app.command()
@@ -144,14 +199,19 @@ def compare(
                                                                "results.parquet and the images."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON record per run on stdout."),
     time_budget: Optional[str] = typer.Option(
-        None, "--time-budget", help="Equal-time mode: every renderer gets this wall time (e.g. 10s, 2m); "
-                                    "its spp is chosen from two short calibration renders and reported. "
-                                    "Overrides --spp."),
+        None, "--time-budget", help="Equal-time mode: every renderer gets this time (e.g. 10s, 2m; wall seconds, "
+                                    "CPU seconds with --time-basis cpu); its spp is chosen from two short "
+                                    "calibration renders (1 and 4 spp), --time-repeats rounds of them "
+                                    "interleaved over the renderers, and reported with a 95% interval "
+                                    "(info_spp_low/high). Overrides --spp."),
     target_error: Optional[str] = typer.Option(
         None, "--target-error", help="Equal-quality mode: METRIC=VALUE (e.g. delta_e2000_mean=1, rel_mse=1e-3; "
                                      "a bare number means ΔE mean). Each renderer renders at 1, 2, 4, ... spp "
-                                     "until the metric is at most VALUE and reports the time it needed."),
+                                     "until the metric is at most VALUE and reports the time it needed (that "
+                                     "render timed --time-repeats times)."),
     max_spp: int = typer.Option(4096, "--max-spp", min=1, help="Upper spp limit of --target-error."),
+    time_repeats: Optional[int] = time_repeats_option("default 3 with --time-budget or --target-error, else 1"),
+    time_basis: str = TimeBasisOpt,
     title: Optional[str] = TitleOpt,
 ) -> None:
     """Render with each renderer, score against the scene's reference, write a report.
@@ -162,7 +222,8 @@ def compare(
     if time_budget and target_error:
         raise typer.BadParameter("give --time-budget or --target-error, not both")
     raise typer.Exit(_run_compare(scene, renderer, spp, seed, out, as_json, time_budget, target_error, max_spp,
-                                  overrides=overrides, title=title)[0])
+                                  overrides=overrides, title=title, time_repeats=time_repeats,
+                                  time_basis=time_basis)[0])
 
 
 #: The scenes of ``cbox demo``: a convergence run on the first, whose report leads; each other one is a

@@ -23,6 +23,7 @@ import numpy as np
 from harness.evaluate import metrics
 from harness.evaluate import noise as stats
 from harness.evaluate import regions as named_regions
+from harness.evaluate import timing_stats
 from harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, attribute
 from harness.adapters.registry import RendererEntry, estimator_of, missing_features
 from harness.adapters.settings import canonical
@@ -65,6 +66,9 @@ class RunRecord:
     image: np.ndarray | None = field(default=None, repr=False)
     variance: np.ndarray | None = field(default=None, repr=False)  # of the image, when the renderer gives it
     checkpoints: list = field(default_factory=list, repr=False)  # harness.adapters.api.Checkpoint
+    # (wall, CPU or None) of each timing of this render when it was re-timed (--time-repeats); time_s is then
+    # their median (harness.evaluate.timing_stats). Empty: the one timing time_s.
+    time_samples: list = field(default_factory=list, repr=False)
 
     @classmethod
     def new(cls, scene: Scene, entry: RendererEntry, spp: int, seed: int, **fields) -> "RunRecord":
@@ -112,11 +116,14 @@ class RunRecord:
             out["efficiency"] = 1.0 / (self.metrics["mse"] * self.time_s) if self.metrics["mse"] > 0 else math.inf
         for k, v in self.info.items():
             out[f"info_{k}"] = v if isinstance(v, (str, int, float, bool)) or v is None else json.dumps(v)
+        timings = self.time_samples or ([(self.time_s, getattr(self, "cpu_time_s", None))]
+                                        if self.time_s is not None else [])
+        out.update(timing_stats.repeat_columns([w for w, _ in timings], [c for _, c in timings]))
         return out
 
 
 #: Fields a results row holds as JSON text (a table cell is a scalar); objects again in JSON output.
-JSON_TEXT_FIELDS = ("settings", "scene_settings", "approximations")
+JSON_TEXT_FIELDS = ("settings", "scene_settings", "approximations", "time_samples_s", "cpu_time_samples_s")
 
 
 def json_row(row: dict) -> dict:

@@ -32,7 +32,9 @@ from harness.workflows.reference_build import build_reference  # noqa: E402
 DASK = Path(sys.executable).parent / "dask"
 #: Measured (times), or where the cell ran (its threads, how Mitsuba found LLVM there): the only columns
 #: allowed to differ between backends.
-RUN_COLUMNS = ["time_s", "efficiency", "info_setup_s", "info_threads", "info_variant_note"]
+RUN_COLUMNS = ["time_s", "efficiency", "info_setup_s", "info_threads", "info_variant_note",
+               # the timings behind time_s (harness.evaluate.timing_stats.repeat_columns)
+               "time_samples_s", "time_s_low", "time_s_high", "cpu_time_samples_s", "cpu_time_s_low", "cpu_time_s_high"]
 #: Ours, built on Embree in the worker, and a user's renderer loaded there by module:Class (cheap: Mitsuba, whose
 #: import and JIT cost seconds per worker, renders the reference batches and a gate expectation below).
 RENDERERS = ["pathtracer", "tests.user_renderers:SeededNoise"]
@@ -272,6 +274,22 @@ def test_killed_worker_loses_no_cell_and_duplicates_none(cluster, workdir, small
     assert not stored.duplicated(["renderer", "seed", "spp"]).any()
     assert sorted(zip(stored["seed"], stored["spp"])) == [(s, 1) for s in seeds]
     assert sorted(p.name for p in (out / "cells").iterdir()) == [f"logged-noise__seed{s}.parquet" for s in seeds]
+
+
+def test_repeats_on_the_cluster_are_stored_and_not_redone(cluster, workdir, small_scene):
+    """--time-repeats on workers: every cell's final checkpoint gets its K timings (in the scheduler's order),
+    the images repeat bit for bit, and the same run again submits nothing."""
+    out, scene = workdir / "repeats", small_scene
+    with open_executor(scheduler=cluster.address) as executor:
+        table = run_experiment(out, scene, load_reference(scene), resolve(["tests.user_renderers:Clocked"]), [1, 4],
+                               SEEDS, executor=executor, time_repeats=3)
+        repeats = []
+        run_experiment(out, scene, load_reference(scene), resolve(["tests.user_renderers:Clocked"]), [1, 4], SEEDS,
+                       executor=executor, time_repeats=3, on_repeat=lambda name, stored: repeats.append(stored))
+    top = table[table["spp"] == 4]
+    assert (top["time_repeats"] == 3).all() and (table[table["spp"] == 1]["time_repeats"] == 1).all()
+    assert top["time_samples_s"].tolist() == ["[0.5, 0.5, 0.5]"] * len(SEEDS)  # Clocked's own clock
+    assert "info_repeat_images_differ" not in table and repeats == [True] * 2 * len(SEEDS)
 
 
 def test_task_that_raises_is_retried_then_recorded_and_the_rest_go_on(cluster, workdir):

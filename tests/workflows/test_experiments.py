@@ -116,6 +116,9 @@ def test_equal_time_mode_reports_spp_and_respects_the_budget(tmp_path):
     assert set(recs) == {"pathtracer", "mitsuba", "clocked"}, list(recs)
     for r in recs.values():
         assert r["status"] == "ok" and r["spp"] >= 1 and r["info_time_budget_s"] == 2.0 and r["time_s"] > 0, r
+        # By default three calibration rounds and three timings: medians with their intervals (whatever the load).
+        assert r["time_repeats"] == 3 and len(r["time_samples_s"]) == 3, r
+        assert r["time_s_low"] <= r["time_s"] <= r["time_s_high"] and r["info_spp_low"] <= r["spp"] <= r["info_spp_high"]
     assert recs["clocked"]["spp"] == 28 and recs["clocked"]["time_s"] == 2.0, recs["clocked"]
 
 

@@ -1,0 +1,152 @@
+"""Equal-time comparisons with repeated timings: the spp a budget buys with its interval, calibration and
+repeats interleaved over the renderers, the timing columns, and the CPU time basis. No verdict here reads
+the wall clock: the renderers report clocks of their own (tests.user_renderers.Clocked, Jittery)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from harness.adapters.api import RenderResult
+from harness.adapters.registry import resolve
+from harness.scenes.library import resolve_scene
+from harness.workflows import compare as cmp
+from harness.workflows import runner
+from tests.user_renderers import Jittery, JitteryToo, Unrepeatable
+
+#: Jittery's clock: Clocked's (0.25 s + 1/16 s per spp) times 1, 1.25 and 0.8 by turns of two renders.
+OVERHEAD, PER_SPP = 0.25, 0.0625
+
+
+@pytest.fixture
+def scene():
+    return resolve_scene("cornell-box").with_resolution(8, 8)
+
+
+@pytest.fixture
+def log(tmp_path, monkeypatch):
+    """The order renders ran in, "NAME SPP SEED" per line (Jittery writes it), counts reset."""
+    path = tmp_path / "renders.log"
+    monkeypatch.setenv("CBOX_TEST_RENDER_LOG", str(path))
+    Jittery.calls = JitteryToo.calls = Unrepeatable.calls = 0
+    return lambda: [tuple(line.split()[:2]) for line in path.read_text().splitlines()] if path.exists() else []
+
+
+def _times(factor: float, spp: int) -> float:
+    return factor * (OVERHEAD + PER_SPP * spp)
+
+
+def test_budget_choice_gives_the_spp_of_the_medians_and_an_interval_from_the_rounds():
+    """Three rounds at clock factors 1, 1.25 and 0.8: the median times buy (2 - 0.25) / (1/16) = 28 spp; the
+    rounds alone would buy 28, 21.6 and 36, whose interval (Student-t on log, K = 3) is wider than their range."""
+    factors = (1.0, 1.25, 0.8)
+    choice = cmp.budget_choice([_times(f, 1) for f in factors], [_times(f, 4) for f in factors], 2.0)
+    assert choice.spp == 28 and choice.basis == "wall"
+    assert choice.samples == pytest.approx([28.0, 21.6, 36.0])
+    assert choice.spp_low <= 21 and choice.spp_high >= 36
+    one = cmp.budget_choice([_times(1.0, 1)], [_times(1.0, 4)], 2.0)
+    assert (one.spp, one.spp_low, one.spp_high) == (28, None, None)
+
+
+def test_calibration_rounds_are_interleaved_over_the_renderers(scene, log):
+    """K rounds of (1 spp, 4 spp) per renderer run as A B A B ..., never A A A B B B: load that changes during
+    calibration then hits both alike. Jittery's clock spreads over the rounds, so its spp gets an interval."""
+    entries = resolve(["tests.user_renderers:Jittery", "tests.user_renderers:JitteryToo"])
+    choices = cmp.calibrate_time_budget(entries, scene, 2.0, 0, repeats=3)
+    round_ = [("jittery", "1"), ("jittery", "4"), ("jittery-too", "1"), ("jittery-too", "4")]
+    assert log() == round_ * 3
+    for choice in choices:
+        assert choice.spp == 28 and choice.spp_low <= 21 and choice.spp_high >= 36, choice
+
+
+def test_calibration_failure_is_that_renderers_alone(scene, log):
+    entries = resolve(["tests.user_renderers:Crashes", "tests.user_renderers:Jittery"])
+    crashed, choice = cmp.calibrate_time_budget(entries, scene, 2.0, 0, repeats=3)
+    assert isinstance(crashed, RuntimeError) and choice.spp == 28
+    assert log() == [("jittery", "1"), ("jittery", "4")] * 3
+
+
+def test_repeats_are_interleaved_and_give_the_median_with_its_interval(scene, log):
+    """retime: K timings per record in rounds over the renderers; time_s is their median, the row carries
+    K, the interval and the raw timings; the same seed gives the same image, so nothing is counted as
+    differing."""
+    entries = resolve(["tests.user_renderers:Jittery", "tests.user_renderers:JitteryToo"])
+    records = [runner.run_one(e, scene, 16, 0, None) for e in entries]
+    first_images = [r.image.copy() for r in records]
+    cmp.retime(entries, records, scene, 3)
+    assert log() == [("jittery", "16"), ("jittery-too", "16")] * 3
+    clock = OVERHEAD + PER_SPP * 16  # 1.25 s; Jittery's calls 0, 1, 2 read factors 1, 1, 1.25
+    for rec, image in zip(records, first_images):
+        row = rec.row()
+        samples = json.loads(row["time_samples_s"])
+        assert samples == pytest.approx([clock, clock, 1.25 * clock])
+        assert row["time_repeats"] == 3 and row["time_s"] == pytest.approx(clock, abs=1e-4)
+        assert row["time_s_low"] <= row["time_s"] <= row["time_s_high"] and row["time_s_high"] > 1.25 * clock
+        assert "info_repeat_images_differ" not in row and (rec.image == image).all()
+
+
+def test_one_timing_keeps_the_contract_of_a_row_without_repeats(scene, log):
+    entries = resolve(["tests.user_renderers:Jittery"])
+    records = [runner.run_one(entries[0], scene, 4, 0, None)]
+    cmp.retime(entries, records, scene, 1)
+    row = records[0].row()
+    assert log() == [("jittery", "4")]
+    assert row["time_repeats"] == 1 and math.isnan(row["time_s_low"]) and math.isnan(row["time_s_high"])
+    assert json.loads(row["time_samples_s"]) == [row["time_s"]]
+
+
+def test_a_repeat_whose_image_differs_is_counted_and_the_first_kept(scene, log):
+    (entry,) = resolve(["tests.user_renderers:Unrepeatable"])
+    rec = runner.run_one(entry, scene, 4, 0, None)
+    first = rec.image.copy()
+    cmp.retime([entry], [rec], scene, 3)
+    assert rec.info["repeat_images_differ"] == 2 and (rec.image == first).all()
+    assert rec.row()["time_repeats"] == 3
+
+
+def test_skipped_and_failed_records_are_not_repeated(scene, log):
+    entries = resolve(["tests.user_renderers:Crashes", "tests.user_renderers:Jittery"])
+    records = [runner.run_one(e, scene, 4, 0, None) for e in entries]
+    cmp.retime(entries, records, scene, 2)
+    assert records[0].status == "failed" and records[0].row()["time_repeats"] == 0
+    assert log() == [("jittery", "4")] * 2
+
+
+def _fake_render(wall_per_spp: float, cpu_per_spp: float | None):
+    """A stand-in for the render path that records CPU time (as the capture of issue 30 adds it)."""
+    import numpy as np
+
+    def render(entry, scene, spp, seed, checkpoints=()):
+        image = np.full((scene.camera.height, scene.camera.width, 3), 0.5, np.float32)
+        result = RenderResult(image, OVERHEAD + wall_per_spp * spp, spp, seed)
+        if cpu_per_spp is not None:
+            result.cpu_time_s = OVERHEAD + cpu_per_spp * spp
+        return result
+    return render
+
+
+def test_cpu_basis_spends_the_budget_in_cpu_seconds(scene, monkeypatch):
+    """With --time-basis cpu the calibration reads CPU time: a render whose CPU time per sample is half its
+    wall time (two threads, say) buys twice the samples of a CPU budget; without CPU times it falls back to
+    wall time and says so."""
+    (entry,) = resolve(["tests.user_renderers:Jittery"])
+    monkeypatch.setattr(cmp, "render_checked", _fake_render(PER_SPP, PER_SPP / 2))
+    (wall,) = cmp.calibrate_time_budget([entry], scene, 2.0, 0, repeats=2, basis="wall")
+    (cpu,) = cmp.calibrate_time_budget([entry], scene, 2.0, 0, repeats=2, basis="cpu")
+    assert (wall.spp, wall.basis) == (28, "wall") and (cpu.spp, cpu.basis) == (56, "cpu")
+    monkeypatch.setattr(cmp, "render_checked", _fake_render(PER_SPP, None))
+    (fallback,) = cmp.calibrate_time_budget([entry], scene, 2.0, 0, repeats=2, basis="cpu")
+    assert fallback.spp == 28 and fallback.basis == "wall (no CPU time recorded)"
+
+
+def test_repeats_carry_cpu_time_when_the_render_path_records_it(scene, monkeypatch):
+    (entry,) = resolve(["tests.user_renderers:Jittery"])
+    rec = runner.run_one(entry, scene, 16, 0, None)
+    rec.cpu_time_s = 0.5  # the first render's, as a RunRecord with the capture's columns holds it
+    monkeypatch.setattr(cmp, "render_checked", _fake_render(PER_SPP, PER_SPP / 4))
+    cmp.retime([entry], [rec], scene, 3)
+    row = rec.row()
+    assert json.loads(row["cpu_time_samples_s"]) == [0.5, 0.5, 0.5]
+    assert rec.cpu_time_s == 0.5 and row["cpu_time_s_low"] == row["cpu_time_s_high"] == 0.5
