@@ -11,7 +11,6 @@ the checkpoints a cell lacks. One run at a time writes a folder. Cells
 from __future__ import annotations
 
 import hashlib
-import inspect
 import json
 import logging
 import math
@@ -335,22 +334,11 @@ def experiment_results(out: Path, scene: Scene, reference: Reference,
     images = final_images(out, runs)
     targets = [tuple(t) for t in config.get("targets", convergence.DEFAULT_TARGETS)]
     summary = summary_table(runs, images, reference, scene, targets, config.get("deterministic", ()),
-                            **time_column(summary_table, basis))
+                            time_column=column)
     if summary_dir is not None and not summary.empty:
         with atomic_path(Path(summary_dir) / SUMMARY_FILE) as tmp:
             summary.to_csv(tmp, index=False)
     return ExperimentResults(config, runs, images, summary)
-
-
-def time_column(fn: Callable, basis: str) -> dict:
-    """``{"time_column": ...}`` for ``--time-basis`` ``basis``, for a call of ``fn`` (``summary_table``), where
-    ``fn`` takes it; ``{}`` where it does not yet (then its figures read wall time, and a cpu basis is logged
-    as not applied)."""
-    if "time_column" in inspect.signature(fn).parameters:
-        return {"time_column": timing_stats.TIME_BASES[basis]}
-    if basis != "wall":
-        logging.getLogger(__name__).warning("--time-basis %s: this summary reads wall time only", basis)
-    return {}
 
 
 #: More checkpoints than this is a typo (``1,2,...,100000``), not an experiment; refused before expanding it.

@@ -15,12 +15,12 @@ from tests.user_renderers import Jittery, JitteryToo
 
 @pytest.fixture
 def time_columns(monkeypatch):
-    """The time column each summary was asked to read (summary_table wrapped: it may not take one yet)."""
+    """The time column each summary was asked to read."""
     seen, real = [], converge.summary_table
 
     def summary_table(*args, time_column="time_s", **kwargs):
         seen.append(time_column)
-        return real(*args, **kwargs)
+        return real(*args, time_column=time_column, **kwargs)
 
     monkeypatch.setattr(converge, "summary_table", summary_table)
     return seen

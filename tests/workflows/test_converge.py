@@ -4,7 +4,6 @@ renderers report clocks of their own (tests.user_renderers.Jittery): no verdict 
 
 from __future__ import annotations
 
-import inspect
 import json
 import math
 
@@ -121,8 +120,8 @@ def test_add_timing_to_a_row_written_before_repeats_were_recorded():
 
 
 def test_time_basis_is_recorded_and_reaches_the_summary(tmp_path, cornell, monkeypatch):
-    """experiment.json records --time-basis; experiment_results passes its column to summary_table (where it
-    takes ``time_column``), and an explicit basis (cbox report --time-basis) wins over the recorded one."""
+    """experiment.json records --time-basis; experiment_results passes its column to summary_table, and an
+    explicit basis (cbox report --time-basis) wins over the recorded one."""
     scene, ref = cornell
     out = tmp_path / "exp"
     converge.run_experiment(out, scene, ref, resolve(RENDERERS[:1]), [1], [0], "cbox converge", time_basis="cpu")
@@ -139,19 +138,9 @@ def test_time_basis_is_recorded_and_reaches_the_summary(tmp_path, cornell, monke
     assert converge.experiment_results(out, scene, ref, time_basis="wall").config["time_basis"] == "wall"
     assert seen == ["cpu_time_s", "time_s"]
 
-    def older(runs, images, reference, scene, targets=(), deterministic=()):  # before it took a time column
-        seen.append("called")
-        return pd.DataFrame()
 
-    monkeypatch.setattr(converge, "summary_table", older)
-    converge.experiment_results(out, scene, ref)
-    assert seen[-1] == "called"
-
-
-@pytest.mark.skipif("time_column" not in inspect.signature(converge.summary_table).parameters,
-                    reason="summary_table takes no time_column yet (issue 30, helper 'uncertainty')")
 def test_cpu_basis_summary_reads_cpu_time(tmp_path, cornell):
-    """End to end, once summary_table takes the column: with the cpu basis the efficiency is 1 / (MSE · CPU s)."""
+    """End to end: with the cpu basis the efficiency is 1 / (MSE · CPU s)."""
     scene, ref = cornell
     out = tmp_path / "exp"
     converge.run_experiment(out, scene, ref, resolve(RENDERERS[:1]), [1, 2], [0], "cbox converge", time_basis="cpu")
