@@ -154,13 +154,14 @@ def _print_summary(path: Path) -> None:
     import pandas as pd
 
     from harness.evaluate.regions import REGION_PREFIX
-    from harness.evaluate.summary import region_split
+    from harness.evaluate.summary import region_split, with_intervals
 
     summary = pd.read_csv(path)
     fmt = {"float_format": lambda v: f"{v:.4g}", "index": False}
-    typer.echo(summary[[c for c in summary.columns if not c.startswith(REGION_PREFIX)]].to_string(**fmt))
+    image_wide = summary[[c for c in summary.columns if not c.startswith(REGION_PREFIX)]]
+    typer.echo(with_intervals(image_wide).to_string(**fmt))
     if not (split := region_split(summary)).empty:
-        typer.echo("\nbias² and variance per region:\n" + split.to_string(**fmt))
+        typer.echo("\nbias² and variance per region (95% intervals):\n" + with_intervals(split).to_string(**fmt))
 
 
 def _checked_scene(folder: Path, overrides: Optional[List[str]]):
