@@ -115,5 +115,5 @@ class Film:
         spread = ((means - means.mean(axis=0)) ** 2).sum(axis=0) / (b * (b - 1))
         return spread.reshape(self.shape).astype(np.float32)
 
-    def checkpoint(self, n: int, time_s: float) -> Checkpoint:
-        return Checkpoint(n, self.image(n), time_s, self.aovs(n))
+    def checkpoint(self, n: int, time_s: float, cpu_time_s: float | None = None) -> Checkpoint:
+        return Checkpoint(n, self.image(n), time_s, self.aovs(n), cpu_time_s)
