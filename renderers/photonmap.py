@@ -202,9 +202,13 @@ def build_pass2(geom: SceneGeometry, scene: Scene, seed: int, settings: dict, th
 
 
 def _warm_up(geom: SceneGeometry, scene: Scene) -> None:
-    """Compile (or load from numba's cache) every kernel before the clock starts."""
-    settings = with_defaults(PhotonMapper.settings, {"global_photons": 64, "caustic_photons": 0})
+    """Compile (or load from numba's cache) every kernel before the clock starts: enough photons and paths
+    (64, through the middle row of the image) that the lookups run; with 64 photons and one path they did
+    not, and a process's first render compiled the nearest-site kernel inside its time."""
+    settings = with_defaults(PhotonMapper.settings, {"global_photons": 1024, "caustic_photons": 0})
     p2 = build_pass2(geom, scene, 0, settings, 1)
-    p2.shade(0, 1, 1, independent(0))
+    pixels = scene.camera.width * scene.camera.height
+    middle = pixels // 2 - scene.camera.width // 2
+    p2.shade(middle, min(middle + 64, pixels), pixels, independent(0))
     p2.s = dict(settings, gather_rays=0)
-    p2.shade(0, 1, 1, independent(0))
+    p2.shade(middle, min(middle + 64, pixels), pixels, independent(0))

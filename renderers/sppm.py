@@ -96,8 +96,10 @@ class SPPM(ToolkitRenderer):
             raise ValueError(f"spp must be >= 1, got {spp}")
         s = with_defaults(self.settings, settings)
         threads = self.threads or default_threads()
+        # A warm-up iteration with enough photons that some land near a visible point (with one, none did,
+        # and a process's first render compiled the photon tests inside its time).
         geom, setup_s = warmed_geometry(scene, lambda g: Progress(g, scene, s).iterate(independent(0), independent(0),
-                                                                                       1, photons=1))
+                                                                                       1, photons=256))
         state = Progress(geom, scene, s)
         photons = s["photons_per_iteration"] or state.pixels
         shots, clock = [], Stopwatch()
