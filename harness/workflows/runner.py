@@ -172,6 +172,13 @@ def _threads_of(info: dict) -> int | None:
         return None
 
 
+def rows_frame(records: Sequence["RunRecord"]):
+    """The records' rows as a results table (pandas imported here: the sandbox's child never needs it)."""
+    import pandas as pd
+
+    return pd.DataFrame([r.row() for r in records])
+
+
 #: Fields a results row holds as JSON text (a table cell is a scalar); objects again in JSON output.
 JSON_TEXT_FIELDS = ("settings", "scene_settings", "approximations")
 
