@@ -22,17 +22,22 @@ lives there):
   machine its time changes only when something else holds the core; a
   pure-Python loop (no memory traffic, no library threads) loses time in
   proportion to the share of a core it loses. Measured on the 2-core
-  development machine (docs/timing.md): quiet, median 21.6 ms, but one
-  kernel in ten takes 1.5x that (a neighbour's burst, a virtual machine's
-  stolen tick); beside two CPU burners, median 28-47 ms. The cell's figure
+  development machine (a virtual machine, issue 30): quiet, median 21.6 ms,
+  but one kernel in ten takes 1.5x that (a neighbour's burst, a stolen
+  tick); beside two CPU burners, median 28-47 ms. (Shorter kernels, 1-4 ms,
+  whose median over repeats was tried, mostly run between two preemptions
+  and miss the contention.) The cell's figure
   is the **faster** of the two timings: contention that lasts through the
   cell slows both, while a single preemption at either end (which the
   slower of the two, or the mean, would carry) must not flag a quiet cell
   against :data:`harness.evaluate.timing_quality.SLOWDOWN_LIMIT`; the load
   readings catch the contention itself.
 - **CPU time**: this process's CPU time, all its threads
-  (:func:`time.process_time`), plus its finished children's
-  (:func:`os.times`; a child counts once waited for).
+  (:func:`time.process_time`; Mitsuba's LLVM threads are this process's),
+  plus its finished children's (:func:`os.times`; a child counts once
+  waited for: a command-line renderer's program). Beside two burners on
+  2 cores the renderers' CPU times moved by 1-5% while their wall times
+  doubled (tests/cli/test_contention.py).
   :class:`harness.adapters.api.Stopwatch` gives it for the render proper;
   :func:`measure` gives it for the whole render call, the fallback for a
   renderer that does not report its own.
