@@ -120,13 +120,14 @@ class LuxCore:
     @staticmethod
     def _result(means, record, sizes, spp, seed, checkpoints, threads) -> RenderResult:
         """The image, the variance of its mean and the checkpoints, from the batch means."""
-        shots, done, elapsed = [], 0, 0.0
+        shots, done, elapsed, cpu = [], 0, 0.0, 0.0
         for k, n in enumerate(sizes):
             done += n
             elapsed += record[k]["seconds"]
+            cpu += record[k]["cpu_seconds"]  # the child's CPU time of the batch, all its threads
             if done in checkpoints:
                 image, _ = mean_and_variance(means[:k + 1], sizes[:k + 1])
-                shots.append(Checkpoint(done, image.astype(np.float32), elapsed))
+                shots.append(Checkpoint(done, image.astype(np.float32), elapsed, cpu_time_s=cpu))
         image, variance = mean_and_variance(means, sizes)
         # How far LuxCore's halt missed each batch's spp, per pixel (see the module docstring).
         off = [(r["pixel_samples"][0] - n, r["pixel_samples"][1] - n) for r, n in zip(record, sizes)]
@@ -134,4 +135,4 @@ class LuxCore:
                 "pixel_samples_off": [min(o[0] for o in off), max(o[1] for o in off)],
                 "samples": sum(r["samples"] for r in record)}
         return RenderResult(image.astype(np.float32), elapsed, spp, seed, shots, info,
-                            None if variance is None else variance.astype(np.float32))
+                            None if variance is None else variance.astype(np.float32), cpu_time_s=cpu)

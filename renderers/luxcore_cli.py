@@ -168,10 +168,11 @@ def run(args: argparse.Namespace) -> None:
     means, record = [], []
     for k, n in enumerate(sizes):
         seed = pass_seed(args.seed, k)
-        t0 = time.perf_counter()
+        t0, cpu0 = time.perf_counter(), time.process_time()  # process time: LuxCore's threads included
         mean, counts = render_batch(pyluxcore, props, n, seed, threads)
         means.append(mean)
         record.append({"spp": n, "seed": seed, "seconds": time.perf_counter() - t0,
+                       "cpu_seconds": time.process_time() - cpu0,
                        "pixel_samples": [int(counts.min()), int(counts.max())], "samples": int(counts.sum())})
     mean, variance = mean_and_variance(means, sizes)
     # One line a renderer file's `time` regex can read: the render proper, without start-up and writing.

@@ -33,13 +33,12 @@ import ctypes.util
 import glob
 import os
 import re
-import time
 from functools import cache
 from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.api import AOVS, Checkpoint, RenderResult, pass_seed, spp_passes
+from harness.adapters.api import AOVS, Checkpoint, RenderResult, Stopwatch, pass_seed, spp_passes
 from harness.scenes.export import mitsuba as mitsuba_plugins
 from harness.scenes.export.mitsuba import bsdf_dict
 from harness.scenes.model import Scene
@@ -163,22 +162,45 @@ def scene_dict(scene: Scene, spp: int, sampler: str = "independent", aovs: bool 
 def run_passes(spp: int, seed: int, per_pass: int, checkpoints: Sequence[int], sums, image, aovs=None):
     """Accumulate ``sums(n, pass_seed)`` (a tuple of per-pixel sums over n samples) over the passes of a render.
 
-    Returns (sums over all spp, ``image(sums, spp)``, checkpoints, seconds spent in ``sums``); a checkpoint's
-    image is ``image(sums so far, done)``, its auxiliary images ``aovs(sums so far, done)`` (none if None).
+    Returns (sums over all spp, ``image(sums, spp)``, checkpoints, wall seconds spent in ``sums``, CPU seconds
+    spent in ``sums``, Mitsuba's threads included); a checkpoint's image is ``image(sums so far, done)``, its
+    auxiliary images ``aovs(sums so far, done)`` (none if None).
     """
-    acc, done, elapsed, shots = None, 0, 0.0, []
+    acc, done, elapsed, cpu, shots = None, 0, 0.0, 0.0, []
     for k, n in enumerate(spp_passes(spp, per_pass, checkpoints)):
-        t0 = time.perf_counter()
+        clock = Stopwatch()
         part = sums(n, pass_seed(seed, k))
-        elapsed += time.perf_counter() - t0
+        wall_k, cpu_k = clock.read()
+        elapsed, cpu = elapsed + wall_k, cpu + cpu_k
         acc = part if acc is None else tuple(a + p for a, p in zip(acc, part))
         done += n
         if done in checkpoints and done < spp:
-            shots.append(Checkpoint(done, image(acc, done), elapsed, aovs(acc, done) if aovs else {}))
+            shots.append(Checkpoint(done, image(acc, done), elapsed, aovs(acc, done) if aovs else {}, cpu))
     final = image(acc, spp)
     if spp in checkpoints:
-        shots.append(Checkpoint(spp, final, elapsed, aovs(acc, spp) if aovs else {}))
-    return acc, final, shots, elapsed
+        shots.append(Checkpoint(spp, final, elapsed, aovs(acc, spp) if aovs else {}, cpu))
+    return acc, final, shots, elapsed, cpu
+
+
+#: The kernels this process has compiled (or loaded from Dr.Jit's cache), by (scene content hash, what else
+#: changes the kernel): a render of one of these needs no warm-up.
+_WARM: set = set()
+
+
+def _warm_up(key, sums) -> None:
+    """A 1-spp pass (``sums(1, seed 0)``, thrown away) the first time this process renders ``key``, so that
+    Dr.Jit's tracing and LLVM compilation (or the load from its disk cache: measured 0.24 s for the Cornell
+    box's first 1-spp pass with a cold cache, 0.03 s with a warm one) are set-up, not the render's time."""
+    if key not in _WARM:
+        sums(1, 0)
+        _WARM.add(key)
+
+
+def _threads() -> int:
+    """Threads of Dr.Jit's pool, which renders the LLVM variant (all cores unless set otherwise)."""
+    import drjit as dr
+
+    return int(dr.thread_count())
 
 
 class Mitsuba3:
@@ -211,7 +233,8 @@ class Mitsuba3:
         variant, note = self.variant()
         import mitsuba as mi
 
-        info = {"variant": variant, "variant_note": note}
+        clock = Stopwatch()
+        info = {"variant": variant, "variant_note": note, "threads": _threads()}
         cam = scene.camera
         per_pass = max(1, MAX_SAMPLES_PER_PASS // (cam.width * cam.height))
         if unknown := set(aovs) - set(AOVS):
@@ -220,21 +243,25 @@ class Mitsuba3:
             raise ValueError(f"AOVs are for radiance images; scene {scene.name!r} is {scene.quantity}")
         mi_scene = mi.load_dict(scene_dict(scene, per_pass, aovs=bool(aovs)))
         if scene.quantity == "ambient_occlusion":
-            return self._render_ao(mi_scene, scene, spp, seed, checkpoints, per_pass, info)
+            return self._render_ao(mi_scene, scene, spp, seed, checkpoints, per_pass, info, clock)
 
         def sums(n: int, s: int) -> tuple[np.ndarray]:
             return (np.asarray(mi.render(mi_scene, spp=n, seed=s), dtype=np.float64) * n,)
 
+        _warm_up((scene.content_hash(), bool(aovs)), sums)
+        info["setup_s"] = round(clock.wall(), 3)  # scene load and warm-up, outside time_s
+
         def aux(acc, n: int) -> dict:
             return {name: (acc[0][..., 3 + 3 * j:6 + 3 * j] / n).astype(np.float32) for j, name in enumerate(AOVS)}
 
-        acc, image, shots, elapsed = run_passes(spp, seed, per_pass, checkpoints, sums,
-                                                lambda acc, n: (acc[0][..., :3] / n).astype(np.float32),
-                                                aux if aovs else None)
-        return RenderResult(image, elapsed, spp, seed, shots, info, aovs=aux(acc, spp) if aovs else {})
+        acc, image, shots, elapsed, cpu = run_passes(spp, seed, per_pass, checkpoints, sums,
+                                                     lambda acc, n: (acc[0][..., :3] / n).astype(np.float32),
+                                                     aux if aovs else None)
+        return RenderResult(image, elapsed, spp, seed, shots, info, aovs=aux(acc, spp) if aovs else {},
+                            cpu_time_s=cpu)
 
     def _render_ao(self, mi_scene, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int], per_pass: int,
-                   info: dict) -> RenderResult:
+                   info: dict, clock: Stopwatch) -> RenderResult:
         """Ambient occlusion (:mod:`renderers.mitsuba_ao`): grey image and the variance of its mean."""
         if info["variant"] == "scalar_rgb":
             raise RuntimeError(f"ambient occlusion needs Mitsuba's llvm_ad_rgb variant: {info['variant_note']}")
@@ -244,8 +271,11 @@ class Mitsuba3:
         def sums(n: int, s: int) -> tuple[np.ndarray, np.ndarray]:
             return mitsuba_ao.ao_pass(mi_scene, scene, maxt, n, s)
 
-        (s1, s2), image, shots, elapsed = run_passes(
+        _warm_up((scene.content_hash(), "ao"), sums)
+        info["setup_s"] = round(clock.wall(), 3)
+
+        (s1, s2), image, shots, elapsed, cpu = run_passes(
             spp, seed, per_pass, checkpoints, sums,
             lambda acc, n: mitsuba_ao.mean_and_variance(acc[0], acc[1], n, shape)[0])
         variance = mitsuba_ao.mean_and_variance(s1, s2, spp, shape)[1]
-        return RenderResult(image, elapsed, spp, seed, shots, info, variance)
+        return RenderResult(image, elapsed, spp, seed, shots, info, variance, cpu_time_s=cpu)

@@ -34,13 +34,12 @@ the gate gives it budgets and a consistency check.
 from __future__ import annotations
 
 import threading
-import time
 from functools import cache
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from harness.adapters.api import AOVS, Checkpoint, RenderResult, Setting, attribute, default_threads
+from harness.adapters.api import AOVS, Checkpoint, RenderResult, Setting, Stopwatch, attribute, default_threads
 from harness.scenes.model import Scene
 
 QUALITIES = ("high", "balanced", "fast")
@@ -181,25 +180,33 @@ class Denoised:
         base_settings = {k: v for k, v in settings.items() if k not in own}
         kwargs = {"settings": base_settings} if attribute(self.base, "settings") else {}
         threads = self.threads or default_threads()
+        warm = Stopwatch()
         _device(threads)  # created and warmed before any timing
+        device_s = warm.wall()
         result = self.base.render(scene, spp, seed, checkpoints, aovs=AOVS if aux != "none" else (), **kwargs)
 
-        def cleaned(image: np.ndarray, aovs: dict) -> tuple[np.ndarray, float]:
-            t0 = time.perf_counter()
+        def cleaned(image: np.ndarray, aovs: dict) -> tuple[np.ndarray, float, float]:
+            clock = Stopwatch()
             out = denoise(image, aovs.get("albedo"), aovs.get("normal"), quality=quality, aux=aux, threads=threads)
-            return out, time.perf_counter() - t0
+            return out, *clock.read()
+
+        def plus(cpu: float | None, more: float) -> float | None:
+            return None if cpu is None else cpu + more
 
         shots = []
         for c in result.checkpoints:
-            image, dt = cleaned(c.image, c.aovs)
-            shots.append(Checkpoint(c.spp, image, c.time_s + dt, c.aovs))
+            image, dt, dcpu = cleaned(c.image, c.aovs)
+            shots.append(Checkpoint(c.spp, image, c.time_s + dt, c.aovs, plus(c.cpu_time_s, dcpu)))
         if shots and shots[-1].spp == spp:
             image, dt = shots[-1].image, shots[-1].time_s - result.checkpoints[-1].time_s
+            dcpu = (shots[-1].cpu_time_s or 0.0) - (result.checkpoints[-1].cpu_time_s or 0.0)
         else:
-            image, dt = cleaned(result.image, result.aovs)
+            image, dt, dcpu = cleaned(result.image, result.aovs)
         info = {**result.info, "denoiser": f"OIDN (quality {quality}, aux {aux})", "denoise_s": round(dt, 4),
-                "denoise_threads": threads, "denoise_determinism": DETERMINISM}
-        return RenderResult(image, result.time_s + dt, spp, seed, shots, info, None, result.aovs)
+                "denoise_threads": threads, "denoise_determinism": DETERMINISM,
+                "setup_s": round(float(result.info.get("setup_s") or 0.0) + device_s, 3)}
+        return RenderResult(image, result.time_s + dt, spp, seed, shots, info, None, result.aovs,
+                            plus(result.cpu_time_s, dcpu))
 
 
 class PathTracerOIDN(Denoised):

@@ -53,12 +53,11 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.api import RenderResult, Setting, default_threads, pass_key
+from harness.adapters.api import RenderResult, Setting, Stopwatch, default_threads, pass_key
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.bsdf import LAMBERT
@@ -113,13 +112,15 @@ class PhotonMapper(ToolkitRenderer):
         s = with_defaults(self.settings, settings)
         threads = self.threads or default_threads()
         geom, setup_s = warmed_geometry(scene, lambda g: _warm_up(g, scene))
-        t0 = time.perf_counter()
+        clock = Stopwatch()
         pass2 = build_pass2(geom, scene, seed, s, threads)
-        photons_s = time.perf_counter() - t0
+        photons_s, photons_cpu = clock.read()
         result = render_image(scene, spp, seed, pass2.shade, checkpoints, threads, sampler=s["sampler"])
         result.time_s += photons_s
+        result.cpu_time_s += photons_cpu
         for c in result.checkpoints:
             c.time_s += photons_s
+            c.cpu_time_s += photons_cpu
         result.info.update(s, photons_s=round(photons_s, 3), setup_s=round(setup_s, 3), rays=geom.rays,
                            global_stored=len(pass2.global_map), global_emitted=pass2.global_map.emitted,
                            caustic_stored=len(pass2.caustic_map), caustic_emitted=pass2.caustic_map.emitted)
@@ -201,9 +202,13 @@ def build_pass2(geom: SceneGeometry, scene: Scene, seed: int, settings: dict, th
 
 
 def _warm_up(geom: SceneGeometry, scene: Scene) -> None:
-    """Compile (or load from numba's cache) every kernel before the clock starts."""
-    settings = with_defaults(PhotonMapper.settings, {"global_photons": 64, "caustic_photons": 0})
+    """Compile (or load from numba's cache) every kernel before the clock starts: enough photons and paths
+    (64, through the middle row of the image) that the lookups run; with 64 photons and one path they did
+    not, and a process's first render compiled the nearest-site kernel inside its time."""
+    settings = with_defaults(PhotonMapper.settings, {"global_photons": 1024, "caustic_photons": 0})
     p2 = build_pass2(geom, scene, 0, settings, 1)
-    p2.shade(0, 1, 1, independent(0))
+    pixels = scene.camera.width * scene.camera.height
+    middle = pixels // 2 - scene.camera.width // 2
+    p2.shade(middle, min(middle + 64, pixels), pixels, independent(0))
     p2.s = dict(settings, gather_rays=0)
-    p2.shade(0, 1, 1, independent(0))
+    p2.shade(middle, min(middle + 64, pixels), pixels, independent(0))

@@ -50,12 +50,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.api import RenderResult, Setting, SettingsError, default_threads, pass_key
+from harness.adapters.api import RenderResult, Setting, SettingsError, Stopwatch, default_threads, pass_key
 from harness.scenes.model import Scene
 from renderers import ddgi
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
@@ -130,14 +129,16 @@ class IrradianceProbes(ToolkitRenderer):
         threads = self.threads or default_threads()
         grid = grid_of(scene, s)
         geom, setup_s = warmed_geometry(scene, lambda g: _warm_up(g, scene, grid, s))
-        t0 = time.perf_counter()
+        clock = Stopwatch()
         volume = update_probes(geom, grid, seed, s, threads)
-        probes_s = time.perf_counter() - t0
+        probes_s, probes_cpu = clock.read()
         result = render_image(scene, spp, seed, CameraPass(geom, scene, volume).trace, checkpoints, threads,
                               sampler=s["sampler"])
         result.time_s += probes_s
+        result.cpu_time_s += probes_cpu
         for c in result.checkpoints:
             c.time_s += probes_s
+            c.cpu_time_s += probes_cpu
         result.info.update(s, probes=int(np.prod(grid.counts)), probe_spacing=grid.spacing.tolist(),
                            probe_origin=grid.origin.tolist(), probes_s=round(probes_s, 3),
                            setup_s=round(setup_s, 3), rays=geom.rays)

@@ -50,13 +50,12 @@ pass is one sequence over its photons.
 from __future__ import annotations
 
 import math
-import time
 from typing import Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from harness.adapters.api import Checkpoint, RenderResult, Setting, default_threads, pass_key
+from harness.adapters.api import Checkpoint, RenderResult, Setting, Stopwatch, default_threads, pass_key
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.geometry import SceneGeometry
@@ -97,24 +96,28 @@ class SPPM(ToolkitRenderer):
             raise ValueError(f"spp must be >= 1, got {spp}")
         s = with_defaults(self.settings, settings)
         threads = self.threads or default_threads()
+        # A warm-up iteration with enough photons that some land near a visible point (with one, none did,
+        # and a process's first render compiled the photon tests inside its time).
         geom, setup_s = warmed_geometry(scene, lambda g: Progress(g, scene, s).iterate(independent(0), independent(0),
-                                                                                       1, photons=1))
+                                                                                       1, photons=256))
         state = Progress(geom, scene, s)
         photons = s["photons_per_iteration"] or state.pixels
-        shots, t0 = [], time.perf_counter()
+        shots, clock = [], Stopwatch()
         for i in range(spp):
             # Iteration i is sample i of each pixel's camera sequence (no batches: SPPM reports no variance).
             state.iterate(pass_stream(s["sampler"], seed, i, state.pixels, i, batches=1),
                           sequence_stream(s["sampler"], pass_key(seed, i, PHOTON_STREAM)), threads, photons)
             if i + 1 in checkpoints and i + 1 < spp:
-                shots.append(Checkpoint(i + 1, state.image(i + 1), time.perf_counter() - t0))
-        elapsed = time.perf_counter() - t0
+                shot = state.image(i + 1)
+                wall, cpu = clock.read()
+                shots.append(Checkpoint(i + 1, shot, wall, cpu_time_s=cpu))
+        elapsed, cpu = clock.read()
         image = state.image(spp)
         if spp in checkpoints:
-            shots.append(Checkpoint(spp, image, elapsed))
+            shots.append(Checkpoint(spp, image, elapsed, cpu_time_s=cpu))
         info = dict(s, threads=threads, setup_s=round(setup_s, 3), rays=geom.rays, photons_per_iteration=photons,
                     initial_radius_world=state.r0, final_radius_median=float(np.median(state.radius)))
-        return RenderResult(image, elapsed, spp, seed, shots, info, None)
+        return RenderResult(image, elapsed, spp, seed, shots, info, None, cpu_time_s=cpu)
 
 
 def pixel_footprint(scene: Scene) -> float:

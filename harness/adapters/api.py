@@ -7,18 +7,19 @@ the harness is here: what it returns (:class:`RenderResult`,
 :class:`Checkpoint`), the auxiliary images it may give (:data:`AOVS`), the
 kinds of estimate it may declare (:data:`ESTIMATORS`), its settings
 (:class:`Setting`, :class:`SettingsError`), the seed and pass helpers every
-renderer shares (:func:`pass_key`, :func:`pass_seed`, :func:`spp_passes`) and
-the thread count (:func:`default_threads`). The harness reads what a
-renderer declares through :func:`attribute` only. Discovery, settings
-resolution and the render path live elsewhere (:mod:`harness.adapters.registry`,
-:mod:`harness.adapters.settings`, :mod:`harness.workflows.render`) and a
-renderer never imports them.
+renderer shares (:func:`pass_key`, :func:`pass_seed`, :func:`spp_passes`), the
+thread count (:func:`default_threads`) and the clock of the render proper
+(:class:`Stopwatch`). The harness reads what a renderer declares through
+:func:`attribute` only. Discovery, settings resolution and the render path
+live elsewhere (:mod:`harness.adapters.registry`, :mod:`harness.adapters.settings`,
+:mod:`harness.workflows.render`) and a renderer never imports them.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import time
 from dataclasses import dataclass, field, fields
 from typing import Any, Mapping, Protocol, Sequence, runtime_checkable
 
@@ -29,8 +30,8 @@ from harness.scenes.model import Scene
 from harness.scenes.quantities import DEFAULT_QUANTITY
 
 __all__ = ["AOVS", "DECLARATIONS", "ESTIMATORS", "THREADS_VARIABLE", "Checkpoint", "Declarations", "ReferenceFit",
-           "RenderResult", "Renderer", "Setting", "SettingsError", "attribute", "default_threads", "machine_cores",
-           "pass_key", "pass_seed", "spp_passes"]
+           "RenderResult", "Renderer", "Setting", "SettingsError", "Stopwatch", "attribute", "default_threads",
+           "machine_cores", "pass_key", "pass_seed", "process_cpu_s", "spp_passes"]
 
 #: Auxiliary images (AOVs) a renderer may return, defined as Intel Open Image Denoise expects them (its
 #: documentation, "RT" filter): the surface seen through each pixel at the first non-delta hit, following
@@ -111,12 +112,14 @@ def _parse_word(text: str) -> Any:
 
 @dataclass
 class Checkpoint:
-    """The image after the first ``spp`` samples per pixel, and the time to get there."""
+    """The image after the first ``spp`` samples per pixel, and the time to get there (wall, and CPU when the
+    renderer measures it: :class:`Stopwatch`)."""
 
     spp: int
     image: np.ndarray
     time_s: float
     aovs: dict = field(default_factory=dict)  # name (AOVS) -> (H, W, 3) float32, when asked for
+    cpu_time_s: float | None = None
 
 
 @dataclass
@@ -125,7 +128,12 @@ class RenderResult:
 
     ``image`` is linear-sRGB radiance, float32, shape (height, width, 3).
     ``time_s`` is wall time of the render proper (scene set-up excluded,
-    JIT compilation included unless the adapter warmed up beforehand).
+    JIT compilation included unless the adapter warmed up beforehand);
+    ``cpu_time_s`` the CPU time of the same span, all threads and children
+    included (:class:`Stopwatch`), None when the renderer does not measure
+    it (the harness then records the CPU time of the whole ``render`` call).
+    ``info["setup_s"]``, when given, is the set-up left out of ``time_s``
+    (scene build, JIT compilation, warm-up): the results' ``setup_s`` column.
     ``info`` carries adapter details worth recording (e.g. Mitsuba's variant).
     ``variance``, when the renderer can give it, is the per-pixel variance of
     ``image`` (of the mean, not of one sample), float32 (height, width, 3).
@@ -140,6 +148,35 @@ class RenderResult:
     info: dict = field(default_factory=dict)
     variance: np.ndarray | None = None
     aovs: dict = field(default_factory=dict)
+    cpu_time_s: float | None = None
+
+
+def process_cpu_s() -> float:
+    """CPU seconds of this process so far: all its threads (:func:`time.process_time`) and its children that
+    have ended and been waited for (:func:`os.times`; a command-line renderer's program, a sandbox)."""
+    t = os.times()
+    return time.process_time() + t.children_user + t.children_system
+
+
+class Stopwatch:
+    """The clock of a render proper: wall time (:func:`time.perf_counter`) and CPU time (:func:`process_cpu_s`)
+    since it was started. Start it where ``time_s`` starts; read both where it ends."""
+
+    def __init__(self):
+        self.start()
+
+    def start(self) -> None:
+        self._wall0, self._cpu0 = time.perf_counter(), process_cpu_s()
+
+    def wall(self) -> float:
+        return time.perf_counter() - self._wall0
+
+    def cpu(self) -> float:
+        return process_cpu_s() - self._cpu0
+
+    def read(self) -> tuple[float, float]:
+        """(wall seconds, CPU seconds) since the start."""
+        return self.wall(), self.cpu()
 
 
 @runtime_checkable

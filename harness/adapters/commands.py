@@ -40,7 +40,10 @@ A render (:class:`CommandRenderer`) exports the scene once, then runs the
 program once per spp asked for: every progress checkpoint is a run of its
 own at that spp and the same seed. A non-zero exit, a missing or unreadable
 image, or one of the wrong size is a :class:`CommandFailed` quoting the tail
-of the program's stderr: a failed run in the results, with the reason. The
+of the program's stderr: a failed run in the results, with the reason. A
+run's ``time_s`` is its wall time (or what ``time`` reads), its
+``cpu_time_s`` the program's CPU time, all its threads and its own children,
+start-up included (the CPU time of the waited-for child, :func:`os.times`). The
 time limit and memory bound are the sandbox's (:mod:`harness.workflows.sandbox`):
 the program runs in the sandbox worker's process group and is killed with it.
 
@@ -68,7 +71,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-from harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, default_threads
+from harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, Stopwatch, default_threads
 from harness.scenes.model import FEATURES, Scene
 from harness.scenes.quantities import DEFAULT_QUANTITY, QUANTITIES
 from harness.suggest import did_you_mean
@@ -312,14 +315,15 @@ class CommandRenderer:
             main = export_scene(scene, d.scene_format, folder / "scene")
             shots = []
             for c in sorted(set(checkpoints) - {spp}):
-                image, _, t = self._run(program, folder, main, scene, c, seed)
-                shots.append(Checkpoint(c, image, t))
-            image, variance, t = self._run(program, folder, main, scene, spp, seed)
+                image, _, t, cpu = self._run(program, folder, main, scene, c, seed)
+                shots.append(Checkpoint(c, image, t, cpu_time_s=cpu))
+            image, variance, t, cpu = self._run(program, folder, main, scene, spp, seed)
         return RenderResult(image, t, spp, seed, shots, {"program": program, "scene_format": d.scene_format},
-                            variance)
+                            variance, cpu_time_s=cpu)
 
     def _run(self, program: str, folder: Path, main: Path, scene: Scene, spp: int, seed: int):
-        """One run at ``spp``: (image, variance or None, seconds)."""
+        """One run at ``spp``: (image, variance or None, seconds, CPU seconds of the program's whole run, its
+        start-up included: the CPU time of the children this process waited for, :class:`Stopwatch`)."""
         d = self.declaration
         cam = scene.camera
         out = folder / f"out-{spp}spp.exr"
@@ -332,10 +336,10 @@ class CommandRenderer:
                 stale.unlink()
         stdout, stderr = folder / f"stdout-{spp}.txt", folder / f"stderr-{spp}.txt"
         with open(stdout, "wb") as o, open(stderr, "wb") as e:
-            t0 = time.perf_counter()
+            clock = Stopwatch()
             # The program stays in this process's group: the sandbox kills the group at its bounds.
             code = subprocess.call(argv, cwd=folder, stdin=subprocess.DEVNULL, stdout=o, stderr=e)
-            wall = time.perf_counter() - t0
+            wall, cpu = clock.read()
 
         def failed(what: str) -> CommandFailed:
             return CommandFailed(f"{d.name} at {spp} spp: {what}; stderr: {_tail(stderr)}")
@@ -345,7 +349,7 @@ class CommandRenderer:
         expected = (cam.height, cam.width, 3)
         image = _read(out, expected, failed, "image")
         var = None if variance is None else _read(variance, expected, failed, "variance image")
-        return image, var, wall if d.time == "wall" else _seconds(d.time, stdout, failed)
+        return image, var, wall if d.time == "wall" else _seconds(d.time, stdout, failed), cpu
 
 
 def _read(path: Path, expected: tuple[int, int, int], failed, what: str):

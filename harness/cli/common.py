@@ -392,6 +392,18 @@ def info(message: str) -> None:
         tqdm.write(message, file=sys.stderr)  # above a live bar, if there is one
 
 
+def warn_contention(runs) -> None:
+    """One warning line on stderr when ``runs`` (a results table) were timed on a busy machine
+    (:func:`harness.evaluate.timing_quality.timing_quality`); nothing when it was quiet or nothing is known.
+    ``--quiet`` drops it with the other remarks: the results alone, whatever the machine's load."""
+    from harness.adapters.api import machine_cores
+    from harness.evaluate.timing_quality import timing_quality
+
+    quality = timing_quality(runs, machine_cores())
+    if quality.known and not quality.ok:
+        info(quality.line())
+
+
 def _stderr_is_terminal() -> bool:
     try:
         return sys.stderr.isatty()

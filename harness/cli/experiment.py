@@ -95,6 +95,9 @@ def converge(
         _print_json(out, report, runs)
     else:
         print_summary(out, runs)
+    from harness.cli.common import warn_contention  # issue 30: the contention verdict
+
+    warn_contention(runs)
     info(f"report: {report}")
     raise typer.Exit(1 if (runs["status"] == "failed").any() else 0)
 

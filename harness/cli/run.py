@@ -142,6 +142,9 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
         for rec in records:
             bar.write(json.dumps(runner.json_record(rec), allow_nan=False))
     bar.close()
+    from harness.cli.common import warn_contention  # issue 30: the contention verdict
+
+    warn_contention(runner.rows_frame(records))
     report = write_compare_outputs(out, sc, ref, records, command_line(), sections=sections, title=title,
                                    time_basis=time_basis, time_repeats=repeats)
     if not as_json:

@@ -23,6 +23,7 @@ from harness.store.exr import write_exr
 from harness.store.references import Reference
 from harness.workflows import runner
 from harness.workflows.render import render_checked
+from harness.workflows.timing import measure
 
 
 def spp_for_calibration(t1: float, t4: float, budget_s: float) -> float:
@@ -84,20 +85,20 @@ def calibrate_time_budget(entries: Sequence[RendererEntry], scene: Scene, budget
     (1 and 4 spp) each, ``repeats`` rounds of them interleaved over the renderers (A1 A4 B1 B4, A1 A4 B1 B4,
     ...), so that a change of load during calibration hits every renderer alike.
 
-    ``basis`` "cpu" spends the budget in process CPU seconds (the renders' ``cpu_time_s``); a renderer whose
-    renders do not record it falls back to wall time, and its choice says so. The calibration renders are not
+    ``basis`` "cpu" spends the budget in process CPU seconds (:func:`harness.workflows.runner.cpu_time`: the
+    render proper's, or the whole call's for a renderer that measures none). The calibration renders are not
     counted in the budget; the final render's own time is what is reported. ``on_render(label)`` follows each
     calibration render (progress).
     """
-    timings: list[list[tuple[float, float | None]] | Exception] = [[] for _ in entries]
+    timings: list[list[tuple[float, float]] | Exception] = [[] for _ in entries]
     for round_ in range(repeats):
         for i, entry in enumerate(entries):
             if isinstance(timings[i], Exception):
                 continue
             try:
                 for spp in (1, 4):
-                    result = render_checked(entry, scene, spp, seed)
-                    timings[i].append((float(result.time_s), _cpu_time(result)))
+                    result, timing = measure(lambda: render_checked(entry, scene, spp, seed))
+                    timings[i].append((float(result.time_s), runner.cpu_time(result, timing)))
                     if on_render:
                         on_render(f"{entry.name} calibration {spp} spp, round {round_ + 1}/{repeats}")
             except Exception as e:  # recorded as the renderer's failure by the caller; the others go on
@@ -107,10 +108,8 @@ def calibrate_time_budget(entries: Sequence[RendererEntry], scene: Scene, budget
         if isinstance(t, Exception):
             out.append(t)
             continue
-        use_cpu = basis == "cpu" and all(c is not None for _, c in t)
-        seconds = [c if use_cpu else w for w, c in t]
-        out.append(budget_choice(seconds[0::2], seconds[1::2], budget_s,
-                                 "cpu" if use_cpu else "wall" if basis == "wall" else "wall (no CPU time recorded)"))
+        seconds = [c if basis == "cpu" else w for w, c in t]
+        out.append(budget_choice(seconds[0::2], seconds[1::2], budget_s, basis))
     return out
 
 
@@ -135,17 +134,17 @@ def retime(entries: Sequence[RendererEntry], records: Sequence[runner.RunRecord]
     """
     timed = [(e, r) for e, r in zip(entries, records) if r.status == "ok" and r.time_s is not None]
     for e, r in timed:
-        r.time_samples = [(float(r.time_s), getattr(r, "cpu_time_s", None))]
+        r.time_samples = [(float(r.time_s), r.cpu_time_s)]
     for round_ in range(1, repeats):
         for entry, rec in timed:
             if "time_repeat_error" in rec.info:
                 continue
             try:
-                result = render_checked(entry, scene, rec.spp, rec.seed)
+                result, timing = measure(lambda: render_checked(entry, scene, rec.spp, rec.seed))
             except Exception as e:  # the first render's record stands
                 rec.info["time_repeat_error"] = f"{type(e).__name__}: {e}"
                 continue
-            rec.time_samples.append((float(result.time_s), _cpu_time(result)))
+            rec.time_samples.append((float(result.time_s), runner.cpu_time(result, timing)))
             if rec.image is not None and not np.array_equal(result.image, rec.image, equal_nan=True):
                 rec.info["repeat_images_differ"] = rec.info.get("repeat_images_differ", 0) + 1
             if on_render:
@@ -155,12 +154,6 @@ def retime(entries: Sequence[RendererEntry], records: Sequence[runner.RunRecord]
         rec.time_s = wall
         if cpu is not None:
             rec.cpu_time_s = cpu
-
-
-def _cpu_time(result) -> float | None:
-    """A render's process CPU time, where the render path records it (None where it does not)."""
-    cpu = getattr(result, "cpu_time_s", None)
-    return None if cpu is None else float(cpu)
 
 
 def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, metric: str, target: float,

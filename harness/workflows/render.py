@@ -71,12 +71,21 @@ def _fitted_render(renderer, fit: ReferenceFit, scene: Scene, spp: int, seed: in
     direct, unit = (renderer.render(scene, spp, seed, **{**kwargs, "settings": {**settings, **changed}})
                     for changed in (fit.without, fit.unit))
     image, c = fitted_image(direct.image, unit.image, reference)
-    shots = [Checkpoint(a.spp, fitted_image(a.image, b.image, reference)[0], a.time_s + b.time_s)
+    shots = [Checkpoint(a.spp, fitted_image(a.image, b.image, reference)[0], a.time_s + b.time_s,
+                        cpu_time_s=_sum(a.cpu_time_s, b.cpu_time_s))
              for a, b in zip(direct.checkpoints, unit.checkpoints)]
     info = {**direct.info, fit.setting: fit.value, fit.record: [float(x) for x in c], "oracle": ORACLE_NOTE}
     if "rays" in direct.info and "rays" in unit.info:
         info["rays"] = direct.info["rays"] + unit.info["rays"]
-    return RenderResult(image, direct.time_s + unit.time_s, direct.spp, direct.seed, shots, info, None)
+    if "setup_s" in direct.info and "setup_s" in unit.info:
+        info["setup_s"] = direct.info["setup_s"] + unit.info["setup_s"]
+    return RenderResult(image, direct.time_s + unit.time_s, direct.spp, direct.seed, shots, info, None,
+                        cpu_time_s=_sum(direct.cpu_time_s, unit.cpu_time_s))
+
+
+def _sum(a: float | None, b: float | None) -> float | None:
+    """The CPU time of two renders, None when either did not measure it."""
+    return None if a is None or b is None else a + b
 
 
 def _checked_image(image, expected: tuple[int, int, int], what: str) -> np.ndarray:

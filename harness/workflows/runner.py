@@ -8,6 +8,18 @@ model a feature the scene uses, is never run; its record says why
 (``status`` "unavailable" or "skipped"). A renderer that raises, or returns
 an image of the wrong shape, is recorded as "failed" with the reason, and the
 other renderers still run.
+
+Every timed render records, beside ``time_s`` (the wall time of the render
+proper, as the renderer measured it), the columns of
+:data:`harness.evaluate.timing_quality.TIMING_COLUMNS` (:mod:`harness.workflows.timing`
+measures the machine around the render call): ``cpu_time_s`` the CPU time of
+the render proper as the renderer measured it (:class:`harness.adapters.api.Stopwatch`),
+or, for a renderer that gives none, that of the whole render call, set-up
+included (the row's ``info_cpu_time_of`` then says so); ``setup_s`` the set-up
+the renderer reports (``info["setup_s"]``: scene build, compilation, warm-up);
+``threads`` the threads it rendered on; ``load_before``/``load_after`` and
+``calibration_s``. Every checkpoint row of one render carries the render's
+figures, and its own ``cpu_time_s`` where the renderer gave one.
 """
 
 from __future__ import annotations
@@ -24,13 +36,14 @@ from harness.evaluate import metrics
 from harness.evaluate import noise as stats
 from harness.evaluate import regions as named_regions
 from harness.evaluate import timing_stats
-from harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, attribute
+from harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, SettingsError, attribute, default_threads
 from harness.adapters.registry import RendererEntry, estimator_of, missing_features
 from harness.adapters.settings import canonical
 from harness.store.atomic import json_safe
 from harness.store.references import Reference
 from harness.workflows.render import RenderError, RenderTimeout, render_checked
 from harness.workflows.sandbox import run_sandboxed
+from harness.workflows.timing import Timing, measure
 from harness.scenes.model import Scene
 
 STATUSES = ("ok", "skipped", "unavailable", "failed")
@@ -59,6 +72,12 @@ class RunRecord:
     reason: str | None = None
     version: str | None = None
     time_s: float | None = None
+    cpu_time_s: float | None = None  # the columns of harness.evaluate.timing_quality.TIMING_COLUMNS
+    setup_s: float | None = None
+    threads: int | None = None
+    load_before: float | None = None
+    load_after: float | None = None
+    calibration_s: float | None = None
     approximations: tuple[str, ...] = ()
     info: dict = field(default_factory=dict)
     metrics: dict = field(default_factory=dict)
@@ -109,6 +128,12 @@ class RunRecord:
             "spp": self.spp,
             "seed": self.seed,
             "time_s": None if self.time_s is None else round(self.time_s, 4),
+            "cpu_time_s": _rounded(self.cpu_time_s, 4),
+            "setup_s": _rounded(self.setup_s, 4),
+            "threads": self.threads,
+            "load_before": _rounded(self.load_before, 3),
+            "load_after": _rounded(self.load_after, 3),
+            "calibration_s": _rounded(self.calibration_s, 5),
         }
         out.update(self.metrics)
         out.update(named_regions.region_columns(self.regions))
@@ -116,10 +141,54 @@ class RunRecord:
             out["efficiency"] = 1.0 / (self.metrics["mse"] * self.time_s) if self.metrics["mse"] > 0 else math.inf
         for k, v in self.info.items():
             out[f"info_{k}"] = v if isinstance(v, (str, int, float, bool)) or v is None else json.dumps(v)
-        timings = self.time_samples or ([(self.time_s, getattr(self, "cpu_time_s", None))]
+        timings = self.time_samples or ([(self.time_s, self.cpu_time_s)]
                                         if self.time_s is not None else [])
         out.update(timing_stats.repeat_columns([w for w, _ in timings], [c for _, c in timings]))
         return out
+
+    def timed(self, result: RenderResult, timing: Timing) -> "RunRecord":
+        """This record with the timing figures of ``result``, rendered in a call measured as ``timing``."""
+        self.cpu_time_s = cpu_time(result, timing)
+        if result.cpu_time_s is None:
+            self.info["cpu_time_of"] = CALL_CPU_NOTE
+        setup = result.info.get("setup_s")
+        self.setup_s = float(setup) if isinstance(setup, (int, float)) else None
+        self.threads = _threads_of(result.info)
+        self.load_before, self.load_after = timing.load_before, timing.load_after
+        self.calibration_s = timing.calibration_s
+        return self
+
+
+#: What ``info_cpu_time_of`` says of a row whose renderer gave no CPU time of its render proper.
+CALL_CPU_NOTE = "the whole render call, set-up included (the renderer gives no CPU time of its render proper)"
+
+
+def cpu_time(result: RenderResult, timing: Timing) -> float:
+    """The CPU time of a render: of its render proper where the renderer measured it, else of the whole call
+    measured as ``timing`` (set-up included: :data:`CALL_CPU_NOTE`)."""
+    return float(timing.cpu_s if result.cpu_time_s is None else result.cpu_time_s)
+
+
+def _rounded(value: float | None, digits: int) -> float | None:
+    return None if value is None else round(float(value), digits)
+
+
+def _threads_of(info: dict) -> int | None:
+    """The threads a render ran on: what the renderer says (``info["threads"]``), else the share it was given."""
+    given = info.get("threads")
+    if isinstance(given, int) and not isinstance(given, bool) and given > 0:
+        return given
+    try:
+        return default_threads()
+    except SettingsError:
+        return None
+
+
+def rows_frame(records: Sequence["RunRecord"]):
+    """The records' rows as a results table (pandas imported here: the sandbox's child never needs it)."""
+    import pandas as pd
+
+    return pd.DataFrame([r.row() for r in records])
 
 
 #: Fields a results row holds as JSON text (a table cell is a scalar); objects again in JSON output.
@@ -147,8 +216,9 @@ def json_record(rec: "RunRecord") -> dict:
 
 
 def render_sandboxed(entry: RendererEntry, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int],
-                     time_limit_s: float) -> RenderResult:
-    """:func:`render_checked` in a child process that is killed after ``time_limit_s`` (a hang cannot stall CI).
+                     time_limit_s: float) -> tuple[RenderResult, Timing]:
+    """:func:`render_checked` in a child process that is killed after ``time_limit_s`` (a hang cannot stall CI),
+    with the child's measure of the call (:func:`harness.workflows.timing.measure`).
 
     Raises :class:`RenderTimeout` (carrying the time) when it is killed, RenderError for anything else
     that went wrong there.
@@ -159,8 +229,9 @@ def render_sandboxed(entry: RendererEntry, scene: Scene, spp: int, seed: int, ch
         raise RenderTimeout(f"killed at its time limit of {time_limit_s:g} s (ran {out.time_s:.1f} s)", out.time_s)
     if (why := out.problem()) is not None:
         raise RenderError(why)
-    shots = [Checkpoint(s, image, t) for s, image, t in out.checkpoints[0]]
-    return RenderResult(out.images[0], out.render_times[0], spp, seed, shots, out.infos[0], out.variances[0])
+    shots = [Checkpoint(s, image, t, cpu_time_s=cpu) for s, image, t, cpu in out.checkpoints[0]]
+    return (RenderResult(out.images[0], out.render_times[0], spp, seed, shots, out.infos[0], out.variances[0],
+                         cpu_time_s=out.cpu_times[0]), out.timings[0])
 
 
 def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: Reference | None,
@@ -176,9 +247,9 @@ def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: 
     try:
         rec.version = str(entry.renderer.version())
         if time_limit_s is None:
-            result = render_checked(entry, scene, spp, seed, checkpoints)
+            result, timing = measure(lambda: render_checked(entry, scene, spp, seed, checkpoints))
         else:
-            result = render_sandboxed(entry, scene, spp, seed, checkpoints, time_limit_s)
+            result, timing = render_sandboxed(entry, scene, spp, seed, checkpoints, time_limit_s)
     except RenderTimeout as e:
         rec.status, rec.reason, rec.time_s = "failed", str(e), e.time_s
         rec.info = {"timed_out": True}
@@ -187,6 +258,7 @@ def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: 
         return rec.failed(e)
     rec.time_s, rec.info, rec.image = float(result.time_s), dict(result.info), result.image
     rec.variance, rec.checkpoints = result.variance, list(result.checkpoints)
+    rec.timed(result, timing)
     if reference is None:
         rec.metrics = metrics.invalid_pixel_counts(result.image)
     else:
@@ -207,19 +279,23 @@ def run_checkpoints(entry: RendererEntry, scene: Scene, spps: Sequence[int], see
     top = run_one(entry, scene, spps[-1], seed, None, checkpoints=spps)
     if top.status != "ok":
         return [top]
-    shots = {c.spp: (c.image, c.time_s) for c in top.checkpoints}
-    shots[top.spp] = (top.image, top.time_s)
+    shots = {c.spp: (c.image, c.time_s, c.cpu_time_s) for c in top.checkpoints}
+    shots[top.spp] = (top.image, top.time_s, top.cpu_time_s)
     try:
         for spp in spps:
             if spp not in shots:
-                extra = render_checked(entry, scene, spp, seed)
-                shots[spp] = (extra.image, extra.time_s)
+                extra, timing = measure(lambda: render_checked(entry, scene, spp, seed))
+                cpu = timing.cpu_s if extra.cpu_time_s is None else extra.cpu_time_s
+                shots[spp] = (extra.image, extra.time_s, cpu)
     except Exception as e:  # as in run_one: recorded, not raised
         return [top.failed(e)]
     out = []
     for spp in spps:
-        image, t = shots[spp]
-        rec = RunRecord.new(scene, entry, spp, seed, version=top.version, time_s=float(t), info=dict(top.info))
+        image, t, cpu = shots[spp]
+        # The cell's machine figures on every row; the CPU time of the checkpoint where the renderer gave one.
+        rec = RunRecord.new(scene, entry, spp, seed, version=top.version, time_s=float(t), info=dict(top.info),
+                            cpu_time_s=cpu, setup_s=top.setup_s, threads=top.threads, load_before=top.load_before,
+                            load_after=top.load_after, calibration_s=top.calibration_s)
         rec.image, rec.metrics = image, score(image, reference, spp)
         # Only the highest-spp image comes with the renderer's own variance.
         rec.regions = score_regions(scene, image, reference, spp, top.variance if spp == top.spp else None)

@@ -60,6 +60,7 @@ from typing import Sequence
 
 import numpy as np
 
+from harness.workflows.timing import Timing
 
 #: Seconds between two polls of the worker's wall time and resident memory.
 POLL_S = 0.02
@@ -77,9 +78,11 @@ class SandboxOutcome:
     images: list = dataclasses.field(default_factory=list)
     variances: list = dataclasses.field(default_factory=list)  # None where the renderer returned none
     render_times: list = dataclasses.field(default_factory=list)  # each render's own time_s
+    cpu_times: list = dataclasses.field(default_factory=list)  # each render's own cpu_time_s (None: not given)
+    timings: list = dataclasses.field(default_factory=list)  # each render call's harness.workflows.timing.Timing
     shapes: list = dataclasses.field(default_factory=list)  # (H, W, 3) each render was asked for
     infos: list = dataclasses.field(default_factory=list)  # each render's RenderResult.info
-    checkpoints: list = dataclasses.field(default_factory=list)  # each render's [(spp, image, time_s), ...]
+    checkpoints: list = dataclasses.field(default_factory=list)  # each render's [(spp, image, time_s, cpu), ...]
 
     def problem(self) -> str | None:
         """Why the images cannot be used (None: they can)."""
@@ -215,8 +218,11 @@ def _read_outcome(folder: Path, watched: _Watched, time_bound_s: float, rss_boun
         with np.load(folder / f"render-{i}.npz") as z:
             outcome.images.append(z["image"])
             outcome.variances.append(z["variance"] if "variance" in z.files else None)
-            outcome.checkpoints.append([(spp, z[f"checkpoint-{spp}"], t) for spp, t in r.get("checkpoints", [])])
+            outcome.checkpoints.append([(spp, z[f"checkpoint-{spp}"], t, cpu)
+                                        for spp, t, cpu in r.get("checkpoints", [])])
         outcome.render_times.append(float(r["time_s"]))
+        outcome.cpu_times.append(r.get("cpu_time_s"))
+        outcome.timings.append(Timing(**r["timing"]))
         outcome.infos.append(r.get("info", {}))
     if result.get("error"):
         outcome.ended, outcome.message = "error", f"renderer raised {result['error']}"
@@ -233,6 +239,7 @@ def _render_job(spec: str, settings: dict, folder: Path, result: dict) -> None:
     ``render-<i>.npz``."""
     from harness.adapters.registry import resolve
     from harness.workflows.render import render_checked
+    from harness.workflows.timing import measure
 
     (entry,) = resolve([spec])
     entry = entry.with_settings(settings) if settings else entry
@@ -246,15 +253,21 @@ def _render_job(spec: str, settings: dict, folder: Path, result: dict) -> None:
     with open(folder / "renders.pkl", "rb") as f:
         renders = pickle.load(f)
     for i, (scene, spp, seed, *rest) in enumerate(renders):
-        res = render_checked(entry, scene, spp, seed, rest[0] if rest else ())
+        res, timed = measure(lambda: render_checked(entry, scene, spp, seed, rest[0] if rest else ()))
         arrays = {"image": np.asarray(res.image)}
         if res.variance is not None:
             arrays["variance"] = np.asarray(res.variance)
         arrays.update({f"checkpoint-{c.spp}": np.asarray(c.image) for c in res.checkpoints})
         np.savez(folder / f"render-{i}.npz", **arrays)
         info = json.loads(json.dumps(dict(res.info), default=str))  # what JSON cannot hold, as text
-        result["renders"].append({"time_s": float(res.time_s), "info": info,
-                                  "checkpoints": [(c.spp, float(c.time_s)) for c in res.checkpoints]})
+        result["renders"].append({"time_s": float(res.time_s), "info": info, "cpu_time_s": _number(res.cpu_time_s),
+                                  "timing": timed.as_dict(),
+                                  "checkpoints": [(c.spp, float(c.time_s), _number(c.cpu_time_s))
+                                                  for c in res.checkpoints]})
+
+
+def _number(value) -> float | None:
+    return None if value is None else float(value)
 
 
 def _worker_main(folder: Path) -> int:

@@ -8,11 +8,15 @@ differ only in their integrator and settings, so the rest is written once here.
 
 from __future__ import annotations
 
-import time
 from typing import Callable
 
+import numpy as np
+
+from harness.adapters.api import Stopwatch
 from harness.scenes.model import Scene
+from renderers.core import film
 from renderers.core.geometry import SceneGeometry
+from renderers.core.rays import add_unoccluded, shadow_buffer
 
 #: Scene features the shared toolkit models (renderers/core): every renderer of ours inherits them.
 TOOLKIT_FEATURES = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
@@ -45,10 +49,25 @@ class ToolkitRenderer:
 
 def warmed_geometry(scene: Scene, warm_up: Callable[[SceneGeometry], object]) -> tuple[SceneGeometry, float]:
     """The scene's Embree geometry after ``warm_up(geom)`` compiled (or loaded from numba's cache) the
-    renderer's kernels, and the seconds both took: the set-up a render's time leaves out. The rays the
-    warm-up traced are not counted in ``geom.rays``."""
-    t0 = time.perf_counter()
+    renderer's kernels, and the seconds both took: the set-up a render's time leaves out. The kernels every
+    renderer shares are warmed up too (:func:`warm_up_shared`). The rays the warm-up traced are not counted
+    in ``geom.rays``."""
+    clock = Stopwatch()
     geom = SceneGeometry(scene)
+    warm_up_shared(geom)
     warm_up(geom)
     geom.rays = 0
-    return geom, time.perf_counter() - t0
+    return geom, clock.wall()
+
+
+def warm_up_shared(geom: SceneGeometry) -> None:
+    """Compile (or load) the shared kernels a renderer's own warm-up may not reach: the film's
+    (:func:`renderers.core.film.warm_up`) and the shadow rays' (one segment). A warm-up of one path often
+    casts no shadow ray, and then a process's first render compiled these inside its time: 0.9 s of a 1-spp
+    Cornell box with a cold numba cache (issue 30, a Dask worker's first cell)."""
+    film.warm_up()
+    shadow = shadow_buffer(1)
+    for array in shadow:
+        array[:] = 0
+    shadow.d[:, 2] = shadow.t[:] = 1.0
+    add_unoccluded(np.zeros((1, 3)), shadow, geom.unoccluded(shadow.o, shadow.d, shadow.t))

@@ -115,5 +115,13 @@ class Film:
         spread = ((means - means.mean(axis=0)) ** 2).sum(axis=0) / (b * (b - 1))
         return spread.reshape(self.shape).astype(np.float32)
 
-    def checkpoint(self, n: int, time_s: float) -> Checkpoint:
-        return Checkpoint(n, self.image(n), time_s, self.aovs(n))
+    def checkpoint(self, n: int, time_s: float, cpu_time_s: float | None = None) -> Checkpoint:
+        return Checkpoint(n, self.image(n), time_s, self.aovs(n), cpu_time_s)
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) every kernel a film adds with (batches and auxiliary images
+    included) on a throwaway one-pixel film, so that a render's clock starts after them: a process's first
+    render otherwise compiled them inside its time (issue 30: 0.3 s of a 1-spp Cornell box, cold cache)."""
+    film = Film(1, 1, 2, ("albedo", "normal"))
+    film.add(0, np.zeros((1, 3)), 0, np.zeros((1, 6)))

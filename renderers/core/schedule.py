@@ -29,14 +29,13 @@ and the ray queries hold no GIL (:mod:`renderers.core.embree`).
 
 from __future__ import annotations
 
-import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Iterable, Iterator, NamedTuple, Sequence, TypeVar
 
 import numpy as np
 
-from harness.adapters.api import Checkpoint, RenderResult, default_threads, spp_passes
+from harness.adapters.api import Checkpoint, RenderResult, Stopwatch, default_threads, spp_passes
 from harness.scenes.model import Scene
 from renderers.core.film import Film
 from renderers.core.sampler import Stream, pass_stream
@@ -128,7 +127,7 @@ def render_image(
     film = Film(cam.width, cam.height, batches, tuple(aovs))
     threads = threads or default_threads()
     done, shots = 0, []
-    t0 = time.perf_counter()
+    clock = Stopwatch()
 
     def work(unit: Unit) -> np.ndarray:
         return trace(unit.first, unit.stop, film.pixels, streams[unit.index])
@@ -140,13 +139,13 @@ def render_image(
         if unit.last:
             done += passes[unit.index]
             if done in checkpoints and done < spp:
-                shots.append(film.checkpoint(done, time.perf_counter() - t0))
+                shots.append(film.checkpoint(done, *clock.read()))
 
     run_units(pass_units(passes, film.pixels, threads), work, reduce, threads)
-    elapsed = time.perf_counter() - t0
+    elapsed, cpu = clock.read()
     image = film.image(spp)
     aux = film.aovs(spp)
     if spp in checkpoints:
-        shots.append(Checkpoint(spp, image, elapsed, aux))
+        shots.append(Checkpoint(spp, image, elapsed, aux, cpu))
     meta = {"threads": threads, "sampler": sampler, **({"batches": batches} if batches > 1 else {}), **(info or {})}
-    return RenderResult(image, elapsed, spp, seed, shots, meta, film.variance(spp), aux)
+    return RenderResult(image, elapsed, spp, seed, shots, meta, film.variance(spp), aux, cpu)

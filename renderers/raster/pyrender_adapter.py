@@ -107,12 +107,11 @@ from __future__ import annotations
 import math
 import shutil
 import tempfile
-import time
 from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.api import RenderResult
+from harness.adapters.api import RenderResult, Stopwatch
 from harness.scenes.model import Scene
 from renderers.raster.framebuffer import BACK_SIDE_ATTR, MSAA_SAMPLES, float_renderer
 from renderers.raster.glsl import write_direct_lighting_shaders
@@ -318,17 +317,17 @@ class Pyrender:
         lights = [] if scene.max_depth == 1 else light_samples(scene, self.lights)
         plat = open_platform(platform)
         shader_dir = tempfile.mkdtemp(prefix="cbox-pyrender-")
-        renderer = None
+        renderer, setup = None, Stopwatch()
         try:
             s = self._supersampling_here(cam, spp)
             write_direct_lighting_shaders(shader_dir, scene.extent(), _shadow_texel_angle())
             renderer = float_renderer(cam.width * s, cam.height * s, shader_dir)
             ps, emissive = _build_scene(scene)
             flags, batches = self._light_passes(lights)
-            t0 = time.perf_counter()
+            setup_s, clock = setup.wall(), Stopwatch()  # context, shaders and scene: set-up, not render
             acc = _accumulate(renderer, ps, emissive, batches, flags, (cam.height * s, cam.width * s))
             image = acc.reshape(cam.height, s, cam.width, s, 3).mean(axis=(1, 3)).astype(np.float32)
-            elapsed = time.perf_counter() - t0
+            elapsed, cpu = clock.read()
         finally:
             _release(renderer, plat, shader_dir)
 
@@ -342,8 +341,10 @@ class Pyrender:
             "light_passes": len(batches),
             "shadows": self.shadows,
             "direct_only": True,
+            "setup_s": round(setup_s, 4),
         }
-        return RenderResult(image=image, time_s=elapsed, spp=int(spp), seed=int(seed), checkpoints=[], info=info)
+        return RenderResult(image=image, time_s=elapsed, spp=int(spp), seed=int(seed), checkpoints=[], info=info,
+                            cpu_time_s=cpu)
 
     def _supersampling_here(self, cam, spp: int) -> int:
         """:meth:`supersampling` within the current GL context's framebuffer limits."""

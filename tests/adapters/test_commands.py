@@ -69,6 +69,9 @@ if mode == "hog":  # 400 MB, touched, held
     time.sleep(600)
 if mode == "small":
     width -= 1
+if mode == "burn":  # 0.3 s of CPU time in all
+    while time.process_time() < 0.3:
+        pass
 write_exr(args["out"], np.full((height, width, 3), spp + seed / 1000))
 if mode != "novar" and "variance" in args:
     write_exr(args["variance"], np.full((height, width, 3), 1.0 / spp))
@@ -210,6 +213,21 @@ def test_the_programs_memory_counts_against_the_sandboxs_bound(tmp_path, scene):
     path = renderers_file(tmp_path, "hog", scene_format=_sandbox_format())
     out = run_sandboxed(spec_of(path, "fake-cli"), [(scene, 1, 0)], time_bound_s=300, rss_bound_mb=300)
     assert out.ended == "memory" and out.peak_rss_mb > 300 and out.time_s < 300, (out.ended, out.message)
+
+
+@pytest.mark.skipif(_sandbox_format() is None, reason="no export format module yet (harness.scenes.export.*): a "
+                                                      "sandboxed child must export the scene for real")
+def test_cpu_time_is_the_programs_own(tmp_path, scene):
+    """The program burns 0.3 s of CPU: a render's cpu_time_s counts it (a child's CPU time, not this process's),
+    and so does the results row, in this process and through the sandbox (the child's child)."""
+    path = renderers_file(tmp_path, mode="burn", scene_format=_sandbox_format())
+    res = the_renderer(path).render(scene, 2, 0, checkpoints=[1, 2])
+    assert 0.3 <= res.cpu_time_s < 0.3 + 5.0 and 0.3 <= res.checkpoints[0].cpu_time_s < 5.3
+    (entry,) = resolve([spec_of(path, "fake-cli")])
+    for limit in (None, 120.0):
+        row = runner.run_one(entry, scene, 1, 0, None, time_limit_s=limit).row()
+        assert row["status"] == "ok" and 0.3 <= row["cpu_time_s"] < 5.3, (limit, row)
+        assert "info_cpu_time_of" not in row  # measured by the renderer, not the whole call
 
 
 def _running(pid: int) -> bool:

@@ -14,6 +14,7 @@ from harness.adapters.registry import resolve
 from harness.scenes.library import resolve_scene
 from harness.workflows import compare as cmp
 from harness.workflows import runner
+from harness.workflows.timing import Timing
 from tests.user_renderers import Jittery, JitteryToo, Unrepeatable
 
 #: Jittery's clock: Clocked's (0.25 s + 1/16 s per spp) times 1, 1.25 and 0.8 by turns of two renders.
@@ -130,15 +131,18 @@ def _fake_render(wall_per_spp: float, cpu_per_spp: float | None):
 def test_cpu_basis_spends_the_budget_in_cpu_seconds(scene, monkeypatch):
     """With --time-basis cpu the calibration reads CPU time: a render whose CPU time per sample is half its
     wall time (two threads, say) buys twice the samples of a CPU budget; without CPU times it falls back to
-    wall time and says so."""
+    the whole call's CPU time."""
     (entry,) = resolve(["tests.user_renderers:Jittery"])
     monkeypatch.setattr(cmp, "render_checked", _fake_render(PER_SPP, PER_SPP / 2))
     (wall,) = cmp.calibrate_time_budget([entry], scene, 2.0, 0, repeats=2, basis="wall")
     (cpu,) = cmp.calibrate_time_budget([entry], scene, 2.0, 0, repeats=2, basis="cpu")
     assert (wall.spp, wall.basis) == (28, "wall") and (cpu.spp, cpu.basis) == (56, "cpu")
+    # A renderer that measures no CPU time of its own: the whole call's (runner.cpu_time), here a quarter of
+    # its wall time, stands in; never wall time under the CPU name.
     monkeypatch.setattr(cmp, "render_checked", _fake_render(PER_SPP, None))
+    monkeypatch.setattr(cmp, "measure", lambda call: ((r := call()), Timing(r.time_s, r.time_s / 4, 1.0, 1.0, 0.02)))
     (fallback,) = cmp.calibrate_time_budget([entry], scene, 2.0, 0, repeats=2, basis="cpu")
-    assert fallback.spp == 28 and fallback.basis == "wall (no CPU time recorded)"
+    assert fallback.basis == "cpu" and fallback.spp > 3 * wall.spp
 
 
 def test_repeats_carry_cpu_time_when_the_render_path_records_it(scene, monkeypatch):

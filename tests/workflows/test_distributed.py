@@ -21,6 +21,7 @@ from tests.conftest import CORNELL, ROOT
 pytest.importorskip("distributed")
 
 from harness.adapters.registry import resolve  # noqa: E402
+from harness.evaluate.timing_quality import TIMING_COLUMNS  # noqa: E402
 from harness.scenes.library import resolve_scene  # noqa: E402
 from harness.store.experiments import RESULTS_FILE  # noqa: E402
 from harness.store.exr import read_exr  # noqa: E402
@@ -32,7 +33,8 @@ from harness.workflows.reference_build import build_reference  # noqa: E402
 DASK = Path(sys.executable).parent / "dask"
 #: Measured (times), or where the cell ran (its threads, how Mitsuba found LLVM there): the only columns
 #: allowed to differ between backends.
-RUN_COLUMNS = ["time_s", "efficiency", "info_setup_s", "info_threads", "info_variant_note",
+RUN_COLUMNS = ["time_s", "efficiency", "info_setup_s", "info_threads", "info_variant_note", "info_cpu_time_of",
+               *TIMING_COLUMNS,
                # the timings behind time_s (harness.evaluate.timing_stats.repeat_columns)
                "time_samples_s", "time_s_low", "time_s_high", "cpu_time_samples_s", "cpu_time_s_low", "cpu_time_s_high"]
 #: Ours, built on Embree in the worker, and a user's renderer loaded there by module:Class (cheap: Mitsuba, whose

@@ -87,7 +87,7 @@ def test_results_table_is_tidy_and_report_rebuilds(tmp_path):
     for region in ("walls", "boxes", "floor", "light"):
         for key in ("bias2", "variance", "bias2_fraction"):
             assert f"region.{region}.{key}" in summary, (region, key)
-    assert "bias² and variance per region:" in proc.stdout and "region.walls" not in proc.stdout
+    assert "bias² and variance per region (95% intervals):" in proc.stdout and "region.walls" not in proc.stdout
     assert 'id="region-bias-variance-table"' in (out / "report.html").read_text()
     # A second run renders nothing, and `cbox report` rebuilds the report without rendering.
     n_renders = len(log.read_text().splitlines())
