@@ -1,4 +1,5 @@
-"""Issue 30's burner test: a small ``cbox compare`` beside CPU-burning processes.
+"""Issue 30's burner tests: a small ``cbox compare`` beside CPU-burning processes (the slow one below; a cheap
+one of the warning and the load in the default set, at the end).
 
 The CLI warns that the machine was busy, the rows' ``load_after`` exceeds the
 cores, and the ratio of the two renderers' CPU times (what ``--time-basis
@@ -95,3 +96,25 @@ def test_burners_beside_a_compare_are_warned_of_and_cpu_time_ratio_holds(tmp_pat
         assert all(r["load_after"] > cores for r in rows.values()), rows
     q, b = _ratio(quiet), _ratio(busy)
     assert abs(b / q - 1.0) <= RATIO_TOLERANCE, (q, b, _cpu_times(quiet), _cpu_times(busy))
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/stat"), reason="the load is read from Linux's /proc/stat")
+def test_a_compare_beside_burners_warns_and_records_the_load(tmp_path, capsys):
+    """The default set's share of the above (a few seconds): the warning and ``load_after`` beside burners,
+    with cheap test renderers. More burners than cores keep the load above the cores whatever else runs, so
+    this verdict does not depend on the machine's own load; the CPU-time ratio is the slow test's."""
+    cores = machine_cores()
+    procs = _burners(cores + 1)
+    try:
+        code, stdout, stderr = cbox(capsys, "compare", "--scene", "furnace", "-r", "tests.user_renderers:SeededNoise",
+                                    "-r", "tests.user_renderers:FlatGrey", "--spp", "4", "--json",
+                                    "--out", str(tmp_path))
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+    assert code == 0, stderr
+    rows = [json.loads(line) for line in stdout.splitlines() if line.strip()]
+    assert len(rows) == 2 and all(r["load_after"] > cores and r["load_before"] > cores for r in rows), rows
+    warnings = [line for line in stderr.splitlines() if line.startswith("warning: the machine was busy")]
+    assert len(warnings) == 1 and "2 of 2 timed renders contended" in warnings[0], stderr
