@@ -58,6 +58,8 @@ from harness.adapters.api import Stopwatch
 #: Readings of ``procs_running`` averaged into one load figure, and the seconds between two.
 LOAD_SAMPLES = 5
 LOAD_GAP_S = 0.002
+#: Seconds :func:`settle` waits at most for this process's own threads to go idle.
+SETTLE_S = 0.25
 #: Iterations of the calibration loop (about 20 ms on a 2020s core).
 CALIBRATION_STEPS = 200_000
 
@@ -76,10 +78,37 @@ def _procs_running() -> int | None:
     return None
 
 
+def own_runnable_threads() -> int | None:
+    """This process's threads that are runnable now (state R in ``/proc/self/task/*/stat``), the calling one
+    included; None without ``/proc``."""
+    try:
+        tasks = os.listdir("/proc/self/task")
+    except OSError:
+        return None
+    n = 0
+    for tid in tasks:
+        try:
+            with open(f"/proc/self/task/{tid}/stat", "rb") as f:
+                n += f.read().rpartition(b")")[2].split()[0] == b"R"
+        except (OSError, IndexError):
+            continue  # a thread that ended since the listing
+    return n
+
+
+def settle(timeout_s: float = SETTLE_S, gap_s: float = LOAD_GAP_S) -> None:
+    """Wait, at most ``timeout_s``, until no other thread of this process is runnable: a renderer's thread pool
+    may spin on after its render (Mitsuba's worker thread stays runnable about 20 ms, measured), and a load
+    reading or calibration kernel then would count the harness's own render as the machine's load."""
+    deadline = time.perf_counter() + timeout_s
+    while (own_runnable_threads() or 1) > 1 and time.perf_counter() < deadline:
+        time.sleep(gap_s)
+
+
 def machine_load(samples: int = LOAD_SAMPLES, gap_s: float = LOAD_GAP_S) -> float:
-    """Runnable threads on the machine now, the measuring thread included: ``procs_running`` averaged over
-    ``samples`` readings ``gap_s`` apart; the one-minute load average where ``/proc/stat`` is absent, NaN
-    where neither is."""
+    """Runnable threads on the machine now, the measuring thread included and this process's others not:
+    ``procs_running`` less this process's other runnable threads (:func:`own_runnable_threads`), averaged
+    over ``samples`` readings ``gap_s`` apart; the one-minute load average where ``/proc/stat`` is absent,
+    NaN where neither is."""
     readings = []
     for i in range(samples):
         if i:
@@ -87,7 +116,7 @@ def machine_load(samples: int = LOAD_SAMPLES, gap_s: float = LOAD_GAP_S) -> floa
         value = _procs_running()
         if value is None:
             break
-        readings.append(value)
+        readings.append(value - max((own_runnable_threads() or 1) - 1, 0))
     if readings:
         return sum(readings) / len(readings)
     try:
@@ -131,13 +160,15 @@ def measure(call: Callable[[], T]) -> tuple[T, Timing]:
     """``call()`` between two readings of the machine: its value and its :class:`Timing`.
 
     Order: calibration, load, the call, load, calibration, so that each load reading is the one nearest
-    the call. An exception in ``call`` propagates (nothing is recorded for a failed render).
+    the call; each side after :func:`settle`, so that the readings are of the machine, not of this process. An exception in ``call`` propagates (nothing is recorded for a failed render).
     """
+    settle()
     cal_before = calibration_seconds()
     load_before = machine_load()
     watch = Stopwatch()
     value = call()
     wall, cpu = watch.wall(), watch.cpu()
+    settle()
     load_after = machine_load()
     cal_after = calibration_seconds()
     return value, Timing(wall, cpu, load_before, load_after, min(cal_before, cal_after))

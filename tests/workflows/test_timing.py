@@ -42,6 +42,41 @@ def test_machine_load_counts_the_measuring_thread_and_two_burners():
     assert 3.0 <= load < 3.0 + 64, load
 
 
+@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="threads' states are Linux's /proc")
+def test_this_process_own_spinning_thread_is_not_the_machines_load(monkeypatch):
+    """A thread of this process still running (a renderer's pool spinning after its render: Mitsuba's does for
+    about 20 ms) is counted by own_runnable_threads, left out of machine_load, and waited for by settle."""
+    import hashlib
+    import threading
+
+    stop, data = threading.Event(), bytes(1 << 22)
+
+    def spin():  # hashing a large buffer runs in C without the GIL: the thread stays runnable
+        while not stop.is_set():
+            hashlib.sha256(data).digest()
+
+    worker = threading.Thread(target=spin)
+    worker.start()
+    try:
+        time.sleep(0.05)
+        own = max(timing.own_runnable_threads() for _ in range(20))
+        monkeypatch.setattr(timing, "_procs_running", lambda: 5)  # the machine's count, this process's included
+        load = timing.machine_load(samples=20)
+        monkeypatch.undo()
+        t0 = time.perf_counter()
+        timing.settle(timeout_s=0.2)
+        waited = time.perf_counter() - t0
+    finally:
+        stop.set()
+        worker.join()
+    assert own >= 2, own
+    assert load < 5, load  # the spinning thread is taken out of the machine's count
+    assert waited >= 0.15  # it never went idle: settle waited to its limit
+    t0 = time.perf_counter()
+    timing.settle(timeout_s=0.2)
+    assert time.perf_counter() - t0 < 0.15  # idle now: no wait
+
+
 def test_machine_load_falls_back_on_the_load_average(monkeypatch):
     monkeypatch.setattr(timing, "_procs_running", lambda: None)
     assert timing.machine_load() == pytest.approx(os.getloadavg()[0], abs=0.5)
