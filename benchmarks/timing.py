@@ -16,7 +16,7 @@ proportion to 1/time, so a ratio that moves by x% moves the verdict of an equal-
 
 ``--markdown FILE`` writes the table into the file's block ``timing.py#load`` (``benchmarks/markdown_blocks.py``).
 
-Run: ``.venv/bin/python benchmarks/timing.py --markdown docs/timing.md`` (about 4 minutes on 2 cores).
+Run: ``.venv/bin/python benchmarks/timing.py --markdown docs/timing.md`` (about a minute on 2 cores).
 """
 
 from __future__ import annotations
