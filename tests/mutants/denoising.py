@@ -25,8 +25,9 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "oidn_checkpoints_not_denoised",
         "only the final image denoised: the checkpoints below it keep the path tracer's noisy image",
-        (("            shots.append(Checkpoint(c.spp, image, c.time_s + dt, c.aovs))\n",
-          "            shots.append(Checkpoint(c.spp, image if c.spp == spp else c.image, c.time_s + dt, c.aovs))\n",
+        (("            shots.append(Checkpoint(c.spp, image, c.time_s + dt, c.aovs, plus(c.cpu_time_s, dcpu)))\n",
+          "            shots.append(Checkpoint(c.spp, image if c.spp == spp else c.image, c.time_s + dt, c.aovs,\n"
+          "                                    plus(c.cpu_time_s, dcpu)))\n",
           OIDN),),
         "pathtracer+oidn",
     ),
