@@ -9,9 +9,10 @@ import typer
 
 from harness.adapters.api import attribute
 from harness.adapters.registry import missing_features, resolve
-from harness.cli.common import (DashboardOpt, Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SchedulerOpt,
-                                SetOpt, TimeBasisOpt, TitleOpt, WorkersOpt, app, command_line, executor_for, info,
-                                out_folder_option, print_json, time_basis_option, time_repeats_option)
+from harness.cli.common import (DashboardOpt, Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SchedulerOpt, SetOpt,
+                                TitleOpt, WorkersOpt, app, command_line, executor_for, info, out_folder_option,
+                                print_json)
+from harness.cli.timing import TimeBasisOpt, time_basis_option, time_repeats_option, warn_contention
 from harness.scenes.library import resolve_scene
 from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results
 from harness.store.references import load_reference
@@ -95,8 +96,6 @@ def converge(
         _print_json(out, report, runs)
     else:
         print_summary(out, runs)
-    from harness.cli.common import warn_contention  # issue 30: the contention verdict
-
     warn_contention(runs)
     info(f"report: {report}")
     raise typer.Exit(1 if (runs["status"] == "failed").any() else 0)

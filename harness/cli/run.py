@@ -10,9 +10,9 @@ import typer
 
 from harness.adapters.registry import RendererError, missing_features, resolve
 from harness.adapters.settings import canonical
-from harness.cli.common import (Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt,
-                                TimeBasisOpt, TitleOpt, app, check_output_file, command_line, info,
-                                out_folder_option, time_repeats_option)
+from harness.cli.common import (Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt, TitleOpt,
+                                app, check_output_file, command_line, info, out_folder_option)
+from harness.cli.timing import TimeBasisOpt, time_repeats_option, warn_contention
 from harness.scenes.library import resolve_scene
 from harness.store.exr import write_exr
 from harness.store.image_files import SPP_ATTRIBUTE
@@ -142,8 +142,6 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
         for rec in records:
             bar.write(json.dumps(runner.json_record(rec), allow_nan=False))
     bar.close()
-    from harness.cli.common import warn_contention  # issue 30: the contention verdict
-
     warn_contention(runner.rows_frame(records))
     report = write_compare_outputs(out, sc, ref, records, command_line(), sections=sections, title=title,
                                    time_basis=time_basis, time_repeats=repeats)
