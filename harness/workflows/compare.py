@@ -22,8 +22,6 @@ from harness.store.experiments import (CONFIG_FILE, RESULTS_FILE, ExperimentErro
 from harness.store.exr import write_exr
 from harness.store.references import Reference
 from harness.workflows import runner
-from harness.workflows.render import render_checked
-from harness.workflows.timing import measure
 
 
 def spp_for_calibration(t1: float, t4: float, budget_s: float) -> float:
@@ -52,8 +50,7 @@ class BudgetChoice:
     (:func:`harness.evaluate.timing_stats.median_interval`) of what each
     round's own pair of renders would buy, the spread of the per-sample
     cost (and overhead) carried to spp, widened to hold ``spp``; None with
-    one round. ``basis`` is the clock the budget was spent in: "cpu" only
-    where every calibration render recorded its CPU time.
+    one round. ``basis`` is the clock the budget was spent in (wall or cpu).
     """
 
     spp: int
@@ -97,7 +94,7 @@ def calibrate_time_budget(entries: Sequence[RendererEntry], scene: Scene, budget
                 continue
             try:
                 for spp in (1, 4):
-                    result, timing = measure(lambda: render_checked(entry, scene, spp, seed))
+                    result, timing = runner.render_timed(entry, scene, spp, seed)
                     timings[i].append((float(result.time_s), runner.cpu_time(result, timing)))
                     if on_render:
                         on_render(f"{entry.name} calibration {spp} spp, round {round_ + 1}/{repeats}")
@@ -133,14 +130,14 @@ def retime(entries: Sequence[RendererEntry], records: Sequence[runner.RunRecord]
     (``info["time_repeat_error"]``); its timings so far stand.
     """
     timed = [(e, r) for e, r in zip(entries, records) if r.status == "ok" and r.time_s is not None]
-    for e, r in timed:
+    for _, r in timed:
         r.time_samples = [(float(r.time_s), r.cpu_time_s)]
     for round_ in range(1, repeats):
         for entry, rec in timed:
             if "time_repeat_error" in rec.info:
                 continue
             try:
-                result, timing = measure(lambda: render_checked(entry, scene, rec.spp, rec.seed))
+                result, timing = runner.render_timed(entry, scene, rec.spp, rec.seed)
             except Exception as e:  # the first render's record stands
                 rec.info["time_repeat_error"] = f"{type(e).__name__}: {e}"
                 continue

@@ -36,8 +36,6 @@ from harness.store.references import Reference
 from harness.workflows import runner
 from harness.workflows.cells import Cell, entry_for, failed_rows, render_cell_task
 from harness.workflows.executor import DaskExecutor, InProcess, Task, task_key
-from harness.workflows.render import render_checked
-from harness.workflows.timing import measure
 
 
 def _not_run_row(entry: RendererEntry, scene: Scene) -> dict | None:
@@ -203,7 +201,7 @@ def repeat_cell_task(cell: Cell, scene: Scene, entry: RendererEntry | None = Non
     (recorded in the row, not raised: in-process an exception would end the run)."""
     entry = entry or entry_for(cell.spec, cell.settings)
     try:
-        result, timing = measure(lambda: render_checked(entry, scene, cell.spps[-1], cell.seed, cell.spps))
+        result, timing = runner.render_timed(entry, scene, cell.spps[-1], cell.seed, cell.spps)
     except Exception as e:
         return None, None, None, f"{type(e).__name__}: {e}"
     return float(result.time_s), runner.cpu_time(result, timing), image_digest(result.image), None

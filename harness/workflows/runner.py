@@ -163,6 +163,13 @@ class RunRecord:
 CALL_CPU_NOTE = "the whole render call, set-up included (the renderer gives no CPU time of its render proper)"
 
 
+def render_timed(entry: RendererEntry, scene: Scene, spp: int, seed: int,
+                 checkpoints: Sequence[int] = ()) -> tuple[RenderResult, Timing]:
+    """:func:`render_checked` measured (:func:`harness.workflows.timing.measure`): every timed render of the
+    harness (a run, a repeat, a time budget's calibration) is this call; its CPU time is :func:`cpu_time`."""
+    return measure(lambda: render_checked(entry, scene, spp, seed, checkpoints))
+
+
 def cpu_time(result: RenderResult, timing: Timing) -> float:
     """The CPU time of a render: of its render proper where the renderer measured it, else of the whole call
     measured as ``timing`` (set-up included: :data:`CALL_CPU_NOTE`)."""
@@ -247,7 +254,7 @@ def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: 
     try:
         rec.version = str(entry.renderer.version())
         if time_limit_s is None:
-            result, timing = measure(lambda: render_checked(entry, scene, spp, seed, checkpoints))
+            result, timing = render_timed(entry, scene, spp, seed, checkpoints)
         else:
             result, timing = render_sandboxed(entry, scene, spp, seed, checkpoints, time_limit_s)
     except RenderTimeout as e:
@@ -284,9 +291,8 @@ def run_checkpoints(entry: RendererEntry, scene: Scene, spps: Sequence[int], see
     try:
         for spp in spps:
             if spp not in shots:
-                extra, timing = measure(lambda: render_checked(entry, scene, spp, seed))
-                cpu = timing.cpu_s if extra.cpu_time_s is None else extra.cpu_time_s
-                shots[spp] = (extra.image, extra.time_s, cpu)
+                extra, timing = render_timed(entry, scene, spp, seed)
+                shots[spp] = (extra.image, extra.time_s, cpu_time(extra, timing))
     except Exception as e:  # as in run_one: recorded, not raised
         return [top.failed(e)]
     out = []

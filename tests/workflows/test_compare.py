@@ -133,14 +133,14 @@ def test_cpu_basis_spends_the_budget_in_cpu_seconds(scene, monkeypatch):
     wall time (two threads, say) buys twice the samples of a CPU budget; without CPU times it falls back to
     the whole call's CPU time."""
     (entry,) = resolve(["tests.user_renderers:Jittery"])
-    monkeypatch.setattr(cmp, "render_checked", _fake_render(PER_SPP, PER_SPP / 2))
+    monkeypatch.setattr(runner, "render_checked", _fake_render(PER_SPP, PER_SPP / 2))
     (wall,) = cmp.calibrate_time_budget([entry], scene, 2.0, 0, repeats=2, basis="wall")
     (cpu,) = cmp.calibrate_time_budget([entry], scene, 2.0, 0, repeats=2, basis="cpu")
     assert (wall.spp, wall.basis) == (28, "wall") and (cpu.spp, cpu.basis) == (56, "cpu")
     # A renderer that measures no CPU time of its own: the whole call's (runner.cpu_time), here a quarter of
     # its wall time, stands in; never wall time under the CPU name.
-    monkeypatch.setattr(cmp, "render_checked", _fake_render(PER_SPP, None))
-    monkeypatch.setattr(cmp, "measure", lambda call: ((r := call()), Timing(r.time_s, r.time_s / 4, 1.0, 1.0, 0.02)))
+    monkeypatch.setattr(runner, "render_checked", _fake_render(PER_SPP, None))
+    monkeypatch.setattr(runner, "measure", lambda call: ((r := call()), Timing(r.time_s, r.time_s / 4, 1.0, 1.0, 0.02)))
     (fallback,) = cmp.calibrate_time_budget([entry], scene, 2.0, 0, repeats=2, basis="cpu")
     assert fallback.basis == "cpu" and fallback.spp > 3 * wall.spp
 
@@ -149,7 +149,7 @@ def test_repeats_carry_cpu_time_when_the_render_path_records_it(scene, monkeypat
     (entry,) = resolve(["tests.user_renderers:Jittery"])
     rec = runner.run_one(entry, scene, 16, 0, None)
     rec.cpu_time_s = 0.5  # the first render's, as a RunRecord with the capture's columns holds it
-    monkeypatch.setattr(cmp, "render_checked", _fake_render(PER_SPP, PER_SPP / 4))
+    monkeypatch.setattr(runner, "render_checked", _fake_render(PER_SPP, PER_SPP / 4))
     cmp.retime([entry], [rec], scene, 3)
     row = rec.row()
     assert json.loads(row["cpu_time_samples_s"]) == [0.5, 0.5, 0.5]
