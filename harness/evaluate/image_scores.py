@@ -39,6 +39,7 @@ class InputImage:
     label: str  # unique among the images of one run (names output files and report entries)
     image: np.ndarray = field(repr=False)  # (H, W, 3) float32 linear
     spp: int | None  # from its header or given; None: unknown
+    clipped: float | None = None  # display-referred files: the fraction of pixels clipped at 0 or full scale
 
 
 @dataclass
