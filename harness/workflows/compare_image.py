@@ -44,6 +44,7 @@ from typing import Sequence
 import numpy as np
 
 from harness.evaluate import flip, metrics
+from harness.evaluate.ciede2000 import srgb_eotf
 from harness.evaluate import noise as stats
 from harness.evaluate.image_scores import ImageScore, InputImage, Target
 from harness.scenes.model import Scene
@@ -64,12 +65,6 @@ INPUT_TRANSFERS = {
 # --------------------------------------------------------------------------
 # Loading and checking
 # --------------------------------------------------------------------------
-
-
-def srgb_eotf(code: np.ndarray) -> np.ndarray:
-    """Linear values of sRGB-encoded ones in [0, 1]: the EOTF of IEC 61966-2-1 (piecewise, 2.4 power)."""
-    v = np.asarray(code, dtype=np.float64)
-    return np.where(v <= 0.04045, v / 12.92, ((np.maximum(v, 0.04045) + 0.055) / 1.055) ** 2.4)
 
 
 def canonical_transfer(transfer: str | None) -> str | None:

@@ -11,7 +11,7 @@ from PIL import Image
 
 from tests.conftest import cbox_in_process as cbox, run_cbox
 from harness.store.exr import write_exr
-from harness.workflows.compare_image import srgb_eotf
+from harness.evaluate.ciede2000 import srgb_eotf
 
 
 @pytest.fixture(scope="module")
