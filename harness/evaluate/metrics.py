@@ -56,12 +56,13 @@ from __future__ import annotations
 import numpy as np
 
 from harness.evaluate import ciede2000, flip
+from harness.evaluate import ssim as structural_similarity
 from harness.evaluate.pixels import as_image, as_pair, finite_pixels, luminance, zero_broken_pixels
 from harness.scenes.quantities import DEFAULT_QUANTITY, has_colour
 
-# No colour-science or skimage.metrics at import: `import colour` costs ~1.5 s and skimage.metrics pulls in
-# scipy.stats (~2 s), which `cbox compare-image` cannot afford (issue 31). CIEDE2000 and the sRGB transfer are
-# harness.evaluate.ciede2000 (the same arithmetic as colour-science's); SSIM is skimage's, imported when used.
+# No colour-science or skimage: `import colour` costs ~1.5 s and skimage.metrics pulls in scipy.stats (~2 s)
+# and SSIM scipy.ndimage (~0.4 s), which `cbox compare-image` cannot afford (issue 31). CIEDE2000 and the sRGB
+# transfer are harness.evaluate.ciede2000, SSIM harness.evaluate.ssim: the same arithmetic, in numpy.
 
 REINHARD_KEY = 0.18
 REINHARD_DELTA = 1e-4
@@ -134,20 +135,11 @@ def psnr(img, ref, exposure: float | None = None) -> float:
 
 
 def ssim(img, ref, exposure: float | None = None) -> float:
-    """Mean SSIM of the display-encoded images (skimage defaults, data range 1)."""
-    from skimage.metrics._structural_similarity import structural_similarity  # not skimage.metrics: scipy.stats
-
+    """Mean SSIM of the display-encoded images (skimage's defaults, data range 1: :mod:`harness.evaluate.ssim`)."""
     img, ref = as_pair(img, ref)
     if exposure is None:
         exposure = exposure_scale(ref)
-    return float(
-        structural_similarity(
-            display_encode(img, exposure),
-            display_encode(ref, exposure),
-            channel_axis=-1,
-            data_range=1.0,
-        )
-    )
+    return structural_similarity.ssim(display_encode(img, exposure), display_encode(ref, exposure), data_range=1.0)
 
 
 def linear_srgb_to_lab(img) -> np.ndarray:
