@@ -93,18 +93,16 @@ def compare_image(
               else workflow.load_file_target(reference, input_transfer, exposure))
     _check_regions(thresholds, target)
     sources = workflow.load_images(images, target, input_transfer, spp, exposure)
-    if exposure is not None and all(s.clipped is None for s in sources) and (scene is not None or not
-                                                                               _display_referred(reference)):
+    if exposure is not None and all(s.clipped is None for s in (*sources, target)):
         raise typer.BadParameter("applies to display-referred (integer) images only, and every image given is "
                                  "floating-point (radiance already)", param_hint="--exposure")
     from harness.evaluate import thresholds as th
     from reports.compare_image import ERROR_MAP_SUFFIX, write_compare_image_report, write_error_map
 
     scores, verdicts = [], []
+    _warn_clipped(target.path, target.clipped)
     for source in sources:
-        if source.clipped is not None and source.clipped > CLIPPED_WARNING:
-            warn(f"{source.path}: {100 * source.clipped:.3g}% of the pixels are clipped (a channel at 0 or at "
-                 "the maximum code value): their errors are the encoding's, not the renderer's")
+        _warn_clipped(source.path, source.clipped)
         result = workflow.score(source, target)
         error_map = write_error_map(out, result, target)
         scores.append(result)
@@ -164,10 +162,11 @@ def _check_regions(thresholds, target) -> None:
                                      f"{did_you_mean(parts[0], regions)}", param_hint=f"--{t.level}")
 
 
-def _display_referred(path: Path) -> bool:
-    from harness.store.image_files import read_image_file
-
-    return not read_image_file(path).scene_linear
+def _warn_clipped(path: Path, clipped: float | None) -> None:
+    """The warning line of a display-referred file with more than :data:`CLIPPED_WARNING` of its pixels clipped."""
+    if clipped is not None and clipped > CLIPPED_WARNING:
+        warn(f"{path}: {100 * clipped:.3g}% of the pixels are clipped (a channel at 0 or at the maximum code "
+             "value): their errors are the encoding's, not the renderer's")
 
 
 def _verdict(result, thresholds, workflow, target, fail_percent, pixel_threshold, th) -> dict | None:

@@ -25,6 +25,7 @@ class Target:
     path: Path  # the reference image file
     scene: Scene | None = None  # with a scene: its regions are scored
     noise_note: str | None = None  # why this reference cannot give noise yardsticks, if it cannot
+    clipped: float | None = None  # a display-referred reference file: the fraction of its pixels clipped
 
     @property
     def label(self) -> str:

@@ -143,13 +143,15 @@ def load_file_target(path: Path, transfer: str | None = None, exposure: float | 
     image is scored as radiance (a scene says otherwise: use one).
     """
     path = Path(path)
-    image = linear_pixels(read_image_file(path), transfer, exposure)
+    file = read_image_file(path)
+    image = linear_pixels(file, transfer, exposure)
     folder = path.parent
     stored = [folder / f for f in (VARIANCE_FILE, NOISE_FILE, PROVENANCE_FILE)]
     if path.name != REFERENCE_FILE or not all(f.is_file() for f in stored):
         note = (f"no reference variance: {path} is not a reference folder's {REFERENCE_FILE} with "
                 f"{', '.join(f.name for f in stored)} beside it")
-        return Target(Reference(image, None, None, {}, folder, DEFAULT_QUANTITY), path, noise_note=note)
+        return Target(Reference(image, None, None, {}, folder, DEFAULT_QUANTITY), path, noise_note=note,
+                      clipped=clipped_fraction(file))
     try:
         provenance = json.loads((folder / PROVENANCE_FILE).read_text())
         int(provenance["spp"]), int(provenance["noise_spp"])

@@ -123,3 +123,12 @@ def test_clipping_warning_above_a_tenth_of_a_percent(tmp_path, capsys, fraction,
     assert code == 0 and len(lines) == warned, err
     if warned:
         assert lines[0].startswith(f"cbox: warning: {png}: 0.293% of the pixels are clipped")
+
+
+def test_a_display_referred_reference_is_warned_of_too(tmp_path, capsys):
+    ref, png = _synthetic(tmp_path, 0.003)
+    code, out, err = cbox(capsys, "compare-image", str(ref), "--reference", str(png), "--input-transfer", "SRGB",
+                          "--exposure", "1", "--out", str(tmp_path / "o"), "--json")
+    (line,) = [x for x in err.splitlines() if "clipped" in x]
+    assert code == 0 and line.startswith(f"cbox: warning: {png}: 0.293% of the pixels are clipped")
+    assert abs(json.loads(out)["metrics"]["mean_radiance_rel_error"]) < 0.02  # --exposure applied to it
