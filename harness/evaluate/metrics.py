@@ -30,14 +30,16 @@ Conventions
   observations"). Both images are multiplied by the shared exposure, taken
   linear sRGB -> XYZ -> CIELAB with the D65 white of the CIE 1931 2°
   observer, *without* clipping: L* may exceed 100 on the light source, and
-  that is a real difference we want to see. ΔE00 is then computed per pixel.
+  that is a real difference we want to see. ΔE00 is then computed per pixel
+  (:mod:`harness.evaluate.ciede2000`: colour-science's arithmetic in numpy).
   Summary statistics report the fraction above 2.3, the just-noticeable
   difference (Sharma 2003, *Digital Color Imaging Handbook*; Mahy et al.
   1994).
 - **SSIM** (Wang et al. 2004, "Image quality assessment: from error
-  visibility to structural similarity"), as implemented by
-  ``skimage.metrics.structural_similarity`` with its defaults (uniform 7x7
-  window), per channel, on the display-encoded images.
+  visibility to structural similarity"), as
+  ``skimage.metrics.structural_similarity`` computes it with its defaults
+  (uniform 7x7 window), per channel, on the display-encoded images
+  (:mod:`harness.evaluate.ssim`, in numpy).
 - **HDR-FLIP** (Andersson et al. 2021, "Visualizing Errors in Rendered High
   Dynamic Range Images"), its mean over pixels, on the linear images with
   its own exposure range from the reference: :mod:`harness.evaluate.flip`.
