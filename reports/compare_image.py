@@ -55,16 +55,18 @@ class BareReference:
         return "none (an image file)"
 
 
-def delta_e_png(img, ref, quantity: str = DEFAULT_QUANTITY) -> np.ndarray:
-    """The ΔE00 error map of ``img`` against ``ref`` as uint8 RGB pixels, as the report's viewer colours it."""
-    _, de = metrics.delta_e2000(img, ref, exposure=metrics.display_exposure(ref, quantity), full=True)
+def delta_e_png(img, ref, quantity: str = DEFAULT_QUANTITY, de: np.ndarray | None = None) -> np.ndarray:
+    """The ΔE00 error map of ``img`` against ``ref`` as uint8 RGB pixels, as the report's viewer colours it;
+    ``de``: that map (H, W), when the caller has computed it already."""
+    if de is None:
+        _, de = metrics.delta_e2000(img, ref, exposure=metrics.display_exposure(ref, quantity), full=True)
     return apply_colormap(de, *DELTA_E_RANGE, cmap=MAP_COLORMAPS["de"])
 
 
-def write_error_map(folder: Path, score: ImageScore, target: Target) -> Path:
-    """``folder/<label>.delta_e.png`` of one scored image; returns its path."""
+def write_error_map(folder: Path, score: ImageScore, target: Target, de: np.ndarray | None = None) -> Path:
+    """``folder/<label>.delta_e.png`` of one scored image (``de``: its ΔE00 map, if computed); returns its path."""
     path = Path(folder) / f"{score.source.label}{ERROR_MAP_SUFFIX}"
-    pixels = delta_e_png(score.source.image, target.reference.image, target.reference.quantity)
+    pixels = delta_e_png(score.source.image, target.reference.image, target.reference.quantity, de)
     with atomic_path(path) as tmp:
         Image.fromarray(pixels).save(tmp, format="PNG", optimize=True)
     return path

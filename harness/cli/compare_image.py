@@ -104,9 +104,11 @@ def compare_image(
     for source in sources:
         _warn_clipped(source.path, source.clipped)
         result = workflow.score(source, target)
-        error_map = write_error_map(out, result, target)
+        # The ΔE00 map --fail-percent counts is the error map's: computed once for both.
+        de = workflow.pixel_errors(source, target) if fail_percent is not None else None
+        error_map = write_error_map(out, result, target, de)
         scores.append(result)
-        verdict = _verdict(result, thresholds, workflow, target, fail_percent, pixel_threshold, th)
+        verdict = _verdict(result, thresholds, de, fail_percent, pixel_threshold, th)
         verdicts.append(verdict)
         if as_json:
             record = {**result.record(target), "error_map": str(error_map)}
@@ -169,7 +171,7 @@ def _warn_clipped(path: Path, clipped: float | None) -> None:
              "value): their errors are the encoding's, not the renderer's")
 
 
-def _verdict(result, thresholds, workflow, target, fail_percent, pixel_threshold, th) -> dict | None:
+def _verdict(result, thresholds, de, fail_percent, pixel_threshold, th) -> dict | None:
     """Check one score against the thresholds; print each broken one; the verdict for --json (None without
     thresholds)."""
     if not thresholds and fail_percent is None:
@@ -181,7 +183,7 @@ def _verdict(result, thresholds, workflow, target, fail_percent, pixel_threshold
         line = t.line(label, row.get(t.metric))
         typer.echo(f"cbox: fail: {line}" if t.level == "fail" else f"cbox: warning: {line}", err=True)
     if fail_percent is not None:
-        percent = 100 * th.fraction_above(workflow.pixel_errors(result.source, target), pixel_threshold)
+        percent = 100 * th.fraction_above(de, pixel_threshold)
         checks.append({"metric": "percent_pixels_delta_e2000_above", "level": "fail", "limit": fail_percent,
                        "pixel_threshold": pixel_threshold, "value": percent, "broken": percent > fail_percent})
         if percent > fail_percent:
