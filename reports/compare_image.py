@@ -20,15 +20,12 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-import pandas as pd
 from PIL import Image
 
 from harness.evaluate import metrics
 from harness.evaluate.image_scores import ImageScore, Target
 from harness.scenes.quantities import DEFAULT_QUANTITY
 from harness.store.atomic import atomic_path
-from harness.store.provenance import provenance
-from reports.html import write_report
 from reports.images import DELTA_E_RANGE, MAP_COLORMAPS, apply_colormap
 
 #: Suffix of each image's error-map file: ``<label>.delta_e.png``.
@@ -58,16 +55,18 @@ class BareReference:
         return "none (an image file)"
 
 
-def delta_e_png(img, ref, quantity: str = DEFAULT_QUANTITY) -> np.ndarray:
-    """The ΔE00 error map of ``img`` against ``ref`` as uint8 RGB pixels, as the report's viewer colours it."""
-    _, de = metrics.delta_e2000(img, ref, exposure=metrics.display_exposure(ref, quantity), full=True)
+def delta_e_png(img, ref, quantity: str = DEFAULT_QUANTITY, de: np.ndarray | None = None) -> np.ndarray:
+    """The ΔE00 error map of ``img`` against ``ref`` as uint8 RGB pixels, as the report's viewer colours it;
+    ``de``: that map (H, W), when the caller has computed it already."""
+    if de is None:
+        _, de = metrics.delta_e2000(img, ref, exposure=metrics.display_exposure(ref, quantity), full=True)
     return apply_colormap(de, *DELTA_E_RANGE, cmap=MAP_COLORMAPS["de"])
 
 
-def write_error_map(folder: Path, score: ImageScore, target: Target) -> Path:
-    """``folder/<label>.delta_e.png`` of one scored image; returns its path."""
+def write_error_map(folder: Path, score: ImageScore, target: Target, de: np.ndarray | None = None) -> Path:
+    """``folder/<label>.delta_e.png`` of one scored image (``de``: its ΔE00 map, if computed); returns its path."""
     path = Path(folder) / f"{score.source.label}{ERROR_MAP_SUFFIX}"
-    pixels = delta_e_png(score.source.image, target.reference.image, target.reference.quantity)
+    pixels = delta_e_png(score.source.image, target.reference.image, target.reference.quantity, de)
     with atomic_path(path) as tmp:
         Image.fromarray(pixels).save(tmp, format="PNG", optimize=True)
     return path
@@ -75,6 +74,13 @@ def write_error_map(folder: Path, score: ImageScore, target: Target) -> Path:
 
 def write_compare_image_report(path: Path, target: Target, scores: Sequence[ImageScore], command: str) -> Path:
     """The HTML report of the scored images against ``target`` at ``path``; returns the path."""
+    # Here, not at the top: the report's modules import pandas and SciPy's stats (seconds), which
+    # `cbox compare-image` without --report does not pay (issue 31: its cost within 3× idiff's).
+    import pandas as pd
+
+    from harness.store.provenance import provenance
+    from reports.html import write_report
+
     runs = pd.DataFrame([{"renderer": s.source.label, "status": "ok", "spp": s.source.spp, "seed": None,
                           "version": None, **s.row()} for s in scores])
     # The summary table takes a run's numbers from rows of known spp; these rows give them to every image.

@@ -8,11 +8,18 @@ from typing import List, Optional
 
 import typer
 
+from harness.cli.choices import choice_callback
 from harness.cli.common import app, command_line, info, out_folder_option
 from harness.cli.run import TABLE_METRICS
 from harness.scenes.library import resolve_scene
 # Heavy modules (the metrics, pandas, the report) are imported inside the command: `cbox --help` must answer
 # in a second.
+
+
+def _transfers() -> tuple[str, ...]:
+    from harness.workflows.compare_image import INPUT_TRANSFERS
+
+    return tuple(INPUT_TRANSFERS)
 
 
 @app.command("compare-image")
@@ -31,12 +38,35 @@ def compare_image(
                                       "yardsticks, where an image has no cbox:spp header (cbox render writes "
                                       "one); one that contradicts its header is refused. Without either the "
                                       "yardsticks are skipped."),
-    input_transfer: Optional[str] = typer.Option(None, "--input-transfer", help="How to linearise display-"
-                                                 "referred (integer) images: srgb (the sRGB EOTF, IEC 61966-2-1) "
-                                                 "or linear (values as stored, scaled to [0, 1]). Without it "
-                                                 "they are refused. Floating-point images are unaffected."),
+    input_transfer: Optional[str] = typer.Option(
+        None, "--input-transfer", metavar="srgb|linear", callback=choice_callback("--input-transfer", _transfers),
+        help="How to linearise display-referred (integer) images: srgb (the sRGB EOTF, IEC 61966-2-1) or linear "
+             "(values as stored, scaled to [0, 1]), in any case (sRGB). Without it they are refused. "
+             "Floating-point images are unaffected."),
+    exposure: Optional[float] = typer.Option(
+        None, "--exposure", metavar="STOPS", help="The exposure display-referred images were made at: their "
+        "linear values (after --input-transfer) are radiance × 2^STOPS, so they are divided by 2^STOPS. Applies "
+        "to integer images only (a tonemapped PNG or JPEG), the --reference file too if it is one."),
+    fail_at: Optional[List[str]] = typer.Option(
+        None, "--fail", metavar="METRIC=V", help="Exit 1 when an image's METRIC is worse than V: above it, or "
+        "below it for a metric where higher is better (psnr, ssim), or in magnitude above it for a signed one "
+        "(mean_radiance_rel_error). Any per-image metric (the keys of --json's metrics and noise: rmse, "
+        "rel_mse, psnr, ssim, delta_e2000_mean, delta_e2000_p95, flip_mean, ...), or region.REGION.METRIC with "
+        "--scene. Repeatable; each broken threshold is printed with its value."),
+    warn_at: Optional[List[str]] = typer.Option(
+        None, "--warn", metavar="METRIC=V", help="As --fail, but a broken threshold prints a warning line and the "
+        "exit code stays 0. Repeatable."),
+    fail_percent: Optional[float] = typer.Option(
+        None, "--fail-percent", metavar="P", min=0.0, max=100.0, help="Exit 1 when more than P percent of the "
+        "pixels have a per-pixel error above --pixel-threshold; the per-pixel error is CIEDE2000 (ΔE00) at the "
+        "reference's display exposure, the error map's (idiff's -failpercent, on ΔE00 rather than channel "
+        "difference)."),
+    pixel_threshold: Optional[float] = typer.Option(
+        None, "--pixel-threshold", metavar="T", min=0.0, help="The per-pixel ΔE00 --fail-percent counts pixels "
+        "above (2.3 is a just-noticeable difference)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object per image on stdout: metrics, "
-                                                       "noise, regions, HDR-FLIP parameters."),
+                                                       "noise, regions, HDR-FLIP parameters, and with thresholds "
+                                                       "its verdict."),
     out: Path = out_folder_option(Path("out/compare-image"), "Folder for each image's ΔE error map "
                                                              "(LABEL.delta_e.png) and, with --report, report.html."),
     report: bool = typer.Option(False, "--report", help="Also write OUT/report.html: the table and the image "
@@ -45,29 +75,46 @@ def compare_image(
     """Score image files against a reference with every image metric, as `cbox compare` scores a render.
 
     Prints a table (or --json), writes a ΔE error map per image. Exit code 0
-    when every image was scored, 2 for bad input (display-referred image
-    without --input-transfer, a size other than the reference's, ...), found
-    before anything is scored.
+    when every image was scored and no --fail threshold is broken (a broken
+    --warn prints a warning line), 1 when one is (each printed on stderr with
+    its value), 2 for bad input (display-referred image without
+    --input-transfer, a size other than the reference's, an unknown metric,
+    ...), found before anything is scored.
     """
     if (reference is None) == (scene is None):
         raise typer.BadParameter("give --reference REF or --scene NAME (one of them)", param_hint="--reference")
+    if (fail_percent is None) != (pixel_threshold is None):
+        raise typer.BadParameter("give --fail-percent P and --pixel-threshold T together",
+                                 param_hint="--fail-percent" if pixel_threshold is None else "--pixel-threshold")
+    thresholds = _thresholds(fail_at, warn_at)
     from harness.workflows import compare_image as workflow
 
-    if input_transfer is not None and input_transfer not in workflow.INPUT_TRANSFERS:
-        raise typer.BadParameter(f"{input_transfer!r}: expected one of {', '.join(workflow.INPUT_TRANSFERS)}",
-                                 param_hint="--input-transfer")
     target = (workflow.load_scene_target(resolve_scene(scene)) if scene is not None
-              else workflow.load_file_target(reference, input_transfer))
-    sources = workflow.load_images(images, target, input_transfer, spp)
+              else workflow.load_file_target(reference, input_transfer, exposure))
+    _check_regions(thresholds, target)
+    sources = workflow.load_images(images, target, input_transfer, spp, exposure)
+    if exposure is not None and all(s.clipped is None for s in (*sources, target)):
+        raise typer.BadParameter("applies to display-referred (integer) images only, and every image given is "
+                                 "floating-point (radiance already)", param_hint="--exposure")
+    from harness.evaluate import thresholds as th
     from reports.compare_image import ERROR_MAP_SUFFIX, write_compare_image_report, write_error_map
 
-    scores = []
+    scores, verdicts = [], []
+    _warn_clipped(target.path, target.clipped)
     for source in sources:
+        _warn_clipped(source.path, source.clipped)
         result = workflow.score(source, target)
-        error_map = write_error_map(out, result, target)
+        # The ΔE00 map --fail-percent counts is the error map's: computed once for both.
+        de = workflow.pixel_errors(source, target) if fail_percent is not None else None
+        error_map = write_error_map(out, result, target, de)
         scores.append(result)
+        verdict = _verdict(result, thresholds, de, fail_percent, pixel_threshold, th)
+        verdicts.append(verdict)
         if as_json:
-            typer.echo(json.dumps({**result.record(target), "error_map": str(error_map)}, allow_nan=False))
+            record = {**result.record(target), "error_map": str(error_map)}
+            if verdict is not None:
+                record["verdict"] = verdict
+            typer.echo(json.dumps(record, allow_nan=False))
         if result.noise_note:
             info(f"{source.path}: noise yardsticks skipped: {result.noise_note}")
     if not as_json:
@@ -75,16 +122,110 @@ def compare_image(
     info(f"error maps: {out}/*{ERROR_MAP_SUFFIX}")
     if report:
         info(f"report: {write_compare_image_report(out / 'report.html', target, scores, command_line())}")
+    if any(v is not None and v["status"] == "fail" for v in verdicts):
+        raise typer.Exit(1)
+
+
+#: The fraction of a display-referred image's pixels clipped above which a warning is printed (0.1%).
+CLIPPED_WARNING = 1e-3
+
+
+def warn(message: str) -> None:
+    """``cbox: warning: MESSAGE`` on stderr; not dropped by --quiet (a result a CI log must show)."""
+    typer.echo(f"cbox: warning: {message}", err=True)
+
+
+def _thresholds(fail_at, warn_at) -> list:
+    from harness.evaluate.thresholds import ThresholdError, parse_threshold
+
+    out = []
+    for level, given in (("fail", fail_at), ("warn", warn_at)):
+        for text in given or ():
+            try:
+                out.append(parse_threshold(text, level))
+            except ThresholdError as e:
+                raise typer.BadParameter(str(e), param_hint=f"--{level}") from None
+    return out
+
+
+def _check_regions(thresholds, target) -> None:
+    """A region threshold needs a scene that names the region: refused otherwise, before anything is scored."""
+    from harness.evaluate.registry import region_metric
+    from harness.suggest import did_you_mean
+
+    for t in thresholds:
+        parts = region_metric(t.metric)
+        if parts is None:
+            continue
+        regions = target.scene.regions if target.scene is not None else {}
+        if parts[0] not in regions:
+            where = f"scene {target.scene.name!r}" if target.scene is not None else "a --reference file"
+            raise typer.BadParameter(f"{t.metric}: {where} has no region {parts[0]!r}"
+                                     f"{did_you_mean(parts[0], regions)}", param_hint=f"--{t.level}")
+
+
+def _warn_clipped(path: Path, clipped: float | None) -> None:
+    """The warning line of a display-referred file with more than :data:`CLIPPED_WARNING` of its pixels clipped."""
+    if clipped is not None and clipped > CLIPPED_WARNING:
+        warn(f"{path}: {100 * clipped:.3g}% of the pixels are clipped (a channel at 0 or at the maximum code "
+             "value): their errors are the encoding's, not the renderer's")
+
+
+def _verdict(result, thresholds, de, fail_percent, pixel_threshold, th) -> dict | None:
+    """Check one score against the thresholds; print each broken one; the verdict for --json (None without
+    thresholds)."""
+    if not thresholds and fail_percent is None:
+        return None
+    label, row = result.source.label, result.row()
+    checks = [{"metric": t.metric, "level": t.level, "limit": t.value, "value": row.get(t.metric),
+               "broken": t.exceeded(row.get(t.metric))} for t in thresholds]
+    for t in th.broken(thresholds, row):
+        line = t.line(label, row.get(t.metric))
+        typer.echo(f"cbox: fail: {line}" if t.level == "fail" else f"cbox: warning: {line}", err=True)
+    if fail_percent is not None:
+        percent = 100 * th.fraction_above(de, pixel_threshold)
+        checks.append({"metric": "percent_pixels_delta_e2000_above", "level": "fail", "limit": fail_percent,
+                       "pixel_threshold": pixel_threshold, "value": percent, "broken": percent > fail_percent})
+        if percent > fail_percent:
+            typer.echo(f"cbox: fail: {th.percent_line(label, percent, fail_percent, pixel_threshold)}", err=True)
+    status = ("fail" if any(c["broken"] and c["level"] == "fail" for c in checks)
+              else "warn" if any(c["broken"] for c in checks) else "pass")
+    from harness.store.atomic import json_safe
+
+    return json_safe({"status": status, "checks": checks})
 
 
 def _print_table(scores) -> None:
-    """The metrics `cbox compare` prints, one row per image; then each image's regions, if any."""
-    import pandas as pd
+    """The metrics `cbox compare` prints, one row per image; then each image's regions, if any.
 
-    frame = pd.DataFrame([{"image": s.source.label, "spp": s.source.spp, **s.row()} for s in scores])
-    frame["spp"] = frame["spp"].astype("Int64")  # unknown spp: <NA>, and 2 rather than 2.0 beside it
-    typer.echo(frame[[c for c in ("image", "spp", *TABLE_METRICS) if c in frame]].to_string(index=False))
+    Laid out as pandas' ``to_string`` lays a frame out, without pandas (its import is ~0.5 s of this
+    command's time, issue 31)."""
+    columns = ["image", "spp", *(c for c in TABLE_METRICS if any(c in s.row() for s in scores))]
+    rows = [[s.source.label, s.source.spp, *(s.row().get(c) for c in columns[2:])] for s in scores]
+    typer.echo(_format_table(columns, rows))
     for s in scores:
         if s.regions:
-            typer.echo(f"\n{s.source.label} per region:\n"
-                       + pd.DataFrame.from_dict(s.regions, orient="index").to_string())
+            names = list(dict.fromkeys(k for values in s.regions.values() for k in values))
+            typer.echo(f"\n{s.source.label} per region:\n" + _format_table(
+                ["", *names], [[region, *(values.get(k) for k in names)] for region, values in s.regions.items()],
+                left_first=True))
+
+
+def _cell(value) -> str:
+    if value is None:
+        return "<NA>"
+    if isinstance(value, float):
+        return "NaN" if value != value else f"{value:.6f}"
+    return str(value)
+
+
+def _format_table(columns: list[str], rows: list[list], left_first: bool = False) -> str:
+    """Right-aligned columns two spaces apart (the first left-aligned when it is an index of names)."""
+    cells = [[_cell(v) for v in row] for row in rows]
+    widths = [max(len(c), *(len(r[i]) for r in cells)) for i, c in enumerate(columns)]
+
+    def line(values):
+        return "  ".join(v.ljust(w) if (i == 0 and left_first) else v.rjust(w)
+                         for i, (v, w) in enumerate(zip(values, widths))).rstrip()
+
+    return "\n".join([line(columns), *(line(r) for r in cells)])

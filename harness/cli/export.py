@@ -7,10 +7,10 @@ from typing import List, Optional
 
 import typer
 
+from harness.cli.choices import choice_callback
 from harness.cli.common import SceneOpt, SetOpt, app, out_folder_option
 from harness.scenes.export import FORMATS
 from harness.scenes.library import resolve_scene
-from harness.suggest import did_you_mean
 
 FORMAT_HELP = ("Format to write: mitsuba (scene.xml and meshes/*.ply, Mitsuba 3 XML: `mitsuba DIR/scene.xml -o "
                "out.exr -D spp=64 -D seed=3`), luxcore (LuxCore SDL: scene.scn and scene.cfg) or pbrt-v4 "
@@ -21,7 +21,9 @@ FORMAT_HELP = ("Format to write: mitsuba (scene.xml and meshes/*.ply, Mitsuba 3 
 @app.command("export")
 def export(
     scene: str = SceneOpt,
-    fmt: str = typer.Option(..., "--format", "-f", help=FORMAT_HELP, show_default=False),
+    fmt: str = typer.Option(..., "--format", "-f", help=FORMAT_HELP, show_default=False, metavar="|".join(FORMATS),
+                            callback=choice_callback("--format", lambda: FORMATS,
+                                                     "unknown export format {value!r}{hint}; formats: {listed}")),
     out: Path = out_folder_option(Path("out/export"), "Folder to write the scene into (created if missing); "
                                                       "files of an earlier export there are replaced."),
     overrides: Optional[List[str]] = SetOpt,
@@ -33,9 +35,6 @@ def export(
     radiance, such as cornell-box-ao's ambient occlusion) is refused before
     anything is written: one line naming the scene file and field, exit 2.
     """
-    if fmt not in FORMATS:
-        raise typer.BadParameter(f"unknown export format {fmt!r}{did_you_mean(fmt, list(FORMATS))}; formats: "
-                                 f"{', '.join(FORMATS)}", param_hint="--format")
     from harness.scenes.export import export_scene
 
     typer.echo(export_scene(resolve_scene(scene, overrides), fmt, out))

@@ -8,7 +8,7 @@ from typing import Any
 import typer
 
 from harness.cli.common import info
-from harness.suggest import did_you_mean
+from harness.cli.choices import choice_callback
 
 
 def _checked_repeats(ctx: Any, value: int | None) -> int | None:
@@ -27,12 +27,13 @@ def time_repeats_option(default: str) -> Any:
         "did not)."))
 
 
-def _checked_basis(ctx: Any, value: str | None) -> str | None:
+def _time_bases() -> tuple[str, ...]:
     from harness.evaluate.timing_stats import TIME_BASES
 
-    if value is not None and value not in TIME_BASES and not ctx.resilient_parsing:
-        raise typer.BadParameter(f"{value!r}: give {' or '.join(TIME_BASES)}{did_you_mean(value, TIME_BASES)}")
-    return value
+    return tuple(TIME_BASES)
+
+
+_checked_basis = choice_callback("--time-basis", _time_bases)
 
 
 def time_basis_option(default: str | None, help: str) -> Any:

@@ -25,6 +25,7 @@ class Target:
     path: Path  # the reference image file
     scene: Scene | None = None  # with a scene: its regions are scored
     noise_note: str | None = None  # why this reference cannot give noise yardsticks, if it cannot
+    clipped: float | None = None  # a display-referred reference file: the fraction of its pixels clipped
 
     @property
     def label(self) -> str:
@@ -39,6 +40,7 @@ class InputImage:
     label: str  # unique among the images of one run (names output files and report entries)
     image: np.ndarray = field(repr=False)  # (H, W, 3) float32 linear
     spp: int | None  # from its header or given; None: unknown
+    clipped: float | None = None  # display-referred files: the fraction of pixels clipped at 0 or full scale
 
 
 @dataclass

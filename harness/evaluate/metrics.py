@@ -30,14 +30,16 @@ Conventions
   observations"). Both images are multiplied by the shared exposure, taken
   linear sRGB -> XYZ -> CIELAB with the D65 white of the CIE 1931 2°
   observer, *without* clipping: L* may exceed 100 on the light source, and
-  that is a real difference we want to see. ΔE00 is then computed per pixel.
+  that is a real difference we want to see. ΔE00 is then computed per pixel
+  (:mod:`harness.evaluate.ciede2000`: colour-science's arithmetic in numpy).
   Summary statistics report the fraction above 2.3, the just-noticeable
   difference (Sharma 2003, *Digital Color Imaging Handbook*; Mahy et al.
   1994).
 - **SSIM** (Wang et al. 2004, "Image quality assessment: from error
-  visibility to structural similarity"), as implemented by
-  ``skimage.metrics.structural_similarity`` with its defaults (uniform 7x7
-  window), per channel, on the display-encoded images.
+  visibility to structural similarity"), as
+  ``skimage.metrics.structural_similarity`` computes it with its defaults
+  (uniform 7x7 window), per channel, on the display-encoded images
+  (:mod:`harness.evaluate.ssim`, in numpy).
 - **HDR-FLIP** (Andersson et al. 2021, "Visualizing Errors in Rendered High
   Dynamic Range Images"), its mean over pixels, on the linear images with
   its own exposure range from the reference: :mod:`harness.evaluate.flip`.
@@ -53,29 +55,16 @@ Conventions
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
-from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
-from harness.evaluate import flip
+from harness.evaluate import ciede2000, flip
+from harness.evaluate import ssim as structural_similarity
 from harness.evaluate.pixels import as_image, as_pair, finite_pixels, luminance, zero_broken_pixels
 from harness.scenes.quantities import DEFAULT_QUANTITY, has_colour
 
-with warnings.catch_warnings():
-    # colour-science warns at import when matplotlib is missing; we never plot.
-    warnings.filterwarnings("ignore", message=".*Matplotlib.*")
-    import colour
-
-_D65_XY = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
-
-# Derived from the BT.709 primaries and the same D65 xy used as the CIELAB
-# white, not the 4-decimal IEC matrix: the rounded matrix maps RGB (1, 1, 1)
-# to a white slightly off D65 (a* ≈ 0.008 for RGB white), so greys would
-# not be exactly neutral.
-_RGB_TO_XYZ = colour.normalised_primary_matrix(
-    colour.RGB_COLOURSPACES["sRGB"].primaries, _D65_XY
-)
+# No colour-science or skimage: `import colour` costs ~1.5 s and skimage.metrics pulls in scipy.stats (~2 s)
+# and SSIM scipy.ndimage (~0.4 s), which `cbox compare-image` cannot afford (issue 31). CIEDE2000 and the sRGB
+# transfer are harness.evaluate.ciede2000, SSIM harness.evaluate.ssim: the same arithmetic, in numpy.
 
 REINHARD_KEY = 0.18
 REINHARD_DELTA = 1e-4
@@ -113,7 +102,7 @@ def display_encode(img, exposure: float) -> np.ndarray:
     """Exposed, NaN->0, clipped to [0, 1], sRGB-OETF-encoded float64 image."""
     exposed = as_image(img) * float(exposure)
     exposed = np.clip(np.nan_to_num(exposed, nan=0.0), 0.0, 1.0)
-    return np.asarray(colour.models.eotf_inverse_sRGB(exposed), dtype=np.float64)
+    return np.asarray(ciede2000.srgb_eotf_inverse(exposed), dtype=np.float64)
 
 
 def rmse(img, ref) -> float:
@@ -140,39 +129,29 @@ def psnr(img, ref, exposure: float | None = None) -> float:
     img, ref = as_pair(img, ref)
     if exposure is None:
         exposure = exposure_scale(ref)
+    true, test = display_encode(ref, exposure), display_encode(img, exposure)
+    # skimage's peak_signal_noise_ratio, as it computes it (its module imports scipy.stats: seconds).
     with np.errstate(divide="ignore"):  # identical images: log10(1/0) = inf, as intended
-        value = peak_signal_noise_ratio(
-            display_encode(ref, exposure), display_encode(img, exposure), data_range=1.0
-        )
+        value = 10 * np.log10(1.0 / np.mean((true - test) ** 2, dtype=np.float64))
     return float(value)
 
 
 def ssim(img, ref, exposure: float | None = None) -> float:
-    """Mean SSIM of the display-encoded images (skimage defaults, data range 1)."""
+    """Mean SSIM of the display-encoded images (skimage's defaults, data range 1: :mod:`harness.evaluate.ssim`)."""
     img, ref = as_pair(img, ref)
     if exposure is None:
         exposure = exposure_scale(ref)
-    return float(
-        structural_similarity(
-            display_encode(img, exposure),
-            display_encode(ref, exposure),
-            channel_axis=-1,
-            data_range=1.0,
-        )
-    )
+    return structural_similarity.ssim(display_encode(img, exposure), display_encode(ref, exposure), data_range=1.0)
 
 
 def linear_srgb_to_lab(img) -> np.ndarray:
     """CIELAB (D65, 2° observer) of a linear-sRGB image, unclipped."""
-    xyz = as_image(img) @ _RGB_TO_XYZ.T
-    return np.asarray(colour.XYZ_to_Lab(xyz, _D65_XY), dtype=np.float64)
+    return ciede2000.linear_srgb_to_lab(as_image(img))
 
 
 def delta_e2000_lab(lab1, lab2) -> np.ndarray:
     """CIEDE2000 between CIELAB arrays of shape (..., 3)."""
-    lab1 = np.asarray(lab1, dtype=np.float64)
-    lab2 = np.asarray(lab2, dtype=np.float64)
-    return np.asarray(colour.delta_E(lab1, lab2, method="CIE 2000"), dtype=np.float64)
+    return ciede2000.delta_e2000(lab1, lab2)
 
 
 def delta_e2000(img, ref, exposure: float | None = None, full: bool = False):

@@ -44,6 +44,7 @@ from typing import Sequence
 import numpy as np
 
 from harness.evaluate import flip, metrics
+from harness.evaluate.ciede2000 import srgb_eotf
 from harness.evaluate import noise as stats
 from harness.evaluate.image_scores import ImageScore, InputImage, Target
 from harness.scenes.model import Scene
@@ -66,12 +67,25 @@ INPUT_TRANSFERS = {
 # --------------------------------------------------------------------------
 
 
-def linear_pixels(image: ImageFile, transfer: str | None) -> np.ndarray:
+def canonical_transfer(transfer: str | None) -> str | None:
+    """``transfer`` as :data:`INPUT_TRANSFERS` names it, whatever its case (``sRGB`` is ``srgb``)."""
+    if transfer is None:
+        return None
+    known = {t.casefold(): t for t in INPUT_TRANSFERS}
+    if transfer.casefold() not in known:
+        raise ValueError(f"unknown input transfer {transfer!r}; expected one of {', '.join(INPUT_TRANSFERS)}")
+    return known[transfer.casefold()]
+
+
+def linear_pixels(image: ImageFile, transfer: str | None, exposure: float | None = None) -> np.ndarray:
     """The file's pixels as linear values: floating-point files as they are, integer ones through ``transfer``.
 
     An integer (display-referred) file without a transfer is refused: its
     code values are not radiance, and scoring them as if they were would give
-    confident, wrong numbers.
+    confident, wrong numbers. ``exposure`` is the exposure in stops the
+    display-referred file was made at (its values were radiance × 2^exposure
+    before the transfer); the linear values are divided by 2^exposure back.
+    It does not apply to floating-point files, which are radiance already.
     """
     if image.scene_linear:
         return image.pixels
@@ -79,13 +93,20 @@ def linear_pixels(image: ImageFile, transfer: str | None) -> np.ndarray:
         raise ImageFileError(f"{image.path}: {image.file_format} with {image.pixel_type} pixels is display-referred, "
                              f"not linear; say how to linearise it with --input-transfer "
                              f"({' or '.join(INPUT_TRANSFERS)})")
-    if transfer not in INPUT_TRANSFERS:
-        raise ValueError(f"unknown input transfer {transfer!r}; expected one of {', '.join(INPUT_TRANSFERS)}")
-    if transfer == "linear":
-        return image.pixels
-    import colour
+    transfer = canonical_transfer(transfer)
+    linear = image.pixels if transfer == "linear" else srgb_eotf(image.pixels)
+    if exposure:
+        linear = linear / 2.0 ** exposure
+    return np.asarray(linear, dtype=np.float32)
 
-    return np.asarray(colour.models.eotf_sRGB(image.pixels), dtype=np.float32)
+
+def clipped_fraction(image: ImageFile) -> float | None:
+    """The fraction of a display-referred file's pixels with a channel at 0 or at the maximum code value
+    (information the encoding lost: those pixels' errors are not the renderer's); None for a linear file."""
+    if image.scene_linear:
+        return None
+    clipped = np.any((image.pixels <= 0.0) | (image.pixels >= 1.0), axis=-1)
+    return float(np.count_nonzero(clipped) / clipped.size)
 
 
 def image_spp(image: ImageFile, given: int | None) -> int | None:
@@ -113,7 +134,7 @@ def load_scene_target(scene: Scene) -> Target:
     return Target(ref, ref.folder / REFERENCE_FILE, scene)
 
 
-def load_file_target(path: Path, transfer: str | None = None) -> Target:
+def load_file_target(path: Path, transfer: str | None = None, exposure: float | None = None) -> Target:
     """A reference image file; its variance and noise batch when a reference folder's files lie beside it.
 
     That is: ``path`` is a folder's ``reference.exr`` and the folder holds
@@ -122,13 +143,15 @@ def load_file_target(path: Path, transfer: str | None = None) -> Target:
     image is scored as radiance (a scene says otherwise: use one).
     """
     path = Path(path)
-    image = linear_pixels(read_image_file(path), transfer)
+    file = read_image_file(path)
+    image = linear_pixels(file, transfer, exposure)
     folder = path.parent
     stored = [folder / f for f in (VARIANCE_FILE, NOISE_FILE, PROVENANCE_FILE)]
     if path.name != REFERENCE_FILE or not all(f.is_file() for f in stored):
         note = (f"no reference variance: {path} is not a reference folder's {REFERENCE_FILE} with "
                 f"{', '.join(f.name for f in stored)} beside it")
-        return Target(Reference(image, None, None, {}, folder, DEFAULT_QUANTITY), path, noise_note=note)
+        return Target(Reference(image, None, None, {}, folder, DEFAULT_QUANTITY), path, noise_note=note,
+                      clipped=clipped_fraction(file))
     try:
         provenance = json.loads((folder / PROVENANCE_FILE).read_text())
         int(provenance["spp"]), int(provenance["noise_spp"])
@@ -142,17 +165,17 @@ def load_file_target(path: Path, transfer: str | None = None) -> Target:
 
 
 def load_images(paths: Sequence[Path], target: Target, transfer: str | None = None,
-               spp: int | None = None) -> list[InputImage]:
+               spp: int | None = None, exposure: float | None = None) -> list[InputImage]:
     """Every test image read, linearised and checked against ``target``; the first bad one is refused."""
     ref = target.reference.image
     out = []
     for path, label in zip(paths, unique_labels(paths)):
         file = read_image_file(path)
-        pixels = linear_pixels(file, transfer)
+        pixels = linear_pixels(file, transfer, exposure)
         if pixels.shape != ref.shape:
             raise ImageFileError(f"{path}: image is {file.size}, but the reference {target.path} is "
                                  f"{ref.shape[1]}x{ref.shape[0]}; images of different sizes are not compared")
-        out.append(InputImage(Path(path), label, pixels, image_spp(file, spp)))
+        out.append(InputImage(Path(path), label, pixels, image_spp(file, spp), clipped_fraction(file)))
     return out
 
 
@@ -179,3 +202,11 @@ def score(source: InputImage, target: Target) -> ImageScore:
     regions = runner.score_regions(target.scene, source.image, ref, source.spp) if target.scene is not None else {}
     parameters = flip.flip_parameters(ref.image) if "flip_mean" in values else None
     return ImageScore(source, values, yardsticks, note, regions, parameters)
+
+
+def pixel_errors(source: InputImage, target: Target) -> np.ndarray:
+    """The (H, W) CIEDE2000 of each pixel at the reference's display exposure: the map ``delta_e2000_*``
+    summarise and the error-map file shows, what ``--fail-percent`` counts."""
+    ref = target.reference
+    return metrics.delta_e2000(source.image, ref.image, exposure=metrics.display_exposure(ref.image, ref.quantity),
+                               full=True)[1]

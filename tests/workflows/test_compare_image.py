@@ -11,6 +11,7 @@ from PIL import Image
 from tests.conftest import CORNELL, run_cbox
 from harness.adapters.registry import resolve
 from harness.evaluate import flip
+from harness.evaluate.ciede2000 import srgb_eotf_inverse
 from harness.evaluate.registry import IMAGE_METRICS
 from harness.scenes.library import resolve_scene
 from harness.store.exr import ImageFileError, read_exr, write_exr
@@ -104,10 +105,8 @@ def test_display_referred_input_is_refused_unless_its_transfer_is_given(tmp_path
     ref = read_exr(REFERENCE)
     ref = np.minimum(ref / np.percentile(ref, 99), 1.0)  # displayable as it is, mostly far from black
     write_exr(tmp_path / "ref.exr", ref)
-    import colour
-
     png = tmp_path / "shot.png"
-    Image.fromarray(np.round(255 * colour.models.eotf_inverse_sRGB(ref)).astype(np.uint8)).save(png)
+    Image.fromarray(np.round(255 * srgb_eotf_inverse(ref)).astype(np.uint8)).save(png)
     _one_error_line(run_cbox("compare-image", str(png), "--reference", str(tmp_path / "ref.exr"), "--out",
                              str(tmp_path / "out")), str(png), "display-referred", "--input-transfer")
     target = ci.load_file_target(tmp_path / "ref.exr")

@@ -1,0 +1,134 @@
+"""`cbox compare-image` for CI (issue 31): --fail/--warn/--fail-percent give exit 0 pass, 1 fail, 2 bad input,
+each broken threshold printed with its value; --exposure for display-referred input; the clipping warning."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from tests.conftest import cbox_in_process as cbox, run_cbox
+from harness.store.exr import write_exr
+from harness.evaluate.ciede2000 import srgb_eotf
+
+
+@pytest.fixture(scope="module")
+def render16(tmp_path_factory):
+    """A 16-spp Mitsuba render of cornell-box by `cbox render` (256², the reference's size; ~1 s)."""
+    exr = tmp_path_factory.mktemp("ci") / "m16.exr"
+    proc = run_cbox("render", "--scene", "cornell-box", "-r", "mitsuba", "--spp", "16", "--seed", "0",
+                    "--out", str(exr))
+    assert proc.returncode == 0, proc.stderr
+    return exr
+
+
+def _compare(capsys, tmp_path, image, *extra):
+    return cbox(capsys, "compare-image", str(image), "--scene", "cornell-box", "--out", str(tmp_path / "o"),
+                "--json", *extra)
+
+
+def test_the_issue_case_fails_with_exit_1(render16, tmp_path):
+    """`compare-image --fail delta_e2000_mean=0.1` on a 16-spp render: exit 1, the failed threshold and its value
+    on stderr (a fresh process, as CI runs it)."""
+    proc = run_cbox("compare-image", str(render16), "--scene", "cornell-box", "--fail", "delta_e2000_mean=0.1",
+                    "--out", str(tmp_path))
+    assert proc.returncode == 1, proc.stderr
+    (line,) = [x for x in proc.stderr.splitlines() if x.startswith("cbox: fail: ")]
+    assert line.startswith("cbox: fail: m16: delta_e2000_mean = ") and line.endswith(" > 0.1 (--fail)")
+    assert float(line.split(" = ")[1].split()[0]) > 1  # 16 spp: ΔE ~5, far above 0.1
+
+
+def test_pass_warn_and_fail(render16, tmp_path, capsys):
+    code, out, err = _compare(capsys, tmp_path, render16, "--fail", "delta_e2000_mean=20", "--fail", "psnr=10")
+    assert code == 0 and "cbox: fail" not in err and "warning" not in err, err
+    assert json.loads(out)["verdict"]["status"] == "pass"
+    # A broken --warn: one warning line, exit 0; ssim is higher-better, so it warns below its value.
+    code, out, err = _compare(capsys, tmp_path, render16, "--fail", "delta_e2000_mean=20", "--warn", "ssim=0.99")
+    (warning,) = [x for x in err.splitlines() if "warning" in x]
+    assert code == 0 and warning.startswith("cbox: warning: m16: ssim = ") and warning.endswith("< 0.99 (--warn)")
+    verdict = json.loads(out)["verdict"]
+    assert verdict["status"] == "warn" and [c["broken"] for c in verdict["checks"]] == [False, True]
+    code, out, err = _compare(capsys, tmp_path, render16, "--fail", "psnr=60", "--warn", "ssim=0.99")
+    assert code == 1 and "cbox: fail: m16: psnr = " in err and json.loads(out)["verdict"]["status"] == "fail"
+    # A region's metric, of a region the scene names.
+    code, out, err = _compare(capsys, tmp_path, render16, "--fail", "region.walls.rmse=1e-6")
+    assert code == 1 and "cbox: fail: m16: region.walls.rmse = " in err
+
+
+def test_fail_percent_counts_pixels_above_the_delta_e_threshold(render16, tmp_path, capsys):
+    code, out, err = _compare(capsys, tmp_path, render16, "--fail-percent", "5", "--pixel-threshold", "2.3")
+    rec = json.loads(out)
+    (check,) = rec["verdict"]["checks"]
+    # The same pixels delta_e2000_frac_gt_2_3 counts (ΔE00 at the display exposure), as a percentage.
+    assert check["value"] == pytest.approx(100 * rec["metrics"]["delta_e2000_frac_gt_2_3"])
+    assert code == 1 and f"cbox: fail: m16: {check['value']:.4g}% of the pixels have ΔE00 > 2.3" in err
+    code, out, err = _compare(capsys, tmp_path, render16, "--fail-percent", "99.9", "--pixel-threshold", "2.3")
+    assert code == 0 and json.loads(out)["verdict"]["status"] == "pass"
+
+
+@pytest.mark.parametrize("extra, words", [
+    (("--fail", "delta_e200_mean=0.1"), ["--fail", "unknown metric", "did you mean 'delta_e2000_mean'?"]),
+    (("--warn", "rmse"), ["--warn", "expected METRIC=VALUE"]),
+    (("--fail", "region.causti.rmse=1"), ["--fail", "no region 'causti'", "did you mean 'caustic'?"]),
+    (("--fail-percent", "5"), ["--fail-percent", "--pixel-threshold", "together"]),
+    (("--fail-percent", "101", "--pixel-threshold", "1"), ["--fail-percent"]),
+    (("--exposure", "1"), ["--exposure", "display-referred"]),
+    (("--input-transfer", "sRBG"), ["--input-transfer", "did you mean 'srgb'?"]),
+])
+def test_bad_input_is_exit_2_naming_the_option(render16, tmp_path, capsys, extra, words):
+    scene = "cornell-box-caustics" if "causti" in " ".join(extra) else "cornell-box"
+    code, out, err = cbox(capsys, "compare-image", str(render16), "--scene", scene, "--out", str(tmp_path / "o"),
+                          *extra)
+    (line,) = err.strip().splitlines()
+    assert code == 2 and line.startswith("cbox: error: ") and all(w in line for w in words), line
+    assert not (tmp_path / "o").exists()
+
+
+def _synthetic(tmp_path, clip_fraction=0.0):
+    """A linear reference in [0.02, 0.45] and the 8-bit sRGB PNG of it shown one stop up (× 2, no clipping),
+    with ``clip_fraction`` of its pixels then set to white."""
+    rng = np.random.default_rng(3)
+    ref = rng.uniform(0.02, 0.45, (64, 64, 3)).astype(np.float32)
+    write_exr(tmp_path / "ref.exr", ref)
+    shown = 2.0 * ref.astype(np.float64)
+    code = np.where(shown <= 0.0031308, 12.92 * shown, 1.055 * shown ** (1 / 2.4) - 0.055)  # sRGB OETF
+    png = np.round(255 * code).astype(np.uint8)
+    png.reshape(-1, 3)[:int(round(clip_fraction * 64 * 64))] = 255
+    Image.fromarray(png).save(tmp_path / "shot.png")
+    assert np.allclose(srgb_eotf(code), shown)
+    return tmp_path / "ref.exr", tmp_path / "shot.png"
+
+
+def test_exposure_undoes_a_tonemapped_png(tmp_path, capsys):
+    ref, png = _synthetic(tmp_path)
+    args = ("compare-image", str(png), "--reference", str(ref), "--input-transfer", "sRGB", "--json",
+            "--out", str(tmp_path / "o"))
+    code, out, err = cbox(capsys, *args, "--exposure", "1")
+    m = json.loads(out)["metrics"]
+    assert code == 0 and "clipped" not in err, err
+    # 8-bit steps only: well below a just-noticeable difference, the mean radiance right to 1%.
+    assert m["delta_e2000_mean"] < 0.5 and abs(m["mean_radiance_rel_error"]) < 0.01
+    code, out, err = cbox(capsys, *args)  # without it: scored as if shown at radiance, twice too bright
+    assert code == 0 and json.loads(out)["metrics"]["mean_radiance_rel_error"] == pytest.approx(1.0, abs=0.02)
+
+
+@pytest.mark.parametrize("fraction, warned", [(0.0008, False), (0.003, True)])
+def test_clipping_warning_above_a_tenth_of_a_percent(tmp_path, capsys, fraction, warned):
+    ref, png = _synthetic(tmp_path, fraction)
+    code, out, err = cbox(capsys, "compare-image", str(png), "--reference", str(ref), "--input-transfer", "srgb",
+                          "--exposure", "1", "--out", str(tmp_path / "o"), "-q")
+    lines = [x for x in err.splitlines() if "clipped" in x]
+    assert code == 0 and len(lines) == warned, err
+    if warned:
+        assert lines[0].startswith(f"cbox: warning: {png}: 0.293% of the pixels are clipped")
+
+
+def test_a_display_referred_reference_is_warned_of_too(tmp_path, capsys):
+    ref, png = _synthetic(tmp_path, 0.003)
+    code, out, err = cbox(capsys, "compare-image", str(ref), "--reference", str(png), "--input-transfer", "SRGB",
+                          "--exposure", "1", "--out", str(tmp_path / "o"), "--json")
+    (line,) = [x for x in err.splitlines() if "clipped" in x]
+    assert code == 0 and line.startswith(f"cbox: warning: {png}: 0.293% of the pixels are clipped")
+    assert abs(json.loads(out)["metrics"]["mean_radiance_rel_error"]) < 0.02  # --exposure applied to it
