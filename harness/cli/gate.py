@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 from pathlib import Path
 from typing import List, Optional
@@ -16,6 +17,8 @@ from harness.gate.config import GateConfigError, load_config
 from harness.scenes.library import resolve_scene
 from harness.store.atomic import write_text_atomic
 from harness.store.references import load_reference
+
+log = logging.getLogger(__name__)
 
 # Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
 # a misspelt config, or `cbox --help`, must answer in a second.
@@ -88,10 +91,12 @@ def gate(
     _write_ci_files(outcomes, cfg.alpha, out, junit, markdown)
     _write_reports(outcomes, cfg.alpha, out, overrides)
     failed = sum(not c.passed for o in outcomes for c in o.checks)
+    skipped = sum(c.skipped for o in outcomes for c in o.checks)
     if as_json:
         print_json(_verdict(cfg, outcomes, failed))
     else:
-        typer.echo(f"gate {'passed' if not failed else f'failed: {failed} check(s)'}")
+        typer.echo(f"gate {'passed' if not failed else f'failed: {failed} check(s)'}"
+                   + (f" ({skipped} skipped)" if skipped else ""))
     raise typer.Exit(code)
 
 
@@ -102,8 +107,9 @@ def _verdict(cfg, outcomes, failed: int) -> dict:
     return {"passed": not failed, "failed_checks": failed, "config": cfg.path, "alpha": cfg.alpha,
             "expectations": [{"name": o.expectation.name, "scene": o.expectation.scene,
                               "renderer": o.expectation.renderer, "passed": o.passed,
-                              "checks": [{"name": c.name, "passed": c.passed, "error": c.error, "message": c.message,
-                                          "value": c.value, "limit": c.limit} for c in o.checks],
+                              "checks": [{"name": c.name, "passed": c.passed, "error": c.error, "skipped": c.skipped,
+                                          "message": c.message, "value": c.value, "limit": c.limit,
+                                          "traceback": c.traceback or None} for c in o.checks],
                               "run": json_record(o.record)} for o in outcomes]}
 
 
@@ -124,8 +130,10 @@ def _run_with_progress(cfg, skip_baseline: bool, scene_overrides=(), check_lines
     def done(o) -> None:
         for c in o.checks:
             if check_lines and not (skip_baseline and c.name.startswith("baseline.")):
-                word = "PASS" if c.passed else "ERROR" if c.error else "FAIL"
+                word = "SKIP" if c.skipped else c.word.upper()
                 bars[0].write(f"{word}  {o.expectation.name}  {c.name}: {c.message}")
+            if c.traceback:  # the ERROR line says what; the traceback where, in the log (-v prints it)
+                log.info("%s %s: the renderer's traceback:\n%s", o.expectation.name, c.name, c.traceback.rstrip())
         bars[0].advance(f"{o.expectation.name} {'passed' if o.passed else 'failed'}",
                         failed=o.record.status == "failed")
 

@@ -32,6 +32,15 @@ class Check:
     value: float | None = None
     limit: float | None = None
     error: bool = False  # the check could not be made (the renderer crashed): a JUnit <error>, not a <failure>
+    # Not made, and not a failure (the renderer reports no variance to check): passed stays True, so the
+    # verdict is unchanged, but JUnit says <skipped/> and the summaries "skipped", never "pass".
+    skipped: bool = False
+    traceback: str = ""  # a crashed render's traceback (the sandbox child's own), for the log, JUnit and report
+
+    @property
+    def word(self) -> str:
+        """``pass``, ``skipped``, ``FAIL`` or ``ERROR``: the result as every output names it."""
+        return "skipped" if self.skipped else "pass" if self.passed else "ERROR" if self.error else "FAIL"
 
 
 @dataclass
@@ -229,7 +238,7 @@ def _variance_check(exp: Expectation, rec: runner.RunRecord, clean: np.ndarray, 
     if rec.variance is None:
         return Check(exp.name, "variance", True, "skipped: the renderer reports no variance, so the agreement and "
                      "outlier tests use the reference renderer's noise model, not a variance it could misstate"
-                     + _alpha_note(alpha))
+                     + _alpha_note(alpha), skipped=True)
     v = variance_check.variance_check(clean, rec.variance, ref.image, ref.variance, rec.spp,
                                       statistical_alpha(alpha))
     return Check(exp.name, "variance", v.passed, v.message() + _alpha_note(alpha), v.scale, None)
@@ -259,7 +268,8 @@ def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateC
         if rec.info.get("timed_out"):  # a failed check with its time, not a crash
             return Outcome(exp, rec, [Check(exp.name, "time_limit", False, f"{rec.reason}", rec.time_s,
                                             exp.time_limit_s)])
-        return Outcome(exp, rec, [Check(exp.name, "run", False, f"{rec.status}: {rec.reason}", error=True)])
+        return Outcome(exp, rec, [Check(exp.name, "run", False, f"{rec.status}: {rec.reason}", error=True,
+                                        traceback=rec.info.get("traceback") or "")])
     m = rec.metrics
     bad = int(m["nan_count"]) + int(m["inf_count"])
     checks = [Check(exp.name, "finite", bad == 0,
