@@ -38,9 +38,11 @@ def gate(
                                                                     "OUT/gate-summary.md); also appended to "
                                                                     "$GITHUB_STEP_SUMMARY when that is set."),
     update_baseline: bool = typer.Option(False, "--update-baseline", help="Record this run's metrics as the "
-                                                                          "baseline named in the config; refused "
-                                                                          "when a check other than a baseline "
-                                                                          "check fails."),
+                                                                          "baseline named in the config (creating "
+                                                                          "the file; without this option a "
+                                                                          "baseline named but missing is exit 2); "
+                                                                          "refused when a check other than a "
+                                                                          "baseline check fails."),
     force: bool = typer.Option(False, "--force", help="With --update-baseline: record the baseline even though "
                                                       "checks failed."),
     overrides: Optional[List[str]] = typer.Option(
@@ -79,6 +81,10 @@ def gate(
         cfg = load_config(config)
         if update_baseline and cfg.baseline is None:
             raise GateConfigError(cfg.path, "baseline", "--update-baseline needs baseline = \"FILE.json\"")
+        if cfg.baseline is not None and not update_baseline and not cfg.baseline.exists():
+            # Named but missing (a typo, or never recorded): comparing with nothing would pass in silence.
+            raise GateConfigError(cfg.path, "baseline", f"{cfg.baseline}: no such file; record it with "
+                                  "cbox gate --update-baseline")
         with executor_for(workers, scheduler, dashboard) as executor:
             outcomes = _run_with_progress(cfg, skip_baseline=update_baseline, scene_overrides=overrides or (),
                                           check_lines=not as_json, executor=executor)

@@ -3,7 +3,8 @@
 A gate config (TOML) lists expectations::
 
     alpha = 0.01                      # family-wise false-alarm rate per expectation (its statistical tests)
-    baseline = "gate-baseline.json"   # optional, relative to this file
+    baseline = "gate-baseline.json"   # optional, relative to this file; once named it must exist
+                                      # (cbox gate --update-baseline creates it)
     regression_margin = 0.05          # relative; a metric worse than baseline by more fails
     regression_metrics = ["delta_e2000_mean", "rel_mse_trimmed", "ssim"]
     time_limit = "30m"                # default per expectation: a render past it is killed and fails

@@ -174,6 +174,28 @@ def test_a_skipped_check_is_skipped_not_passed(tmp_path):
     assert '<tr class="skipped"><td>variance</td><td>skipped</td>' in html
 
 
+def test_missing_baseline_is_exit_2_unless_update_baseline_creates_it(tmp_path):
+    """A baseline named but missing (a typo, or never recorded) would compare with nothing and pass in silence:
+    exit 2 and one line naming the config and the field, before anything renders."""
+    text = 'baseline = "base.json"\n' + GREY.format(cls="CountingNoise", extra="finite_only = true")
+    path = _write(tmp_path, text)
+    proc = run_cbox("gate", "--config", path, "--out", str(tmp_path / "a"), env_path=ROOT,
+                    env_extra=_render_log(tmp_path))
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [f"cbox: error: {path}: baseline: {tmp_path / 'base.json'}: no such "
+                                                "file; record it with cbox gate --update-baseline"]
+    assert not (tmp_path / "renders.log").exists()
+    assert ET.parse(tmp_path / "a" / "gate-junit.xml").getroot().find(".//error") is not None
+    made = run_cbox("gate", "--config", path, "--out", str(tmp_path / "b"), "--update-baseline", env_path=ROOT,
+                    env_extra=_render_log(tmp_path))
+    assert made.returncode == 0, made.stderr
+    assert list(json.loads((tmp_path / "base.json").read_text())["expectations"]) == [
+        "cornell-box/tests.user_renderers:CountingNoise@1spp"]
+    again = run_cbox("gate", "--config", path, "--out", str(tmp_path / "c"), env_path=ROOT,
+                     env_extra=_render_log(tmp_path))
+    assert again.returncode == 0, again.stderr
+
+
 def test_update_baseline_refuses_a_failing_run(tmp_path):
     text = 'baseline = "base.json"\n' + GREY.format(cls="FlatGrey", extra="max = { delta_e2000_mean = 1.0 }")
     path = _write(tmp_path, text)
