@@ -59,6 +59,8 @@ def junit_xml(outcomes: Sequence[Outcome], suite: str = "cbox gate", config_erro
 
 #: The widest a Markdown table row may be: wider rows wrap into unreadable columns in a step summary.
 ROW_CHARS = 120
+NAME_CHARS = 44  # an expectation name longer than this is cut in the table, given in full below it
+MIN_DETAIL_CHARS = 20  # a row's detail is never cut shorter (so a row may pass ROW_CHARS by a few)
 _HEAD = ["| expectation | check | result | detail |", "|---|---|---|---|"]
 
 
@@ -66,14 +68,23 @@ def _cell(text: str) -> str:
     return text.replace("|", "\\|").replace("\n", " ")
 
 
+def _cut(text: str, room: int, middle: bool = False) -> str:
+    """``text`` in at most ``room`` characters: its end (or, ``middle``, its middle) replaced by "…"."""
+    if len(text) <= room:
+        return text
+    if middle:  # a sweep's expectation name differs in its settings and its spp, at both ends
+        head = (room - 1) // 2
+        return text[:head] + "…" + text[len(text) - (room - 1 - head):]
+    return text[:room - 1].rstrip("\\ ") + "…"
+
+
 def _row(name: str, c: Check) -> tuple[str, bool]:
-    """A table row of at most :data:`ROW_CHARS` (the detail cut to fit) and whether the detail was cut."""
-    head = f"| {_cell(name)} | {_cell(c.name)} | {'**' + c.word + '**' if not c.passed else c.word} | "
-    detail, room = _cell(c.message), max(20, ROW_CHARS - len(head) - 2)
-    cut = len(detail) > room
-    if cut:
-        detail = detail[:room - 1].rstrip("\\ ") + "…"
-    return f"{head}{detail} |", cut
+    """A table row of at most about :data:`ROW_CHARS` (the name and detail cut to fit) and whether it was cut."""
+    cell = _cut(_cell(name), NAME_CHARS, middle=True)
+    head = f"| {cell} | {_cell(c.name)} | {'**' + c.word + '**' if not c.passed else c.word} | "
+    detail = _cell(c.message)
+    shown = _cut(detail, max(MIN_DETAIL_CHARS, ROW_CHARS - len(head) - 2))
+    return f"{head}{shown} |", shown != detail or cell != _cell(name)
 
 
 def _table(rows: list[tuple[str, Check]]) -> list[str]:
