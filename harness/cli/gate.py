@@ -135,7 +135,7 @@ def _run_with_progress(cfg, skip_baseline: bool, scene_overrides=(), check_lines
 
     def done(o) -> None:
         for c in o.checks:
-            if check_lines and not (skip_baseline and c.name.startswith("baseline.")):
+            if check_lines and not (skip_baseline and _is_baseline_check(c)):
                 word = "SKIP" if c.skipped else c.word.upper()
                 bars[0].write(f"{word}  {o.expectation.name}  {c.name}: {c.message}")
             if c.traceback:  # the ERROR line says what; the traceback where, in the log (-v prints it)
@@ -150,9 +150,14 @@ def _run_with_progress(cfg, skip_baseline: bool, scene_overrides=(), check_lines
         if bars:
             bars[0].close()
     if skip_baseline:  # this run becomes the baseline: comparing it with the old one says nothing
-        outcomes = [dataclasses.replace(o, checks=[c for c in o.checks if not c.name.startswith("baseline.")])
+        outcomes = [dataclasses.replace(o, checks=[c for c in o.checks if not _is_baseline_check(c)])
                     for o in outcomes]
     return outcomes
+
+
+def _is_baseline_check(c) -> bool:
+    """``baseline.<metric>``, or ``baseline`` skipped (no baseline to compare with)."""
+    return c.name == "baseline" or c.name.startswith("baseline.")
 
 
 def _update_baseline(cfg, outcomes, force: bool) -> int:

@@ -83,7 +83,11 @@ def _budget_checks(exp: Expectation, rec: runner.RunRecord) -> list[Check]:
     return out
 
 
-def _regression_checks(exp: Expectation, m: dict, base: dict | None, cfg: GateConfig) -> list[Check]:
+def _regression_checks(exp: Expectation, m: dict, base: dict | str | None, cfg: GateConfig) -> list[Check]:
+    """One ``baseline.<metric>`` check per regression metric; ``base`` a string: why there is no baseline to
+    compare with, one skipped ``baseline`` check that says so."""
+    if isinstance(base, str):
+        return [Check(exp.name, "baseline", True, f"skipped: {base}", skipped=True)]
     if not base:
         return []
     out = []
@@ -253,11 +257,12 @@ def _outlier_check(exp: Expectation, rec: runner.RunRecord, clean: np.ndarray, r
 
 
 def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateConfig,
-             baseline: dict | None = None, smaller: runner.RunRecord | None = None,
+             baseline: dict | str | None = None, smaller: runner.RunRecord | None = None,
              masks: Mapping[str, np.ndarray] | None = None,
              bias: Mapping[str, np.ndarray] | str | None = None) -> Outcome:
     """All checks of one expectation on its run (no rendering).
 
+    ``baseline`` the metrics recorded for it, or why it is not compared with any (a string: a skipped check);
     ``smaller`` is the smaller-budget run of a ``max_ratio`` consistency check;
     ``masks`` the scene's region masks (:func:`harness.evaluate.regions.region_masks`): each region is a test of
     an ``unbiased`` expectation's agreement test, and a consistency slope on a region metric needs its mask;
