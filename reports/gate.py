@@ -1,6 +1,7 @@
 """The gate's section of the HTML report: verdicts, where the image disagrees, and the p-values.
 
-For each expectation: its checks (pass/fail and by how much); for an
+For each expectation: its checks (pass, skipped, FAIL or ERROR, and by how much; a crash's traceback folded
+under its message); for an
 agreement test, a map of |z| per tile (magma, 0..6, failing tiles boxed in
 white) and a histogram of the tile p-values, which is flat for a renderer
 that agrees with the reference and piles up at 0 where it does not.
@@ -58,19 +59,28 @@ def p_histogram_svg(p: np.ndarray, level: float, width: int = 320, height: int =
             f'<text x="4" y="14" fill="#bbb" font-size="10">{int(top)}</text></svg>')
 
 
+def _check_row(c) -> str:
+    """One check's row: its result as JUnit has it (pass, skipped, FAIL, ERROR), a crash's traceback folded in."""
+    css = "skipped" if c.skipped else "pass" if c.passed else "fail"
+    tb = (f'<details class="traceback"><summary>traceback</summary><pre>{escape(c.traceback.rstrip())}</pre>'
+          f'</details>' if c.traceback else "")
+    return (f'<tr class="{css}"><td>{escape(c.name)}</td><td>{escape(c.word)}</td>'
+            f'<td>{escape(c.message)}{tb}</td></tr>')
+
+
 def gate_section(outcomes, alpha: float) -> str:
     """HTML fragment (escaped) for :func:`reports.html.write_report`'s ``sections``."""
     failed = sum(not c.passed for o in outcomes for c in o.checks)
-    verdict = ('<p class="gate-verdict pass">Gate passed</p>' if not failed else
-               f'<p class="gate-verdict fail">Gate failed: {failed} check(s)</p>')
+    skipped = sum(c.skipped for o in outcomes for c in o.checks)
+    also = f" ({skipped} check(s) skipped)" if skipped else ""
+    verdict = (f'<p class="gate-verdict pass">Gate passed{also}</p>' if not failed else
+               f'<p class="gate-verdict fail">Gate failed: {failed} check(s){also}</p>')
     parts = [verdict, f"<p class=\"note\">Agreement tests: tiled and whole-image z-tests against the reference "
                       f"at family-wise α = {alpha:g} (Šidák). Every expectation also requires zero NaN and Inf "
                       f"pixels.</p>"]
     for o in outcomes:
         e, r = o.expectation, o.record
-        rows = "".join(
-            f'<tr class="{"pass" if c.passed else "fail"}"><td>{escape(c.name)}</td>'
-            f'<td>{"pass" if c.passed else "FAIL"}</td><td>{escape(c.message)}</td></tr>' for c in o.checks)
+        rows = "".join(_check_row(c) for c in o.checks)
         block = [f'<div class="gate-exp"><h3>{escape(e.name)} <span class="badge {"ok" if o.passed else "failed"}">'
                  f'{"pass" if o.passed else "fail"}</span></h3>'
                  f'<p class="note">{escape(r.renderer)} · {r.spp} spp · seed {r.seed}'

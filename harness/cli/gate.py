@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 from pathlib import Path
 from typing import List, Optional
@@ -16,6 +17,8 @@ from harness.gate.config import GateConfigError, load_config
 from harness.scenes.library import resolve_scene
 from harness.store.atomic import write_text_atomic
 from harness.store.references import load_reference
+
+log = logging.getLogger(__name__)
 
 # Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
 # a misspelt config, or `cbox --help`, must answer in a second.
@@ -35,9 +38,11 @@ def gate(
                                                                     "OUT/gate-summary.md); also appended to "
                                                                     "$GITHUB_STEP_SUMMARY when that is set."),
     update_baseline: bool = typer.Option(False, "--update-baseline", help="Record this run's metrics as the "
-                                                                          "baseline named in the config; refused "
-                                                                          "when a check other than a baseline "
-                                                                          "check fails."),
+                                                                          "baseline named in the config (creating "
+                                                                          "the file; without this option a "
+                                                                          "baseline named but missing is exit 2); "
+                                                                          "refused when a check other than a "
+                                                                          "baseline check fails."),
     force: bool = typer.Option(False, "--force", help="With --update-baseline: record the baseline even though "
                                                       "checks failed."),
     overrides: Optional[List[str]] = typer.Option(
@@ -76,6 +81,10 @@ def gate(
         cfg = load_config(config)
         if update_baseline and cfg.baseline is None:
             raise GateConfigError(cfg.path, "baseline", "--update-baseline needs baseline = \"FILE.json\"")
+        if cfg.baseline is not None and not update_baseline and not cfg.baseline.exists():
+            # Named but missing (a typo, or never recorded): comparing with nothing would pass in silence.
+            raise GateConfigError(cfg.path, "baseline", f"{cfg.baseline}: no such file; record it with "
+                                  "cbox gate --update-baseline")
         with executor_for(workers, scheduler, dashboard) as executor:
             outcomes = _run_with_progress(cfg, skip_baseline=update_baseline, scene_overrides=overrides or (),
                                           check_lines=not as_json, executor=executor)
@@ -88,10 +97,12 @@ def gate(
     _write_ci_files(outcomes, cfg.alpha, out, junit, markdown)
     _write_reports(outcomes, cfg.alpha, out, overrides)
     failed = sum(not c.passed for o in outcomes for c in o.checks)
+    skipped = sum(c.skipped for o in outcomes for c in o.checks)
     if as_json:
         print_json(_verdict(cfg, outcomes, failed))
     else:
-        typer.echo(f"gate {'passed' if not failed else f'failed: {failed} check(s)'}")
+        typer.echo(f"gate {'passed' if not failed else f'failed: {failed} check(s)'}"
+                   + (f" ({skipped} skipped)" if skipped else ""))
     raise typer.Exit(code)
 
 
@@ -102,8 +113,9 @@ def _verdict(cfg, outcomes, failed: int) -> dict:
     return {"passed": not failed, "failed_checks": failed, "config": cfg.path, "alpha": cfg.alpha,
             "expectations": [{"name": o.expectation.name, "scene": o.expectation.scene,
                               "renderer": o.expectation.renderer, "passed": o.passed,
-                              "checks": [{"name": c.name, "passed": c.passed, "error": c.error, "message": c.message,
-                                          "value": c.value, "limit": c.limit} for c in o.checks],
+                              "checks": [{"name": c.name, "passed": c.passed, "error": c.error, "skipped": c.skipped,
+                                          "message": c.message, "value": c.value, "limit": c.limit,
+                                          "traceback": c.traceback or None} for c in o.checks],
                               "run": json_record(o.record)} for o in outcomes]}
 
 
@@ -123,9 +135,11 @@ def _run_with_progress(cfg, skip_baseline: bool, scene_overrides=(), check_lines
 
     def done(o) -> None:
         for c in o.checks:
-            if check_lines and not (skip_baseline and c.name.startswith("baseline.")):
-                word = "PASS" if c.passed else "ERROR" if c.error else "FAIL"
+            if check_lines and not (skip_baseline and _is_baseline_check(c)):
+                word = "SKIP" if c.skipped else c.word.upper()
                 bars[0].write(f"{word}  {o.expectation.name}  {c.name}: {c.message}")
+            if c.traceback:  # the ERROR line says what; the traceback where, in the log (-v prints it)
+                log.info("%s %s: the renderer's traceback:\n%s", o.expectation.name, c.name, c.traceback.rstrip())
         bars[0].advance(f"{o.expectation.name} {'passed' if o.passed else 'failed'}",
                         failed=o.record.status == "failed")
 
@@ -136,9 +150,14 @@ def _run_with_progress(cfg, skip_baseline: bool, scene_overrides=(), check_lines
         if bars:
             bars[0].close()
     if skip_baseline:  # this run becomes the baseline: comparing it with the old one says nothing
-        outcomes = [dataclasses.replace(o, checks=[c for c in o.checks if not c.name.startswith("baseline.")])
+        outcomes = [dataclasses.replace(o, checks=[c for c in o.checks if not _is_baseline_check(c)])
                     for o in outcomes]
     return outcomes
+
+
+def _is_baseline_check(c) -> bool:
+    """``baseline.<metric>``, or ``baseline`` skipped (no baseline to compare with)."""
+    return c.name == "baseline" or c.name.startswith("baseline.")
 
 
 def _update_baseline(cfg, outcomes, force: bool) -> int:

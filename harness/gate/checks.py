@@ -32,6 +32,15 @@ class Check:
     value: float | None = None
     limit: float | None = None
     error: bool = False  # the check could not be made (the renderer crashed): a JUnit <error>, not a <failure>
+    # Not made, and not a failure (the renderer reports no variance to check): passed stays True, so the
+    # verdict is unchanged, but JUnit says <skipped/> and the summaries "skipped", never "pass".
+    skipped: bool = False
+    traceback: str = ""  # a crashed render's traceback (the sandbox child's own), for the log, JUnit and report
+
+    @property
+    def word(self) -> str:
+        """``pass``, ``skipped``, ``FAIL`` or ``ERROR``: the result as every output names it."""
+        return "skipped" if self.skipped else "pass" if self.passed else "ERROR" if self.error else "FAIL"
 
 
 @dataclass
@@ -74,7 +83,11 @@ def _budget_checks(exp: Expectation, rec: runner.RunRecord) -> list[Check]:
     return out
 
 
-def _regression_checks(exp: Expectation, m: dict, base: dict | None, cfg: GateConfig) -> list[Check]:
+def _regression_checks(exp: Expectation, m: dict, base: dict | str | None, cfg: GateConfig) -> list[Check]:
+    """One ``baseline.<metric>`` check per regression metric; ``base`` a string: why there is no baseline to
+    compare with, one skipped ``baseline`` check that says so."""
+    if isinstance(base, str):
+        return [Check(exp.name, "baseline", True, f"skipped: {base}", skipped=True)]
     if not base:
         return []
     out = []
@@ -229,7 +242,7 @@ def _variance_check(exp: Expectation, rec: runner.RunRecord, clean: np.ndarray, 
     if rec.variance is None:
         return Check(exp.name, "variance", True, "skipped: the renderer reports no variance, so the agreement and "
                      "outlier tests use the reference renderer's noise model, not a variance it could misstate"
-                     + _alpha_note(alpha))
+                     + _alpha_note(alpha), skipped=True)
     v = variance_check.variance_check(clean, rec.variance, ref.image, ref.variance, rec.spp,
                                       statistical_alpha(alpha))
     return Check(exp.name, "variance", v.passed, v.message() + _alpha_note(alpha), v.scale, None)
@@ -244,11 +257,12 @@ def _outlier_check(exp: Expectation, rec: runner.RunRecord, clean: np.ndarray, r
 
 
 def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateConfig,
-             baseline: dict | None = None, smaller: runner.RunRecord | None = None,
+             baseline: dict | str | None = None, smaller: runner.RunRecord | None = None,
              masks: Mapping[str, np.ndarray] | None = None,
              bias: Mapping[str, np.ndarray] | str | None = None) -> Outcome:
     """All checks of one expectation on its run (no rendering).
 
+    ``baseline`` the metrics recorded for it, or why it is not compared with any (a string: a skipped check);
     ``smaller`` is the smaller-budget run of a ``max_ratio`` consistency check;
     ``masks`` the scene's region masks (:func:`harness.evaluate.regions.region_masks`): each region is a test of
     an ``unbiased`` expectation's agreement test, and a consistency slope on a region metric needs its mask;
@@ -259,7 +273,8 @@ def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateC
         if rec.info.get("timed_out"):  # a failed check with its time, not a crash
             return Outcome(exp, rec, [Check(exp.name, "time_limit", False, f"{rec.reason}", rec.time_s,
                                             exp.time_limit_s)])
-        return Outcome(exp, rec, [Check(exp.name, "run", False, f"{rec.status}: {rec.reason}", error=True)])
+        return Outcome(exp, rec, [Check(exp.name, "run", False, f"{rec.status}: {rec.reason}", error=True,
+                                        traceback=rec.info.get("traceback") or "")])
     m = rec.metrics
     bad = int(m["nan_count"]) + int(m["inf_count"])
     checks = [Check(exp.name, "finite", bad == 0,

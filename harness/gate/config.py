@@ -3,7 +3,8 @@
 A gate config (TOML) lists expectations::
 
     alpha = 0.01                      # family-wise false-alarm rate per expectation (its statistical tests)
-    baseline = "gate-baseline.json"   # optional, relative to this file
+    baseline = "gate-baseline.json"   # optional, relative to this file; once named it must exist
+                                      # (cbox gate --update-baseline creates it)
     regression_margin = 0.05          # relative; a metric worse than baseline by more fails
     regression_metrics = ["delta_e2000_mean", "rel_mse_trimmed", "ssim"]
     time_limit = "30m"                # default per expectation: a render past it is killed and fails
@@ -41,8 +42,8 @@ renders. Baseline regression checks stay image-wide.
 ``unbiased = true`` runs three statistical tests against the reference:
 ``agreement`` (tiled z-tests, :mod:`harness.evaluate.agreement`),
 ``variance`` (the variance the renderer reports must match the spread of
-its residuals, :mod:`harness.evaluate.variance_check`; skipped, as a pass,
-when it reports none, since the other two then use the reference
+its residuals, :mod:`harness.evaluate.variance_check`; skipped, a JUnit
+``<skipped/>`` and not a failure, when it reports none, since the other two then use the reference
 renderer's noise model) and ``outliers`` (one z-test per pixel,
 :mod:`harness.evaluate.outliers`). ``alpha`` is the family-wise
 false-alarm rate per expectation: the three share it by Šidák's
@@ -107,7 +108,10 @@ not reached the asymptotic rate (measure the clean renderer's limit first).
 
 Every expectation also checks that the image has no NaN and no Inf pixel.
 Baseline checks compare runs at the seed the baseline was recorded with
-only (a metric's spread between seeds can exceed any useful margin).
+only (a metric's spread between seeds can exceed any useful margin); an
+expectation the baseline cannot be compared with (another seed, no record
+of it, scenes derived with ``--set``) has one skipped ``baseline`` check
+that says why.
 Each check becomes one JUnit test case; the Markdown summary and the HTML
 report say which expectation failed, by how much, and where in the image.
 """

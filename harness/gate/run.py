@@ -261,16 +261,30 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
             rec, smaller, bias = runner.RunRecord.new(scene, entry, exp.spp or 0, tasks[i].args[0].seed), None, None
             rec.status, rec.reason = "failed", f"not rendered: {result.error}"
         masks = region_masks(scene) if exp.region_metrics() or exp.unbiased else None  # regions are agreement tests
-        # A baseline compares like with like: the same seed, so the same noise. Runs at other seeds
-        # (false-alarm measurements) are not compared: a metric's spread between seeds can exceed the margin.
-        same_seed = seeds.get(exp.name, rec.seed) == rec.seed
-        outcomes[i] = evaluate(exp, rec, ref, cfg, metrics.get(exp.name) if same_seed else None, smaller, masks,
-                               bias)
+        base = _baseline_of(cfg, exp, rec, metrics, seeds, bool(scene_overrides))
+        outcomes[i] = evaluate(exp, rec, ref, cfg, base, smaller, masks, bias)
         if on_done:
             on_done(outcomes[i])
         if on_start and (following := next((j for j in range(len(tasks)) if outcomes[j] is None), None)) is not None:
             on_start(cfg.expectations[following])
     return outcomes
+
+
+def _baseline_of(cfg: GateConfig, exp: Expectation, rec: runner.RunRecord, metrics: dict, seeds: dict,
+                 derived: bool) -> dict | str | None:
+    """The baseline metrics ``rec`` is compared with; why it is not (a string: its baseline checks are skipped,
+    and say so); None without a baseline in the config."""
+    if cfg.baseline is None:
+        return None
+    if derived:
+        return "the baseline was recorded on the config's own scenes, not on scenes derived with --set"
+    if exp.name not in metrics:
+        return "the baseline has no record of this expectation; record it with cbox gate --update-baseline"
+    # A baseline compares like with like: the same seed, so the same noise. Runs at other seeds
+    # (false-alarm measurements) are not compared: a metric's spread between seeds can exceed the margin.
+    if (seed := seeds.get(exp.name, rec.seed)) != rec.seed:
+        return f"the baseline was recorded at seed {seed}, this run is at seed {rec.seed}: other noise, not compared"
+    return metrics[exp.name]
 
 
 def load_baseline(cfg: GateConfig) -> dict:

@@ -19,7 +19,12 @@ from harness.store.references import load_reference
 
 
 class RenderError(ValueError):
-    """A renderer returned something the harness cannot use (wrong shape, wrong spp)."""
+    """A renderer returned something the harness cannot use (wrong shape, wrong spp), or a sandboxed render
+    failed; ``traceback`` is then the child process's own (the parent's would show only this raise)."""
+
+    def __init__(self, message: str, traceback: str = ""):
+        super().__init__(message)
+        self.traceback = traceback
 
 
 class RenderTimeout(RuntimeError):

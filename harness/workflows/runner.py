@@ -106,7 +106,8 @@ class RunRecord:
     def failed(self, error: Exception) -> "RunRecord":
         """This record marked failed by ``error`` (a renderer bug is reported, never raised)."""
         self.status, self.reason = "failed", f"{type(error).__name__}: {error}"
-        self.info = {"traceback": traceback.format_exc(limit=8)}
+        # A sandboxed render's error carries the child's traceback: here we would see only its re-raise.
+        self.info = {"traceback": getattr(error, "traceback", "") or traceback.format_exc(limit=8)}
         return self
 
     def row(self) -> dict:
@@ -235,7 +236,7 @@ def render_sandboxed(entry: RendererEntry, scene: Scene, spp: int, seed: int, ch
     if out.ended == "timeout":
         raise RenderTimeout(f"killed at its time limit of {time_limit_s:g} s (ran {out.time_s:.1f} s)", out.time_s)
     if (why := out.problem()) is not None:
-        raise RenderError(why)
+        raise RenderError(why, out.traceback)
     shots = [Checkpoint(s, image, t, cpu_time_s=cpu) for s, image, t, cpu in out.checkpoints[0]]
     return (RenderResult(out.images[0], out.render_times[0], spp, seed, shots, out.infos[0], out.variances[0],
                          cpu_time_s=out.cpu_times[0]), out.timings[0])

@@ -64,6 +64,8 @@ from harness.workflows.timing import Timing
 
 #: Seconds between two polls of the worker's wall time and resident memory.
 POLL_S = 0.02
+#: The last lines of a dead worker's stderr kept as its traceback (a fault handler's dump, an import error).
+STDERR_LINES = 40
 
 
 @dataclass
@@ -74,6 +76,7 @@ class SandboxOutcome:
     time_s: float
     peak_rss_mb: float
     message: str = ""
+    traceback: str = ""  # the child's traceback when the renderer raised, or its last stderr lines when it died
     version: str | None = None
     images: list = dataclasses.field(default_factory=list)
     variances: list = dataclasses.field(default_factory=list)  # None where the renderer returned none
@@ -208,9 +211,10 @@ def _read_outcome(folder: Path, watched: _Watched, time_bound_s: float, rss_boun
         return SandboxOutcome("memory", wall, peak, f"resident memory passed the {rss_bound_mb:.0f} MB bound: killed")
     result_path = folder / "result.json"
     if not result_path.exists():
-        tail = (folder / "stderr.txt").read_text(errors="replace").strip().splitlines()[-3:]
+        lines = (folder / "stderr.txt").read_text(errors="replace").strip().splitlines()
         return SandboxOutcome("crashed", wall, peak,
-                              f"worker exited with code {watched.returncode} and no result: {' | '.join(tail)}")
+                              f"worker exited with code {watched.returncode} and no result: {' | '.join(lines[-3:])}",
+                              traceback="\n".join(lines[-STDERR_LINES:]))
     result = json.loads(result_path.read_text())
     outcome = SandboxOutcome("ok", wall, max(peak, float(result.get("vm_hwm_mb") or 0.0)),
                              version=result.get("version"))
@@ -226,6 +230,7 @@ def _read_outcome(folder: Path, watched: _Watched, time_bound_s: float, rss_boun
         outcome.infos.append(r.get("info", {}))
     if result.get("error"):
         outcome.ended, outcome.message = "error", f"renderer raised {result['error']}"
+        outcome.traceback = result.get("traceback") or ""
     return outcome
 
 

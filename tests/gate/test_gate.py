@@ -178,6 +178,11 @@ def test_baseline_regression(tmp_path):
     other = _config(tmp_path, body.replace("unbiased = true", "unbiased = true\nseed = 5"))
     moved = run_cbox("gate", "--config", other, "--out", str(tmp_path / "d"), env_path=ROOT)
     assert moved.returncode == 0 and "baseline." not in moved.stdout
+    assert f"SKIP  {name}  baseline: skipped: the baseline was recorded at seed 0, this run is at seed 5" in moved.stdout
+    # An expectation the baseline has no record of (added since) is not compared either, and says so.
+    (tmp_path / "base.json").write_text(json.dumps({"expectations": {}, "seeds": {}}))
+    new = run_cbox("gate", "--config", cfg_path, "--out", str(tmp_path / "e"), env_path=ROOT)
+    assert new.returncode == 0 and f"SKIP  {name}  baseline: skipped: the baseline has no record" in new.stdout
 
 
 def test_same_commit_same_verdict(tmp_path):

@@ -131,6 +131,69 @@ def test_junit_errors_failures_and_honest_times(tmp_path):
     render_times = [float(c.get("time")) for (_, name), c in cases.items() if name == "render"]
     assert float(suite.get("time")) == pytest.approx(sum(render_times), abs=2e-3)
     assert "ERROR  cornell-box/tests.user_renderers:Crashes@1spp  run" in proc.stdout
+    assert "Traceback" not in proc.stderr  # by default the ERROR line alone; -v adds the traceback
+
+
+def test_crash_traceback_in_the_log_junit_error_and_report(tmp_path):
+    """The sandboxed child's own traceback, down to the renderer's raise, comes back to the parent: in the JUnit
+    <error> body (not a <failure>), in the HTML report and the Markdown, and on stderr with -v."""
+    out = tmp_path / "out"
+    proc = run_cbox("gate", "--config", _write(tmp_path, GREY.format(cls="Crashes", extra="finite_only = true")),
+                    "--out", str(out), "-v", env_path=ROOT)
+    assert proc.returncode == 1, proc.stderr
+    raise_line = 'raise RuntimeError("segfault simulator")'  # tests/user_renderers.py, Crashes.render
+    case = next(c for c in ET.parse(out / "gate-junit.xml").getroot().iter("testcase") if c.get("name") == "run")
+    assert case.find("failure") is None
+    body = case.find("error").text
+    assert body.startswith("failed: RenderError: renderer raised RuntimeError: segfault simulator\n\nTraceback")
+    assert "user_renderers.py" in body and raise_line in body and "_worker_main" in body  # the child's frames
+    assert raise_line in proc.stderr and "Traceback (most recent call last)" in proc.stderr
+    assert raise_line.replace('"', "&quot;") in (out / "report.html").read_text()
+    assert raise_line in (out / "gate-summary.md").read_text()
+
+
+def test_a_skipped_check_is_skipped_not_passed(tmp_path):
+    """FlatGrey reports no variance, so its variance check is not made: <skipped/> in JUnit, SKIP on stdout,
+    "skipped" in the Markdown and the report; the verdict is the other checks' (agreement fails a flat grey)."""
+    out = tmp_path / "out"
+    proc = run_cbox("gate", "--config", _write(tmp_path, GREY.format(cls="FlatGrey", extra="unbiased = true")),
+                    "--out", str(out), env_path=ROOT)
+    assert proc.returncode == 1, proc.stderr
+    suite = ET.parse(out / "gate-junit.xml").getroot().find("testsuite")
+    cases = {c.get("name"): c for c in suite.iter("testcase")}
+    skipped = cases["variance"].find("skipped")
+    assert skipped is not None and skipped.get("message").startswith("skipped: the renderer reports no variance")
+    assert cases["variance"].find("failure") is None and cases["variance"].find("system-out") is None
+    assert suite.get("skipped") == "1" and suite.get("failures") == "2"  # agreement, outliers
+    assert cases["finite"].find("skipped") is None
+    assert "SKIP  cornell-box/tests.user_renderers:FlatGrey@1spp  variance: skipped" in proc.stdout
+    assert proc.stdout.splitlines()[-1] == "gate failed: 2 check(s) (1 skipped)"
+    md = (out / "gate-summary.md").read_text()
+    assert "| variance | skipped |" in md and "| variance | pass |" not in md
+    html = (out / "report.html").read_text()
+    assert '<tr class="skipped"><td>variance</td><td>skipped</td>' in html
+
+
+def test_missing_baseline_is_exit_2_unless_update_baseline_creates_it(tmp_path):
+    """A baseline named but missing (a typo, or never recorded) would compare with nothing and pass in silence:
+    exit 2 and one line naming the config and the field, before anything renders."""
+    text = 'baseline = "base.json"\n' + GREY.format(cls="CountingNoise", extra="finite_only = true")
+    path = _write(tmp_path, text)
+    proc = run_cbox("gate", "--config", path, "--out", str(tmp_path / "a"), env_path=ROOT,
+                    env_extra=_render_log(tmp_path))
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [f"cbox: error: {path}: baseline: {tmp_path / 'base.json'}: no such "
+                                                "file; record it with cbox gate --update-baseline"]
+    assert not (tmp_path / "renders.log").exists()
+    assert ET.parse(tmp_path / "a" / "gate-junit.xml").getroot().find(".//error") is not None
+    made = run_cbox("gate", "--config", path, "--out", str(tmp_path / "b"), "--update-baseline", env_path=ROOT,
+                    env_extra=_render_log(tmp_path))
+    assert made.returncode == 0, made.stderr
+    assert list(json.loads((tmp_path / "base.json").read_text())["expectations"]) == [
+        "cornell-box/tests.user_renderers:CountingNoise@1spp"]
+    again = run_cbox("gate", "--config", path, "--out", str(tmp_path / "c"), env_path=ROOT,
+                     env_extra=_render_log(tmp_path))
+    assert again.returncode == 0, again.stderr
 
 
 def test_update_baseline_refuses_a_failing_run(tmp_path):

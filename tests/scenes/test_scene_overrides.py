@@ -240,6 +240,8 @@ def test_gate_set_derives_every_scene_and_skips_the_baseline(write_scene, tmp_pa
     (moved,) = run_gate(load_config(cfg_path), sandbox=False, scene_overrides=["render.max_depth=3"])
     assert moved.record.scene == derived.name and moved.record.scene_hash == derived.content_hash()
     assert moved.passed and not any(c.name.startswith("baseline.") for c in moved.checks)
+    (skipped,) = [c for c in moved.checks if c.name == "baseline"]
+    assert skipped.skipped and "not on scenes derived with --set" in skipped.message
     assert np.asarray(moved.record.image).shape == (12, 16, 3)
 
 

@@ -267,6 +267,9 @@ def test_sandbox_returns_each_render_and_checks_its_shape():
     assert out.problem() == "image has shape (8, 8, 3), expected (9, 9, 3)"
     bad = sandbox.run_sandboxed("no-such-renderer", [(small, 1, 0)], time_bound_s=60.0)
     assert bad.ended == "error" and "unknown renderer" in bad.message and bad.problem() == bad.message
+    # The child's own traceback comes back, down to where it raised (the gate shows it: tests/gate/test_gate_ci.py).
+    assert bad.traceback.startswith("Traceback") and "_render_job" in bad.traceback
+    assert "unknown renderer" in bad.traceback.splitlines()[-1]
 
 
 def test_unknown_renderer_is_a_usage_error():
