@@ -13,6 +13,9 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
+
+import pytest
 
 from tests.conftest import ROOT
 
@@ -133,3 +136,45 @@ def test_interrupt_during_start_up_is_one_line_without_traceback(tmp_path):
     assert code == 130, rest
     assert rest.strip() == "cbox: interrupted", rest
     assert not (tmp_path / "exp").exists()
+
+
+@pytest.mark.slow
+def test_interrupt_on_local_workers_closes_the_cluster(tmp_path):
+    """--workers 2, held once one render (spp 1 of a cell) is logged, so no cell ends: Ctrl-C as a terminal
+    sends it (to the whole process group, the workers too) gives the message and exit 130, no traceback from
+    any process, and no process of the group is left behind."""
+    out, log = tmp_path / "exp", tmp_path / "renders.log"
+    proc = subprocess.Popen([sys.executable, "-m", "harness", *_converge(out), "--workers", "2"], cwd=ROOT,
+                            env=_env(log, CBOX_TEST_RENDER_HOLD_AFTER="1"), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    said = _lines_until(proc, "starting")
+    deadline = time.monotonic() + PATIENCE_S  # the workers are rendering
+    while not (log.exists() and log.read_text()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    os.killpg(proc.pid, signal.SIGINT)
+    try:
+        _, rest = proc.communicate(timeout=PATIENCE_S)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise
+    assert proc.returncode == 130, said + [rest]
+    assert rest.strip().splitlines()[-1] == f"cbox: interrupted; 0 of {SEEDS} cells kept; rerun the same command " \
+                                             "to resume", rest
+    assert "Traceback" not in rest, rest
+    deadline = time.monotonic() + 30  # the workers' nannies end with their scheduler
+    while _group(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not _group(proc.pid), _group(proc.pid)
+
+
+def _group(pgid: int) -> list[str]:
+    """The live processes of process group ``pgid`` (by /proc), zombies left out."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            found.append(stat.parent.name)
+    return found
