@@ -57,8 +57,9 @@ REFERENCE_RENDERER = "mitsuba"
 
 app = typer.Typer(
     help="Validation harness for renderers on the Cornell box: render, score against a trusted reference, report."
-         "\n\nLong commands show progress as a bar when stderr is a terminal, else (a CI log) as one plain line "
-         "per finished run, without carriage returns, so TQDM_DISABLE is not needed; -q hides it.",
+         "\n\nLong commands show progress as a bar when stderr is a terminal, else (a CI log) as a line when the "
+         "work starts and one plain line per finished run, without carriage returns, so TQDM_DISABLE is not "
+         "needed; -q hides it. Ctrl-C ends a command with exit code 130 and a line saying what was kept.",
     no_args_is_help=True,
     add_completion=True,  # --install-completion / --show-completion; typer builds them without slow imports
     pretty_exceptions_enable=False,
