@@ -42,8 +42,8 @@ from tqdm import tqdm
 
 from harness.adapters.commands import RenderersFileError
 from harness.adapters.registry import RendererError
-from harness.cli import interrupt
 from harness.adapters.settings import SettingsError
+from harness.cli import interrupt
 from harness.gate.config import GateConfigError
 from harness.scenes.model import SceneError, one_line
 from harness.store.experiments import ExperimentError
