@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import sys
 
-from harness.adapters.registry import use_renderer_files
-# Importing a command module registers its commands, in this order in `cbox --help` (so not sorted).
-from harness.cli import listing, run, compare_image, experiment, gate, stress, reference, export  # isort: skip
-from harness.cli.common import (PATH_ERRORS, USER_ERRORS, ClickException, NoArgsIsHelpError, UsageError, Verbosity,
-                                check_environment, close_progress_bars, command_tree, fail, set_verbosity,
-                                usage_message)
+from harness.cli import interrupt
+
+with interrupt.starting():  # a Ctrl-C during these imports (seconds): one line and exit 130, no traceback
+    from harness.adapters.registry import use_renderer_files
+    # Importing a command module registers its commands, in this order in `cbox --help` (so not sorted).
+    from harness.cli import listing, run, compare_image, experiment, gate, stress, reference, export  # isort: skip
+    from harness.cli.common import (PATH_ERRORS, USER_ERRORS, ClickException, NoArgsIsHelpError, UsageError,
+                                    Verbosity, check_environment, close_progress_bars, command_tree, fail,
+                                    set_verbosity, usage_message)
 
 
 #: The command modules, registered on the app by their import above.
@@ -26,10 +29,17 @@ def main(args: list[str] | None = None) -> None:
 
     Typer runs in non-standalone mode so that its usage errors (``--spp 0``)
     come here instead of being drawn as a multi-line box; ``--help`` and a
-    command's own exit code pass through unchanged.
+    command's own exit code pass through unchanged. A Ctrl-C is one line
+    saying what was kept, and exit code 130 (:mod:`harness.cli.interrupt`).
     """
+    with interrupt.handling():
+        _main(args)
+
+
+def _main(args: list[str] | None) -> None:
     set_verbosity(Verbosity.NORMAL)  # until --quiet or --verbose says otherwise (tests call main() again and again)
     use_renderer_files(())  # until --renderers gives some (as above)
+    cut = False  # a KeyboardInterrupt reached here
     try:
         check_environment()
         rv = command_tree().main(args=args, prog_name="cbox", standalone_mode=False)
@@ -44,8 +54,13 @@ def main(args: list[str] | None = None) -> None:
         fail(str(e))
     except PATH_ERRORS as e:  # an output path that went bad during the run (checked beforehand where possible)
         fail(f"{e.filename}: {e.strerror}" if e.filename else str(e))
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # outside typer's own handling (which returns 130): before or after the command
+        cut = True
+    except Exception:
+        if not interrupt.fired():
+            raise
+        cut = True  # raised by the unwinding after a Ctrl-C (a Dask client cut off mid-call): the Ctrl-C is the news
+    if cut or interrupt.fired():
         close_progress_bars()
-        print("cbox: interrupted", file=sys.stderr)
-        sys.exit(130)
+        interrupt.exit_interrupted()
     sys.exit(rv if isinstance(rv, int) else 0)

@@ -43,6 +43,7 @@ from tqdm import tqdm
 from harness.adapters.commands import RenderersFileError
 from harness.adapters.registry import RendererError
 from harness.adapters.settings import SettingsError
+from harness.cli import interrupt
 from harness.gate.config import GateConfigError
 from harness.scenes.model import SceneError, one_line
 from harness.store.experiments import ExperimentError
@@ -56,8 +57,9 @@ REFERENCE_RENDERER = "mitsuba"
 
 app = typer.Typer(
     help="Validation harness for renderers on the Cornell box: render, score against a trusted reference, report."
-         "\n\nLong commands show progress as a bar when stderr is a terminal, else (a CI log) as one plain line "
-         "per finished run, without carriage returns, so TQDM_DISABLE is not needed; -q hides it.",
+         "\n\nLong commands show progress as a bar when stderr is a terminal, else (a CI log) as a line when the "
+         "work starts and one plain line per finished run, without carriage returns, so TQDM_DISABLE is not "
+         "needed; -q hides it. Ctrl-C ends a command with exit code 130 and a line saying what was kept.",
     no_args_is_help=True,
     add_completion=True,  # --install-completion / --show-completion; typer builds them without slow imports
     pretty_exceptions_enable=False,
@@ -371,20 +373,25 @@ def _clock(seconds: float) -> str:
 class Progress:
     """Progress of a long command through ``total`` units of work (runs, cells, batches, expectations).
 
-    On a terminal, a bar on stderr; anywhere else (a CI log, a pipe), one plain
-    line per finished unit, ``converge cornell-box: 3/8 cells, pathtracer seed 2
-    (12.3 s), 01:02 left``, and never a carriage return. ``--quiet``: nothing.
+    On a terminal, a bar on stderr; anywhere else (a CI log, a pipe), a line
+    when the work starts (the first :meth:`start`: ``converge cornell-box: 0/8
+    cells, starting pathtracer seed 0``), then one plain line per finished unit,
+    ``converge cornell-box: 3/8 cells, pathtracer seed 2 (12.3 s), 01:02
+    left``, and never a carriage return. ``--quiet``: nothing. ``kept``: the
+    finished units stay in the output folder and a rerun resumes, which a
+    Ctrl-C's message says (:mod:`harness.cli.interrupt`, told of each Progress).
     The time left is the mean time of the units that did work times the units
     to go: stored (resumed) units take no time and do not count. With
     ``slots`` > 1 (units running at once, on several workers) it also says how
     many are running; it says how many failed once one has.
     """
 
-    def __init__(self, total: int, desc: str, unit: str = "run", slots: int = 1):
+    def __init__(self, total: int, desc: str, unit: str = "run", slots: int = 1, kept: bool = False):
         # English plurals of the units we count: runs, cells, expectations, batches.
-        self.units = unit + ("es" if unit.endswith(("s", "x", "ch", "sh")) else "s")
-        self.total, self.desc, self.slots = total, desc, slots
+        self.unit, self.units = unit, unit + ("es" if unit.endswith(("s", "x", "ch", "sh")) else "s")
+        self.total, self.desc, self.slots, self.kept = total, desc, slots, kept
         self.done = self.stored = self.failed = 0
+        self._said = False  # a line has gone to the log
         self.work_s = 0.0
         self._since = time.perf_counter()
         self._bar = None
@@ -392,6 +399,7 @@ class Progress:
             self._bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True, leave=False,
                              bar_format="{desc}: {n_fmt}/{total_fmt} " + self.units + " |{bar}| {elapsed}{postfix}")
         _live_bars.append(self)
+        interrupt.track(self)
 
     def left_s(self) -> float | None:
         """Seconds to go, from the units that did work; None before the first of them."""
@@ -401,9 +409,21 @@ class Progress:
         return self.work_s / worked * (self.total - self.done)
 
     def start(self, label: str) -> None:
-        """Name the unit now running (on the bar only: a log gets a line when it finishes)."""
+        """Name the unit now running: on the bar; in a log, the first only (the work has started), as the
+        line of each unit comes when it finishes."""
         if self._bar is not None:
             self._bar.set_postfix_str(self._postfix(label))
+        elif _verbosity > Verbosity.QUIET and not self._said:
+            self._said = True
+            print(f"{self.desc}: {self.done}/{self.total} {self.units}, starting {label}".rstrip(), file=sys.stderr,
+                  flush=True)
+
+    def interrupted_note(self) -> str:
+        """What a Ctrl-C's message says of this work: ``; 2 of 6 cells kept; rerun the same command to resume``
+        or ``after 2 of 6 renders; a rerun starts over``."""
+        of = f"{self.done - self.failed if self.kept else self.done} of {self.total} " + \
+            (self.unit if self.total == 1 else self.units)
+        return f"; {of} kept; rerun the same command to resume" if self.kept else f" after {of}; a rerun starts over"
 
     def running(self) -> int:
         """Units running now: as many as there are slots, while that many are left."""
@@ -429,6 +449,7 @@ class Progress:
             self._bar.set_postfix_str(self._postfix(""), refresh=False)
             self._bar.update(1)
         elif _verbosity > Verbosity.QUIET:
+            self._said = True
             print(line, file=sys.stderr, flush=True)
 
     def write(self, line: str) -> None:

@@ -115,18 +115,23 @@ def run_convergence(out: Path, sc, ref, entries, spps: list[int], seeds: int, ta
     cells = sum(1 if attribute(e.renderer, "deterministic") else seeds for e in runnable)
     failed: set[str] = set()
     # With repeats a unit is one timing: a cell's first, then each repeat of its final checkpoint.
+    # kept: each cell is stored as it finishes, and a rerun renders only the rest (what a Ctrl-C says).
     with Progress(cells * time_repeats, f"converge {sc.name}", "cell" if time_repeats == 1 else "timing",
-                  slots=getattr(executor, "slots", 1)) as bar:
-        def on_cell(name: str, cached: bool) -> None:  # name: a cell's file stem, pathtracer__seed2
-            bar.advance(name.replace("__seed", " seed "), stored=cached, failed=name in failed)
+                  slots=getattr(executor, "slots", 1), kept=True) as bar:
+        def label(name: str) -> str:  # name: a cell's file stem, pathtracer__seed2
+            return name.replace("__seed", " seed ")
+
+        def on_cell(name: str, cached: bool) -> None:
+            bar.advance(label(name), stored=cached, failed=name in failed)
 
         def on_repeat(name: str, cached: bool) -> None:
-            bar.advance(f"{name.replace('__seed', ' seed ')} repeat", stored=cached)
+            bar.advance(f"{label(name)} repeat", stored=cached)
 
         runs = run_experiment(out, sc, ref, entries, spps, list(range(seeds)), command_line(), on_cell=on_cell,
                               targets=targets or DEFAULT_TARGETS, executor=executor,
                               on_failed=lambda name, reason: failed.add(name), time_repeats=time_repeats,
-                              time_basis=time_basis, on_repeat=on_repeat)
+                              time_basis=time_basis, on_repeat=on_repeat,
+                              on_start=lambda name: bar.start(label(name)))
     results = experiment_results(out, sc, ref, summary_dir=out)
     return runs, write_experiment_report(out, sc, ref, results=results, title=title, sections=sections)
 

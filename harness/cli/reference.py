@@ -43,6 +43,7 @@ def reference_build(
         raise RendererError(f"renderer {entry.name!r} builds references but is unavailable: {entry.reason}")
     with executor_for(workers, scheduler, dashboard) as executor, \
             Progress(batches + 1, f"reference {sc.name}", "batch", slots=executor.slots) as bar:  # +1: the noise image
+        bar.start(f"{spp // batches} spp per batch")
         ref = build_reference(sc, spp, batches, entry, executor=executor,
                               progress=lambda done, total, label: bar.advance(label))
     typer.echo(f"wrote {ref.folder} ({spp} spp in {ref.provenance['wall_time_s']:.0f} s, {ref.provenance['renderer_version']})")
@@ -101,6 +102,7 @@ def reference_verify(
 
     with executor_for(workers, scheduler, dashboard) as executor, \
             Progress(batches, f"verify {sc.name} with {entry.name}", "batch", slots=executor.slots) as bar:
+        bar.start(f"{spp // batches} spp per batch")
         result = verify_reference(sc, ref, entry, spp, batches, executor=executor,
                                   progress=lambda done, total, label: bar.advance(label))
     a = result.agreement

@@ -116,6 +116,8 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
     mode = f"{budget:g} s each" if budget else f"to {target[0]}<={target[1]:g}" if target else f"{spp} spp"
     calibrations = 2 * repeats * sum(runnable) if budget else 0
     bar = Progress(calibrations + len(entries) + (repeats - 1) * sum(runnable), f"{sc.name} @ {mode}", "render")
+    if budget:
+        bar.start("the time budget's calibration renders")
     choices = iter(cmp.calibrate_time_budget([e for e, ok in zip(entries, runnable) if ok], sc, budget, seed,
                                              repeats, time_basis, on_render=bar.advance) if budget else ())
     records = []

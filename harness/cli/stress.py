@@ -28,12 +28,15 @@ def stress(
     from harness.stress.suite import print_summary, run_suite
     from reports.stress import write_stress_report
 
-    bars: list[Progress] = []  # made at the first finished run, when the count of runs is known
+    bars: list[Progress] = []  # made as the runs start, when the count of runs is known
 
     def progress(done: int, total: int, label: str) -> None:
         if not bars:
             bars.append(Progress(total, "stress", "run"))
-        bars[0].advance(label)
+        if done:
+            bars[0].advance(label)
+        else:
+            bars[0].start(label)
 
     try:
         run = run_suite(renderer, variant, out, progress, reference_renderer=REFERENCE_RENDERER)

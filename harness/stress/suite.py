@@ -47,11 +47,16 @@ Progress = Callable[[int, int, str], None]
 
 @dataclass
 class _Counter:
-    """Runs done out of ``total``, reported to ``progress`` after each process ends."""
+    """Runs done out of ``total``, reported to ``progress`` as the suite starts (0 done) and after each process
+    ends."""
 
     total: int
     progress: Progress | None
     done: int = 0
+
+    def __post_init__(self) -> None:
+        if self.progress:
+            self.progress(0, self.total, "")
 
     def tick(self, label: str) -> None:
         self.done += 1
@@ -66,8 +71,8 @@ def run_stress(renderer_specs: list[str] | None, variants: list[str] | None = No
     ``renderer_specs``: registered names or ``module:Class`` (None: every
     registered renderer); ``variants``: names from
     :data:`~harness.stress.variants.VARIANTS` (None: all; an unknown name
-    raises ValueError). ``progress(done, total, label)`` is called after each
-    process ends. ``reference_renderer`` (a registered name or ``module:Class``;
+    raises ValueError). ``progress(done, total, label)`` is called as the runs
+    start (``done`` 0) and after each process ends. ``reference_renderer`` (a registered name or ``module:Class``;
     the CLI's is Mitsuba) renders the variant references; None: they are not
     rendered and those rows say so. Columns: :data:`~harness.stress.judge.COLUMNS`; ``status``
     is pass, fail, skipped (unavailable, or does not model a feature) or

@@ -68,6 +68,7 @@ def run_experiment(
     time_repeats: int = 1,
     time_basis: str = "wall",
     on_repeat: Callable[[str, bool], None] | None = None,
+    on_start: Callable[[str], None] | None = None,
 ) -> pd.DataFrame:
     """Run (or resume) every (renderer, seed) cell; return the tidy results table.
 
@@ -76,7 +77,8 @@ def run_experiment(
     process alone writes the folder, each cell as it arrives, and the table
     in the cells' planned order, so every backend writes the same table.
     ``on_cell(name, cached)`` is called after each cell (for progress bars),
-    ``on_failed(name, reason)`` before it for a cell that failed.
+    ``on_failed(name, reason)`` before it for a cell that failed;
+    ``on_start(name)`` once, naming the first cell to render, as rendering starts.
 
     With ``time_repeats`` K > 1 each cell's final checkpoint is timed K times
     in all: the extra renders run after the cells, in rounds over the cells
@@ -119,6 +121,8 @@ def run_experiment(
                 pending.setdefault(cell.key, ([], cell, entry, stored))[0].append(len(table.frames))
                 table.frames.append(None)
         if pending:
+            if on_start:
+                on_start(next(iter(pending.values()))[1].name)
             shared = executor.share(scene), executor.share(reference)
             tasks = [Task(key, cell.label, render_cell_task, (cell, *shared, entry if executor.local else None))
                      for key, (_, cell, entry, _) in pending.items()]

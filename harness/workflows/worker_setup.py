@@ -9,8 +9,10 @@ and :func:`local_pre_spawn_environ` before their processes start.
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import tempfile
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -96,7 +98,10 @@ class WorkerSetup(WorkerPlugin):
 
     ``workers_by_host`` counts the worker processes on each host when the client connected; a worker on a
     host not counted shares with nobody. With ``keep_threads`` (an existing cluster), a ``CBOX_THREADS``
-    already in the worker's environment, set by whoever started it, is kept.
+    already in the worker's environment, set by whoever started it, is kept. Without it (a LocalCluster of
+    this process's own) the worker ignores Ctrl-C: a terminal sends it to every process of the foreground
+    group, and the client, which closes the cluster (:mod:`harness.cli.interrupt`), is the one to hear it;
+    a worker that heard it too would print a traceback of its own.
     """
 
     name = "cbox-worker-setup"
@@ -106,6 +111,8 @@ class WorkerSetup(WorkerPlugin):
         self.workers_by_host, self.keep_threads = dict(workers_by_host), keep_threads
 
     def setup(self, worker: Any) -> None:
+        if not self.keep_threads and threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
         # Kept only when whoever started the worker set it: one this plugin set for an earlier client is redone.
         given = os.environ.get(THREADS_VARIABLE) and os.environ.get(_OURS) != os.environ.get(THREADS_VARIABLE)
         if not (self.keep_threads and given):

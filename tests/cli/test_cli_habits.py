@@ -38,7 +38,8 @@ def test_converge_log_in_ci_has_a_line_per_cell_and_no_carriage_return(tmp_path,
     assert proc.returncode == 0, proc.stderr.decode()[-2000:]
     assert b"\r" not in proc.stdout and b"\r" not in proc.stderr
     progress = [line for line in proc.stderr.decode().splitlines() if line.startswith("converge ")]
-    cells = [CELL_LINE.fullmatch(line).groups() for line in progress]
+    assert progress[0] == "converge furnace: 0/2 cells, starting seeded-noise seed 0"  # the work's start
+    cells = [CELL_LINE.fullmatch(line).groups() for line in progress[1:]]
     assert [c[:2] for c in cells] == [("1", "0"), ("2", "1")] and "stored" not in {c[2] for c in cells}
     assert "report: " in proc.stderr.decode()
 
