@@ -51,6 +51,12 @@ class Series:
     labels: list[str] | None = None  # tooltip of each point
     xlo: list[float] | None = None
     xhi: list[float] | None = None
+    label: str = ""  # shown in the legend instead of ``name`` (``data-renderer`` and tooltips keep the name)
+
+
+def shown(item: "Series | Point | BarGroup") -> str:
+    """The text a legend or a bar's tick label shows for an item: its display ``label``, else its ``name``."""
+    return item.label or item.name
 
 
 def _usable(*vals: float) -> bool:
@@ -162,7 +168,7 @@ def line_plot_svg(
                 f'<circle class="point" data-renderer="{escape(s.name)}" cx="{_f(ax.x(x))}" cy="{_f(ax.y(y))}" '
                 f'r="3.2" fill="{s.color}">{tip}</circle>'
             )
-    entries = [("line", s.color, s.name) for s in series]
+    entries = [("line", s.color, shown(s)) for s in series]
     if any(s.lo is not None for s in series):
         entries.append(("band", "#9aa1ad", band_label))
     if any(s.xlo is not None for s in series):
@@ -179,12 +185,13 @@ class Point:
     color: str
     x: float
     y: float
-    label: str = ""  # tooltip
+    tip: str = ""  # tooltip
     tag: str = ""  # short text drawn beside the point (e.g. its spp)
     xlo: float | None = None  # 95% CI whiskers, where known
     xhi: float | None = None
     ylo: float | None = None
     yhi: float | None = None
+    label: str = ""  # the renderer's display text in the legend (``data-renderer`` keeps ``name``)
 
 
 def scatter_svg(
@@ -228,7 +235,7 @@ def scatter_svg(
         _whisker(ax, p.name, p.color, p.x, p.y, p.ylo, p.yhi, clip, axis="y")
     for i, p in enumerate(pts):
         cls = "point on-front" if i in on_front else "point"
-        tip = f"<title>{escape(p.label)}{' — on the Pareto frontier' if i in on_front else ''}</title>"
+        tip = f"<title>{escape(p.tip)}{' — on the Pareto frontier' if i in on_front else ''}</title>"
         ax.parts.append(
             f'<circle class="{cls}" data-renderer="{escape(p.name)}" cx="{_f(ax.x(p.x))}" cy="{_f(ax.y(p.y))}" '
             f'r="{5 if i in on_front else 3.6}" fill="{p.color}">{tip}</circle>'
@@ -242,8 +249,9 @@ def scatter_svg(
                 )
     names = list(dict.fromkeys(p.name for p in pts))
     colors = {p.name: p.color for p in pts}
+    texts = {p.name: shown(p) for p in reversed(pts)}  # the first point's label, where points disagree
     whiskers = [("whisker", "#9aa1ad", "95% CI")] if any(p.xlo is not None or p.ylo is not None for p in pts) else []
-    ax.legend([("dot", colors[n], n) for n in names] + [("ring", "#ffd166", "Pareto frontier")] + whiskers)
+    ax.legend([("dot", colors[n], texts[n]) for n in names] + [("ring", "#ffd166", "Pareto frontier")] + whiskers)
     return ax.svg(uid, "scatter-plot", f"{ylabel} against {xlabel}", extra_attrs)
 
 
@@ -254,6 +262,7 @@ class BarGroup:
     note: str = ""  # text above the group
     lo: list[float] | None = None  # each bar's 95% CI, drawn as an error bar where known
     hi: list[float] | None = None
+    label: str = ""  # shown under the group instead of ``name`` (``data-renderer`` and tooltips keep the name)
 
 
 def bars_svg(
@@ -321,7 +330,7 @@ def bars_svg(
             )
         ax.parts.append(
             f'<text class="tick x" x="{_f(cx)}" y="{_f(base + 18)}" text-anchor="middle">'
-            f"<title>{escape(g.name)}</title>{escape(_short(g.name, max(6, int(slot / (0.65 * layout.font)))))}</text>"
+            f"<title>{escape(g.name)}</title>{escape(_short(shown(g), max(6, int(slot / (0.65 * layout.font)))))}</text>"
         )
     bars = any(g.hi is not None for g in groups)
     ax.legend([("rect", color, label) for label, color in kinds] + ([("whisker", "#555", "95% CI")] if bars else []))
