@@ -91,7 +91,8 @@ def has_convergence(runs: pd.DataFrame) -> bool:
     return bool(len(ok)) and bool((ok.groupby("renderer")["spp"].nunique() >= 2).any())
 
 
-def _series_for(conv: pd.DataFrame, metric: str, x: str, names: Sequence[str], colors: dict) -> list[plots.Series]:
+def _series_for(conv: pd.DataFrame, metric: str, x: str, names: Sequence[str], colors: dict,
+                shown: dict | None = None) -> list[plots.Series]:
     out = []
     for name in names:
         g = conv[conv["renderer"] == name].sort_values(x if x == "spp" else "spp")
@@ -105,7 +106,7 @@ def _series_for(conv: pd.DataFrame, metric: str, x: str, names: Sequence[str], c
             lo=g[metric + "_low"].astype(float).tolist() if multi else None,
             hi=g[metric + "_high"].astype(float).tolist() if multi else None, labels=labels,
             xlo=g["time_s_low"].astype(float).tolist() if timed else None,
-            xhi=g["time_s_high"].astype(float).tolist() if timed else None,
+            xhi=g["time_s_high"].astype(float).tolist() if timed else None, label=(shown or {}).get(name, name),
         ))
     return out
 
@@ -140,10 +141,11 @@ def _prefixed(prefix: str, name: str) -> str:
     return f"{prefix}-{name}" if prefix else name
 
 
-def page_charts(runs, names, colors, prefix: str = "", time_column: str = "time_s") -> dict:
+def page_charts(runs, names, colors, prefix: str = "", time_column: str = "time_s", labels=None) -> dict:
     """The page's charts, as :class:`Figure` objects, with what the template needs around them; ``prefix``
     starts their file stems and element ids (:func:`_prefixed`); ``time_column``: the clock of the time
-    axes (``time_s``, wall, or ``cpu_time_s``)."""
+    axes (``time_s``, wall, or ``cpu_time_s``); ``labels``: a series' shown text by name (default its name)."""
+    labels = labels or {}
     ok = ok_runs(runs)
     conv = convergence_table(runs, [k for k in PLOT_METRICS if k in ok.columns], time_column)
     clock = "CPU time (s)" if time_column == "cpu_time_s" else "wall time (s)"
@@ -158,18 +160,19 @@ def page_charts(runs, names, colors, prefix: str = "", time_column: str = "time_
         if charts["has_convergence"]:
             guide = _GUIDE_LABELS.get(slope, f"slope {slope:g}")
             spp = Figure(_prefixed(prefix, f"convergence-spp-{k}"), partial(
-                plots.line_plot_svg, _series_for(conv, k, "spp", names, colors),
+                plots.line_plot_svg, _series_for(conv, k, "spp", names, colors, labels),
                 uid=_prefixed(prefix, f"conv-spp-{k}"),
                 xlabel="samples per pixel", ylabel=label, guide_slope=slope, guide_label=guide, xbase2=True,
                 band_label=BAND_LABEL))
             tim = Figure(_prefixed(prefix, f"convergence-time-{k}"), partial(
-                plots.line_plot_svg, _series_for(conv, k, "time_s", names, colors),
+                plots.line_plot_svg, _series_for(conv, k, "time_s", names, colors, labels),
                 uid=_prefixed(prefix, f"conv-time-{k}"),
                 xlabel=clock, ylabel=label, guide_slope=slope, guide_label=guide, band_label=BAND_LABEL))
             charts["convergence"].append({"key": k, "attrs": Markup(attrs), "spp": spp, "time": tim})
         points = [
             plots.Point(name=r["renderer"], color=colors[r["renderer"]], x=float(r["time_s"]), y=float(r[k]),
-                        label=_point_label(r["renderer"], r, k), tag=f"{int(r['spp'])}",
+                        tip=_point_label(r["renderer"], r, k), tag=f"{int(r['spp'])}",
+                        label=labels.get(r["renderer"], r["renderer"]),
                         xlo=_finite(r["time_s_low"]), xhi=_finite(r["time_s_high"]),
                         ylo=_finite(r[k + "_low"]), yhi=_finite(r[k + "_high"]))
             for _, r in conv.iterrows()
@@ -208,7 +211,7 @@ def chart_rows(charts: dict, bias_variance: Figure | None) -> list[dict]:
     return rows
 
 
-def bias_variance_chart(summary, names, colors, prefix: str = "") -> Figure | None:
+def bias_variance_chart(summary, names, colors, prefix: str = "", labels=None) -> Figure | None:
     if summary is None or not len(summary) or "bias2" not in summary.columns or "variance" not in summary.columns:
         return None
     by_name = {str(r["renderer"]): r for r in summary.to_dict("records")}
@@ -225,7 +228,7 @@ def bias_variance_chart(summary, names, colors, prefix: str = "") -> Figure | No
         note = ("bias not significant" if significant is False else
                 f"bias {100 * float(frac):.0f} %" if is_finite(frac) else "")
         bounds = [[float(r.get(f"{k}_{end}", math.nan)) for k in ("bias2", "variance")] for end in ("low", "high")]
-        groups.append(plots.BarGroup(name, [b2, var], note, *bounds))
+        groups.append(plots.BarGroup(name, [b2, var], note, *bounds, label=(labels or {}).get(name, name)))
     if not groups:
         return None
     return Figure(_prefixed(prefix, "bias-variance"), partial(

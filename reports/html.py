@@ -216,6 +216,7 @@ def _context(
     sections: Sequence[tuple] = (),
     labels: Sequence[str] = (),
     cores: int | None = None,
+    series_labels: Mapping[str, str] | None = None,
 ) -> dict:
     """What the template shows (see :func:`write_report`), with the charts as ``figures``; not the links to
     figure files, which exist only once written.
@@ -236,13 +237,17 @@ def _context(
 
     names = renderer_order(runs, images)
     colors = renderer_colors(runs, images, names)
-    info = renderer_info(runs, names, colors)
+    shown = {n: (series_labels or {}).get(n, n) for n in names}  # what a series is called on the page
+    info = [{**i, "label": shown[i["name"]]} for i in renderer_info(runs, names, colors)]
     table_head, table_rows = summary_rows(runs, summary, names, info, thresholds)
+    _label_rows(table_rows, shown)
     time_column = _summary_text(summary, "time_column") or "time_s"
-    charts = page_charts(runs, names, colors, time_column=time_column)
-    bias_variance = bias_variance_chart(summary, names, colors)
+    charts = page_charts(runs, names, colors, time_column=time_column, labels=shown)
+    bias_variance = bias_variance_chart(summary, names, colors, labels=shown)
     run_seeds = provenance.get("seeds") or []
     viewer, viewer_notes = image_viewer(ref_img, exposure, images, names, colors, runs, run_seeds)
+    for entry in viewer.get("renderers", ()):
+        entry["label"] = shown.get(entry["name"], entry["name"])
     ref_prov = dict(reference.provenance or {})
     counts = {s: sum(i["status"] == s for i in info) for s in ("ok", *_NOT_RUN)}
     sections = list(sections)
@@ -290,6 +295,14 @@ def _context(
     }
 
 
+def _label_rows(rows: list[dict], shown: Mapping[str, str]) -> None:
+    """The summary table's renderer cells show the series' label; the recorded name is their tooltip."""
+    for row in rows:
+        for cell in row.get("cells", ()):
+            if cell["key"] == "renderer" and shown.get(row["renderer"], row["renderer"]) != row["renderer"]:
+                cell["text"], cell["title"] = shown[row["renderer"]], row["renderer"]
+
+
 def _render(ctx: dict, written: WrittenFigures) -> str:
     env = _environment()
     return env.get_template("report.html.j2").render(
@@ -318,6 +331,8 @@ def write_report(
     labels: Sequence[str] = (),
     figures: bool = True,
     cores: int | None = None,
+    series_labels: Mapping[str, str] | None = None,
+    crops: Sequence[Sequence[int]] | None = None,
 ) -> Path:
     """Write the self-contained HTML report to ``path`` atomically; return the path.
 
@@ -340,7 +355,9 @@ def write_report(
     - ``labels``: the names of the experiments shown, for the header
       (``cbox report --label``);
     - ``cores``: the cores of the machine the runs were timed on, for the timing-quality badge
-      (:mod:`reports.timing`); default this machine's.
+      (:mod:`reports.timing`); default this machine's;
+    - ``series_labels``: recorded series name → the text legends, tables and figures show for it
+      (``--series-label``); ``crops``: (x, y, w, h) rectangles the image figure enlarges (``--crop``).
 
     Every chart is also written as a standalone SVG, PDF and PNG into
     ``figures/`` beside ``path`` (:func:`reports.figures.write_figures`), and
@@ -351,6 +368,7 @@ def write_report(
     ctx = _context(
         scene=scene, reference=reference, runs=runs, images=images, summary=summary, thresholds=thresholds,
         provenance=provenance, command=command, title=title, sections=sections, labels=labels, cores=cores,
+        series_labels=series_labels,
     )
     written = write_figures(path.parent, ctx["figures"]) if figures else WrittenFigures()
     write_text_atomic(path, _render(ctx, written))

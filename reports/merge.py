@@ -93,7 +93,8 @@ def _first_images(exp: Experiment) -> dict[str, np.ndarray]:
     return {name: imgs[0] for name, imgs in exp.images.items() if imgs}
 
 
-def experiment_section(exp: Experiment, report_dir: Path, prefix: str, colors: dict[str, str]) -> tuple:
+def experiment_section(exp: Experiment, report_dir: Path, prefix: str, colors: dict[str, str],
+                       labels: dict[str, str] | None = None) -> tuple:
     """The report section of one experiment: (id, title, escaped HTML, chart rows); its charts' files and
     element ids start with ``prefix``, its renderers keep the colours of the whole report."""
     images = _first_images(exp)
@@ -104,8 +105,8 @@ def experiment_section(exp: Experiment, report_dir: Path, prefix: str, colors: d
     names = renderer_order(exp.runs, images)
     time_column = str(exp.summary["time_column"].iloc[0]) if exp.summary is not None and \
         "time_column" in exp.summary.columns else "time_s"
-    charts = page_charts(exp.runs, names, colors, prefix=prefix, time_column=time_column)
-    bias_variance = bias_variance_chart(exp.summary, names, colors, prefix=prefix)
+    charts = page_charts(exp.runs, names, colors, prefix=prefix, time_column=time_column, labels=labels)
+    bias_variance = bias_variance_chart(exp.summary, names, colors, prefix=prefix, labels=labels)
     return (f"experiment-{prefix}", f"{exp.label} · {exp.scene.name}", html, chart_rows(charts, bias_variance))
 
 
@@ -115,15 +116,20 @@ def _concat(frames: Sequence[pd.DataFrame | None]) -> pd.DataFrame | None:
 
 
 def write_merged_report(out: Path, inputs: Sequence[tuple[str, Path, Scene, Reference, ExperimentResults]],
-                        title: str | None = None) -> Path:
+                        title: str | None = None, options: dict | None = None) -> Path:
     """Write ``out/report.html`` (and ``out/figures/``) for the experiments ``inputs``, each (label, folder,
     scene, reference, results) with distinct labels, the scenes checked against the folders by the caller,
-    the results :func:`harness.workflows.converge.experiment_results`'s."""
+    the results :func:`harness.workflows.converge.experiment_results`'s. ``options``: ``series_labels`` (by
+    an experiment's own series name; a name made distinct keeps its experiment's label after the text) and
+    ``crops``, as :func:`reports.experiment.write_experiment_report` takes them."""
+    options = options or {}
     out = Path(out)
     experiments = [load_experiment(*i) for i in inputs]
     labels = [e.label for e in experiments]
     names = distinct_names([renderer_order(e.runs, e.images) for e in experiments], labels)
     experiments = [renamed(e, n) for e, n in zip(experiments, names)]
+    given = options.get("series_labels") or {}
+    series_labels = {new: given[old] + new[len(old):] for ns in names for old, new in ns.items() if old in given}
     lead_hash = experiments[0].scene.content_hash()
     lead = [e for e in experiments if e.scene.content_hash() == lead_hash]
     others = [e for e in experiments if e.scene.content_hash() != lead_hash]
@@ -132,7 +138,8 @@ def write_merged_report(out: Path, inputs: Sequence[tuple[str, Path, Scene, Refe
     all_runs = pd.concat([e.runs for e in lead + others], ignore_index=True)
     all_images = {n: img for e in lead + others for n, img in _first_images(e).items()}
     colors = renderer_colors(all_runs, all_images, renderer_order(all_runs, all_images))
-    sections = [experiment_section(e, out, prefix, colors) for e, prefix in zip(experiments, file_prefixes(labels))]
+    sections = [experiment_section(e, out, prefix, colors, series_labels)
+                for e, prefix in zip(experiments, file_prefixes(labels))]
 
     runs = pd.concat([e.runs for e in lead], ignore_index=True)
     prov = provenance(lead[0].config, runs)
@@ -142,4 +149,5 @@ def write_merged_report(out: Path, inputs: Sequence[tuple[str, Path, Scene, Refe
                         images={n: img for e in lead for n, img in _first_images(e).items()},
                         summary=_concat([e.summary for e in lead]), provenance=prov,
                         command="\n".join(e.config.get("command", "") for e in lead),
-                        sections=sections, title=title or f"Renderer comparison — {scenes}", labels=labels)
+                        sections=sections, title=title or f"Renderer comparison — {scenes}", labels=labels,
+                        series_labels=series_labels, crops=options.get("crops"))

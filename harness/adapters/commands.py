@@ -12,6 +12,11 @@ A renderer written in any language is gated like ours once a renderers file says
     variance = "{out}.var.exr"          # optional: a second EXR the program writes, the variance of its mean
     time = 'render took ([0-9.]+) s'    # optional: "wall" (default) or a regex whose one group is seconds
 
+The file may also name how series show in legends and tables (``--series-label`` gives the same)::
+
+    [series_labels]
+    'pathtracer[sampler="independent"]' = "PT (independent)"
+
 ``command`` is a list of arguments, run without a shell; each argument has
 its placeholders replaced: ``{scene}`` (the exported scene's main file),
 ``{out}`` (the EXR the program must write), ``{spp}``, ``{seed}``,
@@ -71,7 +76,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-from harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, Stopwatch, default_threads
+from harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, SettingsError, Stopwatch, default_threads
 from harness.scenes.model import FEATURES, Scene
 from harness.scenes.quantities import DEFAULT_QUANTITY, QUANTITIES
 from harness.suggest import did_you_mean
@@ -151,13 +156,39 @@ def read_file(path: Path | str) -> dict[str, Declaration]:
     except tomllib.TOMLDecodeError as e:
         raise RenderersFileError(path, "(file)", f"not valid TOML: {e}") from None
     for key in doc:
-        if key != "renderer":
-            raise RenderersFileError(path, key, "unknown key; a renderers file holds [renderer.NAME] tables only"
-                                     + did_you_mean(key, ["renderer"]))
-    tables = doc.get("renderer")
-    if not isinstance(tables, dict) or not tables:
+        if key not in ("renderer", "series_labels"):
+            raise RenderersFileError(path, key, "unknown key; a renderers file holds [renderer.NAME] tables and "
+                                     "a [series_labels] table only" + did_you_mean(key, ["renderer", "series_labels"]))
+    _series_labels(path, doc)
+    tables = doc.get("renderer", {} if "series_labels" in doc else None)
+    if not isinstance(tables, dict) or (not tables and "series_labels" not in doc):
         raise RenderersFileError(path, "renderer", "declares no renderer; add a [renderer.NAME] table")
     return {name: _declaration(path, name, t) for name, t in tables.items()}
+
+
+def read_series_labels(path: Path | str) -> dict[str, str]:
+    """A renderers file's ``[series_labels]``: ``'pathtracer[sampler="independent"]' = "PT (independent)"``,
+    series spec → the text legends and tables show for it (``--series-label`` gives the same)."""
+    path = Path(path).resolve()
+    read_file(path)  # the file's other errors first, as every reader of it reports them
+    return _series_labels(path, tomllib.loads(path.read_text()))
+
+
+def _series_labels(path: Path, doc: dict) -> dict[str, str]:
+    from harness.adapters.settings import split_spec
+
+    table = doc.get("series_labels", {})
+    if not isinstance(table, dict):
+        raise RenderersFileError(path, "series_labels", "expected a table of 'SPEC' = \"text\"")
+    for spec, shown in table.items():
+        where = f"series_labels.{spec}"
+        if not isinstance(shown, str) or not shown.strip():
+            raise RenderersFileError(path, where, "expected a non-empty string, the text shown for the series")
+        try:
+            split_spec(spec)
+        except SettingsError as e:
+            raise RenderersFileError(path, where, str(e)) from None
+    return dict(table)
 
 
 def _declaration(path: Path, name: str, t) -> Declaration:

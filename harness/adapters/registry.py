@@ -204,6 +204,16 @@ def declared_commands() -> dict[str, str]:
     return out
 
 
+def declared_series_labels() -> dict[str, str]:
+    """The ``[series_labels]`` of the renderers files in use, spec → text; a later file's entry wins."""
+    from harness.adapters.commands import read_series_labels
+
+    out: dict[str, str] = {}
+    for path in renderer_files():
+        out.update(read_series_labels(path))
+    return out
+
+
 def _load_command(name: str, spec: str) -> RendererEntry:
     from harness.adapters.commands import load
 

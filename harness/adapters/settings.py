@@ -22,8 +22,8 @@ from typing import Any, Mapping, Sequence
 from harness.adapters.api import Setting, SettingsError, attribute
 from harness.suggest import did_you_mean
 
-__all__ = ["Setting", "SettingsError", "canonical", "declared", "describe", "label", "parse_sweep",
-           "resolve_settings", "split_spec"]
+__all__ = ["Setting", "SettingsError", "canonical", "declared", "describe", "label", "match_series_labels",
+           "parse_series_label", "parse_sweep", "resolve_settings", "series_key", "split_spec"]
 
 
 def declared(renderer) -> tuple[Setting, ...]:
@@ -89,3 +89,40 @@ def parse_sweep(text: str) -> tuple[str, str, list[str]]:
 def describe(settings: Sequence[Setting]) -> list[str]:
     """One line per setting: name, default, allowed values, documentation."""
     return [f"{s.name} = {s.default!r}  ({s.allowed()}): {s.doc}" for s in settings]
+
+
+def series_key(spec: str) -> tuple[str, tuple[tuple[str, str], ...]]:
+    """What makes two specs name the same series: the renderer and its settings in any order, a value quoted
+    or not (``pathtracer[sampler=independent]`` is the recorded ``pathtracer[sampler="independent"]``)."""
+    name, given = split_spec(spec)
+    return name, tuple(sorted((k, v[1:-1] if len(v) >= 2 and v[0] == v[-1] == '"' else v) for k, v in given.items()))
+
+
+def parse_series_label(text: str) -> tuple[str, str]:
+    """``'pathtracer[sampler="independent"]=PT (independent)'`` → the spec and its display text: split at the
+    first ``=`` outside the brackets (a spec's settings hold ``=`` too)."""
+    depth = 0
+    for i, ch in enumerate(text):
+        depth += (ch == "[") - (ch == "]")
+        if ch == "=" and depth == 0:
+            spec, shown = text[:i].strip(), text[i + 1:].strip()
+            if spec and shown:
+                split_spec(spec)  # a malformed spec says so here
+                return spec, shown
+            break
+    raise SettingsError(f"{text!r}: expected SPEC=TEXT, e.g. 'pathtracer[sampler=\"independent\"]=PT (independent)'")
+
+
+def match_series_labels(labels: Mapping[str, str], names: Sequence[str]) -> dict[str, str]:
+    """Display text per recorded series name, from ``labels`` (spec → text, :func:`parse_series_label`); a spec
+    that names none of ``names`` is a SettingsError naming the series there are: a typo must not silently
+    leave a legend unlabelled."""
+    keys = {series_key(n): n for n in names}
+    out = {}
+    for spec, shown in labels.items():
+        name = keys.get(series_key(spec))
+        if name is None:
+            raise SettingsError(f"{spec!r} names no series here" + did_you_mean(spec, list(names))
+                                + f"; the series: {', '.join(names) or '(none)'}")
+        out[name] = shown
+    return out

@@ -12,6 +12,7 @@ from harness.adapters.registry import missing_features, resolve
 from harness.cli.common import (DashboardOpt, Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SchedulerOpt, SetOpt,
                                 TitleOpt, WorkersOpt, app, command_line, executor_for, info, out_folder_option,
                                 print_json)
+from harness.cli.figures import CropOpt, SeriesLabelOpt, keep_report_options, parse_crops, series_labels_for
 from harness.cli.timing import TimeBasisOpt, time_basis_option, time_repeats_option, warn_contention
 from harness.scenes.library import resolve_scene
 from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results
@@ -57,6 +58,8 @@ def converge(
         "default 1; here the final checkpoint of each renderer and seed, after all cells, in rounds over them; "
         "on Dask in the scheduler's order; a rerun keeps the repeats done"),
     time_basis: str = TimeBasisOpt,
+    series_label: Optional[List[str]] = SeriesLabelOpt,
+    crop: Optional[List[str]] = CropOpt,
 ) -> None:
     """Convergence experiment: every metric at every spp checkpoint, per renderer and seed.
 
@@ -89,6 +92,8 @@ def converge(
     entries = resolve(renderer)
     if sweep:
         entries = sweep_entries(entries, *parse_sweep(sweep))
+    keep_report_options(out, series_labels_for(series_label, [e.name for e in entries]),
+                        parse_crops(crop, sc.camera.width, sc.camera.height))
     with executor_for(workers, scheduler, dashboard) as executor:
         runs, report = run_convergence(out, sc, ref, entries, spps, seeds, targets, title=title, executor=executor,
                                        time_repeats=time_repeats or 1, time_basis=time_basis)
@@ -222,6 +227,8 @@ def report(
     time_basis: Optional[str] = time_basis_option(
         None, "The clock time-derived figures read: wall (time_s) or cpu (cpu_time_s). Default: the one each "
               "experiment was run with (its experiment.json), else wall."),
+    series_label: Optional[List[str]] = SeriesLabelOpt,
+    crop: Optional[List[str]] = CropOpt,
 ) -> None:
     """Rebuild a report from stored results, without rendering: DIR/report.html (and summary.csv).
 
@@ -238,13 +245,21 @@ def report(
     if len(folders) == 1:
         (folder, sc), ref = checked[0], load_reference(checked[0][1])
         results = experiment_results(folder, sc, ref, summary_dir=out or folder, time_basis=time_basis)
+        names = list(dict.fromkeys(results.runs["renderer"].astype(str)))
+        options = keep_report_options(folder, series_labels_for(series_label, names),
+                                      parse_crops(crop, sc.camera.width, sc.camera.height),
+                                      save=out is None or out.resolve() == folder.resolve())
         path = write_experiment_report(folder, sc, ref, results=results, title=title, labels=label or (),
-                                       report_dir=out)
+                                       report_dir=out, options=options)
     else:
         from reports.merge import write_merged_report
 
         refs = [load_reference(sc) for _, sc in checked]
-        path = write_merged_report(out, [(name, folder, sc, ref, experiment_results(folder, sc, ref,
-                                                                                    time_basis=time_basis))
-                                         for name, (folder, sc), ref in zip(labels, checked, refs)], title=title)
+        experiments = [(name, folder, sc, ref, experiment_results(folder, sc, ref, time_basis=time_basis))
+                       for name, (folder, sc), ref in zip(labels, checked, refs)]
+        lead = checked[0][1]
+        names = list(dict.fromkeys(str(n) for e in experiments for n in e[4].runs["renderer"]))
+        path = write_merged_report(out, experiments, title=title, options={
+            "series_labels": series_labels_for(series_label, names),
+            "crops": parse_crops(crop, lead.camera.width, lead.camera.height)})
     info(f"report: {path}")

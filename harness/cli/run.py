@@ -12,6 +12,7 @@ from harness.adapters.registry import RendererError, missing_features, resolve
 from harness.adapters.settings import canonical
 from harness.cli.common import (Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt, TitleOpt,
                                 app, check_output_file, command_line, info, out_folder_option)
+from harness.cli.figures import CropOpt, SeriesLabelOpt, keep_report_options, parse_crops, series_labels_for
 from harness.cli.timing import TimeBasisOpt, time_repeats_option, warn_contention
 from harness.scenes.library import resolve_scene
 from harness.store.exr import write_exr
@@ -92,7 +93,8 @@ def default_time_repeats(time_budget, target_error) -> int:
 def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool,
                  time_budget: Optional[str] = None, target_error: Optional[str] = None, max_spp: int = 4096,
                  sections=(), overrides: Optional[List[str]] = None, title: Optional[str] = None,
-                 time_repeats: Optional[int] = None, time_basis: str = "wall") -> tuple[int, list, object, object]:
+                 time_repeats: Optional[int] = None, time_basis: str = "wall", series_label: Optional[List[str]] = None,
+                 crop: Optional[List[str]] = None) -> tuple[int, list, object, object]:
     """Compare renderers on one scene, write its folder and report; (exit code, run records, scene, reference).
 
     With ``time_budget`` each renderer's spp comes from calibration renders, ``time_repeats`` rounds of them
@@ -112,6 +114,8 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
     sc = resolve_scene(scene, overrides)
     ref = load_reference(sc)
     entries = resolve(renderer)
+    keep_report_options(out, series_labels_for(series_label, [e.name for e in entries]),
+                        parse_crops(crop, sc.camera.width, sc.camera.height))
     runnable = [e.available and not missing_features(e.renderer, sc) for e in entries]
     mode = f"{budget:g} s each" if budget else f"to {target[0]}<={target[1]:g}" if target else f"{spp} spp"
     calibrations = 2 * repeats * sum(runnable) if budget else 0
@@ -216,6 +220,8 @@ def compare(
     time_repeats: Optional[int] = time_repeats_option("default 3 with --time-budget or --target-error, else 1"),
     time_basis: str = TimeBasisOpt,
     title: Optional[str] = TitleOpt,
+    series_label: Optional[List[str]] = SeriesLabelOpt,
+    crop: Optional[List[str]] = CropOpt,
 ) -> None:
     """Render with each renderer, score against the scene's reference, write a report.
 
@@ -226,7 +232,7 @@ def compare(
         raise typer.BadParameter("give --time-budget or --target-error, not both")
     raise typer.Exit(_run_compare(scene, renderer, spp, seed, out, as_json, time_budget, target_error, max_spp,
                                   overrides=overrides, title=title, time_repeats=time_repeats,
-                                  time_basis=time_basis)[0])
+                                  time_basis=time_basis, series_label=series_label, crop=crop)[0])
 
 
 #: The scenes of ``cbox demo``: a convergence run on the first, whose report leads; each other one is a

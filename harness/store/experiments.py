@@ -13,7 +13,9 @@ An experiment folder ``DIR`` holds
   which), written before the cell's rows;
 - ``results.parquet``: all rows, a tidy table with one row per (scene,
   renderer, settings, seed, spp), rewritten after each cell;
-- ``summary.csv``, ``report.html``: derived figures and the report.
+- ``summary.csv``, ``report.html``: derived figures and the report;
+- ``report-options.json``: how the report names series and crops images (``--series-label``, ``--crop``),
+  kept so that ``cbox report`` draws it the same way again.
 
 A run that is interrupted keeps every finished cell; running the same
 command again loads finished cells instead of rendering them, and a changed
@@ -42,6 +44,8 @@ if TYPE_CHECKING:  # pandas is imported where it is used: the CLI must start fas
     import pandas as pd
 
 CONFIG_FILE, RESULTS_FILE, SUMMARY_FILE = "experiment.json", "results.parquet", "summary.csv"
+#: The report's presentation options (:func:`read_report_options`).
+REPORT_OPTIONS_FILE = "report-options.json"
 #: Held (flock) by the run writing the folder; its text names the holder.
 LOCK_FILE = ".lock"
 
@@ -162,3 +166,18 @@ def final_images(out: Path, runs: pd.DataFrame) -> dict[str, list[np.ndarray]]:
             if path.exists():
                 images.setdefault(renderer, []).append(read_exr(path))
     return images
+
+
+def read_report_options(out: Path) -> dict:
+    """The presentation options stored with an experiment: ``series_labels`` (recorded series name → text)
+    and ``crops`` (``[x, y, w, h]`` in pixels); empty when none were given or the file is unreadable (they
+    only change how the report looks, never what it says)."""
+    try:
+        options = json.loads((Path(out) / REPORT_OPTIONS_FILE).read_text())
+    except (OSError, ValueError):
+        return {}
+    return options if isinstance(options, dict) else {}
+
+
+def write_report_options(out: Path, options: dict) -> None:
+    write_json_atomic(Path(out) / REPORT_OPTIONS_FILE, options)

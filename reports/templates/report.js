@@ -228,7 +228,7 @@
       ctx.fillStyle = 'rgba(255,255,255,0.85)';
       ctx.fillRect(sx - Math.max(1, dpr) / 2, 0, Math.max(1, dpr), canvas.height);
     }
-    var rname = D.renderers[S.r].name + (S.mode === 'image' ? '' : ' · ' + D.maps[S.mode].label);
+    var rname = (D.renderers[S.r].label || D.renderers[S.r].name) + (S.mode === 'image' ? '' : ' · ' + D.maps[S.mode].label);
     $('tag-left').textContent = S.flipped ? 'reference' : rname;
     $('tag-right').textContent = S.flipped ? rname : 'reference';
     $('tag-left').style.display = S.split > 0 ? '' : 'none';
@@ -249,7 +249,7 @@
   }
   function updateReadout() {
     var p = S.hover, d = rdata(S.r);
-    $('ro-name').textContent = D.renderers[S.r].name;
+    $('ro-name').textContent = D.renderers[S.r].label || D.renderers[S.r].name;
     if (!p) {
       ['ro-xy', 'ro-r0', 'ro-r1', 'ro-r2', 'ro-f0', 'ro-f1', 'ro-f2', 'ro-de', 'ro-rel', 'ro-flip'].forEach(function (id) { $(id).textContent = '—'; });
       return;

@@ -280,7 +280,7 @@ def test_a_wrong_field_is_one_line_naming_file_and_field(tmp_path, fake_format, 
 
 @pytest.mark.parametrize("text, field, says", [
     ("[renderer.r]\ncommand = [\"p\"]\nscene_format = \"fake\"\n", "renderer.r.models", "missing"),
-    ("[renderers.r]\n", "renderers", "unknown key; a renderers file holds [renderer.NAME] tables only"),
+    ("[renderers.r]\n", "renderers", "unknown key; a renderers file holds [renderer.NAME] tables and a [series_labels] table only"),
     ("x = 1\n", "x", "unknown key"),
     ("", "renderer", "declares no renderer"),
     ("[renderer]\n\"a#b\" = {}\n", "renderer.a#b", "is not a renderer name"),
