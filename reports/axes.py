@@ -177,12 +177,12 @@ class Axes:
         self.right = lay.right
         self.legend_lines = [[label] for _, _, label in self.entries]
         if self.entries and not lay.legend_below:
-            room = lay.right - LEGEND_TEXT_X - 6  # the column's room for text
+            room = lay.right - 14 - LEGEND_TEXT_X - 6  # the column's room for text
             longest = max(widest_piece(label, font) for _, _, label in self.entries)
             room = max(room, min(longest, LEGEND_MAX * lay.width))
             self.legend_lines = [wrap(label, room, font) for _, _, label in self.entries]
             used = max(text_width(line, font) for lines in self.legend_lines for line in lines)
-            self.right = max(lay.right, math.ceil(LEGEND_TEXT_X + used + 6))
+            self.right = max(lay.right, math.ceil(14 + LEGEND_TEXT_X + used + 6))
         self.width = lay.width + self.right - lay.right
 
     @property
@@ -216,25 +216,29 @@ class Axes:
         # shows its plot area, grid and axes without the page's stylesheet.
         self.parts.append(
             f'<rect class="plot-bg" x="{l}" y="{num(t)}" width="{num(pw)}" height="{num(ph)}" fill="none"/>')
-        if xticks:
-            # as many ticks as labels of ~3.6 characters fit side by side (9 on the page, fewer in print), fewer
-            # where the labels would still meet
-            most = max(3, int(pw / (3.6 * self.layout.font)))
-            for v in _spaced(lambda m: log_ticks(*self.xdom, base2=xbase2, max_ticks=m), most, self._xtick_boxes):
-                px = self.x(v)
-                self.parts.append(
-                    f'<line class="grid" x1="{num(px)}" y1="{num(t)}" x2="{num(px)}" y2="{num(t + ph)}" stroke="#bbb"/>')
-                self.parts.append(
-                    f'<text class="tick x" x="{num(px)}" y="{num(t + ph + 16)}" text-anchor="middle">'
-                    f"{escape(format_tick(v))}</text>"
-                )
+        font, below = self.layout.font, t + ph + 16
+        # as many x ticks as labels of ~3.6 characters fit side by side (9 on the page, fewer in print), fewer
+        # where the labels would still meet
+        most = max(3, int(pw / (3.6 * font)))
+        xs = _spaced(lambda m: log_ticks(*self.xdom, base2=xbase2, max_ticks=m), most, self._xtick_boxes) \
+            if xticks else []
+        labelled: list[Box] = []
+        for v in xs:
+            px = self.x(v)
+            self.parts.append(
+                f'<line class="grid" x1="{num(px)}" y1="{num(t)}" x2="{num(px)}" y2="{num(t + ph)}" stroke="#bbb"/>')
+            box = text_box(px, below, format_tick(v), font, "middle")
+            if 0 <= box[0] and box[2] <= self.width:  # a label that would leave the chart is left out
+                labelled.append(box)
+                self.parts.append(f'<text class="tick x" x="{num(px)}" y="{num(below)}" text-anchor="middle">'
+                                  f"{escape(format_tick(v))}</text>")
         for v in self.yticks:
             py = self.y(v)
             self.parts.append(
                 f'<line class="grid" x1="{l}" y1="{num(py)}" x2="{num(l + pw)}" y2="{num(py)}" stroke="#bbb"/>')
-            self.parts.append(
-                f'<text class="tick y" x="{l - 6}" y="{num(py + 4)}" text-anchor="end">{escape(format_tick(v))}</text>'
-            )
+            if not any(overlaps(text_box(l - 6, py + 4, format_tick(v), font, "end"), b) for b in labelled):
+                self.parts.append(f'<text class="tick y" x="{l - 6}" y="{num(py + 4)}" text-anchor="end">'
+                                  f"{escape(format_tick(v))}</text>")
         self.parts.append(
             f'<rect class="axis" x="{l}" y="{num(t)}" width="{num(pw)}" height="{num(ph)}" fill="none" stroke="#888"/>')
         if xlabel:

@@ -263,15 +263,18 @@ def place_tags(centres: Sequence[tuple[float, float]], radius: Sequence[float], 
                area: Box, font: float) -> list[tuple[float, float, str]]:
     """Where each point's tag goes: (x, y, text-anchor) of its baseline, the first of right-up, right-down,
     left-up, left-down, above and below whose estimated box (:func:`reports.axes.text_box`) lies in ``area``
-    and meets no tag placed before it and no point; ``(0, 0, "")`` for an empty tag or one with no room
-    (its point's tooltip still says it)."""
+    and meets no tag placed before it and no point; ``(0, 0, "")`` for an empty tag, one with no room (its
+    point's tooltip still says it) or one that a point under this one already shows."""
     dots = [(cx - r, cy - r, cx + r, cy + r) for (cx, cy), r in zip(centres, radius)]
     placed: list[Box] = []
+    told: list[tuple[float, float, str]] = []  # the points whose tags are placed, and their tags
     out = []
-    up, down = -0.3 * font, ASCENT * font - 0.1 * font  # baselines beside a point: the box's middle a little off
+    # baselines beside a point: the box just above or just below its centre, 1 apart more than a tag's gap
+    up, down = -0.1 * font - 1 - DESCENT * font, 0.1 * font + 1 + ASCENT * font
     for (cx, cy), r, tag in zip(centres, radius, tags):
         spot = (0.0, 0.0, "")
-        if tag:
+        said = any(t == tag and abs(x - cx) <= r and abs(y - cy) <= r for x, y, t in told)
+        if tag and not said:  # a tag that a point on this one already has would only say it twice
             d = r + 2.5
             for x, y, anchor in ((cx + d, cy + up, "start"), (cx + d, cy + down, "start"),
                                  (cx - d, cy + up, "end"), (cx - d, cy + down, "end"),
@@ -282,6 +285,7 @@ def place_tags(centres: Sequence[tuple[float, float]], radius: Sequence[float], 
                     and box[3] <= area[3] - 1
                 if inside and not any(overlaps(box, b, gap=1) for b in placed + dots):
                     placed.append(box)
+                    told.append((cx, cy, tag))
                     spot = (x, y, anchor)
                     break
         out.append(spot)
