@@ -1,7 +1,10 @@
-"""The frame every report chart is drawn in: size and legend place (:class:`Layout`), log axes, ticks, legend.
+"""The frame every report chart is drawn in: size and legend place (:class:`Layout`), log axes, ticks, legend;
+and the one estimate of how much room a text takes (:func:`text_width`, :func:`text_box`, :func:`wrap`).
 
 :class:`Axes` maps values to a log-log plot area, draws its frame (clip path, grid, ticks, labels) and its
-legend, and wraps the parts into one ``<svg>``; :mod:`reports.plots` draws the charts in it.
+legend, and wraps the parts into one ``<svg>``; :mod:`reports.plots` draws the charts in it. Text is placed
+by the estimate, so no text is cut and none meets another: tick labels are thinned until they keep apart,
+legends wrap and the chart grows to hold them.
 """
 
 from __future__ import annotations

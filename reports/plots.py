@@ -13,8 +13,13 @@ its legend goes: :data:`PAGE` for the report, styled by the page; one with a
   whiskers where x is uncertain too (time) and an optional slope guide (convergence plots);
 - :func:`scatter_svg`: log-log speed/accuracy points, with 95% CI whiskers where given, and the Pareto frontier;
 - :func:`bars_svg`: grouped bars on a log axis (bias² and variance);
-- the frame they are drawn in (layout, axes, legend) is :mod:`reports.axes`'; the numbers behind them
-  (ticks, domains, the Pareto front) are :mod:`reports.plotmath`'s.
+- the frame they are drawn in (layout, axes, legend) and the estimate of text boxes are :mod:`reports.axes`';
+  the numbers behind them (ticks, domains, the Pareto front) are :mod:`reports.plotmath`'s.
+
+No text is cut and no two texts meet, by those estimates: legends and names wrap (the chart growing to hold
+them), names that do not wrap stand vertical, notes take rows, and a point's tag goes to the first free side
+of it or is left to its tooltip. A series' or group's ``label`` (a point's ``series_label``) is the text shown
+for it; ``data-renderer`` and the tooltips keep its ``name``.
 """
 
 from __future__ import annotations
