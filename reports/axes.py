@@ -1,7 +1,10 @@
-"""The frame every report chart is drawn in: size and legend place (:class:`Layout`), log axes, ticks, legend.
+"""The frame every report chart is drawn in: size and legend place (:class:`Layout`), log axes, ticks, legend;
+and the one estimate of how much room a text takes (:func:`text_width`, :func:`text_box`, :func:`wrap`).
 
 :class:`Axes` maps values to a log-log plot area, draws its frame (clip path, grid, ticks, labels) and its
-legend, and wraps the parts into one ``<svg>``; :mod:`reports.plots` draws the charts in it.
+legend, and wraps the parts into one ``<svg>``; :mod:`reports.plots` draws the charts in it. Text is placed
+by the estimate, so no text is cut and none meets another: tick labels are thinned until they keep apart,
+legends wrap and the chart grows to hold them.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ class Layout:
     font: float = 11.5  # size of tick and legend text: to estimate how wide a label is
     legend_row: float = 19
     legend_below: bool = False
+    label_font: float = 12.5  # size of the axes' labels (the page's stylesheet: 12.5 px)
     style: str = ""  # a stylesheet to embed: the SVG then stands alone (xmlns, its own background)
     width_in: float | None = None  # printed width of a standalone SVG
 
@@ -39,6 +43,24 @@ class Layout:
 #: The report page's charts: the page's stylesheet themes them.
 PAGE = Layout()
 
+
+
+#: Where the y axis' label is (its baseline, rotated), from the left edge.
+YLABEL_X = 16
+#: A legend label starts this far right of its mark's left end.
+LEGEND_TEXT_X = 28
+#: A legend right of the plot is at most this share of the chart's width wide; longer labels wrap.
+LEGEND_MAX = 0.45
+
+
+def _spaced(ticks_for, most: int, boxes) -> list[float]:
+    """The ticks ``ticks_for(m)`` for the largest ``m <= most`` whose labels' ``boxes`` do not meet."""
+    for m in range(most, 1, -1):
+        ticks = ticks_for(m)
+        bs = boxes(ticks)
+        if not any(overlaps(a, b, gap=2) for i, a in enumerate(bs) for b in bs[i + 1:]):
+            return ticks
+    return ticks_for(2)
 
 
 def color_for(index: int) -> str:
@@ -49,8 +71,80 @@ def num(v: float) -> str:
     return f"{v:.2f}".rstrip("0").rstrip(".")
 
 
-def short(name: str, n: int = 20) -> str:
-    return name if len(name) <= n else name[: n - 1] + "…"
+# --------------------------------------------------------------------------
+# Text boxes: every chart places its text by these estimates, so no two texts meet
+# --------------------------------------------------------------------------
+
+#: A character's estimated width, in font sizes: above the mean of DejaVu Sans and Helvetica (about 0.55), so
+#: an estimated box holds the drawn text.
+CHAR_WIDTH = 0.62
+#: A text's box above and below its baseline, in font sizes (DejaVu Sans: 0.93 and 0.24, Helvetica less).
+ASCENT, DESCENT = 0.95, 0.25
+#: Baseline to baseline of wrapped lines, in font sizes: more than a box's height, so lines do not meet.
+LINE = 1.25
+#: Where a label may break: after these characters (and a space, which stays at the end of its line).
+_BREAK_AFTER = ",[( -"
+
+Box = tuple[float, float, float, float]  # x0, y0, x1, y1
+
+
+def text_width(text: str, font: float) -> float:
+    """Estimated width of ``text`` at font size ``font`` (a trailing space is not counted)."""
+    return CHAR_WIDTH * font * len(text.rstrip(" "))
+
+
+def text_box(x: float, y: float, text: str, font: float, anchor: str = "start", lines: int = 1) -> Box:
+    """Estimated box of ``text`` (its widest line) with its first baseline at ``y``, anchored at ``x``."""
+    w = text_width(text, font)
+    x0 = x - {"start": 0.0, "middle": w / 2, "end": w}[anchor]
+    return x0, y - ASCENT * font, x0 + w, y + DESCENT * font + (lines - 1) * LINE * font
+
+
+def overlaps(a: Box, b: Box, gap: float = 0.0) -> bool:
+    """True when boxes ``a`` and ``b`` come closer than ``gap``."""
+    return a[0] < b[2] + gap and b[0] < a[2] + gap and a[1] < b[3] + gap and b[1] < a[3] + gap
+
+
+def pieces(text: str) -> list[str]:
+    """``text`` cut after each break character (``pathtracer[`` ``sampler="independent",`` ``rr_depth=3]``)."""
+    out, cur = [], ""
+    for ch in text:
+        cur += ch
+        if ch in _BREAK_AFTER:
+            out.append(cur)
+            cur = ""
+    return out + ([cur] if cur else [])
+
+
+def widest_piece(text: str, font: float) -> float:
+    return max((text_width(p, font) for p in pieces(text)), default=0.0)
+
+
+def wrap(text: str, width: float, font: float) -> list[str]:
+    """``text`` in lines no wider than ``width``, broken at :data:`_BREAK_AFTER` characters; a piece wider than
+    ``width`` alone is cut where it must be. Joined, the lines are ``text`` again."""
+    per_line = max(1, int(width / (CHAR_WIDTH * font)))
+    lines: list[str] = []
+    cur = ""
+    for piece in pieces(text):
+        if text_width(cur + piece, font) <= width:
+            cur += piece
+            continue
+        if cur:
+            lines.append(cur)
+        while text_width(piece, font) > width:
+            lines.append(piece[:per_line])
+            piece = piece[per_line:]
+        cur = piece
+    return lines + ([cur] if cur else []) or [""]
+
+
+def text_lines(lines: list[str], x: float, font: float) -> str:
+    """The inside of a ``<text>`` element: its one line, or a ``<tspan>`` per line, each :data:`LINE` below."""
+    if len(lines) == 1:
+        return escape(lines[0])
+    return "".join(f'<tspan x="{num(x)}" dy="{0 if i == 0 else num(LINE * font)}">{escape(line)}</tspan>'
+                   for i, line in enumerate(lines))
 
 
 # --------------------------------------------------------------------------
@@ -60,17 +154,39 @@ def short(name: str, n: int = 20) -> str:
 
 @dataclass
 class Axes:
+    """A log-log plot area of ``layout``'s size, its frame and its legend (``entries``: (kind, colour, label);
+    kind is 'line', 'dash', 'band', 'whisker', 'dot', 'ring' or 'rect').
+
+    Text is never cut: the left margin holds the widest y tick label, a legend at the right is as wide as its
+    longest label needs (the figure growing), wrapped where a label is longer still; a legend below wraps and
+    takes as many columns as keep it shortest. A chart may grow ``top`` and ``height`` before :meth:`frame`
+    for text of its own above or below the plot (:func:`reports.plots.bars_svg`).
+    """
+
     xdom: tuple[float, float]
     ydom: tuple[float, float]
     layout: Layout = PAGE
-    extra_bottom: int = 0  # more room below the plot (the bars' names)
+    entries: list[tuple[str, str, str]] = field(default_factory=list)
     parts: list[str] = field(default_factory=list)
-    legend_height: float = 0.0  # what a legend below the plot adds to the height
+    legend_height: float = 0.0  # what the legend adds below the plot's height
 
     def __post_init__(self) -> None:
-        lay = self.layout
-        self.width, self.height = lay.width, lay.height
-        self.left, self.right, self.top, self.bottom = lay.left, lay.right, lay.top, lay.bottom + self.extra_bottom
+        lay, font = self.layout, self.layout.font
+        self.top, self.bottom, self.height = lay.top, lay.bottom, lay.height
+        self.yticks = _spaced(lambda m: log_ticks(*self.ydom, max_ticks=m), 7, self._ytick_boxes)
+        widest = max((text_width(format_tick(v), font) for v in self.yticks), default=0.0)
+        # the y label's box (rotated: its height across), a gap, the tick labels, the tick gap
+        self.left = max(lay.left, math.ceil(YLABEL_X + DESCENT * lay.label_font + 4 + widest + 6))
+        self.right = lay.right
+        self.legend_lines = [[label] for _, _, label in self.entries]
+        if self.entries and not lay.legend_below:
+            room = lay.right - 14 - LEGEND_TEXT_X - 6  # the column's room for text
+            longest = max(widest_piece(label, font) for _, _, label in self.entries)
+            room = max(room, min(longest, LEGEND_MAX * lay.width))
+            self.legend_lines = [wrap(label, room, font) for _, _, label in self.entries]
+            used = max(text_width(line, font) for lines in self.legend_lines for line in lines)
+            self.right = max(lay.right, math.ceil(14 + LEGEND_TEXT_X + used + 6))
+        self.width = lay.width + self.right - lay.right
 
     @property
     def pw(self) -> float:
@@ -86,58 +202,97 @@ class Axes:
     def y(self, v: float) -> float:
         return self.top + (1 - (math.log10(v) - self.ydom[0]) / (self.ydom[1] - self.ydom[0])) * self.ph
 
+    def _ytick_boxes(self, ticks: list[float]) -> list[Box]:
+        return [text_box(self.layout.left - 6, self.y(v) + 4, format_tick(v), self.layout.font, "end")
+                for v in ticks]
+
+    def _xtick_boxes(self, ticks: list[float]) -> list[Box]:
+        return [text_box(self.x(v), self.top + self.ph + 16, format_tick(v), self.layout.font, "middle")
+                for v in ticks]
+
     def frame(self, uid: str, xlabel: str, ylabel: str, xbase2: bool = False, xticks: bool = True) -> None:
         l, t, pw, ph = self.left, self.top, self.pw, self.ph
         self.parts.append(
-            f'<clipPath id="{uid}-clip"><rect x="{l}" y="{t}" width="{num(pw)}" height="{num(ph)}"/></clipPath>'
+            f'<clipPath id="{uid}-clip"><rect x="{l}" y="{num(t)}" width="{num(pw)}" height="{num(ph)}"/></clipPath>'
         )
         # Fallback presentation attributes (a stylesheet overrides them) so that an SVG cut out of the page
         # shows its plot area, grid and axes without the page's stylesheet.
-        self.parts.append(f'<rect class="plot-bg" x="{l}" y="{t}" width="{num(pw)}" height="{num(ph)}" fill="none"/>')
-        if xticks:
-            # as many ticks as labels of ~3.6 characters fit side by side: 9 on the page, fewer in print
-            for v in log_ticks(*self.xdom, base2=xbase2, max_ticks=max(3, int(pw / (3.6 * self.layout.font)))):
-                px = self.x(v)
-                self.parts.append(
-                    f'<line class="grid" x1="{num(px)}" y1="{t}" x2="{num(px)}" y2="{num(t + ph)}" stroke="#bbb"/>')
-                self.parts.append(
-                    f'<text class="tick x" x="{num(px)}" y="{num(t + ph + 16)}" text-anchor="middle">'
-                    f"{escape(format_tick(v))}</text>"
-                )
-        for v in log_ticks(*self.ydom, max_ticks=7):
+        self.parts.append(
+            f'<rect class="plot-bg" x="{l}" y="{num(t)}" width="{num(pw)}" height="{num(ph)}" fill="none"/>')
+        font, below = self.layout.font, t + ph + 16
+        # as many x ticks as labels of ~3.6 characters fit side by side (9 on the page, fewer in print), fewer
+        # where the labels would still meet
+        most = max(3, int(pw / (3.6 * font)))
+        xs = _spaced(lambda m: log_ticks(*self.xdom, base2=xbase2, max_ticks=m), most, self._xtick_boxes) \
+            if xticks else []
+        labelled: list[Box] = []
+        for v in xs:
+            px = self.x(v)
+            self.parts.append(
+                f'<line class="grid" x1="{num(px)}" y1="{num(t)}" x2="{num(px)}" y2="{num(t + ph)}" stroke="#bbb"/>')
+            box = text_box(px, below, format_tick(v), font, "middle")
+            if 0 <= box[0] and box[2] <= self.width:  # a label that would leave the chart is left out
+                labelled.append(box)
+                self.parts.append(f'<text class="tick x" x="{num(px)}" y="{num(below)}" text-anchor="middle">'
+                                  f"{escape(format_tick(v))}</text>")
+        for v in self.yticks:
             py = self.y(v)
             self.parts.append(
                 f'<line class="grid" x1="{l}" y1="{num(py)}" x2="{num(l + pw)}" y2="{num(py)}" stroke="#bbb"/>')
+            if not any(overlaps(text_box(l - 6, py + 4, format_tick(v), font, "end"), b) for b in labelled):
+                self.parts.append(f'<text class="tick y" x="{l - 6}" y="{num(py + 4)}" text-anchor="end">'
+                                  f"{escape(format_tick(v))}</text>")
+        self.parts.append(
+            f'<rect class="axis" x="{l}" y="{num(t)}" width="{num(pw)}" height="{num(ph)}" fill="none" stroke="#888"/>')
+        if xlabel:
             self.parts.append(
-                f'<text class="tick y" x="{l - 6}" y="{num(py + 4)}" text-anchor="end">{escape(format_tick(v))}</text>'
+                f'<text class="label x" x="{num(l + pw / 2)}" y="{num(self.height - 12)}" text-anchor="middle">'
+                f"{escape(xlabel)}</text>"
             )
         self.parts.append(
-            f'<rect class="axis" x="{l}" y="{t}" width="{num(pw)}" height="{num(ph)}" fill="none" stroke="#888"/>')
-        self.parts.append(
-            f'<text class="label x" x="{num(l + pw / 2)}" y="{self.height - 12}" text-anchor="middle">'
-            f"{escape(xlabel)}</text>"
-        )
-        self.parts.append(
-            f'<text class="label y" transform="translate(16 {num(t + ph / 2)}) rotate(-90)" text-anchor="middle">'
-            f"{escape(ylabel)}</text>"
+            f'<text class="label y" transform="translate({YLABEL_X} {num(t + ph / 2)}) rotate(-90)" '
+            f'text-anchor="middle">{escape(ylabel)}</text>'
         )
 
-    def legend(self, entries: list[tuple[str, str, str]]) -> None:
-        """entries: (kind, colour, label); kind is 'line', 'dash', 'band', 'whisker', 'dot', 'ring' or 'rect'.
+    def _legend_spots(self) -> list[tuple[float, float]]:
+        """Where each entry's mark goes (its label's first baseline is 4 below); sets ``legend_height``."""
+        lay, font, n = self.layout, self.layout.font, len(self.entries)
+        if not n:
+            return []
+        step = LINE * font
+        if not lay.legend_below:
+            spots, y = [], self.top + 6
+            for lines in self.legend_lines:
+                spots.append((self.width - self.right + 14, y))
+                y += lay.legend_row + (len(lines) - 1) * step
+            bottom = spots[-1][1] + 4 + (len(self.legend_lines[-1]) - 1) * step + DESCENT * font + 4
+            self.legend_height = max(0.0, bottom - self.height)
+            return spots
+        best = None
+        avail = self.width - 16
+        for cols in range(1, n + 1):
+            room = avail / cols - LEGEND_TEXT_X - 8
+            labels = [label for _, _, label in self.entries]
+            if cols > 1 and (room < 4 * CHAR_WIDTH * font or max(widest_piece(t, font) for t in labels) > room):
+                break
+            lines = [wrap(t, room, font) for t in labels]
+            rows = [max(len(ls) for ls in lines[r:r + cols]) for r in range(0, n, cols)]
+            height = sum(lay.legend_row + (k - 1) * step for k in rows)
+            if best is None or height < best[0]:
+                best = (height, cols, lines, rows)
+        _, cols, self.legend_lines, rows = best
+        colw, spots, y = avail / cols, [], self.height + 6
+        for r, k in enumerate(rows):
+            spots += [(8 + c * colw, y) for c in range(min(cols, n - r * cols))]
+            y += lay.legend_row + (k - 1) * step
+        self.legend_height = spots[-1][1] + 10 + (rows[-1] - 1) * step - self.height
+        return spots
 
-        One per row right of the plot; or, with ``layout.legend_below``, in as many columns as fit under
-        it, the chart growing to hold them: a standalone figure's legend is inside its viewBox.
-        """
-        lay = self.layout
-        if lay.legend_below:
-            col = 28 + 0.62 * lay.font * max((len(short(e[2], 22)) for e in entries), default=0) + 8
-            cols = max(1, int((self.width - 8) // col))
-            spots = [(8 + (i % cols) * col, self.height + 6 + (i // cols) * lay.legend_row)
-                     for i in range(len(entries))]
-            self.legend_height = spots[-1][1] + 10 - self.height if spots else 0.0
-        else:
-            spots = [(self.width - self.right + 14, self.top + 6 + i * lay.legend_row) for i in range(len(entries))]
-        for (kind, color, label), (x0, y) in zip(entries, spots):
+    def legend(self) -> None:
+        """The legend of ``entries``: right of the plot, one per row, or with ``layout.legend_below`` in columns
+        under it, the chart growing to hold it (a standalone figure's legend is inside its viewBox)."""
+        spots = self._legend_spots()  # first: it wraps the labels of a legend below
+        for (kind, color, label), lines, (x0, y) in zip(self.entries, self.legend_lines, spots):
             x1 = num(x0 + 22)
             if kind in ("line", "dash"):
                 # the dashed entry is the slope guide: its class lets a theme colour it as the guide
@@ -170,10 +325,10 @@ class Axes:
             else:
                 self.parts.append(
                     f'<circle class="legend-mark" cx="{num(x0 + 11)}" cy="{num(y)}" r="4" fill="{color}"/>')
-            title = f"<title>{escape(label)}</title>" if len(label) > 22 else ""
+            tx = x0 + LEGEND_TEXT_X
             self.parts.append(
-                f'<text class="legend-label" x="{num(x0 + 28)}" y="{num(y + 4)}">'
-                f"{title}{escape(short(label, 22))}</text>"
+                f'<text class="legend-label" x="{num(tx)}" y="{num(y + 4)}">'
+                f"{text_lines(lines, tx, self.layout.font)}</text>"
             )
 
     def svg(self, uid: str, cls: str, aria: str, extra_attrs: str = "") -> str:

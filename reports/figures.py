@@ -49,7 +49,7 @@ _STYLE = (
 )
 
 #: The standalone figures' layout: column width, print-size text, legend below the plot.
-PRINT = Layout(width=380, height=290, left=76, right=22, top=14, bottom=50, font=13, legend_row=18,
+PRINT = Layout(width=380, height=290, left=76, right=22, top=14, bottom=50, font=13, label_font=14, legend_row=18,
                legend_below=True, style=_STYLE, width_in=COLUMN_WIDTH_IN)
 
 # A figure file of some report: a kind, perhaps after a section's prefix (a merged report's experiment label).

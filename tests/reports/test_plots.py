@@ -1,0 +1,212 @@
+"""The charts' text on the SVG strings: never cut, every long label whole, no two estimated text boxes meeting.
+
+Each ``<text>`` of a chart is given the box that :mod:`reports.axes` estimates for it (its anchor, lines and a
+rotation of -90°), the same estimate the charts place their text by; the browser checks the drawn boxes
+(tests/reports/test_figures_browser.py).
+"""
+
+from __future__ import annotations
+
+import re
+import xml.etree.ElementTree as ET
+
+import pytest
+
+from reports import plots
+from reports.axes import ASCENT, CHAR_WIDTH, DESCENT, LINE, overlaps, pieces, text_width, wrap
+from reports.figures import PRINT
+
+LONG = ['pathtracer[sampler="independent",rr_depth=3]', 'pathtracer[sampler="sobol",rr_depth=3]',
+        'mitsuba[integrator="volpath",max_depth=8]', "ambient-occlusion", "mitsuba", "sppm"]
+LAYOUTS = pytest.mark.parametrize("layout", [plots.PAGE, PRINT], ids=["page", "print"])
+
+
+def _local(tag: str) -> str:
+    return tag.rsplit("}", 1)[-1]
+
+
+def _texts(svg: str) -> tuple[list[dict], tuple[float, float]]:
+    """Every non-empty ``<text>``: class, its own text (tspans joined, no tooltip), estimated box; and the
+    viewBox's size."""
+    root = ET.fromstring(svg)
+    _, _, w, h = map(float, root.get("viewBox").split())
+    out = []
+    for el in root.iter():
+        if _local(el.tag) != "text":
+            continue
+        cls = el.get("class", "")
+        spans = [c for c in el if _local(c.tag) == "tspan"]
+        # its text or its lines, without a <title> (a tooltip, not drawn)
+        lines = [c.text or "" for c in spans] if spans else [(el.text or "") + "".join(c.tail or "" for c in el)]
+        if not "".join(lines).strip():
+            continue
+        font = PRINT.label_font if cls.startswith("label") else float(root.get("font-size"))
+        width = max(text_width(line, font) for line in lines)
+        anchor = el.get("text-anchor", "start")
+        down = DESCENT * font + (len(lines) - 1) * LINE * font
+        m = re.fullmatch(r"translate\(([-\d.]+) ([-\d.]+)\) rotate\(-90\)", el.get("transform", ""))
+        if m:  # rotated: its length runs up the page from the anchor, its lines to the right
+            a, b = map(float, m.groups())
+            x0 = float(el.get("x", 0)) - {"start": 0, "middle": width / 2, "end": width}[anchor]
+            box = (a - ASCENT * font, b - x0 - width, a + down, b - x0)
+        else:
+            x, y = float(el.get("x")), float(el.get("y"))
+            x0 = x - {"start": 0, "middle": width / 2, "end": width}[anchor]
+            box = (x0, y - ASCENT * font, x0 + width, y + down)
+        out.append({"cls": cls, "text": "".join(lines), "lines": lines, "box": box})
+    return out, (w, h)
+
+
+def _check_layout(svg: str) -> list[dict]:
+    texts, (w, h) = _texts(svg)
+    for t in texts:
+        assert not t["text"].endswith("…"), t
+        x0, y0, x1, y1 = t["box"]
+        assert -0.01 <= x0 and x1 <= w + 0.01 and -0.01 <= y0 and y1 <= h + 0.01, (t, w, h)
+    for i, a in enumerate(texts):
+        for b in texts[i + 1:]:
+            assert not overlaps(a["box"], b["box"]), (a, b)
+    return texts
+
+
+def _series(names=LONG):
+    return [plots.Series(n, plots.color_for(i), [1, 4, 16, 64], [1 / (i + 1), .5 / (i + 1), .25 / (i + 1), .12 / (i + 1)],
+                         [.9 / (i + 1)] * 4, [1.1 / (i + 1)] * 4, xlo=[.9, 3.6, 14, 60], xhi=[1.1, 4.4, 18, 70])
+            for i, n in enumerate(names)]
+
+
+def test_wrap_breaks_at_brackets_commas_and_spaces_and_keeps_every_character():
+    assert pieces('pathtracer[sampler="independent",rr_depth=3]') == [
+        "pathtracer[", 'sampler="independent",', "rr_depth=3]"]
+    font = 10.0
+    room = text_width('sampler="independent",', font)
+    assert wrap(LONG[0], room, font) == ["pathtracer[", 'sampler="independent",', "rr_depth=3]"]
+    assert wrap("bias not significant", text_width("significant", font), font) == ["bias not ", "significant"]
+    for text in [*LONG, "a" * 50, "x, y, z", ""]:
+        for chars in (3, 7, 12, 30):
+            room = chars * CHAR_WIDTH * font
+            lines = wrap(text, room, font)
+            assert "".join(lines) == text  # nothing dropped, nothing added
+            assert all(text_width(line, font) <= room + 1e-9 for line in lines), (text, chars, lines)
+    assert wrap("a" * 25, 10 * CHAR_WIDTH * 10, 10) == ["a" * 10, "a" * 10, "a" * 5]  # cut only where it must
+
+
+@LAYOUTS
+def test_line_plot_legend_holds_every_label_whole(layout):
+    svg = plots.line_plot_svg(_series(), uid="u", xlabel="wall time (s)", ylabel="RMSE", layout=layout)
+    texts = _check_layout(svg)
+    legend = [t for t in texts if t["cls"] == "legend-label"]
+    assert [t["text"] for t in legend] == [*LONG, "min–max over seeds", "95% CI of the time", "slope −½ (∝ 1/√N)"]
+    assert len(legend[0]["lines"]) >= 2  # the longest wraps (page: beside the plot; print: a column's width)
+    if not layout.legend_below:  # the legend's column grew for `sampler="independent",`; the plot kept its size
+        root = ET.fromstring(svg)
+        assert float(root.get("viewBox").split()[2]) > layout.width
+        plot = [el for el in root.iter() if _local(el.tag) == "rect" and el.get("class") == "axis"][0]
+        assert float(plot.get("width")) == layout.width - layout.left - layout.right
+
+
+def test_short_labels_stay_one_line_and_print_legend_takes_columns():
+    svg = plots.line_plot_svg(_series(["a", "bb", "ccc"]), uid="u", xlabel="spp", ylabel="RMSE", layout=PRINT,
+                              guide_slope=None)
+    texts = _check_layout(svg)
+    legend = [t for t in texts if t["cls"] == "legend-label"]
+    assert [t["lines"] for t in legend[:3]] == [["a"], ["bb"], ["ccc"]]
+    assert len({t["box"][0] for t in legend}) >= 2  # side by side, not one per row
+    page = plots.line_plot_svg(_series(["a", "bb", "ccc"]), uid="u", xlabel="spp", ylabel="RMSE", guide_slope=None)
+    assert 'viewBox="0 0 640 400"' in page  # nothing long: the page's size is unchanged
+
+
+def test_series_label_is_shown_and_name_kept_for_the_page():
+    s = _series(LONG[:2])
+    s[0].label = "PT (independent)"
+    svg = plots.line_plot_svg(s, uid="u", xlabel="spp", ylabel="RMSE")
+    legend = [t["text"] for t in _check_layout(svg) if t["cls"] == "legend-label"]
+    assert legend[:2] == ["PT (independent)", LONG[1]]
+    assert 'data-renderer="pathtracer[sampler=&quot;independent&quot;,rr_depth=3]"' in svg
+    groups = [plots.BarGroup(n, [1e-3, 2e-3], label="PT" if i == 0 else "") for i, n in enumerate(LONG[:2])]
+    bars = plots.bars_svg(groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")), uid="b", ylabel="m")
+    names = [t["text"] for t in _check_layout(bars) if t["cls"] == "tick x"]
+    assert names == ["PT", LONG[1]] and f"<title>{LONG[0].replace(chr(34), '&quot;')}</title>" in bars
+    points = [plots.Point(n, "#000", 1.0 + i, 2.0 + i, label="tooltip", series_label="S" if i == 0 else "")
+              for i, n in enumerate(LONG[:2])]
+    scatter = plots.scatter_svg(points, uid="s", xlabel="t", ylabel="e")
+    assert [t["text"] for t in _check_layout(scatter) if t["cls"] == "legend-label"][:2] == ["S", LONG[1]]
+    assert "<title>tooltip" in scatter
+
+
+def _points(spread: float):
+    """Six renderers at four spp whose points lie within ``spread`` (relative) of each other."""
+    return [plots.Point(n, plots.color_for(i), 0.01 * s * (1 + spread * i), s ** -0.5 * (1 + spread * i),
+                        label=f"{n} {s}", tag=str(s))
+            for i, n in enumerate(LONG) for s in (1, 4, 16, 64)]
+
+
+@LAYOUTS
+@pytest.mark.parametrize("spread", [0.0, 0.01, 0.1])
+def test_scatter_tags_never_meet(layout, spread):
+    svg = plots.scatter_svg(_points(spread), uid="s", xlabel="t", ylabel="e", layout=layout)
+    texts = _check_layout(svg)
+    tags = [t for t in texts if t["cls"] == "point-tag"]
+    assert 4 <= len(tags) <= 24  # the first renderer's tags always fit; coincident ones are left to tooltips
+    if spread == 0.0:  # six points on each other: their spp said once
+        assert sorted(t["text"] for t in tags) == ["1", "16", "4", "64"]
+    root = ET.fromstring(svg)
+    plot = [el for el in root.iter() if _local(el.tag) == "rect" and el.get("class") == "axis"][0]
+    px, py, pw, ph = (float(plot.get(k)) for k in ("x", "y", "width", "height"))
+    for t in tags:  # inside the plot, so the clip never cuts one
+        assert px <= t["box"][0] and t["box"][2] <= px + pw and py <= t["box"][1] and t["box"][3] <= py + ph
+
+
+def test_place_tags_tries_each_side_then_drops():
+    area = (0.0, 0.0, 200.0, 200.0)
+    spots = plots.place_tags([(100, 100), (100, 100), (100, 100), (100, 100), (100, 100), (100, 100), (100, 100)],
+                             [3.6] * 7, ["4", "1", "16", "64", "2", "8", "32"], area, 10.0)
+    anchors = [a for _, _, a in spots]
+    assert anchors[:6] == ["start", "start", "end", "end", "middle", "middle"] and anchors[6] == ""
+    (x, y, anchor), = plots.place_tags([(5, 5)], [3.6], ["4"], area, 10.0)  # no room above: right-down
+    assert anchor == "start" and x > 5 and y - ASCENT * 10 > 5
+    (_, _, anchor), = plots.place_tags([(195, 195)], [3.6], ["4"], area, 10.0)  # in the corner: left-up
+    assert anchor == "end"
+    assert plots.place_tags([(50, 50)], [3.6], [""], area, 10.0) == [(0.0, 0.0, "")]
+
+
+@LAYOUTS
+@pytest.mark.parametrize("names", [LONG, ["alpha", "beta", "gamma", "delta", "epsilon"],
+                                   ["ambient-occlusion", "mitsuba", "pathtracer", "sppm", "bdpt", "photon-mapper"]])
+def test_bar_names_and_notes_whole_and_apart(layout, names):
+    groups = [plots.BarGroup(n, [1e-3 * (i + 1) if i % 3 else -1e-5, 2e-3], "bias not significant" if i % 2 else
+                             f"bias {10 * i} %", [5e-4, 1e-3], [2e-3, 3e-3]) for i, n in enumerate(names)]
+    svg = plots.bars_svg(groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")), uid="b", ylabel="m",
+                         layout=layout)
+    texts = _check_layout(svg)
+    assert [t["text"] for t in texts if t["cls"] == "tick x"] == names
+    assert [t["text"] for t in texts if t["cls"] == "bar-note"] == [g.note for g in groups]
+    root = ET.fromstring(svg)
+    plot = [el for el in root.iter() if _local(el.tag) == "rect" and el.get("class") == "axis"][0]
+    top = float(plot.get("y"))
+    for t in texts:
+        if t["cls"] == "bar-note":  # above the plot, over the plot's width
+            assert t["box"][3] <= top
+
+
+def test_bar_names_turn_vertical_only_when_they_do_not_wrap():
+    slot, font = 60.0, 10.0
+    lines, vertical, _ = plots.bar_names(["alpha", "beta-gamma"], slot, font)
+    assert not vertical and lines == [["alpha"], ["beta-", "gamma"]]
+    lines, vertical, depth = plots.bar_names(LONG[:2], slot, font)
+    assert vertical and ["".join(ls) for ls in lines] == LONG[:2]
+    assert depth >= max(text_width(line, font) for ls in lines for line in ls)
+
+
+def test_notes_take_rows_only_when_they_would_meet():
+    font = 10.0
+    notes, height = plots.note_rows(["bias 1 %", "bias 2 %"], [50, 150], (0, 200), font)
+    assert notes[0][1] == notes[1][1] and height == pytest.approx(LINE * font + 6)  # one row
+    notes, height = plots.note_rows(["bias not significant"] * 3, [30, 60, 90], (0, 120), font)
+    assert len({n[1] for n in notes}) == 3 or any(len(n[2]) == 2 for n in notes)
+    xs = [(n[0] - max(text_width(line, font) for line in n[2]) / 2, n[0] + max(text_width(line, font)
+                                                                              for line in n[2]) / 2) for n in notes]
+    for i in range(3):
+        for j in range(i + 1, 3):
+            same_row = notes[i][1] == notes[j][1]
+            assert not same_row or xs[i][1] <= xs[j][0] or xs[j][1] <= xs[i][0]
