@@ -42,6 +42,7 @@ from harness.store.atomic import write_text_atomic
 from reports import plots
 from reports.charts import SINGLE_SPP_NOTE, bias_variance_chart, chart_figures, page_charts
 from reports.figures import WrittenFigures, write_figures
+from reports.image_figure import write_image_figure
 from reports.images import JND
 from reports.regions import bias_variance_table, region_section
 from reports.timing import timing_badge
@@ -242,7 +243,8 @@ def _context(
     charts = page_charts(runs, names, colors, time_column=time_column)
     bias_variance = bias_variance_chart(summary, names, colors)
     run_seeds = provenance.get("seeds") or []
-    viewer, viewer_notes = image_viewer(ref_img, exposure, images, names, colors, runs, run_seeds)
+    error_arrays: dict = {}  # the viewer's error maps, reused by the image figure
+    viewer, viewer_notes = image_viewer(ref_img, exposure, images, names, colors, runs, run_seeds, error_arrays)
     ref_prov = dict(reference.provenance or {})
     counts = {s: sum(i["status"] == s for i in info) for s in ("ok", *_NOT_RUN)}
     sections = list(sections)
@@ -282,6 +284,8 @@ def _context(
             figure for rows in section_charts.values() for row in rows for _, figure in row["boxes"]],
         "region_bias_variance": Markup(bias_variance_table(summary, scene, colors) or ""),
         "viewer": viewer,
+        "image_figure": {"reference_image": ref_img, "exposure": exposure, "maps": error_arrays,
+                         "images": {n: images[n] for n in names if n in images}},
         "viewer_json": _json_for_script(viewer),
         "viewer_notes": viewer_notes,
         "legends": viewer_legends(),
@@ -318,6 +322,8 @@ def write_report(
     labels: Sequence[str] = (),
     figures: bool = True,
     cores: int | None = None,
+    series_labels: Mapping[str, str] | None = None,
+    crops: Sequence[Sequence[int]] | None = None,
 ) -> Path:
     """Write the self-contained HTML report to ``path`` atomically; return the path.
 
@@ -341,11 +347,15 @@ def write_report(
       (``cbox report --label``);
     - ``cores``: the cores of the machine the runs were timed on, for the timing-quality badge
       (:mod:`reports.timing`); default this machine's.
+    - ``series_labels``: recorded renderer name -> display text; ``crops``: (x, y, w, h) pixel rectangles
+      that replace the scene's regions as the image figure's crops (:mod:`reports.image_figure`).
 
     Every chart is also written as a standalone SVG, PDF and PNG into
     ``figures/`` beside ``path`` (:func:`reports.figures.write_figures`), and
-    the report links them; ``figures=False`` writes the page alone (a second
-    or two quicker: converting every chart to PDF and 300 dpi PNG takes that).
+    the report links them; so is the image grid, ``figures/images.*``, with each
+    of its images in ``images/`` (:func:`reports.image_figure.write_image_figure`).
+    ``figures=False`` writes the page alone (a few seconds quicker: converting
+    every chart to PDF and 300 dpi PNG takes that).
     """
     path = Path(path)
     ctx = _context(
@@ -353,5 +363,10 @@ def write_report(
         provenance=provenance, command=command, title=title, sections=sections, labels=labels, cores=cores,
     )
     written = write_figures(path.parent, ctx["figures"]) if figures else WrittenFigures()
+    if figures:  # the image grid and images/*.png (reports.image_figure); its links: written.files["images"]
+        grid = write_image_figure(path.parent, scene=scene, series_labels=series_labels, crops=crops,
+                                  **ctx["image_figure"])
+        written = WrittenFigures({**written.files, "images": grid["figure"]} if grid["figure"] else written.files,
+                                 written.note)
     write_text_atomic(path, _render(ctx, written))
     return path
