@@ -68,7 +68,7 @@ _RANGES = {"de": DELTA_E_RANGE, "flip": FLIP_RANGE}
 _BAR_TITLES = {"de": "ΔE₀₀ per pixel, clipped at 10", "flip": "FLIP per pixel (HDR-FLIP)"}
 
 # Layout in viewBox units (1 unit = 7 in / total width; about 0.6 pt at three columns).
-_CELL, _GAP, _MARGIN, _HEADER, _ROW_GAP, _INSET_GAP, _FONT, _LINE = 240.0, 10.0, 8.0, 22.0, 12.0, 4.0, 13.0, 15.0
+_CELL, _GAP, _MARGIN, _HEADER, _ROW_GAP, _INSET_GAP, _FONT, _LINE = 240.0, 10.0, 8.0, 22.0, 12.0, 4.0, 13.0, 16.0
 _STYLE = ('text{font-family:Helvetica,Arial,"Liberation Sans","DejaVu Sans",sans-serif;font-size:13px;fill:#000}'
           ".tick{font-size:11px;fill:#222}.note{font-size:11px;fill:#444}")
 # A PNG this report writes into images/ (see _stale).
@@ -88,6 +88,12 @@ class Crop:
 
     def take(self, pixels: np.ndarray) -> np.ndarray:
         return pixels[self.y:self.y + self.h, self.x:self.x + self.w]
+
+    @property
+    def label(self) -> str:
+        """How the legend names it: the region, or the rectangle given (named by its number)."""
+        box = f"{self.x},{self.y} {self.w}×{self.h} px"
+        return f"crop {box}" if self.name.isdigit() else f"{self.name} ({box})"
 
 
 def file_stem(name: str) -> str:
@@ -237,6 +243,19 @@ def _colorbar(key: str, x: float, y: float) -> list[str]:
     return parts + ["</g>"]
 
 
+def _crop_legend(crops: Sequence[Crop], x: float, y: float) -> list[str]:
+    if not crops:
+        return []
+    parts = ['<g class="crop-legend">', f'<text x="{x:.2f}" y="{y + 13:.2f}">crops, framed in their colours:</text>']
+    for k, crop in enumerate(crops):
+        ty, text = y + 32 + 17 * k, crop.label
+        if len(text) * 0.6 * 11 > _CELL - 18:  # the name alone rather than past the cell (the figure's edge)
+            text = crop.name
+        parts.append(f'<rect class="swatch" x="{x:.2f}" y="{ty - 10:.2f}" width="11" height="11" '
+                     f'fill="{crop.color}"/><text class="tick" x="{x + 17:.2f}" y="{ty:.2f}">{escape(text)}</text>')
+    return parts + ["</g>"]
+
+
 def figure_svg(rows: Sequence[tuple[str, list]], crops: Sequence[Crop], columns: Sequence[int],
                labels: Mapping[str, str], note: str = "", uris: Mapping | None = None) -> str:
     """The grid as a standalone SVG document. ``rows``: :func:`image_rows`'s; ``columns``: indices into
@@ -262,6 +281,8 @@ def figure_svg(rows: Sequence[tuple[str, list]], crops: Sequence[Crop], columns:
         body.append(f'<g class="row-label" data-row="{escape(name)}">' + "".join(
             f'<text transform="translate({cx + k * _LINE:.2f},{cy:.2f}) rotate(-90)" text-anchor="middle">'
             f"{escape(line)}</text>" for k, line in enumerate(lines)) + "</g>")
+        if name == "reference" and len(columns) > 1:  # the legend of the crops, where the maps would be
+            body += _crop_legend(crops, col_x[1], y)
         for x, c in zip(col_x, columns):
             if pixels[c] is None:
                 continue

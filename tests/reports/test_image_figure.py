@@ -218,3 +218,15 @@ def test_write_report_writes_the_image_figure(tmp_path):
     assert {"reference.png", "alpha-tracer.png", "beta-photons.delta_e2000.png"} <= names
     svg = (tmp_path / "figures" / "images.svg").read_text(encoding="utf-8")
     assert ">Alpha<" in svg and ">beta-photons<" in svg
+
+
+def test_crop_legend_names_each_crop_in_its_colour(written, case, tmp_path):
+    crops = fig.choose_crops(case["scene"], (N, N))
+    legend = _by_class(written["svg"], "g", "crop-legend")
+    assert len(legend) == 1
+    swatches = [r.get("fill") for r in legend[0].iter(SVG + "rect")]
+    texts = [t.text for t in legend[0].iter(SVG + "text")][1:]
+    assert swatches == [c.color for c in crops]
+    assert [t.split(" (")[0] for t in texts] == [c.name for c in crops]
+    _, svg = _write(tmp_path, case, crops=[(2, 3, 10, 20)])
+    assert [t.text for t in _by_class(svg, "g", "crop-legend")[0].iter(SVG + "text")][1:] == ["crop 2,3 10×20 px"]
