@@ -85,6 +85,37 @@ def _converter():
     return cairosvg, ""
 
 
+def write_svg_pdf_png(folder: Path, stem: str, svg: str, cairosvg) -> tuple[list[str], list[str]]:
+    """Write ``stem.svg`` into ``folder`` and, with ``cairosvg`` (:func:`_converter`'s module; None: the SVG
+    alone), ``stem.pdf`` and ``stem.png`` (at :data:`PNG_DPI`) converted from it, each atomically; return
+    (formats written, failures as "file: why"); never raises for a failing conversion."""
+    write_text_atomic(folder / f"{stem}.svg", svg)
+    done, failed = ["svg"], []
+    for fmt in ("pdf", "png") if cairosvg is not None else ():
+        try:
+            with atomic_path(folder / f"{stem}.{fmt}") as tmp:
+                if fmt == "pdf":
+                    cairosvg.svg2pdf(bytestring=svg.encode("utf-8"), write_to=str(tmp))
+                else:
+                    cairosvg.svg2png(bytestring=svg.encode("utf-8"), write_to=str(tmp), dpi=PNG_DPI)
+            done.append(fmt)
+        except Exception as e:  # whatever cairo makes of one figure, the report and the run go on
+            failed.append(f"{stem}.{fmt}: {one_line(str(e), 160)}")
+    return done, failed
+
+
+def no_converter_note(why_not: str) -> str:
+    """What is said when :func:`_converter` finds no converter (``why_not``), by every writer of figures."""
+    return f"PDF and PNG figures were not written: {why_not}; the SVG figures are in {FIGURES_DIR}/"
+
+
+def say_once(note: str) -> None:
+    """Print ``cbox: note: NOTE`` to stderr, once per process."""
+    if note and note not in _said:
+        _said.add(note)
+        print(f"cbox: note: {note}", file=sys.stderr)
+
+
 def write_figures(report_dir: Path, figures: Sequence[Figure]) -> WrittenFigures:
     """Write each figure as SVG, PDF and PNG into ``report_dir/figures/``, atomically; never raises for a
     missing or failing converter (the note says what was skipped). Figure files of an earlier report that
@@ -97,28 +128,16 @@ def write_figures(report_dir: Path, figures: Sequence[Figure]) -> WrittenFigures
         svg = standalone_svg(figure)
         if svg is None:
             continue
-        write_text_atomic(folder / f"{figure.stem}.svg", svg)
-        done = ["svg"]
-        for fmt in ("pdf", "png") if cairosvg is not None else ():
-            try:
-                with atomic_path(folder / f"{figure.stem}.{fmt}") as tmp:
-                    if fmt == "pdf":
-                        cairosvg.svg2pdf(bytestring=svg.encode("utf-8"), write_to=str(tmp))
-                    else:
-                        cairosvg.svg2png(bytestring=svg.encode("utf-8"), write_to=str(tmp), dpi=PNG_DPI)
-                done.append(fmt)
-            except Exception as e:  # whatever cairo makes of one figure, the report and the run go on
-                failed.append(f"{figure.stem}.{fmt}: {one_line(str(e), 160)}")
+        done, failures = write_svg_pdf_png(folder, figure.stem, svg, cairosvg)
+        failed += failures
         files[figure.stem] = [(fmt.upper(), f"{FIGURES_DIR}/{figure.stem}.{fmt}") for fmt in done]
     _remove_stale(folder, {f"{stem}.{fmt.lower()}" for stem, done in files.items() for fmt, _ in done})
     note = ""
     if files and cairosvg is None:
-        note = f"PDF and PNG figures were not written: {why_not}; the SVG figures are in {FIGURES_DIR}/"
+        note = no_converter_note(why_not)
     elif failed:
         note = f"{len(failed)} figure file(s) could not be converted, e.g. {failed[0]}"
-    if note and note not in _said:
-        _said.add(note)
-        print(f"cbox: note: {note}", file=sys.stderr)
+    say_once(note)
     return WrittenFigures(files, note)
 
 

@@ -42,6 +42,7 @@ from harness.store.atomic import write_text_atomic
 from reports import plots
 from reports.charts import SINGLE_SPP_NOTE, bias_variance_chart, chart_figures, page_charts
 from reports.figures import WrittenFigures, write_figures
+from reports.image_figure import write_image_figure
 from reports.images import JND
 from reports.regions import bias_variance_table, region_section
 from reports.timing import timing_badge
@@ -245,7 +246,8 @@ def _context(
     charts = page_charts(runs, names, colors, time_column=time_column, labels=shown)
     bias_variance = bias_variance_chart(summary, names, colors, labels=shown)
     run_seeds = provenance.get("seeds") or []
-    viewer, viewer_notes = image_viewer(ref_img, exposure, images, names, colors, runs, run_seeds)
+    error_arrays: dict = {}  # the viewer's error maps, reused by the image figure
+    viewer, viewer_notes = image_viewer(ref_img, exposure, images, names, colors, runs, run_seeds, error_arrays)
     for entry in viewer.get("renderers", ()):
         entry["label"] = shown.get(entry["name"], entry["name"])
     ref_prov = dict(reference.provenance or {})
@@ -287,6 +289,8 @@ def _context(
             figure for rows in section_charts.values() for row in rows for _, figure in row["boxes"]],
         "region_bias_variance": Markup(bias_variance_table(summary, scene, colors) or ""),
         "viewer": viewer,
+        "image_figure": {"reference_image": ref_img, "exposure": exposure, "maps": error_arrays,
+                         "images": {n: images[n] for n in names if n in images}},
         "viewer_json": _json_for_script(viewer),
         "viewer_notes": viewer_notes,
         "legends": viewer_legends(),
@@ -361,8 +365,10 @@ def write_report(
 
     Every chart is also written as a standalone SVG, PDF and PNG into
     ``figures/`` beside ``path`` (:func:`reports.figures.write_figures`), and
-    the report links them; ``figures=False`` writes the page alone (a second
-    or two quicker: converting every chart to PDF and 300 dpi PNG takes that).
+    the report links them; so is the image grid, ``figures/images.*``, with each
+    of its images in ``images/`` (:func:`reports.image_figure.write_image_figure`).
+    ``figures=False`` writes the page alone (a few seconds quicker: converting
+    every chart to PDF and 300 dpi PNG takes that).
     """
     path = Path(path)
     ctx = _context(
@@ -371,5 +377,10 @@ def write_report(
         series_labels=series_labels,
     )
     written = write_figures(path.parent, ctx["figures"]) if figures else WrittenFigures()
+    if figures:  # the image grid and images/*.png (reports.image_figure); its links: written.files["images"]
+        grid = write_image_figure(path.parent, scene=scene, series_labels=series_labels, crops=crops,
+                                  **ctx["image_figure"])
+        written = WrittenFigures({**written.files, "images": grid["figure"]} if grid["figure"] else written.files,
+                                 written.note)
     write_text_atomic(path, _render(ctx, written))
     return path

@@ -51,8 +51,9 @@ def _clean(v: float) -> float | None:
 
 
 def image_viewer(reference: np.ndarray, exposure: float, images: Mapping, names, colors, runs,
-                 seeds) -> tuple[dict, list]:
-    """The image viewer's data (the reference, each renderer's image and error maps) and its notes."""
+                 seeds, maps_out: dict | None = None) -> tuple[dict, list]:
+    """The image viewer's data (the reference, each renderer's image and error maps) and its notes; each
+    renderer's error maps also go into ``maps_out`` (by name) when given, for the image figure to reuse."""
     h, w = reference.shape[:2]
     entries, notes = [], []
     flip_available = True
@@ -65,6 +66,8 @@ def image_viewer(reference: np.ndarray, exposure: float, images: Mapping, names,
                          "not shown")
             continue
         maps = error_maps(img, reference, exposure)
+        if maps_out is not None:
+            maps_out[name] = maps
         if maps["flip"] is None:
             flip_available = False
         spp, seed = _first_seed_image_run(runs, name, seeds)
