@@ -150,7 +150,7 @@ def experiment(out: Path, scene, ref, entries, spps, seeds, command: str):
     assert bad.empty, bad[["renderer", "status", "reason"]].to_string()
     summary = summary_table(runs, final_images(out, runs), ref, scene)
     with atomic_path(out / SUMMARY_FILE) as tmp:
-        summary.to_csv(tmp, index=False)
+        summary.to_parquet(tmp, index=False)
     return runs, summary.set_index("renderer")
 
 

@@ -44,6 +44,7 @@ from reports.charts import SINGLE_SPP_NOTE, bias_variance_chart, chart_figures, 
 from reports.figures import WrittenFigures, write_figures
 from reports.images import JND
 from reports.regions import bias_variance_table, region_section
+from reports.summary_files import write_summary_files
 from reports.timing import timing_badge
 from reports.tables import (OPERATOR_SIGNS, column_label, column_or_nan, ok_runs, renderer_info, renderer_order,
                             summary_rows)
@@ -346,6 +347,8 @@ def write_report(
     ``figures/`` beside ``path`` (:func:`reports.figures.write_figures`), and
     the report links them; ``figures=False`` writes the page alone (a second
     or two quicker: converting every chart to PDF and 300 dpi PNG takes that).
+    With a summary, ``summary.csv`` and ``summary.tex`` are written beside ``path`` too
+    (:func:`reports.summary_files.write_summary_files`).
     """
     path = Path(path)
     ctx = _context(
@@ -354,4 +357,5 @@ def write_report(
     )
     written = write_figures(path.parent, ctx["figures"]) if figures else WrittenFigures()
     write_text_atomic(path, _render(ctx, written))
+    write_summary_files(path.parent, [(None, summary)])  # summary.csv, summary.tex (reports.summary_files)
     return path

@@ -37,7 +37,8 @@ def converge(
     spp: str = typer.Option("1,2,4,...,256", "--spp", help=SPP_HELP),
     seeds: int = typer.Option(4, "--seeds", min=1, help="Number of seeds (0 .. N-1); bias and variance need 2 or more."),
     out: Path = out_folder_option(Path("out/converge"), "Experiment folder: results.parquet, "
-                                                                      "summary.csv, report.html, cells/, images/."),
+                                                                      "summary.parquet, summary.csv, summary.tex, "
+                                                                      "report.html, cells/, images/."),
     target: Optional[List[str]] = typer.Option(
         None, "--target", help="Target error for the time-to-target figure, METRIC=VALUE (repeatable), the "
                                "metric image-wide or in a region of the scene (region.caustic.rel_mse=0.01); "
@@ -150,7 +151,7 @@ def _print_json(out: Path, report: Path, runs) -> None:
 
     from harness.workflows.runner import json_row
 
-    summary = pd.read_csv(out / SUMMARY_FILE) if (out / SUMMARY_FILE).exists() else pd.DataFrame()
+    summary = pd.read_parquet(out / SUMMARY_FILE) if (out / SUMMARY_FILE).exists() else pd.DataFrame()
     print_json({"folder": out, "report": report,
                 "runs": [json_row(r) for r in runs.to_dict("records")],
                 "summary": [json_row(r) for r in summary.to_dict("records")]})
@@ -163,7 +164,7 @@ def _print_summary(path: Path) -> None:
     from harness.evaluate.regions import REGION_PREFIX
     from harness.evaluate.summary import region_split, with_intervals
 
-    summary = pd.read_csv(path)
+    summary = pd.read_parquet(path)
     fmt = {"float_format": lambda v: f"{v:.4g}", "index": False}
     image_wide = summary[[c for c in summary.columns if not c.startswith(REGION_PREFIX)]]
     typer.echo(with_intervals(image_wide).to_string(**fmt))
@@ -223,7 +224,7 @@ def report(
         None, "The clock time-derived figures read: wall (time_s) or cpu (cpu_time_s). Default: the one each "
               "experiment was run with (its experiment.json), else wall."),
 ) -> None:
-    """Rebuild a report from stored results, without rendering: DIR/report.html (and summary.csv).
+    """Rebuild a report from stored results, without rendering: DIR/report.html (and summary.parquet, .csv, .tex).
 
     Several DIRs make one report in --out: each experiment a section (scene,
     images, table, charts, a link to its own report), led by the experiments

@@ -13,7 +13,9 @@ An experiment folder ``DIR`` holds
   which), written before the cell's rows;
 - ``results.parquet``: all rows, a tidy table with one row per (scene,
   renderer, settings, seed, spp), rewritten after each cell;
-- ``summary.csv``, ``report.html``: derived figures and the report.
+- ``summary.parquet``: the derived figures per renderer (raw names, full precision);
+- ``report.html``, ``summary.csv``, ``summary.tex``: the report, and the summary for people
+  (readable headers and units) and for papers (a LaTeX table), written with it (:mod:`reports.summary_files`).
 
 A run that is interrupted keeps every finished cell; running the same
 command again loads finished cells instead of rendering them, and a changed
@@ -41,7 +43,7 @@ from harness.store.exr import read_exr
 if TYPE_CHECKING:  # pandas is imported where it is used: the CLI must start fast
     import pandas as pd
 
-CONFIG_FILE, RESULTS_FILE, SUMMARY_FILE = "experiment.json", "results.parquet", "summary.csv"
+CONFIG_FILE, RESULTS_FILE, SUMMARY_FILE = "experiment.json", "results.parquet", "summary.parquet"
 #: Held (flock) by the run writing the folder; its text names the holder.
 LOCK_FILE = ".lock"
 
