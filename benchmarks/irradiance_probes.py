@@ -3,7 +3,7 @@
 Three measurements on ``cornell-box``, each printed as markdown tables (docs/irradiance-probes.md explains them),
 all from :func:`harness.workflows.converge.run_experiment` called in-process (the code ``cbox converge`` runs;
 sweeps built by :func:`harness.adapters.registry.sweep`, as ``--sweep`` does), then
-:func:`harness.evaluate.summary.summary_table` (the ``summary.csv`` ``cbox converge`` writes, with the
+:func:`harness.evaluate.summary.summary_table` (the ``summary.parquet`` ``cbox converge`` writes, with the
 bias²/variance split per region; ``cbox report OUT/probes`` adds the HTML report):
 
 1. **Error against time and spp** for ``probes`` at grid 4, 6, 8, 12 (rays 256), rays_per_probe 64, 256, 1024
