@@ -43,6 +43,7 @@ from reports import plots
 from reports.charts import SINGLE_SPP_NOTE, bias_variance_chart, chart_figures, page_charts
 from reports.figures import WrittenFigures, write_figures
 from reports.images import JND
+from reports.print_tables import print_tables
 from reports.regions import bias_variance_table, region_section
 from reports.summary_files import write_summary_files
 from reports.timing import timing_badge
@@ -272,6 +273,7 @@ def _context(
         "renderers": info,
         "table_head": table_head[0],
         "table_rows": table_rows,
+        "print_tables": print_tables(table_head[0], table_rows),  # the summary split for A4 (report.css)
         "thresholds": [
             {"key": k, "label": column_label(k)[0], "op": OPERATOR_SIGNS[op], "value": f"{float(v):g}"}
             for k, (op, v) in thresholds.items()
