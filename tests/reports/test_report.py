@@ -128,7 +128,7 @@ def test_file_written_atomically_into_new_folders(report):
     path = report["path"]
     assert isinstance(path, Path) and path.is_file() and path.name == "report.html"
     # no temp file left behind, beside the report or among its figures
-    assert sorted(p.name for p in path.parent.iterdir()) == ["figures", "report.html"]
+    assert sorted(p.name for p in path.parent.iterdir()) == ["figures", "report.html", "summary.csv", "summary.tex"]
     assert not [p.name for p in (path.parent / "figures").iterdir() if p.name.startswith(".")]
     assert report["text"].lstrip().lower().startswith("<!doctype html>")
 
