@@ -59,7 +59,7 @@ SPECS: dict[str, Spec] = {
 
 #: A metric's name in a header (plain, LaTeX); others: the registry's label.
 _METRIC_NAMES = {
-    "delta_e2000_mean": ("mean ΔE00", r"$\Delta E_{00}$"),
+    "delta_e2000_mean": ("mean ΔE00", r"mean $\Delta E_{00}$"),
     "delta_e2000_p95": ("ΔE00 p95", r"$\Delta E_{00}$ p95"),
     "rel_mse": ("relMSE", "relMSE"),
     "rel_mse_trimmed": ("trimmed relMSE", "trim.\\ relMSE"),
@@ -71,11 +71,13 @@ _TEX_OPS = {"<=": r"\le", ">=": r"\ge", "<": "<", ">": ">"}
 _TEXT_OPS = {"<=": "≤", ">=": "≥", "<": "<", ">": ">"}
 
 #: Decisive figures in table order (a ``*`` ends a prefix), and which to keep first when there are more than
-#: a table holds: slope, efficiency and bias share before the third and fourth time to a target.
+#: a table holds: slope, efficiency and bias share before the third and fourth time to a target. A summary of
+#: single images (``cbox compare-image``'s) has none of the convergence figures: its errors are then decisive.
+_IMAGE_ERRORS = ("delta_e2000_mean", "delta_e2000_p95", "flip_mean", "rel_mse", "rmse", "psnr", "ssim", "time_s")
 DECISIVE = ("slope_rmse_spp", "time_to_*", "efficiency", "time_at_max_spp", "spp_in_budget", "bias2_fraction",
-            "slope_rmse_time")
+            "slope_rmse_time", *_IMAGE_ERRORS)
 _PRIORITY = ("slope_rmse_spp", "efficiency", "bias2_fraction", "time_to_*", "spp_in_budget", "time_at_max_spp",
-             "slope_rmse_time")
+             "slope_rmse_time", *_IMAGE_ERRORS)
 
 
 def _metric_names(metric: str) -> tuple[str, str]:
@@ -98,6 +100,9 @@ def spec(key: str) -> Spec:
         text, tex = _metric_names(metric)
         return Spec(f"time to {text} {_TEXT_OPS[op]} {value:g} (s)", f"time to\\\\{tex} ${_TEX_OPS[op]} {value:g}$ (s)",
                     "low")
+    if key in registry.METRICS:  # a metric of the final image (compare-image's summary)
+        text, tex = _metric_names(key)
+        return Spec(text, tex, registry.METRICS[key].better)
     if (region := registry.region_metric(key)) is not None and region[1] in SPECS:
         base = SPECS[region[1]]
         return Spec(_in_region(base.text, region[0]), _in_region(base.tex, escape(region[0])), base.better,

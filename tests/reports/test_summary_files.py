@@ -113,7 +113,7 @@ def test_tex_is_booktabs_with_a_cell_per_column(written):
     assert len(rows) == 3 and all(len(r) == len(header) for r in rows), (header, rows)
     assert 1 < len(header) <= 9  # a renderer column and at most 8 figures
     assert re.search(r"\\begin\{tabular\}\{l(r+)\}", tex).group(1) == "r" * (len(header) - 1)
-    assert "time to\\\\$\\Delta E_{00}$ $\\le 1$ (s)" in tex and "efficiency\\\\1/(MSE$\\cdot$s)" in tex
+    assert "time to\\\\mean $\\Delta E_{00}$ $\\le 1$ (s)" in tex and "efficiency\\\\1/(MSE$\\cdot$s)" in tex
 
 
 def test_tex_escapes_names(written):
@@ -161,6 +161,17 @@ def test_tex_compiles_with_pdflatex(written, tmp_path):
     log = (tmp_path / "paper.log").read_text(errors="replace") if (tmp_path / "paper.log").exists() else ""
     assert proc.returncode == 0 and (tmp_path / "paper.pdf").stat().st_size > 1000, proc.stdout[-3000:]
     assert "Missing character" not in log, "a character the font cannot print (escaping)"
+
+
+def test_a_summary_of_single_images_shows_their_errors(tmp_path):
+    """compare-image's summary has no convergence figures: its image errors make the table, best in bold."""
+    summary = pd.DataFrame({"renderer": ["a", "b"], "delta_e2000_mean": [1.5, 0.7], "psnr": [30.0, 28.0],
+                            "nan_count": [0, 0]})
+    write_summary_files(tmp_path, [(None, summary)])
+    header, rows = _table((tmp_path / "summary.tex").read_text(encoding="utf-8"))
+    assert header == ["renderer", "mean $\\Delta E_{00}$", "PSNR (dB)"]
+    assert rows == [["a", "$1.50$", "\\textbf{\\boldmath$30.0$}"], ["b", "\\textbf{\\boldmath$0.700$}", "$28.0$"]]
+    assert pd.read_csv(tmp_path / "summary.csv").columns.tolist() == ["renderer", "mean ΔE00", "PSNR (dB)", "NaN px"]
 
 
 def test_merged_tables_have_an_experiment_column_and_a_table_each(summary, tmp_path):
