@@ -35,10 +35,13 @@ def column_chunks(groups: Sequence[tuple[str, int]], max_columns: int = MAX_COLU
     return [c for c in chunks if c]
 
 
-def print_tables(head: Mapping, rows: Sequence[Mapping], max_columns: int = MAX_COLUMNS) -> list[dict]:
+def print_tables(head: Mapping, rows: Sequence[Mapping], max_columns: int = MAX_COLUMNS,
+                 series_labels: Mapping[str, str] | None = None) -> list[dict]:
     """The printed tables of :func:`reports.tables.summary_rows`'s ``head`` (its ``head`` groups and ``cols``)
     and ``rows``: per table its group header cells, its columns and its rows (each row's cells for those
-    columns; a renderer that did not run: ``reason`` in the first table, left out of the others)."""
+    columns, its ``renderer_cell`` shown as ``series_labels.get(name, name)``; a renderer that did not run:
+    ``reason`` in the first table, left out of the others)."""
+    labels = dict(series_labels or {})
     cols = list(head["cols"])
     if not cols or cols[0]["key"] != "renderer":
         raise ValueError("print_tables: the summary's first column must be the renderer")
@@ -60,6 +63,8 @@ def print_tables(head: Mapping, rows: Sequence[Mapping], max_columns: int = MAX_
             if row["status"] != "ok" and n:
                 continue
             cells = list(row["cells"])
-            table_rows.append({**row, "renderer_cell": cells[0], "cells": [cells[i + 1] for i in chunk]})
+            name = str(row["renderer"])
+            table_rows.append({**row, "renderer_cell": {**cells[0], "text": labels.get(name, cells[0]["text"])},
+                               "cells": [cells[i + 1] for i in chunk]})
         out.append({"head": spans, "cols": [cols[i + 1] for i in chunk], "rows": table_rows})
     return out

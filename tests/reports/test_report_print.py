@@ -93,3 +93,5 @@ def test_print_tables_repeat_the_renderer_and_keep_every_cell():
     assert all(t["rows"][0]["renderer_cell"]["text"] == "renderer" for t in tables)
     assert [len(t["rows"]) for t in tables] == [2, 1, 1]  # a renderer that did not run: its reason once
     assert tables[1]["head"] == [{"title": "convergence", "span": 8}]
+    labelled = print_tables(head, [ok, bad], series_labels={"a": "PT (independent)"})
+    assert [r["renderer_cell"]["text"] for r in labelled[0]["rows"]] == ["PT (independent)", "renderer"]
