@@ -9,7 +9,8 @@ table holds is :func:`reports.summary_files.summary_tex`'s.
 Numbers (:func:`value_cell`): the value at 3 significant digits, in fixed
 notation from 0.0001 to 9999, else as mantissa × 10^e; a 95% interval's
 distances from the value at 2 significant digits (the usual precision of an
-uncertainty). The interval is written
+uncertainty), and the value then no finer than they are (``37^{+66}_{-24}``,
+not ``37.4``; ``0.000 ± 0.010`` for a slope of 6e-16). The interval is written
 
 - ``v ± h`` when it is symmetric about the value to within 10% of its width
   (slopes are: mean ± Student-t half-width), ``h`` the half-width;
