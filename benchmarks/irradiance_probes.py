@@ -3,7 +3,7 @@
 Three measurements on ``cornell-box``, each printed as markdown tables (docs/irradiance-probes.md explains them),
 all from :func:`harness.workflows.converge.run_experiment` called in-process (the code ``cbox converge`` runs;
 sweeps built by :func:`harness.adapters.registry.sweep`, as ``--sweep`` does), then
-:func:`harness.evaluate.summary.summary_table` (the ``summary.csv`` ``cbox converge`` writes, with the
+:func:`harness.evaluate.summary.summary_table` (the ``summary.parquet`` ``cbox converge`` writes, with the
 bias²/variance split per region; ``cbox report OUT/probes`` adds the HTML report):
 
 1. **Error against time and spp** for ``probes`` at grid 4, 6, 8, 12 (rays 256), rays_per_probe 64, 256, 1024
@@ -150,7 +150,7 @@ def experiment(out: Path, scene, ref, entries, spps, seeds, command: str):
     assert bad.empty, bad[["renderer", "status", "reason"]].to_string()
     summary = summary_table(runs, final_images(out, runs), ref, scene)
     with atomic_path(out / SUMMARY_FILE) as tmp:
-        summary.to_csv(tmp, index=False)
+        summary.to_parquet(tmp, index=False)
     return runs, summary.set_index("renderer")
 
 

@@ -44,7 +44,9 @@ from reports.charts import SINGLE_SPP_NOTE, bias_variance_chart, chart_figures, 
 from reports.figures import WrittenFigures, write_figures
 from reports.image_figure import write_image_figure
 from reports.images import JND
+from reports.print_tables import print_tables
 from reports.regions import bias_variance_table, region_section
+from reports.summary_files import write_summary_files
 from reports.timing import timing_badge
 from reports.tables import (OPERATOR_SIGNS, column_label, column_or_nan, ok_runs, renderer_info, renderer_order,
                             summary_rows)
@@ -278,6 +280,7 @@ def _context(
         "renderers": info,
         "table_head": table_head[0],
         "table_rows": table_rows,
+        "print_tables": print_tables(table_head[0], table_rows),  # the summary split for A4 (report.css)
         "thresholds": [
             {"key": k, "label": column_label(k)[0], "op": OPERATOR_SIGNS[op], "value": f"{float(v):g}"}
             for k, (op, v) in thresholds.items()
@@ -369,6 +372,8 @@ def write_report(
     of its images in ``images/`` (:func:`reports.image_figure.write_image_figure`).
     ``figures=False`` writes the page alone (a few seconds quicker: converting
     every chart to PDF and 300 dpi PNG takes that).
+    With a summary, ``summary.csv`` and ``summary.tex`` are written beside ``path`` too
+    (:func:`reports.summary_files.write_summary_files`).
     """
     path = Path(path)
     ctx = _context(
@@ -383,4 +388,5 @@ def write_report(
         written = WrittenFigures({**written.files, "images": grid["figure"]} if grid["figure"] else written.files,
                                  written.note)
     write_text_atomic(path, _render(ctx, written))
+    write_summary_files(path.parent, [(None, summary)], series_labels)  # summary.csv, .tex (reports.summary_files)
     return path

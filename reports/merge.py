@@ -9,7 +9,9 @@ convergence charts across them, so sweeps of one scene (other renderers, other
 settings) compare directly. Renderer names already carry their settings
 (``pathtracer[rr_depth=3]``); a name two experiments share gets the
 experiment's label (:func:`distinct_names`). Every chart is also a file in
-``OUT/figures/``, a section's named after its experiment's label.
+``OUT/figures/``, a section's named after its experiment's label. Every
+experiment's summary is in ``OUT/summary.csv`` (an ``experiment`` column) and
+``OUT/summary.tex`` (one table per experiment).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from harness.store.references import Reference
 from reports.charts import bias_variance_chart, chart_rows, page_charts
 from reports.html import renderer_colors, write_report
 from reports.scenes import scene_section
+from reports.summary_files import write_summary_files
 from reports.tables import renderer_order
 from reports.timing import timing_badge
 
@@ -119,12 +122,14 @@ def write_merged_report(out: Path, inputs: Sequence[tuple[str, Path, Scene, Refe
                         title: str | None = None, options: dict | None = None) -> Path:
     """Write ``out/report.html`` (and ``out/figures/``) for the experiments ``inputs``, each (label, folder,
     scene, reference, results) with distinct labels, the scenes checked against the folders by the caller,
-    the results :func:`harness.workflows.converge.experiment_results`'s. ``options``: ``series_labels`` (by
-    an experiment's own series name; a name made distinct keeps its experiment's label after the text) and
-    ``crops``, as :func:`reports.experiment.write_experiment_report` takes them."""
+    the results :func:`harness.workflows.converge.experiment_results`'s; and every experiment's summary as
+    ``out/summary.csv`` and ``out/summary.tex`` (:func:`reports.summary_files.write_summary_files`).
+    ``options``: ``series_labels`` (by an experiment's own series name; a name made distinct keeps its
+    experiment's label after the text) and ``crops``, as :func:`reports.experiment.write_experiment_report`
+    takes them."""
     options = options or {}
     out = Path(out)
-    experiments = [load_experiment(*i) for i in inputs]
+    experiments = stored = [load_experiment(*i) for i in inputs]
     labels = [e.label for e in experiments]
     names = distinct_names([renderer_order(e.runs, e.images) for e in experiments], labels)
     experiments = [renamed(e, n) for e, n in zip(experiments, names)]
@@ -145,9 +150,13 @@ def write_merged_report(out: Path, inputs: Sequence[tuple[str, Path, Scene, Refe
     prov = provenance(lead[0].config, runs)
     prov["experiments"] = {e.label: str(e.folder) for e in experiments}
     scenes = ", ".join(dict.fromkeys(e.scene.name for e in experiments))
-    return write_report(out / "report.html", scene=lead[0].scene, reference=lead[0].reference, runs=runs,
+    path = write_report(out / "report.html", scene=lead[0].scene, reference=lead[0].reference, runs=runs,
                         images={n: img for e in lead for n, img in _first_images(e).items()},
                         summary=_concat([e.summary for e in lead]), provenance=prov,
                         command="\n".join(e.config.get("command", "") for e in lead),
                         sections=sections, title=title or f"Renderer comparison — {scenes}", labels=labels,
                         series_labels=series_labels, crops=options.get("crops"))
+    # Every experiment's summary, the lead's and the others', each under its label with its own names
+    # (write_report wrote the lead's alone): one CSV with an experiment column, one LaTeX table each.
+    write_summary_files(out, [(e.label, e.summary) for e in stored], options.get("series_labels") or {})
+    return path

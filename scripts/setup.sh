@@ -4,7 +4,7 @@
 # Safe to run again: it only installs what is missing or changed.
 #
 #   scripts/setup.sh                 # what `cbox demo` needs
-#   scripts/setup.sh --tests         # plus the test tools: pytest, Playwright, Debian's chromium
+#   scripts/setup.sh --tests         # plus the test tools: pytest, Playwright, Debian's chromium, pdflatex
 #   CBOX_NO_APT=1 scripts/setup.sh   # never call apt-get (renderers needing
 #                                    # missing libraries then report themselves unavailable)
 set -euo pipefail
@@ -41,6 +41,10 @@ have_lib 'libcairo\.so\.2' || need_pkgs+=(libcairo2)
 # chromium: the report's browser test (Playwright drives Debian's build;
 # Playwright's own browser download is not used).
 [[ -n $TESTS ]] && ! command -v chromium >/dev/null 2>&1 && need_pkgs+=(chromium)
+# pdflatex and booktabs.sty (in texlive-latex-recommended): the test that compiles OUT/summary.tex
+# (tests/reports/test_summary_files.py; skipped without them). Small: 48 MB of downloads, 147 MB installed,
+# about 30 s to install with --no-install-recommends (Debian 12).
+[[ -n $TESTS ]] && ! command -v pdflatex >/dev/null 2>&1 && need_pkgs+=(texlive-latex-base texlive-latex-recommended)
 
 if ((${#need_pkgs[@]})); then
   if [[ -n "${CBOX_NO_APT:-}" ]]; then

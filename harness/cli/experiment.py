@@ -38,7 +38,8 @@ def converge(
     spp: str = typer.Option("1,2,4,...,256", "--spp", help=SPP_HELP),
     seeds: int = typer.Option(4, "--seeds", min=1, help="Number of seeds (0 .. N-1); bias and variance need 2 or more."),
     out: Path = out_folder_option(Path("out/converge"), "Experiment folder: results.parquet, "
-                                                                      "summary.csv, report.html, cells/, images/."),
+                                                                      "summary.parquet, summary.csv, summary.tex, "
+                                                                      "report.html, cells/, images/."),
     target: Optional[List[str]] = typer.Option(
         None, "--target", help="Target error for the time-to-target figure, METRIC=VALUE (repeatable), the "
                                "metric image-wide or in a region of the scene (region.caustic.rel_mse=0.01); "
@@ -155,7 +156,7 @@ def _print_json(out: Path, report: Path, runs) -> None:
 
     from harness.workflows.runner import json_row
 
-    summary = pd.read_csv(out / SUMMARY_FILE) if (out / SUMMARY_FILE).exists() else pd.DataFrame()
+    summary = pd.read_parquet(out / SUMMARY_FILE) if (out / SUMMARY_FILE).exists() else pd.DataFrame()
     print_json({"folder": out, "report": report,
                 "runs": [json_row(r) for r in runs.to_dict("records")],
                 "summary": [json_row(r) for r in summary.to_dict("records")]})
@@ -168,7 +169,7 @@ def _print_summary(path: Path) -> None:
     from harness.evaluate.regions import REGION_PREFIX
     from harness.evaluate.summary import region_split, with_intervals
 
-    summary = pd.read_csv(path)
+    summary = pd.read_parquet(path)
     fmt = {"float_format": lambda v: f"{v:.4g}", "index": False}
     image_wide = summary[[c for c in summary.columns if not c.startswith(REGION_PREFIX)]]
     typer.echo(with_intervals(image_wide).to_string(**fmt))
@@ -230,7 +231,7 @@ def report(
     series_label: Optional[List[str]] = SeriesLabelOpt,
     crop: Optional[List[str]] = CropOpt,
 ) -> None:
-    """Rebuild a report from stored results, without rendering: DIR/report.html (and summary.csv).
+    """Rebuild a report from stored results, without rendering: DIR/report.html (and summary.parquet, .csv, .tex).
 
     Several DIRs make one report in --out: each experiment a section (scene,
     images, table, charts, a link to its own report), led by the experiments

@@ -251,8 +251,9 @@ def demo_checkpoints(spp: int) -> list[int]:
 
 @app.command()
 def demo(
-    out: Path = out_folder_option(Path("out"), "Folder for report.html, results.parquet and summary.csv (the "
-                                               "caustics comparison in a subfolder named after its scene)."),
+    out: Path = out_folder_option(Path("out"), "Folder for report.html, results.parquet and summary.parquet, "
+                                               ".csv, .tex (the caustics comparison in a subfolder named after "
+                                               "its scene)."),
     spp: int = typer.Option(64, "--spp", min=1, help="Highest spp: cornell-box converges at 1, 4, 16, ... up to "
                                                    "it, and cornell-box-caustics is compared at it."),
     seeds: int = typer.Option(2, "--seeds", min=1, help="Seeds of the convergence run (bias and variance need 2)."),

@@ -2,7 +2,7 @@
 
 Computed from an experiment's results table and its stored highest-spp
 images (:mod:`harness.store.experiments`); the workflow writes it as
-``summary.csv`` (:func:`harness.workflows.converge.experiment_results`) and
+``summary.parquet`` (:func:`harness.workflows.converge.experiment_results`) and
 the reports draw it. Nothing here reads or writes files.
 """
 

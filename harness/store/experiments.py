@@ -13,7 +13,9 @@ An experiment folder ``DIR`` holds
   which), written before the cell's rows;
 - ``results.parquet``: all rows, a tidy table with one row per (scene,
   renderer, settings, seed, spp), rewritten after each cell;
-- ``summary.csv``, ``report.html``: derived figures and the report;
+- ``summary.parquet``: the derived figures per renderer (raw names, full precision);
+- ``report.html``, ``summary.csv``, ``summary.tex``: the report, and the summary for people
+  (readable headers and units) and for papers (a LaTeX table), written with it (:mod:`reports.summary_files`);
 - ``report-options.json``: how the report names series and crops images (``--series-label``, ``--crop``),
   kept so that ``cbox report`` draws it the same way again.
 
@@ -43,7 +45,7 @@ from harness.store.exr import read_exr
 if TYPE_CHECKING:  # pandas is imported where it is used: the CLI must start fast
     import pandas as pd
 
-CONFIG_FILE, RESULTS_FILE, SUMMARY_FILE = "experiment.json", "results.parquet", "summary.csv"
+CONFIG_FILE, RESULTS_FILE, SUMMARY_FILE = "experiment.json", "results.parquet", "summary.parquet"
 #: The report's presentation options (:func:`read_report_options`).
 REPORT_OPTIONS_FILE = "report-options.json"
 #: Held (flock) by the run writing the folder; its text names the holder.

@@ -320,7 +320,8 @@ def experiment_results(out: Path, scene: Scene, reference: Reference,
                        summary_dir: Path | None = None, time_basis: str | None = None) -> ExperimentResults:
     """What the experiment folder ``out`` holds, and its summary (:mod:`harness.evaluate.summary`); no
     rendering. With ``summary_dir`` (the folder itself, or where its report goes) the summary is written
-    there as ``summary.csv`` (not when nothing ran): every experiment's summary.csv is written here.
+    there as ``summary.parquet`` (not when nothing ran; raw names, full precision): every experiment's is
+    written here (the readable ``summary.csv`` and ``summary.tex`` are the report's).
 
     ``time_basis`` (wall or cpu; default: the one experiment.json records, else wall) is the clock the
     summary's time-derived figures read; the returned config holds the one used. Results without that
@@ -339,7 +340,7 @@ def experiment_results(out: Path, scene: Scene, reference: Reference,
                             time_column=column)
     if summary_dir is not None and not summary.empty:
         with atomic_path(Path(summary_dir) / SUMMARY_FILE) as tmp:
-            summary.to_csv(tmp, index=False)
+            summary.to_parquet(tmp, index=False)
     return ExperimentResults(config, runs, images, summary)
 
 

@@ -75,7 +75,7 @@ def test_demo_writes_report(tmp_path):
     ok = runs[runs["status"] == "ok"]
     assert set(ok["renderer"]) == {"mitsuba", "pyrender", "pathtracer"}
     assert set(ok.loc[ok["renderer"] == "pathtracer", "seed"]) == {0, 1} and set(ok["spp"]) == {1, 4}
-    summary = pd.read_csv(tmp_path / "summary.csv").set_index("renderer")
+    summary = pd.read_parquet(tmp_path / "summary.parquet").set_index("renderer")
     assert summary.loc["pathtracer", "slope_rmse_spp"] < 0 and summary.loc["pathtracer", "variance"] > 0
     assert (tmp_path / "figures" / "bias-variance.svg").exists()  # the report's plots, as figures too
     # The caustics scene: its own full report, and a section of the main one that links to it.

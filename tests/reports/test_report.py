@@ -128,7 +128,8 @@ def test_file_written_atomically_into_new_folders(report):
     path = report["path"]
     assert isinstance(path, Path) and path.is_file() and path.name == "report.html"
     # no temp file left behind, beside the report, among its figures or its images' PNGs
-    assert sorted(p.name for p in path.parent.iterdir()) == ["figures", "images", "report.html"]
+    assert sorted(p.name for p in path.parent.iterdir()) == ["figures", "images", "report.html", "summary.csv",
+                                                             "summary.tex"]
     assert not [p.name for p in (path.parent / "figures").iterdir() if p.name.startswith(".")]
     assert not [p.name for p in (path.parent / "images").iterdir() if p.name.startswith(".")]
     assert report["text"].lstrip().lower().startswith("<!doctype html>")
@@ -840,8 +841,8 @@ def test_timing_badge_good_contended_unknown(tmp_path, case):
         assert ("warning: the machine was busy" in badges[0]["title"]) == (state == "contended")
 
 
-def test_intervals_in_table_charts_and_summary_csv(tmp_path, case):
-    """A summary from summary_table: summary.csv holds every figure's bounds; the table shows them beside the
+def test_intervals_in_table_charts_and_summary_file(tmp_path, case):
+    """A summary from summary_table: summary.parquet holds every figure's bounds; the table shows them beside the
     figure; the time charts draw 95% CI bands and time whiskers, labelled so; an unbiased renderer's bias share
     reads "not significant"."""
     from harness.evaluate.convergence import bias_significant, target_column
@@ -850,8 +851,8 @@ def test_intervals_in_table_charts_and_summary_csv(tmp_path, case):
     runs = _timed(case["runs"], 1.0)
     images = {n: [case["raw"][n, s, 64] for s in (0, 1, 2)] for n in OK_NAMES}
     summary = summary_table(runs, images, case["reference"], case["scene"])
-    summary.to_csv(tmp_path / "summary.csv", index=False)
-    csv = pd.read_csv(tmp_path / "summary.csv").set_index("renderer")
+    summary.to_parquet(tmp_path / "summary.parquet", index=False)
+    csv = pd.read_parquet(tmp_path / "summary.parquet").set_index("renderer")
     for fig in ("efficiency", "slope_rmse_time", "time_at_max_spp", target_column("rel_mse", 1e-2), "bias2",
                 "variance", "bias2_fraction"):
         for end in ("low", "high"):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import html
 import re
 
+import pandas as pd
 import pytest
 
 from harness.cli.app import main
@@ -98,6 +99,12 @@ def test_same_scene_merges_into_one_table_with_a_section_each(experiments, tmp_p
         assert f"{stem}.svg" in svgs, stem
         assert f'href="figures/{stem}.svg"' in text
     assert len(set(re.findall(r'<svg id="([^"]+)"', text))) == len(re.findall(r'<svg id="', text))  # ids unique
+    # Every experiment's summary for people and papers: an experiment column, a LaTeX table each with its names.
+    readable = pd.read_csv(out / "summary.csv")
+    assert list(zip(readable["experiment"], readable["renderer"])) == [
+        ("sweep-a", "seeded-noise"), ("sweep-b", "seeded-noise"), ("sweep-b", "flat-grey")]
+    tex = (out / "summary.tex").read_text()
+    assert tex.count("\\begin{tabular}{l") == 2 and "\\textbf{sweep-a}" in tex and "\\textbf{sweep-b}" in tex
 
 
 def test_different_scenes_each_get_a_section(experiments, tmp_path, capsys):

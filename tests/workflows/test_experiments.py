@@ -63,7 +63,7 @@ def test_killed_run_resumes_without_losing_or_repeating_cells(tmp_path):
     for s, rows in before.items():  # nothing finished was lost or changed
         kept = results[results["seed"] == s].reset_index(drop=True)
         pd.testing.assert_frame_equal(kept[rows.columns], rows, check_dtype=False)
-    assert (out / "report.html").exists() and (out / "summary.csv").exists()
+    assert all((out / f).exists() for f in ("report.html", "summary.parquet", "summary.csv", "summary.tex"))
 
 
 def test_results_table_is_tidy_and_report_rebuilds(tmp_path):
@@ -83,7 +83,7 @@ def test_results_table_is_tidy_and_report_rebuilds(tmp_path):
     assert config["spp"] == [1, 2] and config["seeds"] == [0, 1] and "converge" in config["command"]
     assert set(runs["estimator"]) == {"unbiased"}  # the adapter declares none
     # cornell-box names regions: the summary splits bias and variance per region too, and the console shows it.
-    summary = pd.read_csv(out / "summary.csv")
+    summary = pd.read_parquet(out / "summary.parquet")
     for region in ("walls", "boxes", "floor", "light"):
         for key in ("bias2", "variance", "bias2_fraction"):
             assert f"region.{region}.{key}" in summary, (region, key)
