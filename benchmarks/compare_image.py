@@ -11,8 +11,12 @@ its interpreter start subtracted the same way.
 The test image is a 16-spp Mitsuba render of ``cornell-box`` by ``cbox render`` (or ``--image``); the reference
 is the scene's stored one (256²).
 
-``--markdown FILE`` writes the table into the file's block ``compare_image.py#cost``
-(``benchmarks/markdown_blocks.py``).
+Then the same without any start-up (``--warm``'s table): one process that has imported both and run each once
+times, interleaved, OpenImageIO's read-and-compare and ``cbox compare-image``'s whole command in-process
+(``harness.cli.app.main``: reading, scoring, the error map, the table), medians of ``--rounds`` × 5 calls.
+
+``--markdown FILE`` writes the tables into the file's blocks ``compare_image.py#cost`` and
+``compare_image.py#warm`` (``benchmarks/markdown_blocks.py``).
 
 Run: ``.venv/bin/python benchmarks/compare_image.py --markdown BENCHMARKS.md`` (about a minute on 2 cores).
 """
@@ -33,6 +37,7 @@ from harness.scenes.library import resolve_scene
 from harness.store.references import REFERENCE_FILE, load_reference
 
 BLOCK = "compare_image.py#cost"
+WARM_BLOCK = "compare_image.py#warm"
 ROOT = Path(__file__).resolve().parents[1]
 #: idiff's stand-in: what idiff does, through OpenImageIO's Python binding.
 OIIO_COMPARE = ("import sys, OpenImageIO as oiio; a, b = oiio.ImageBuf(sys.argv[1]), oiio.ImageBuf(sys.argv[2]); "
@@ -75,6 +80,46 @@ def measure(cmds: dict[str, list[str]], rounds: int) -> dict[str, float]:
     return {k: statistics.median(v) for k, v in times.items()}
 
 
+#: The warm measurement, run in a child process: argv = image, reference, out, rounds; prints two medians.
+WARM = """
+import contextlib, io, statistics, sys, time
+import OpenImageIO as oiio
+from harness.cli.app import main
+image, reference, out, rounds = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
+args = ["compare-image", image, "--reference", reference, "--fail", "delta_e2000_mean=0.1", "--out", out]
+def ours():
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        try:
+            main(list(args))
+        except SystemExit:
+            pass
+def theirs():
+    a, b = oiio.ImageBuf(image), oiio.ImageBuf(reference)
+    oiio.ImageBufAlgo.compare(a, b, 1e-3, 1e-6)
+times = {"theirs": [], "ours": []}
+for f in (theirs, ours):
+    f()
+for _ in range(rounds):
+    for name, f in (("theirs", theirs), ("ours", ours)):
+        t0 = time.perf_counter(); f(); times[name].append(time.perf_counter() - t0)
+print(statistics.median(times["theirs"]), statistics.median(times["ours"]))
+"""
+
+
+def measure_warm(image: Path, reference: Path, out: Path, rounds: int) -> tuple[float, float]:
+    """(OpenImageIO's read and compare, compare-image's command) in one warm process: median seconds per call."""
+    proc = subprocess.run([sys.executable, "-c", WARM, str(image), str(reference), str(out), str(rounds)],
+                          capture_output=True, text=True, cwd=ROOT, check=True)
+    theirs, ours = map(float, proc.stdout.split())
+    return theirs, ours
+
+
+def warm_table(theirs: float, ours: float) -> list[str]:
+    return ["| in a warm process | median per call (s) | / idiff's |", "| --- | --- | --- |",
+            f"| OpenImageIO ImageBufAlgo.compare, both files read (idiff's stand-in) | {theirs:.4f} | **1.0×** |",
+            f"| compare-image --reference FILE --fail delta_e2000_mean=0.1 | {ours:.4f} | **{ours / theirs:.1f}×** |"]
+
+
 def table(medians: dict[str, float]) -> list[str]:
     names = list(medians)
     start, baseline = medians[names[0]], names[1]
@@ -102,14 +147,17 @@ def main(argv: list[str] | None = None) -> int:
             subprocess.run([sys.executable, "-m", "harness", "render", "--scene", "cornell-box", "-r", "mitsuba",
                             "--spp", "16", "--out", str(image)], check=True, capture_output=True, cwd=ROOT)
         medians = measure(commands(image, reference, Path(tmp) / "out"), args.rounds)
+        warm = measure_warm(image, reference, Path(tmp) / "warm", 5 * args.rounds)
     import os
 
     lines = table(medians) + ["", f"256×256 (`cornell-box`, a 16-spp Mitsuba render against the stored reference), "
                                   f"median of {args.rounds} interleaved rounds, each command a fresh process, "
                                   f"{os.cpu_count()} cores, {time.strftime('%Y-%m-%d')}. Command: `{command}`."]
     body = "\n".join(lines)
-    print(body, flush=True)
-    markdown_blocks.write_blocks(args.markdown, {BLOCK: body}, command)
+    warm_body = "\n".join(warm_table(*warm) + ["", f"The same image and reference, {5 * args.rounds} interleaved "
+                                                    f"calls each, {time.strftime('%Y-%m-%d')}. Command: `{command}`."])
+    print(body + "\n\n" + warm_body, flush=True)
+    markdown_blocks.write_blocks(args.markdown, {BLOCK: body, WARM_BLOCK: warm_body}, command)
     return 0
 
 

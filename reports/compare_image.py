@@ -68,7 +68,8 @@ def write_error_map(folder: Path, score: ImageScore, target: Target, de: np.ndar
     path = Path(folder) / f"{score.source.label}{ERROR_MAP_SUFFIX}"
     pixels = delta_e_png(score.source.image, target.reference.image, target.reference.quantity, de)
     with atomic_path(path) as tmp:
-        Image.fromarray(pixels).save(tmp, format="PNG", optimize=True)
+        # the fastest zlib level: optimize=True made the map's write a tenth of the command's time (issue 31)
+        Image.fromarray(pixels).save(tmp, format="PNG", compress_level=1)
     return path
 
 

@@ -22,6 +22,7 @@ carriage returns), other remarks with :func:`info`; ``--quiet`` silences both,
 from __future__ import annotations
 
 import contextlib
+import functools
 import copy
 import enum
 import json
@@ -328,6 +329,7 @@ def _everywhere(
     """The options before any command: ``cbox -q converge ...``, ``cbox --version``."""
 
 
+@functools.cache  # built once per process: ~60 ms, paid again by every in-process call of main() otherwise
 def command_tree() -> Any:
     """The app as a click command, every sub-command also taking the app's ``--quiet/-q`` and ``--verbose/-v``.
 

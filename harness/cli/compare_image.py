@@ -71,6 +71,9 @@ def compare_image(
                                                              "(LABEL.delta_e.png) and, with --report, report.html."),
     report: bool = typer.Option(False, "--report", help="Also write OUT/report.html: the table and the image "
                                                         "viewer with its error maps."),
+    with_flip: bool = typer.Option(False, "--flip", help="Also score HDR-FLIP (flip_mean): about 1 s per 256² "
+                                   "image (8 exposures), more than every other metric together, so it is left "
+                                   "out unless asked for here, by a --fail/--warn on flip_mean, or by --report."),
 ) -> None:
     """Score image files against a reference with every image metric, as `cbox compare` scores a render.
 
@@ -103,9 +106,9 @@ def compare_image(
     _warn_clipped(target.path, target.clipped)
     for source in sources:
         _warn_clipped(source.path, source.clipped)
-        result = workflow.score(source, target)
-        # The ΔE00 map --fail-percent counts is the error map's: computed once for both.
-        de = workflow.pixel_errors(source, target) if fail_percent is not None else None
+        result = workflow.score(source, target, with_flip=with_flip or report
+                                or any(t.metric == "flip_mean" for t in thresholds))
+        de = result.delta_e_map  # computed once: the ΔE00 statistics, the error map and --fail-percent's count
         error_map = write_error_map(out, result, target, de)
         scores.append(result)
         verdict = _verdict(result, thresholds, de, fail_percent, pixel_threshold, th)

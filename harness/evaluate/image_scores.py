@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -53,6 +53,7 @@ class ImageScore:
     noise_note: str | None
     regions: dict
     flip_parameters: dict | None  # the HDR-FLIP viewing conditions flip_mean was computed under
+    delta_e_map: Any = None  # (H, W) ΔE00 at the reference's display exposure: the error map's and --fail-percent's
 
     def record(self, target: Target) -> dict:
         """The score as strict-JSON-ready nested dicts (non-finite numbers as None)."""

@@ -132,3 +132,15 @@ def test_a_display_referred_reference_is_warned_of_too(tmp_path, capsys):
     (line,) = [x for x in err.splitlines() if "clipped" in x]
     assert code == 0 and line.startswith(f"cbox: warning: {png}: 0.293% of the pixels are clipped")
     assert abs(json.loads(out)["metrics"]["mean_radiance_rel_error"]) < 0.02  # --exposure applied to it
+
+
+def test_flip_only_when_asked_for(render16, tmp_path, capsys):
+    """HDR-FLIP costs more than every other metric together: scored with --flip or a threshold on it, not by
+    default; the same value either way."""
+    code, out, _ = _compare(capsys, tmp_path, render16)
+    assert code == 0 and "flip_mean" not in json.loads(out)["metrics"]
+    code, out, _ = _compare(capsys, tmp_path, render16, "--flip")
+    flip_mean = json.loads(out)["metrics"]["flip_mean"]
+    assert code == 0 and 0 < flip_mean < 1
+    code, out, err = _compare(capsys, tmp_path, render16, "--fail", f"flip_mean={flip_mean / 2}")
+    assert code == 1 and json.loads(out)["metrics"]["flip_mean"] == flip_mean and "flip_mean = " in err
