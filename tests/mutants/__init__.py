@@ -2,7 +2,7 @@
 
 Each :class:`Mutant` is a realistic bug in one of our renderers
 (:data:`INTEGRATORS`: the path tracer, the photon mapper, SPPM, ao, ambient,
-probes and the denoised path tracer ``pathtracer+oidn``), written as exact
+probes, the denoised path tracer ``pathtracer+oidn`` and whitted), written as exact
 source patches: an ``old`` snippet replaced by ``new`` in the renderer's
 module (the integrator, e.g. ``renderers/pathtracer.py``), in a module of the
 toolkit it is built on (``renderers/core/``) or in another module of
@@ -44,7 +44,7 @@ the names used outside are re-exported here. Used by
 
 from tests.mutants.catalogue import BY_NAME, FAMILIES, ISOLATED, LOW_POWER, MUTANTS
 from tests.mutants.model import (AMBIENT, AO, CORE, DDGI, INTEGRATORS, OIDN, PATHTRACER, PHOTONMAP, PROBES, ROOT,
-                                 SOURCE, SPPM, Mutant, Patch)
+                                 SOURCE, SPPM, WHITTED, Mutant, Patch)
 from tests.mutants.patching import (GATE_TOML, INTEGRATOR_FILES, SHARED_CORE, Verdict, cost, gate_config,
                                     imports_module, integrator, label, load_module, load_mutant, module_name,
                                     original_source, patched_source, patched_sources, pathtracer_gate_config,
@@ -52,6 +52,6 @@ from tests.mutants.patching import (GATE_TOML, INTEGRATOR_FILES, SHARED_CORE, Ve
 
 __all__ = ["AMBIENT", "AO", "BY_NAME", "CORE", "DDGI", "FAMILIES", "GATE_TOML", "INTEGRATORS", "INTEGRATOR_FILES",
            "ISOLATED", "LOW_POWER", "MUTANTS", "OIDN", "PATHTRACER", "PHOTONMAP", "PROBES", "ROOT", "SHARED_CORE",
-           "SOURCE", "SPPM", "Mutant", "Patch", "Verdict", "cost", "gate_config", "imports_module", "integrator",
+           "SOURCE", "SPPM", "WHITTED", "Mutant", "Patch", "Verdict", "cost", "gate_config", "imports_module", "integrator",
            "label", "load_module", "load_mutant", "module_name", "original_source", "patched_source",
            "patched_sources", "pathtracer_gate_config", "run_isolated", "run_until_failure", "verdict"]

@@ -20,13 +20,15 @@ AO = "renderers/ao.py"
 AMBIENT = "renderers/ambient.py"
 PROBES = "renderers/probes.py"
 DDGI = "renderers/ddgi.py"  # the probes' algorithm (not an integrator: its mutants get a copy, as core modules do)
+WHITTED = "renderers/whitted.py"
 OIDN = "renderers/oidn.py"  # the denoise stage; its PathTracerOIDN wraps the unmutated path tracer
 SOURCE = ROOT / PATHTRACER
 CORE = "renderers/core"
 #: The renderers mutants are made of: registered name -> (integrator module, adapter class).
 INTEGRATORS = {"pathtracer": (PATHTRACER, "PathTracer"), "photonmap": (PHOTONMAP, "PhotonMapper"),
                "sppm": (SPPM, "SPPM"), "ao": (AO, "AORenderer"), "ambient": (AMBIENT, "AOAmbient"),
-               "probes": (PROBES, "IrradianceProbes"), "pathtracer+oidn": (OIDN, "PathTracerOIDN")}
+               "probes": (PROBES, "IrradianceProbes"), "pathtracer+oidn": (OIDN, "PathTracerOIDN"),
+               "whitted": (WHITTED, "Whitted")}
 
 
 class Patch(NamedTuple):
