@@ -31,7 +31,7 @@ Conventions
   linear sRGB -> XYZ -> CIELAB with the D65 white of the CIE 1931 2°
   observer, *without* clipping: L* may exceed 100 on the light source, and
   that is a real difference we want to see. ΔE00 is then computed per pixel
-  (:mod:`harness.evaluate.ciede2000`: colour-science's arithmetic, in a numba kernel).
+  (:mod:`harness.evaluate.ciede2000`: colour-science's arithmetic, rearranged for speed in numpy).
   Summary statistics report the fraction above 2.3, the just-noticeable
   difference (Sharma 2003, *Digital Color Imaging Handbook*; Mahy et al.
   1994).
@@ -64,7 +64,7 @@ from harness.scenes.quantities import DEFAULT_QUANTITY, has_colour
 
 # No colour-science or skimage: `import colour` costs ~1.5 s and skimage.metrics pulls in scipy.stats (~2 s)
 # and SSIM scipy.ndimage (~0.4 s), which `cbox compare-image` cannot afford (issue 31). CIEDE2000 and the sRGB
-# transfer are harness.evaluate.ciede2000 (ΔE00 a numba kernel), SSIM harness.evaluate.ssim (numpy): the same arithmetic.
+# transfer are harness.evaluate.ciede2000, SSIM harness.evaluate.ssim: the same arithmetic, in numpy.
 
 REINHARD_KEY = 0.18
 REINHARD_DELTA = 1e-4
@@ -159,7 +159,7 @@ def delta_e2000(img, ref, exposure: float | None = None, full: bool = False):
     img, ref = as_pair(img, ref)
     if exposure is None:
         exposure = exposure_scale(ref)
-    # zero_broken_pixels(img), both exposed, CIELAB and ΔE00 in one compiled pass.
+    # zero_broken_pixels(img), both exposed, CIELAB and ΔE00 on flat channels: no (H, W, 3) temporaries.
     de_map = ciede2000.delta_e2000_linear(img, ref, exposure)
     mean = float(np.mean(de_map))
     return (mean, de_map) if full else mean

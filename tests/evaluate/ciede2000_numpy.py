@@ -1,6 +1,6 @@
-"""The numpy CIEDE2000 the kernel of :mod:`harness.evaluate.ciede2000` replaced, kept as its oracle: the same
-formulas written array-wise, one temporary image per step (colour-science's ``XYZ_to_Lab`` and
-``delta_E_CIE2000``, as that module cites)."""
+"""The array-wise CIEDE2000 that :mod:`harness.evaluate.ciede2000` was sped up from, kept as its oracle: the
+formulas as colour-science writes them (``XYZ_to_Lab``, ``delta_E_CIE2000``: ``np.select``, ``np.hypot``,
+``% 360``, four cosines, ``pow``), which the fast version rearranges."""
 
 from __future__ import annotations
 

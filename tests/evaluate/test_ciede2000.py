@@ -1,6 +1,6 @@
-"""harness.evaluate.ciede2000 (a numba kernel, no colour-science import) against colour-science, which it replaces
-in the metrics, and against the numpy arithmetic it replaced (tests/evaluate/ciede2000_numpy.py): the same numbers,
-edge cases included, and Sharma et al.'s published test pairs."""
+"""harness.evaluate.ciede2000 (numpy, no colour-science import) against colour-science, which it replaces in the
+metrics, and against the array-wise original it was sped up from (tests/evaluate/ciede2000_numpy.py): the same
+numbers, edge cases included, and Sharma et al.'s published test pairs."""
 
 from __future__ import annotations
 
@@ -71,7 +71,7 @@ def _lab_pairs(n=20000, seed=11):
     return lab[:, 0], lab[:, 1]
 
 
-def test_kernel_as_numpy_on_lab_pairs():
+def test_as_the_original_on_lab_pairs():
     lab_1, lab_2 = _lab_pairs()
     ours, theirs = de.delta_e2000(lab_1, lab_2), oracle.delta_e2000(lab_1, lab_2)
     np.testing.assert_array_equal(np.isnan(ours), np.isnan(theirs))
@@ -86,7 +86,7 @@ def _near_neutral(rgb):
     return np.ptp(rgb, axis=-1) <= 1e-6 * np.max(np.abs(rgb), axis=-1)
 
 
-def test_kernel_as_numpy_on_images(rgb):
+def test_as_the_original_on_images(rgb):
     rng = np.random.default_rng(3)
     img = rgb.copy()
     img[9, 0, 1], img[9, 1, 2], img[9, 2] = np.nan, np.inf, -np.inf  # broken pixels: black, as the rule says
@@ -105,7 +105,7 @@ def test_kernel_as_numpy_on_images(rgb):
         np.testing.assert_allclose(ours[grey], theirs[grey], rtol=1e-6)
 
 
-def test_kernel_as_numpy_on_a_render():
+def test_as_the_original_on_a_render():
     """A real 16-spp-like image: a noisy copy of the stored cornell-box reference, at its display exposure."""
     from harness.evaluate.metrics import exposure_scale
     from pathlib import Path
