@@ -69,10 +69,11 @@ def noise_image(ref: np.ndarray, noise: np.ndarray, noise_spp: int, ref_spp: int
     return ref + scale * (np.asarray(noise, np.float64) - ref)
 
 
-def noise_yardsticks(image: np.ndarray, reference, spp: int) -> dict:
+def noise_yardsticks(image: np.ndarray, reference, spp: int, exposure: float | None = None) -> dict:
     """What noise alone would give at this spp, to read the real metrics against.
 
-    ``reference`` is a :class:`harness.store.references.Reference`.
+    ``reference`` is a :class:`harness.store.references.Reference`; ``exposure``, the reference's
+    :func:`harness.evaluate.metrics.exposure_scale` where the caller has it already (the ΔE's exposure).
 
     - ``noise_rmse``: expected RMSE from noise alone;
     - ``noise_delta_e2000_mean``: ΔE mean of :func:`noise_image`;
@@ -86,5 +87,5 @@ def noise_yardsticks(image: np.ndarray, reference, spp: int) -> dict:
     }
     if has_colour(reference.quantity):
         noisy = noise_image(ref, reference.noise, reference.noise_spp, ref_spp, spp)
-        out["noise_delta_e2000_mean"] = float(metrics.delta_e2000(noisy, ref))
+        out["noise_delta_e2000_mean"] = float(metrics.delta_e2000(noisy, ref, exposure=exposure))
     return out

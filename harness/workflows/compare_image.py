@@ -197,21 +197,23 @@ def score(source: InputImage, target: Target, with_flip: bool = True) -> ImageSc
     """Every metric of one test image against the target, computed as ``cbox compare`` computes them
     (``flip_mean`` only ``with_flip``: :func:`harness.evaluate.metrics.image_metrics`)."""
     ref = target.reference
-    de = pixel_errors(source, target) if metrics.has_colour(ref.quantity) else None  # once: stats, map, --fail-percent
-    values = metrics.image_metrics(source.image, ref.image, quantity=ref.quantity, with_flip=with_flip,
+    # float64 once, where each metric would convert the float32 pixels again (the same values, exactly: the
+    # metrics take as_pair's arrays), and the exposure once (each would compute it from the reference again).
+    image, ref_image = metrics.as_pair(source.image, ref.image)
+    exposure = metrics.display_exposure(ref_image, ref.quantity)
+    # the ΔE00 map once: its statistics, the error map and --fail-percent
+    de = pixel_errors(image, ref_image, exposure) if metrics.has_colour(ref.quantity) else None
+    values = metrics.image_metrics(image, ref_image, exposure=exposure, quantity=ref.quantity, with_flip=with_flip,
                                    delta_e_map=de)
     note = noise_gap(target, source.spp)
-    yardsticks = stats.noise_yardsticks(source.image, ref, source.spp) if note is None else None
+    yardsticks = stats.noise_yardsticks(image, ref, source.spp, exposure=exposure) if note is None else None
     regions = runner.score_regions(target.scene, source.image, ref, source.spp) if target.scene is not None else {}
     parameters = flip.flip_parameters(ref.image) if "flip_mean" in values else None
     return ImageScore(source, values, yardsticks, note, regions, parameters, de)
 
 
-def pixel_errors(source: InputImage, target: Target) -> np.ndarray:
-    """The (H, W) CIEDE2000 of each pixel at the reference's display exposure: the map ``delta_e2000_*``
-    summarise and the error-map file shows, what ``--fail-percent`` counts (of the image with its broken
-    pixels zeroed, as the metrics take it)."""
-    ref = target.reference
-    img, ref_img = metrics.as_pair(source.image, ref.image)
-    return metrics.delta_e2000(metrics.zero_broken_pixels(img), ref_img,
-                               exposure=metrics.display_exposure(ref_img, ref.quantity), full=True)[1]
+def pixel_errors(image: np.ndarray, ref: np.ndarray, exposure: float) -> np.ndarray:
+    """The (H, W) CIEDE2000 of each pixel at ``exposure`` (the reference's display exposure): the map
+    ``delta_e2000_*`` summarise and the error-map file shows, what ``--fail-percent`` counts (of the image with
+    its broken pixels zeroed, as the metrics take it)."""
+    return metrics.delta_e2000(image, ref, exposure=exposure, full=True)[1]
