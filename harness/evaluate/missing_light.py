@@ -192,3 +192,12 @@ def region_table(rows: Sequence[Mapping], regions: Sequence[str], ref_noise: Map
                         "time_s": float(np.median(times)) if times else math.nan,
                         "spp": group[0].get("spp")})
     return out
+
+
+def study_columns(scene: Scene, image: np.ndarray, reference, spp: int,
+                  masks: Mapping[str, np.ndarray] | None = None) -> dict:
+    """Results-row columns ``region.<name>.<metric>`` of ``image`` in the study's regions that ``scene`` does
+    not declare itself (``masks``, default :func:`study_masks`; pass them to score many images), scored by
+    :func:`harness.evaluate.regions.region_metrics`."""
+    masks = {k: m for k, m in (study_masks(scene) if masks is None else masks).items() if k not in scene.regions}
+    return named_regions.region_columns(named_regions.region_metrics(image, reference, masks, spp=spp))

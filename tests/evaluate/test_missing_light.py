@@ -72,3 +72,13 @@ def test_study_masks_add_regions_without_changing_the_scene():
     assert "penumbra" not in masks and masks["back-edge"].sum() > 50
     assert not (masks["caustic"] & ~masks["floor"]).any()  # the caustic lies on the floor
     assert "penumbra" in ml.study_masks(resolve_scene("cornell-box"))
+
+
+def test_study_columns_score_only_the_regions_the_scene_lacks():
+    from harness.store.references import load_reference
+
+    sc = resolve_scene("cornell-box-caustics")
+    ref = load_reference(sc)
+    cols = ml.study_columns(sc, ref.image * 0.5, ref, spp=4)
+    assert {k.split(".")[1] for k in cols} == {"floor", "back-edge"}
+    assert cols["region.floor.mean_radiance_rel_error"] == pytest.approx(-0.5)
