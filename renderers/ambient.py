@@ -39,8 +39,8 @@ How La is chosen (setting ``ambient``)
 
       La = ρ̄ / (1 − ρ̄) · Φ / (π · A_total),   Φ = Σ_emitters π·Le·area.
 
-  Implemented exactly so (:func:`scene_surfaces`, :func:`radiosity_ambient`,
-  :func:`interreflection_sum`): A_total sums every triangle's area (each
+  Implemented exactly so (:mod:`renderers.core.ambient_radiance`, shared
+  with :mod:`renderers.whitted`'s constant ambient): A_total sums every triangle's area (each
   surface once, one side) and every sphere's 4πr²; ρ per surface is the
   fraction of power it sends on: a diffuse albedo, a mirror's reflectance,
   and 1 for glass (lossless: what it does not reflect it transmits; the
@@ -104,16 +104,16 @@ passes double, so power-of-two checkpoints are free.
 from __future__ import annotations
 
 import dataclasses
-import math
-from typing import NamedTuple, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from harness.adapters.api import ReferenceFit, RenderResult, Setting, default_threads
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
+from renderers.core.ambient_radiance import bounces_left, radiosity_ambient, scene_surfaces
 from renderers.core.geometry import SceneGeometry
-from renderers.core.occlusion import occlusion_segment
+from renderers.core.occlusion import DEFAULT_AO_MAX_DISTANCE, occlusion_segment
 from renderers.core.rays import add_unoccluded, head, shadow_buffer
 from renderers.core.sampler import SAMPLER_SETTING, Stream, independent, path_point, sample_2d
 from renderers.core.sampling import jit
@@ -127,60 +127,6 @@ AMBIENTS = ("radiosity", "oracle", "none", "constant")
 #: walk uses (vertex d's block starts at 2 + 6(d − 1)), below rng's limit of 2^24 for any ao_samples allowed.
 AO_DIM = 1 << 20
 MAX_AO_SAMPLES = 1024
-#: ao_max_distance's default, relative to the scene's size: 0.1441 × 3.470 (cornell-box's bounding-box
-#: diagonal) = 0.500 scene units, a quarter of the box's width, the distance cornell-box-ao pins.
-DEFAULT_AO_MAX_DISTANCE = 0.1441
-
-
-class Surfaces(NamedTuple):
-    """Every primitive of a scene as the radiosity ambient sees it (float64, N = triangles + spheres)."""
-
-    area: np.ndarray  # (N,)
-    reflectance: np.ndarray  # (N, 3) fraction of incident power sent on: albedo, mirror R, 1 for glass
-    radiance: np.ndarray  # (N, 3) emitted Le (one-sided Lambertian), 0 for non-emitters
-
-
-class RadiosityAmbient(NamedTuple):
-    """The terms of Cohen et al.'s ambient (module docstring), per channel."""
-
-    mean_reflectance: np.ndarray  # (3,) ρ̄ = Σ ρ_i A_i / A_total
-    power: np.ndarray  # (3,) Φ = Σ π Le_i A_i
-    total_area: float
-
-    def radiance(self, bounces) -> np.ndarray:
-        """La for ``bounces`` reflections (K, scalar or array (m,); inf: unbounded): shape (3,) or (m, 3)."""
-        k = np.asarray(bounces, np.float64)
-        s = interreflection_sum(self.mean_reflectance, k[..., None])
-        # No emitter: no ambient, also where the series diverges (0 · inf is not computed into the result).
-        with np.errstate(invalid="ignore"):
-            return np.where(self.power > 0.0, s * self.power / (math.pi * self.total_area), 0.0)
-
-
-def scene_surfaces(geom: SceneGeometry) -> Surfaces:
-    """The areas, power-fractions and emission of every primitive, from the toolkit's tables."""
-    area = np.concatenate([geom.area, 4.0 * math.pi * geom.sphere_radius ** 2])
-    return Surfaces(area, np.asarray(geom.reflectance, np.float64), np.asarray(geom.radiance, np.float64))
-
-
-def radiosity_ambient(surfaces: Surfaces) -> RadiosityAmbient:
-    """ρ̄, Φ and A_total of Cohen et al.'s ambient term (module docstring)."""
-    a = surfaces.area
-    total = float(a.sum())
-    rho_bar = (surfaces.reflectance * a[:, None]).sum(axis=0) / total  # the loader refuses zero-area scenes
-    power = math.pi * (surfaces.radiance * a[:, None]).sum(axis=0)
-    return RadiosityAmbient(rho_bar, power, total)
-
-
-def interreflection_sum(rho: np.ndarray, bounces: np.ndarray) -> np.ndarray:
-    """Σ_{k=1..K} ρ^k, elementwise (K ≥ 0 whole, or inf): ρ(1 − ρ^K)/(1 − ρ), and K where ρ = 1 (inf if K is)."""
-    rho, k = np.broadcast_arrays(np.asarray(rho, np.float64), np.asarray(bounces, np.float64))
-    out = np.empty(rho.shape)
-    one = rho >= 1.0
-    # 1 − ρ is guarded: the closed form only where ρ < 1; ρ^inf = 0 there.
-    with np.errstate(over="ignore"):
-        out[~one] = rho[~one] * (1.0 - rho[~one] ** k[~one]) / (1.0 - rho[~one])
-    out[one] = k[one]
-    return out
 
 
 @jit
@@ -222,13 +168,6 @@ class Shading:
             seg = head(occ, k)
             add_unoccluded(L, seg, self.geom.unoccluded(seg.o, seg.d, seg.t))
         return L
-
-
-def bounces_left(scene: Scene, depth: np.ndarray) -> np.ndarray:
-    """K = max_depth − depth − 1 (at least 0) reflections an ambient path may make; inf when unbounded."""
-    if scene.max_depth < 0:
-        return np.full(np.shape(depth), np.inf)
-    return np.maximum(scene.max_depth - np.asarray(depth) - 1, 0).astype(np.float64)
 
 
 def by_depth(scene: Scene, la_of_bounces):

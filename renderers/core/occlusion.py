@@ -24,6 +24,11 @@ from renderers.core.geometry import offset_origin
 from renderers.core.rays import set_shadow
 from renderers.core.sampling import cosine_hemisphere, jit, uniform_hemisphere
 
+#: The default reach of an ambient term's occlusion rays (renderers.ambient's ao_max_distance,
+#: renderers.whitted's ambient = ao), relative to the scene's size: 0.1441 × 3.470 (cornell-box's bounding-box
+#: diagonal) = 0.500 scene units, a quarter of the box's width, the distance cornell-box-ao pins.
+DEFAULT_AO_MAX_DISTANCE = 0.1441
+
 
 @jit
 def ao_direction(n, cosine, u1, u2):

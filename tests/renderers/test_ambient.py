@@ -32,7 +32,8 @@ from harness.scenes.model import Camera, Diffuse, Mesh, Scene
 from harness.store.references import ReferenceError, load_reference
 from harness.workflows.render import render_checked
 from harness.workflows.runner import run_one
-from renderers.ambient import AOAmbient, interreflection_sum
+from renderers.ambient import AOAmbient
+from renderers.core.ambient_radiance import interreflection_sum
 from renderers.core.sampler import SAMPLERS
 from renderers.pathtracer import PathTracer
 
