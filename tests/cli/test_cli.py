@@ -87,7 +87,8 @@ def test_demo_writes_report(tmp_path):
     assert caustics.set_index("renderer").loc["pathtracer", "region.caustic.rel_mse"] > 0
     html = (tmp_path / "report.html").read_text()
     assert 'href="cornell-box-caustics/report.html"' in html and "ΔE caustic" in html
-    section = html.split("Recursive ray tracing and its hacks", 1)[1]
+    section = html.split('<section id="cornell-box-caustics-whitted">', 1)[1].split("</section>", 1)[0]
+    assert "<h2>Recursive ray tracing and its hacks</h2>" in section
     assert "Pierce" in section and "back-edge" in section and "pathtracer" in section
     if whitted:  # where the renderer is installed: its four variants, every one ok, leading the section's table
         assert len(whitted) == 4 and set(whitted.values()) == {"ok"}
