@@ -292,7 +292,8 @@ def demo(
 ) -> None:
     """What the tool is for, in about three minutes on 2 cores: every available renderer converging on
     cornell-box (error against spp and time, speed/accuracy, bias and variance) and compared on
-    cornell-box-caustics (mirror and glass) → out/report.html, the caustics as a section of it."""
+    cornell-box-caustics (mirror and glass) → out/report.html, the caustics as a section of it, with the
+    Whitted variants against the others per region in "Recursive ray tracing and its hacks"."""
     from harness.cli.experiment import print_summary, run_convergence
     from harness.evaluate.missing_light import study_columns, study_masks
     from harness.evaluate.regions import region_noise
