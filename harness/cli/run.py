@@ -249,6 +249,36 @@ def demo_checkpoints(spp: int) -> list[int]:
     return out if out[-1] == spp else out + [spp]
 
 
+#: The Whitted variants ``cbox demo`` adds to its caustics comparison, for the section "Recursive ray tracing and
+#: its hacks" (reports/whitted.py): each shadow rule for glass, and no ambient term.
+DEMO_WHITTED = ("transparent_shadows=boolean", "transparent_shadows=attenuate", "transparent_shadows=ignore",
+                "ambient=none")
+
+
+def whitted_spec() -> str | None:
+    """How to name the Whitted renderer: its entry point where installed, else its class where this tree has it
+    (an install that predates it), else None."""
+    import importlib.util
+
+    from harness.adapters.registry import registered_names
+
+    if "whitted" in registered_names():
+        return "whitted"
+    return "renderers.whitted:Whitted" if importlib.util.find_spec("renderers.whitted") else None
+
+
+def demo_caustics_renderers(renderer: Optional[List[str]]) -> Optional[List[str]]:
+    """The caustics comparison's renderers: the demo's (all when none are named; the plain ``whitted`` then
+    gives way to its variants) and the :data:`DEMO_WHITTED` variants; the demo's alone without Whitted."""
+    from harness.adapters.registry import declared_commands, registered_names
+
+    base = whitted_spec()
+    if base is None:
+        return renderer
+    names = list(renderer) if renderer else [n for n in [*registered_names(), *declared_commands()] if n != "whitted"]
+    return names + [f"{base}[{s}]" for s in DEMO_WHITTED if f"{base}[{s}]" not in names]
+
+
 @app.command()
 def demo(
     out: Path = out_folder_option(Path("out"), "Folder for report.html, results.parquet and summary.parquet, "
@@ -262,17 +292,27 @@ def demo(
 ) -> None:
     """What the tool is for, in about three minutes on 2 cores: every available renderer converging on
     cornell-box (error against spp and time, speed/accuracy, bias and variance) and compared on
-    cornell-box-caustics (mirror and glass) → out/report.html, the caustics as a section of it."""
+    cornell-box-caustics (mirror and glass) → out/report.html, the caustics as a section of it, with the
+    Whitted variants against the others per region in "Recursive ray tracing and its hacks"."""
     from harness.cli.experiment import print_summary, run_convergence
+    from harness.evaluate.missing_light import study_columns, study_masks
+    from harness.evaluate.regions import region_noise
     from reports.scenes import scene_section
+    from reports.whitted import TITLE, whitted_section
 
     sections, code = [], 0
     for name in DEMO_SCENES[1:]:
-        sub_code, records, sc, ref = _run_compare(name, renderer, spp, 0, out / name, False)
+        sub_code, records, sc, ref = _run_compare(name, demo_caustics_renderers(renderer), spp, 0, out / name, False)
         code = max(code, sub_code)
         images = {r.renderer: r.image for r in records if r.status == "ok" and r.image is not None}
         sections.append((name, sc.name, scene_section(sc, ref.image, [r.row() for r in records], images,
                                                       f"{name}/report.html")))
+        # The Whitted variants against the others, also in the study's regions the scene does not declare.
+        masks = study_masks(sc)
+        rows = [{**r.row(), **(study_columns(sc, r.image, ref, r.spp, masks) if r.image is not None else {})}
+                for r in records]
+        noise = region_noise(ref.image, ref.variance, masks)
+        sections.append((f"{name}-whitted", TITLE, whitted_section(rows, noise, sc.name)))
     sc = resolve_scene(DEMO_SCENES[0])
     runs, report = run_convergence(out, sc, load_reference(sc), resolve(renderer), demo_checkpoints(spp), seeds,
                                    sections=sections)

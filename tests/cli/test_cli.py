@@ -79,11 +79,20 @@ def test_demo_writes_report(tmp_path):
     assert summary.loc["pathtracer", "slope_rmse_spp"] < 0 and summary.loc["pathtracer", "variance"] > 0
     assert (tmp_path / "figures" / "bias-variance.svg").exists()  # the report's plots, as figures too
     # The caustics scene: its own full report, and a section of the main one that links to it.
+    # ... and the Whitted variants of the section "Recursive ray tracing and its hacks" (reports/whitted.py).
     status = dict(zip(caustics["renderer"], caustics["status"]))
-    assert status == {"mitsuba": "ok", "pathtracer": "ok", "pyrender": "skipped"}
+    whitted = {k: v for k, v in status.items() if k == "whitted" or k.startswith("whitted[")}  # default: "whitted"
+    assert {k: v for k, v in status.items() if k not in whitted} == \
+        {"mitsuba": "ok", "pathtracer": "ok", "pyrender": "skipped"}
     assert caustics.set_index("renderer").loc["pathtracer", "region.caustic.rel_mse"] > 0
     html = (tmp_path / "report.html").read_text()
     assert 'href="cornell-box-caustics/report.html"' in html and "ΔE caustic" in html
+    section = html.split('<section id="cornell-box-caustics-whitted">', 1)[1].split("</section>", 1)[0]
+    assert "<h2>Recursive ray tracing and its hacks</h2>" in section
+    assert "Pierce" in section and "back-edge" in section and "pathtracer" in section
+    if whitted:  # where the renderer is installed: its four variants, every one ok, leading the section's table
+        assert len(whitted) == 4 and set(whitted.values()) == {"ok"}
+        assert section.index("transparent_shadows") < section.index("mitsuba")
     assert (tmp_path / "cornell-box-caustics" / "report.html").exists()
 
 
