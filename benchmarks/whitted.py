@@ -31,7 +31,7 @@ import pandas as pd
 
 import markdown_blocks
 from irradiance_probes import write_svg
-from harness.adapters.registry import registered_names, resolve
+from harness.adapters.registry import resolve
 from harness.evaluate import metrics
 from harness.evaluate.convergence import time_to_target
 from harness.evaluate.missing_light import region_table, study_columns, study_masks
@@ -43,7 +43,7 @@ from reports.plots import PALETTE, Series, line_plot_svg
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The Whitted renderer's spec: its entry point where installed, else its class (an older editable install).
-WHITTED = "whitted" if "whitted" in registered_names() else "renderers.whitted:Whitted"
+WHITTED = "whitted"
 #: (settings, label) of the table's columns.
 COLUMNS = (
     (f"{WHITTED}[transparent_shadows=boolean,ambient=none]", "whitted boolean, no ambient"),

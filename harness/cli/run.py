@@ -255,28 +255,13 @@ DEMO_WHITTED = ("transparent_shadows=boolean", "transparent_shadows=attenuate", 
                 "ambient=none")
 
 
-def whitted_spec() -> str | None:
-    """How to name the Whitted renderer: its entry point where installed, else its class where this tree has it
-    (an install that predates it), else None."""
-    import importlib.util
-
-    from harness.adapters.registry import registered_names
-
-    if "whitted" in registered_names():
-        return "whitted"
-    return "renderers.whitted:Whitted" if importlib.util.find_spec("renderers.whitted") else None
-
-
-def demo_caustics_renderers(renderer: Optional[List[str]]) -> Optional[List[str]]:
+def demo_caustics_renderers(renderer: Optional[List[str]]) -> List[str]:
     """The caustics comparison's renderers: the demo's (all when none are named; the plain ``whitted`` then
-    gives way to its variants) and the :data:`DEMO_WHITTED` variants; the demo's alone without Whitted."""
+    gives way to its variants) and the :data:`DEMO_WHITTED` variants."""
     from harness.adapters.registry import declared_commands, registered_names
 
-    base = whitted_spec()
-    if base is None:
-        return renderer
     names = list(renderer) if renderer else [n for n in [*registered_names(), *declared_commands()] if n != "whitted"]
-    return names + [f"{base}[{s}]" for s in DEMO_WHITTED if f"{base}[{s}]" not in names]
+    return names + [f"whitted[{s}]" for s in DEMO_WHITTED if f"whitted[{s}]" not in names]
 
 
 @app.command()
