@@ -24,13 +24,14 @@ from harness.scenes.model import (DEGENERATE_REL_AREA, FEATURES, FOV_AXES, IMAGE
                                   PIXEL_FILTERS, Camera, Mesh, Region, Scene, SceneError, Sphere, extent,
                                   image_memory_bytes, object_bounds, one_line)
 from harness.scenes.quantities import DEFAULT_QUANTITY, QUANTITIES, AmbientOcclusion, parse_ambient_occlusion
+from harness.scenes.spectral_scene import SpectralReader
 from harness.suggest import closest
 
 #: The keys each table of a scene file may have; any other is an error (with a did-you-mean).
 #: A material's keys are its type's fields (harness.scenes.materials).
 SCENE_KEYS = {
     "": ("format", "name", "description", "quantity", "features", "camera", "render", "materials", "meshes",
-         "spheres", "regions", "ambient_occlusion"),
+         "spheres", "regions", "ambient_occlusion", "colour", "spectra"),
     "camera": ("type", "position", "look_at", "up", "fov_deg", "fov_axis", "resolution"),
     "render": ("max_depth", "pixel_filter"),
     "mesh": ("name", "material", "obj", "vertices", "faces", "emitter"),
@@ -192,11 +193,12 @@ def parse_scene(doc: dict, path: Path) -> Scene:
     if pixel_filter not in PIXEL_FILTERS:
         raise r.err("render.pixel_filter", f"unknown filter {pixel_filter!r}; known: {', '.join(PIXEL_FILTERS)}")
 
-    materials = _parse_materials(r, r.get(doc, "materials", "", dict))
+    spectral = SpectralReader(r, doc, _key)  # [colour] and [spectra]: before the values that name a spectrum
+    materials = _parse_materials(r, r.get(doc, "materials", "", dict), spectral)
     raw_meshes = r.get(doc, "meshes", "", list)
     if not raw_meshes:
         raise r.err("meshes", "a scene needs at least one mesh")
-    meshes = tuple(_parse_mesh(r, m, i, materials, path.parent) for i, m in enumerate(raw_meshes))
+    meshes = tuple(_parse_mesh(r, m, i, materials, path.parent, spectral) for i, m in enumerate(raw_meshes))
     spheres = tuple(_parse_sphere(r, t, i, materials) for i, t in enumerate(r.get(doc, "spheres", "", list, [])))
     names = [m.name for m in meshes] + [s.name for s in spheres]
     for n in names:
@@ -233,6 +235,7 @@ def parse_scene(doc: dict, path: Path) -> Scene:
         regions=regions,
         quantity=quantity,
         ambient_occlusion=ao,
+        spectral=spectral.finish(),
     )
 
 
@@ -299,7 +302,7 @@ def _parse_camera(r: _Reader, t: dict) -> Camera:
     return Camera(position, look_at, up, fov, axis, int(res[0]), int(res[1]))
 
 
-def _parse_materials(r: _Reader, t: dict) -> dict:
+def _parse_materials(r: _Reader, t: dict, spectral: SpectralReader) -> dict:
     if not t:
         raise r.err("materials", "a scene needs at least one material")
     out = {}
@@ -317,14 +320,16 @@ def _parse_materials(r: _Reader, t: dict) -> dict:
         cls = MATERIAL_TYPES[kind]
         fields = material_fields(cls)
         r.known(m, w, ("type",) + tuple(f.name for f in fields))
-        out[name] = cls(name, **{f.name: _material_field(r, m, w, f) for f in fields if f.name in m
+        out[name] = cls(name, **{f.name: _material_field(r, m, w, f, spectral, name) for f in fields if f.name in m
                                  or f.default is dataclasses.MISSING})
     return out
 
 
-def _material_field(r: _Reader, m: dict, w: str, f: dataclasses.Field):
+def _material_field(r: _Reader, m: dict, w: str, f: dataclasses.Field, spectral: SpectralReader, material: str):
     """One field of a material table, checked against its kind (harness.scenes.materials)."""
     kind = f.metadata["kind"]
+    if kind == "rgb01" and isinstance(m.get(f.name), dict):  # { spectrum = "NAME" }: its RGB projection
+        return spectral.reflectance(m[f.name], f"{w}.{f.name}", material, f.name)
     if kind == "rgb01":
         rgb = r.vec(m, f.name, w)
         for i, x in enumerate(rgb):
@@ -391,7 +396,7 @@ def _parse_regions(r: _Reader, t: dict, objects: list[str]) -> dict[str, Region]
     return out
 
 
-def _parse_mesh(r: _Reader, t: Any, i: int, materials: dict, base: Path) -> Mesh:
+def _parse_mesh(r: _Reader, t: Any, i: int, materials: dict, base: Path, spectral: SpectralReader) -> Mesh:
     w, name, material = _object_header(r, t, f"meshes[{i}]", SCENE_KEYS["mesh"], materials)
     if "obj" in t and ("vertices" in t or "faces" in t):
         raise r.err(w, "give either obj or vertices/faces, not both")
@@ -422,7 +427,10 @@ def _parse_mesh(r: _Reader, t: Any, i: int, materials: dict, base: Path) -> Mesh
     if "emitter" in t:
         e = r.get(t, "emitter", w, dict)
         r.known(e, f"{w}.emitter", SCENE_KEYS["emitter"])
-        radiance = r.vec(e, "radiance", f"{w}.emitter", bound=MAX_RADIANCE)
+        if isinstance(e.get("radiance"), dict):  # { spectrum = "NAME" }: its RGB
+            radiance = spectral.emission(e["radiance"], f"{w}.emitter.radiance", name, MAX_RADIANCE)
+        else:
+            radiance = r.vec(e, "radiance", f"{w}.emitter", bound=MAX_RADIANCE)
         if min(radiance) < 0.0:
             raise r.err(f"{w}.emitter.radiance", f"must be non-negative, got {list(radiance)}")
     return Mesh(name, v, np.asarray(tris, dtype=np.int64), material, radiance)

@@ -16,6 +16,10 @@ Units and colour space (named here once for the whole harness)
 - **Ambient occlusion** (images of a scene whose ``quantity`` is
   ``ambient_occlusion``) is a dimensionless fraction in [0, 1], the same in
   all three channels; its definition is :mod:`harness.scenes.quantities`'.
+- **Spectra**: a material's reflectance or an emitter's radiance may be a
+  sampled spectrum (wavelengths in nm); the scene then declares its colour
+  pipeline, and the RGB values above are the spectra's projection
+  (:mod:`harness.scenes.spectra`, :mod:`harness.scenes.spectral_scene`).
 - **Reflectance** of a diffuse material is its albedo per channel, in [0, 1];
   of a mirror, its specular reflectance per channel. Materials and their
   fields are :mod:`harness.scenes.materials`'.
@@ -83,6 +87,7 @@ import numpy as np
 # Diffuse is re-exported: scenes built in code (analytic.py, tests) import it from the model.
 from harness.scenes.materials import Diffuse, Material, hash_payload  # noqa: F401
 from harness.scenes.quantities import DEFAULT_QUANTITY, AmbientOcclusion
+from harness.scenes.spectral_scene import SpectralContent
 
 #: Every feature a scene may use, with what it means.
 FEATURES: dict[str, str] = {
@@ -306,6 +311,9 @@ class Scene:
     # KEY=VALUE a derived scene's file was overridden with (harness.scenes.overrides): where its reference is
     # kept and how to rebuild it, not content (the hash reads the values they set).
     overrides: tuple[str, ...] = ()
+    # Spectra of materials and emitters, and the colour pipeline that projected them to the RGB values above
+    # (harness.scenes.spectral_scene); None for an RGB scene.
+    spectral: SpectralContent | None = None
 
     @property
     def emitters(self) -> tuple[Mesh, ...]:
@@ -329,7 +337,7 @@ class Scene:
         Comments, formatting, OBJ-vs-inline choices and regions do not change
         it; any change to geometry, materials, camera, transport settings or
         quantity does. Keys that older scenes lack (spheres, a quantity other
-        than radiance, the AO definition) enter only when present,
+        than radiance, the AO definition, spectral content) enter only when present,
         so the stored references of those scenes stay valid.
         """
         payload = {
@@ -355,6 +363,8 @@ class Scene:
             payload["quantity"] = self.quantity
         if self.ambient_occlusion is not None:
             payload["ambient_occlusion"] = self.ambient_occlusion.hash_payload()
+        if self.spectral is not None:
+            payload["spectral"] = self.spectral.hash_payload()
         blob = json.dumps(payload, sort_keys=True, separators=(",", ":")).encode()
         return "sha256:" + hashlib.sha256(blob).hexdigest()
 
