@@ -25,13 +25,15 @@ from harness.scenes.model import (DEGENERATE_REL_AREA, FEATURES, FOV_AXES, IMAGE
                                   image_memory_bytes, object_bounds, one_line)
 from harness.scenes.quantities import DEFAULT_QUANTITY, QUANTITIES, AmbientOcclusion, parse_ambient_occlusion
 from harness.scenes.spectral_scene import SpectralReader
+from harness.scenes.units import apply_length_scale
 from harness.suggest import closest
 
 #: The keys each table of a scene file may have; any other is an error (with a did-you-mean).
 #: A material's keys are its type's fields (harness.scenes.materials).
 SCENE_KEYS = {
     "": ("format", "name", "description", "quantity", "features", "camera", "render", "materials", "meshes",
-         "spheres", "regions", "ambient_occlusion", "colour", "spectra"),
+         "spheres", "regions", "ambient_occlusion", "colour", "spectra",
+         "length_scale"),
     "camera": ("type", "position", "look_at", "up", "fov_deg", "fov_axis", "resolution"),
     "render": ("max_depth", "pixel_filter"),
     "mesh": ("name", "material", "obj", "vertices", "faces", "emitter"),
@@ -221,7 +223,7 @@ def parse_scene(doc: dict, path: Path) -> Scene:
     if unused := sorted(set(declared) - used):
         raise r.err("features", f"declares {', '.join(unused)} but does not use it")
 
-    return Scene(
+    return apply_length_scale(r, doc, Scene(
         name=name,
         path=path,
         features=frozenset(declared),
@@ -236,7 +238,7 @@ def parse_scene(doc: dict, path: Path) -> Scene:
         quantity=quantity,
         ambient_occlusion=ao,
         spectral=spectral.finish(),
-    )
+    ), _check_degenerate)
 
 
 def _parse_quantity(r: _Reader, doc: dict, meshes, spheres) -> tuple[str, AmbientOcclusion | None]:

@@ -5,7 +5,9 @@ every renderer adapter reads these, never the file.
 
 Units and colour space (named here once for the whole harness)
 ---------------------------------------------------------------
-- **Lengths** are in *scene units*; the harness never assumes metres.
+- **Lengths** are in *scene units*; the harness never assumes metres. A file
+  may give them in another unit and declare the factor, ``length_scale``
+  (:mod:`harness.scenes.units`); the Scene holds scene units.
 - **Angles** in the file are in degrees (``fov_deg``).
 - **Colour space** is linear sRGB: ITU-R BT.709 primaries, D65 white point,
   no transfer function. Every RGB triple in a scene, and every image a

@@ -216,3 +216,4 @@ def test_reflectance_above_one_and_missing_pipeline_are_refused(write_scene):
         load_scene(write_scene(no_colour, "b.toml"))
     with pytest.raises(SceneError, match=r"colour\.light: missing required field"):
         load_scene(write_scene(spectral_scene(SCENE_LIGHT, light_line=""), "c.toml"))
+
