@@ -340,6 +340,7 @@ def write_report(
     cores: int | None = None,
     series_labels: Mapping[str, str] | None = None,
     crops: Sequence[Sequence[int]] | None = None,
+    summary_files: bool = True,
 ) -> Path:
     """Write the self-contained HTML report to ``path`` atomically; return the path.
 
@@ -373,7 +374,8 @@ def write_report(
     ``figures=False`` writes the page alone (a few seconds quicker: converting
     every chart to PDF and 300 dpi PNG takes that).
     With a summary, ``summary.csv`` and ``summary.tex`` are written beside ``path`` too
-    (:func:`reports.summary_files.write_summary_files`).
+    (:func:`reports.summary_files.write_summary_files`), unless ``summary_files=False`` (a merged report
+    writes every experiment's itself).
     """
     path = Path(path)
     ctx = _context(
@@ -388,5 +390,6 @@ def write_report(
         written = WrittenFigures({**written.files, "images": grid["figure"]} if grid["figure"] else written.files,
                                  written.note)
     write_text_atomic(path, _render(ctx, written))
-    write_summary_files(path.parent, [(None, summary)], series_labels)  # summary.csv, .tex (reports.summary_files)
+    if summary_files:
+        write_summary_files(path.parent, [(None, summary)], series_labels)
     return path

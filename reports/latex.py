@@ -51,7 +51,8 @@ def escape(text: str) -> str:
     return "".join(_ESCAPES.get(ch, ch) for ch in str(text))
 
 
-def _round_sig(v: float, sig: int) -> float:
+def round_sig(v: float, sig: int) -> float:
+    """``v`` rounded to ``sig`` significant digits (as printing it in e-notation does)."""
     return float(f"{v:.{sig - 1}e}")
 
 
@@ -62,7 +63,7 @@ def _exponent(v: float) -> int:
 def number(v: float, sig: int = 3) -> str:
     """``v`` at ``sig`` significant digits as math-mode text (no ``$``): ``0.0123``, ``-0.498``,
     ``1.23\\times10^{5}``."""
-    r = _round_sig(float(v), sig)
+    r = round_sig(float(v), sig)
     if r == 0:
         return "0"
     e = _exponent(r)
@@ -74,13 +75,13 @@ def number(v: float, sig: int = 3) -> str:
 def _to_precision(v: float, error: float) -> str:
     """``v`` at 3 significant digits, but no finer than the last of ``error``'s 2 (``0.000`` for 6e-16 ± 0.01);
     in fixed notation where that range allows, else as :func:`number` writes it."""
-    r = _round_sig(v, 3)
+    r = round_sig(v, 3)
     if not (_FIXED[0] <= error < _FIXED[1] and abs(r) < _FIXED[1]):
         return number(v)
     own = 2 - _exponent(r) if abs(r) >= _FIXED[0] else 99  # a value too small for fixed notation: the error's
     if own < 0:  # 2501 → 2500: 3 significant digits in an integer
         return f"{round(v, own):.0f}"
-    decimals = max(min(own, 1 - _exponent(_round_sig(error, 2))), 0)
+    decimals = max(min(own, 1 - _exponent(round_sig(error, 2))), 0)
     text = f"{v:.{decimals}f}"
     return text[1:] if text.startswith("-") and float(text) == 0 else text
 
@@ -106,7 +107,7 @@ def value_cell(v, low=None, high=None, bold: bool = False) -> str:
         elif a + b == 0:  # no spread at all (a deterministic renderer): the value alone
             body = number(v)
         else:
-            top = _round_sig(max(abs(v), a, b), 3)
+            top = round_sig(max(abs(v), a, b), 3)
             e = _exponent(top) if top and not _FIXED[0] <= top < _FIXED[1] else 0
             s = 10.0 ** e
             m = _to_precision(v / s, min(x for x in (a / s, b / s) if x > 0) if a + b > 0 else 0.0)

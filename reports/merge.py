@@ -155,8 +155,8 @@ def write_merged_report(out: Path, inputs: Sequence[tuple[str, Path, Scene, Refe
                         summary=_concat([e.summary for e in lead]), provenance=prov,
                         command="\n".join(e.config.get("command", "") for e in lead),
                         sections=sections, title=title or f"Renderer comparison — {scenes}", labels=labels,
-                        series_labels=series_labels, crops=options.get("crops"))
-    # Every experiment's summary, the lead's and the others', each under its label with its own names
-    # (write_report wrote the lead's alone): one CSV with an experiment column, one LaTeX table each.
+                        series_labels=series_labels, crops=options.get("crops"), summary_files=False)
+    # Every experiment's summary, the lead's and the others', each under its label with its own names:
+    # one CSV with an experiment column, one LaTeX table each.
     write_summary_files(out, [(e.label, e.summary) for e in stored], options.get("series_labels") or {})
     return path

@@ -50,7 +50,7 @@ def _round(v, digits: int = CSV_DIGITS):
         f = float(v)
     except (TypeError, ValueError):
         return v
-    return float(f"{f:.{digits - 1}e}") if math.isfinite(f) else f
+    return latex.round_sig(f, digits) if math.isfinite(f) else f
 
 
 def readable_summary(summary: pd.DataFrame, series_labels: Mapping[str, str] | None = None) -> pd.DataFrame:
