@@ -171,8 +171,8 @@ def page_charts(runs, names, colors, prefix: str = "", time_column: str = "time_
             charts["convergence"].append({"key": k, "attrs": Markup(attrs), "spp": spp, "time": tim})
         points = [
             plots.Point(name=r["renderer"], color=colors[r["renderer"]], x=float(r["time_s"]), y=float(r[k]),
-                        label=_point_label(r["renderer"], r, k), tag=f"{int(r['spp'])}",
-                        series_label=labels.get(r["renderer"], r["renderer"]),
+                        tip=_point_label(r["renderer"], r, k), tag=f"{int(r['spp'])}",
+                        label=labels.get(r["renderer"], r["renderer"]),
                         xlo=_finite(r["time_s_low"]), xhi=_finite(r["time_s_high"]),
                         ylo=_finite(r[k + "_low"]), yhi=_finite(r[k + "_high"]))
             for _, r in conv.iterrows()

@@ -18,8 +18,8 @@ its legend goes: :data:`PAGE` for the report, styled by the page; one with a
 
 No text is cut and no two texts meet, by those estimates: legends and names wrap (the chart growing to hold
 them), names that do not wrap stand vertical, notes take rows, and a point's tag goes to the first free side
-of it or is left to its tooltip. A series' or group's ``label`` (a point's ``series_label``) is the text shown
-for it; ``data-renderer`` and the tooltips keep its ``name``.
+of it or is left to its tooltip. A series', point's or group's ``label`` is the text shown for it;
+``data-renderer`` and the tooltips keep its ``name``.
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ class Series:
     label: str = ""  # shown in the legend instead of ``name`` (``data-renderer`` and tooltips keep the name)
 
 
-def shown(item: "Series | BarGroup") -> str:
+def shown(item: "Series | Point | BarGroup") -> str:
     """The text a legend or a bar's tick label shows for an item: its display ``label``, else its ``name``."""
     return item.label or item.name
 
@@ -191,14 +191,13 @@ class Point:
     color: str
     x: float
     y: float
-    label: str = ""  # tooltip
+    tip: str = ""  # tooltip
     tag: str = ""  # short text drawn beside the point (e.g. its spp)
     xlo: float | None = None  # 95% CI whiskers, where known
     xhi: float | None = None
     ylo: float | None = None
     yhi: float | None = None
-    # the renderer's display text in the legend (``label`` is this point's tooltip, ``data-renderer`` keeps name)
-    series_label: str = ""
+    label: str = ""  # the renderer's text in the legend instead of ``name`` (``data-renderer`` keeps the name)
 
 
 def scatter_svg(
@@ -219,7 +218,7 @@ def scatter_svg(
         return f'<p class="note">No positive values to plot for {escape(ylabel)}.</p>'
     names = list(dict.fromkeys(p.name for p in pts))
     colors = {p.name: p.color for p in pts}
-    texts = {p.name: p.series_label or p.name for p in reversed(pts)}  # the first point's, where they disagree
+    texts = {p.name: shown(p) for p in reversed(pts)}  # the first point's, where they disagree
     whiskers = [("whisker", "#9aa1ad", "95% CI")] if any(p.xlo is not None or p.ylo is not None for p in pts) else []
     ax = _Axes(xdom, ydom, layout,
                [("dot", colors[n], texts[n]) for n in names] + [("ring", "#ffd166", "Pareto frontier")] + whiskers)
@@ -249,7 +248,7 @@ def scatter_svg(
     radius = [5 if i in on_front else 3.6 for i in range(len(pts))]
     for i, p in enumerate(pts):
         cls = "point on-front" if i in on_front else "point"
-        tip = f"<title>{escape(p.label)}{' — on the Pareto frontier' if i in on_front else ''}</title>"
+        tip = f"<title>{escape(p.tip)}{' — on the Pareto frontier' if i in on_front else ''}</title>"
         ax.parts.append(
             f'<circle class="{cls}" data-renderer="{escape(p.name)}" cx="{_f(ax.x(p.x))}" cy="{_f(ax.y(p.y))}" '
             f'r="{radius[i]}" fill="{p.color}">{tip}</circle>'

@@ -127,7 +127,7 @@ def test_series_label_is_shown_and_name_kept_for_the_page():
     bars = plots.bars_svg(groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")), uid="b", ylabel="m")
     names = [t["text"] for t in _check_layout(bars) if t["cls"] == "tick x"]
     assert names == ["PT", LONG[1]] and f"<title>{LONG[0].replace(chr(34), '&quot;')}</title>" in bars
-    points = [plots.Point(n, "#000", 1.0 + i, 2.0 + i, label="tooltip", series_label="S" if i == 0 else "")
+    points = [plots.Point(n, "#000", 1.0 + i, 2.0 + i, tip="tooltip", label="S" if i == 0 else "")
               for i, n in enumerate(LONG[:2])]
     scatter = plots.scatter_svg(points, uid="s", xlabel="t", ylabel="e")
     assert [t["text"] for t in _check_layout(scatter) if t["cls"] == "legend-label"][:2] == ["S", LONG[1]]
@@ -137,7 +137,7 @@ def test_series_label_is_shown_and_name_kept_for_the_page():
 def _points(spread: float):
     """Six renderers at four spp whose points lie within ``spread`` (relative) of each other."""
     return [plots.Point(n, plots.color_for(i), 0.01 * s * (1 + spread * i), s ** -0.5 * (1 + spread * i),
-                        label=f"{n} {s}", tag=str(s))
+                        tip=f"{n} {s}", tag=str(s))
             for i, n in enumerate(LONG) for s in (1, 4, 16, 64)]
 
 
