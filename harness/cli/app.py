@@ -16,8 +16,8 @@ with interrupt.starting():  # a Ctrl-C during these imports (seconds): one line 
     # Importing a command module registers its commands, in this order in `cbox --help` (so not sorted).
     from harness.cli import listing, run, compare_image, experiment, gate, stress, reference, export  # isort: skip
     from harness.cli.common import (PATH_ERRORS, USER_ERRORS, ClickException, NoArgsIsHelpError, UsageError,
-                                    Verbosity, check_environment, close_progress_bars, command_tree, fail,
-                                    set_verbosity, usage_message)
+                                    check_environment, command_tree, fail, usage_message)
+    from harness.cli.output import Verbosity, close_progress_bars, set_verbosity
 
 
 #: The command modules, registered on the app by their import above.

@@ -9,7 +9,8 @@ from typing import List, Optional
 import typer
 
 from harness.cli.choices import choice_callback
-from harness.cli.common import app, command_line, info, out_folder_option
+from harness.cli.common import app, command_line, out_folder_option
+from harness.cli.output import info
 from harness.cli.run import TABLE_METRICS
 from harness.scenes.library import resolve_scene
 # Heavy modules (the metrics, pandas, the report) are imported inside the command: `cbox --help` must answer

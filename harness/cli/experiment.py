@@ -9,10 +9,10 @@ import typer
 
 from harness.adapters.api import attribute
 from harness.adapters.registry import missing_features, resolve
-from harness.cli.common import (DashboardOpt, Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SchedulerOpt, SetOpt,
-                                TitleOpt, WorkersOpt, app, command_line, executor_for, info, out_folder_option,
-                                print_json)
+from harness.cli.common import (DashboardOpt, RendererFilesOpt, RenderersOpt, SceneOpt, SchedulerOpt, SetOpt, TitleOpt,
+                                WorkersOpt, app, command_line, executor_for, out_folder_option, print_json)
 from harness.cli.figures import CropOpt, SeriesLabelOpt, keep_report_options, parse_crops, series_labels_for
+from harness.cli.output import Progress, info
 from harness.cli.timing import TimeBasisOpt, time_basis_option, time_repeats_option, warn_contention
 from harness.scenes.library import resolve_scene
 from harness.store.experiments import CONFIG_FILE, SUMMARY_FILE, ExperimentError, load_results

@@ -10,8 +10,9 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.common import (RENDERER_FILES_HELP, USER_ERRORS, DashboardOpt, Progress, SchedulerOpt, WorkersOpt,
-                                app, command_line, executor_for, info, out_folder_option, print_json)
+from harness.cli.common import (RENDERER_FILES_HELP, USER_ERRORS, DashboardOpt, SchedulerOpt, WorkersOpt, app,
+                                command_line, executor_for, out_folder_option, print_json)
+from harness.cli.output import Progress, info
 from harness.cli.run import write_compare_outputs
 from harness.gate.config import GateConfigError, load_config
 from harness.scenes.library import resolve_scene

@@ -15,7 +15,7 @@ cluster) still runs. During start-up, while the command modules are imported
 (seconds: NumPy, SciPy, Numba), there is nothing to clean up and no ``try`` to
 catch it: the handler of :func:`starting` prints the line and exits at once.
 
-The count comes from the latest progress (:class:`harness.cli.common.Progress`
+The count comes from the latest progress (:class:`harness.cli.output.Progress`
 registers itself with :func:`track`): this module imports nothing heavy, so
 ``app.py`` installs it before everything else.
 """

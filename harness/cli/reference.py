@@ -9,8 +9,9 @@ from typing import List, Optional
 import typer
 
 from harness.adapters.registry import RendererError, resolve
-from harness.cli.common import (REFERENCE_RENDERER, DashboardOpt, Progress, SceneOpt, SchedulerOpt, SetOpt, WorkersOpt,
+from harness.cli.common import (REFERENCE_RENDERER, DashboardOpt, SceneOpt, SchedulerOpt, SetOpt, WorkersOpt,
                                 check_output_folder, executor_for, reference_app)
+from harness.cli.output import Progress
 from harness.scenes.library import resolve_scene
 from harness.store.references import load_reference
 # Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on

@@ -10,9 +10,10 @@ import typer
 
 from harness.adapters.registry import RendererError, missing_features, resolve
 from harness.adapters.settings import canonical
-from harness.cli.common import (Progress, RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt, TitleOpt,
-                                app, check_output_file, command_line, info, out_folder_option)
+from harness.cli.common import (RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt, TitleOpt, app,
+                                check_output_file, command_line, out_folder_option)
 from harness.cli.figures import CropOpt, SeriesLabelOpt, keep_report_options, parse_crops, series_labels_for
+from harness.cli.output import Progress, info
 from harness.cli.timing import TimeBasisOpt, time_repeats_option, warn_contention
 from harness.scenes.library import resolve_scene
 from harness.store.exr import write_exr

@@ -7,7 +7,8 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.common import REFERENCE_RENDERER, Progress, RendererFilesOpt, app, command_line, out_folder_option
+from harness.cli.common import REFERENCE_RENDERER, RendererFilesOpt, app, command_line, out_folder_option
+from harness.cli.output import Progress
 
 
 @app.command()

@@ -7,8 +7,8 @@ from typing import Any
 
 import typer
 
-from harness.cli.common import info
 from harness.cli.choices import choice_callback
+from harness.cli.output import info
 
 
 def _checked_repeats(ctx: Any, value: int | None) -> int | None:

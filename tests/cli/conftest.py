@@ -2,11 +2,11 @@
 
 import pytest
 
-from harness.cli import common
+from harness.cli import output
 
 
 @pytest.fixture(autouse=True)
 def _normal_verbosity():
     """``cbox -q`` in this process sets the verbosity for the process: back to normal after each test."""
     yield
-    common.set_verbosity(common.Verbosity.NORMAL)
+    output.set_verbosity(output.Verbosity.NORMAL)

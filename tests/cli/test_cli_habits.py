@@ -17,7 +17,7 @@ import sys
 import pytest
 
 from tests.conftest import cbox_in_process as cbox, ROOT, run_cbox
-from harness.cli import common
+from harness.cli import common, output
 from harness.suggest import closest
 from harness.workflows.converge import parse_spp_list
 
@@ -65,8 +65,8 @@ def test_converge_log_in_ci_has_a_line_per_cell_and_no_carriage_return(tmp_path,
 
 def test_progress_time_left_ignores_stored_units(monkeypatch, capsys):
     clock = iter([0.0, 0.0, 0.0, 10.0])  # made at 0; two stored units at 0; a rendered one took 10 s
-    monkeypatch.setattr(common.time, "perf_counter", lambda: next(clock))
-    bar = common.Progress(4, "converge box", "cell")
+    monkeypatch.setattr(output.time, "perf_counter", lambda: next(clock))
+    bar = output.Progress(4, "converge box", "cell")
     bar.advance("a seed 0", stored=True)
     bar.advance("a seed 1", stored=True)
     bar.advance("a seed 2")
@@ -84,14 +84,14 @@ def test_an_error_on_a_terminal_starts_a_fresh_line(monkeypatch):
 
     term = Terminal()
     monkeypatch.setattr(sys, "stderr", term)
-    bar = common.Progress(3, "gate", "expectation")
+    bar = output.Progress(3, "gate", "expectation")
     bar.advance("one passed")
     assert term.getvalue().startswith("\rgate: 0/3 expectations |")  # a bar: stderr is a terminal
     with pytest.raises(SystemExit):
         common.fail("boom")
     # The bar's line was cleared and the cursor put back at its start before the error.
     assert term.getvalue().split("\r")[-1] == "cbox: error: boom\n"
-    assert common._live_bars == []
+    assert output._live_bars == []
 
 
 # Usage errors: (arguments, texts the one stderr line must contain after "cbox: error: ").

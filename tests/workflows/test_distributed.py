@@ -168,7 +168,7 @@ def assert_same_experiment(a: Path, b: Path) -> None:
 def test_converge_through_scheduler_equals_in_process(cluster, workdir, small_scene, in_process, capsys):
     """``cbox converge ... --scheduler tcp://127.0.0.1:PORT`` (the command, in this process): the in-process
     table and images; and a finished cell is never rendered again."""
-    from harness.cli import common
+    from harness.cli import output
     from harness.cli.app import main
 
     out = workdir / "scheduler"
@@ -178,7 +178,7 @@ def test_converge_through_scheduler_equals_in_process(cluster, workdir, small_sc
             main(["converge", "--scene", str(small_scene.path.parent), *[a for r in RENDERERS for a in ("-r", r)],
                   "--spp", SPP, "--seeds", str(len(SEEDS)), "--scheduler", cluster.address, "--out", str(out)])
     finally:
-        common.set_verbosity(common.Verbosity.NORMAL)
+        output.set_verbosity(output.Verbosity.NORMAL)
     err = capsys.readouterr().err
     assert e.value.code == 0, err
     assert f"running on scheduler {cluster.address} (2 worker threads)" in err
@@ -357,7 +357,7 @@ def test_options_are_checked_before_any_work(tmp_path, capsys, monkeypatch):
     scheduler: one line naming the option, exit 2, nothing written."""
     import dask
 
-    from harness.cli import common
+    from harness.cli import output
     from harness.cli.app import main
 
     monkeypatch.syspath_prepend(str(ROOT))
@@ -376,7 +376,7 @@ def test_options_are_checked_before_any_work(tmp_path, capsys, monkeypatch):
                 assert e.value.code == 2 and err.startswith("cbox: error: ") and message in err, (extra, err)
                 assert len(err.strip().splitlines()) == 1, err
     finally:
-        common.set_verbosity(common.Verbosity.NORMAL)
+        output.set_verbosity(output.Verbosity.NORMAL)
     assert not (tmp_path / "x" / "results.parquet").exists()
 
 
@@ -395,7 +395,7 @@ def test_worker_share_of_cores_and_a_writable_numba_cache(tmp_path):
 
 
 def test_progress_says_running_and_failed_cells(capsys):
-    from harness.cli.common import Progress
+    from harness.cli.output import Progress
 
     with Progress(4, "converge box", "cell", slots=2) as bar:
         bar.advance("pathtracer seed 0")
