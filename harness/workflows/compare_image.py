@@ -67,16 +67,6 @@ INPUT_TRANSFERS = {
 # --------------------------------------------------------------------------
 
 
-def canonical_transfer(transfer: str | None) -> str | None:
-    """``transfer`` as :data:`INPUT_TRANSFERS` names it, whatever its case (``sRGB`` is ``srgb``)."""
-    if transfer is None:
-        return None
-    known = {t.casefold(): t for t in INPUT_TRANSFERS}
-    if transfer.casefold() not in known:
-        raise ValueError(f"unknown input transfer {transfer!r}; expected one of {', '.join(INPUT_TRANSFERS)}")
-    return known[transfer.casefold()]
-
-
 def linear_pixels(image: ImageFile, transfer: str | None, exposure: float | None = None) -> np.ndarray:
     """The file's pixels as linear values: floating-point files as they are, integer ones through ``transfer``.
 
@@ -93,7 +83,8 @@ def linear_pixels(image: ImageFile, transfer: str | None, exposure: float | None
         raise ImageFileError(f"{image.path}: {image.file_format} with {image.pixel_type} pixels is display-referred, "
                              f"not linear; say how to linearise it with --input-transfer "
                              f"({' or '.join(INPUT_TRANSFERS)})")
-    transfer = canonical_transfer(transfer)
+    if transfer not in INPUT_TRANSFERS:  # the CLI has matched its case already (harness.cli.choices)
+        raise ValueError(f"unknown input transfer {transfer!r}; expected one of {', '.join(INPUT_TRANSFERS)}")
     linear = image.pixels if transfer == "linear" else srgb_eotf(image.pixels)
     if exposure:
         linear = linear / 2.0 ** exposure
