@@ -280,12 +280,15 @@ def demo(
     cornell-box (error against spp and time, speed/accuracy, bias and variance) and compared on
     cornell-box-caustics (mirror and glass) → out/report.html, the caustics as a section of it, with the
     Whitted variants against the others per region in "Recursive ray tracing and its hacks"."""
+    import time
+
     from harness.cli.experiment import print_summary, run_convergence
     from harness.evaluate.missing_light import study_columns, study_masks
     from harness.evaluate.regions import region_noise
     from reports.scenes import scene_section
     from reports.whitted import TITLE, whitted_section
 
+    started = time.perf_counter()
     sections, code = [], 0
     for name in DEMO_SCENES[1:]:
         sub_code, records, sc, ref = _run_compare(name, demo_caustics_renderers(renderer), spp, 0, out / name, False)
@@ -304,4 +307,11 @@ def demo(
                                    sections=sections)
     print_summary(out, runs)
     info(f"report: {report}")
+    info(f"demo: {_minutes(time.perf_counter() - started)} in all")
     raise typer.Exit(max(code, 1 if (runs["status"] == "failed").any() else 0))
+
+
+def _minutes(seconds: float) -> str:
+    """``M:SS`` (wall time, as a user reads a clock)."""
+    whole = int(round(seconds))
+    return f"{whole // 60}:{whole % 60:02d}"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -64,6 +65,7 @@ def _demo(tmp_path, *renderers):
     proc = run_cbox("demo", "--out", str(tmp_path), "--spp", "4", *[a for r in renderers for a in ("-r", r)])
     assert proc.returncode == 0, proc.stderr
     assert "report:" in proc.stderr and (tmp_path / "report.html").exists()
+    assert re.search(r"^demo: \d+:[0-5]\d in all$", proc.stderr, re.M), proc.stderr[-300:]  # its total time, last
     return pd.read_parquet(tmp_path / "results.parquet"), pd.read_csv(tmp_path / "cornell-box-caustics" / "metrics.csv")
 
 
