@@ -1,0 +1,130 @@
+"""The cost of scoring one results row (issue 34: ≤ 0.15 s at 256² with every metric, FLIP included; ΔE00 at
+1024² ≤ 0.2 s).
+
+A row is what :func:`harness.workflows.runner.score` and :func:`~harness.workflows.runner.score_regions` compute
+for each (renderer, spp, seed) of a sweep: every image metric (:func:`harness.evaluate.metrics.image_metrics`,
+FLIP included), the noise yardsticks and the named regions' metrics. The test image is the reference's stored
+independent noise batch (a real 128-spp render of ``cornell-box``, 256²), scored against the stored reference as
+a sweep scores its rows: the same reference object for every row, a new test image array each time.
+
+Each item (the whole row, then each metric on its own) is timed once per round, the items interleaved
+(A B C ... A B C ...) so that a change of machine load hits all alike; the figure is the median over
+``--rounds`` rounds, after one untimed warm-up round (numba compiles or loads its kernels, the reference-side
+caches fill: a sweep pays that once per reference, not per row). ``flip_mean (flip-evaluator)`` is the
+authors' library on the same images and exposures, for the ratio; ΔE00 at 1024² is
+:func:`harness.evaluate.ciede2000.delta_e2000_linear` on the image and reference upsampled 4× (nearest).
+
+``--markdown FILE`` writes the table into the file's block ``scoring.py#cost`` (``benchmarks/markdown_blocks.py``).
+
+Run: ``.venv/bin/python benchmarks/scoring.py --markdown BENCHMARKS.md`` (about a minute on 2 cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import markdown_blocks
+from harness.evaluate import ciede2000, flip, metrics, regions
+from harness.evaluate import noise as yardsticks
+from harness.scenes.library import resolve_scene
+from harness.store.references import load_reference
+from harness.workflows import runner
+
+BLOCK = "scoring.py#cost"
+ROW_TARGET_S, DELTA_E_1024_TARGET_S = 0.15, 0.2
+
+
+def _library_flip_mean(img, ref) -> float:
+    """flip_mean through ``flip_evaluator`` 1.7 on the same exposures (what the harness used before)."""
+    parameters = flip.flip_parameters(ref)
+    fmap, _, _ = flip.flip_library().evaluate(flip.flip_input(ref), flip.flip_input(img), "HDR", applyMagma=False,
+                                              computeMeanError=False, parameters=dict(parameters))
+    return float(np.mean(fmap))
+
+
+def items(scene, reference, image: np.ndarray) -> dict:
+    """What is timed: name → a call. A fresh copy of the test image per call, as each row brings its own."""
+    ref = reference.image
+    exposure = metrics.display_exposure(ref)
+    big_img, big_ref = (np.repeat(np.repeat(a, 4, axis=0), 4, axis=1) for a in (image, ref))
+
+    def fresh():
+        return image.copy()
+
+    return {
+        "whole row (score + regions)": lambda: (runner.score(fresh(), reference, 128),
+                                                runner.score_regions(scene, fresh(), reference, 128)),
+        "flip_mean": lambda: flip.flip_mean(fresh(), ref),
+        "flip_mean (flip-evaluator 1.7)": lambda: _library_flip_mean(fresh(), ref),
+        "ΔE00 map + stats": lambda: metrics.delta_e2000_stats(metrics.delta_e2000(fresh(), ref, exposure,
+                                                                                  full=True)[1]),
+        "SSIM": lambda: metrics.ssim(fresh(), ref, exposure),
+        "PSNR": lambda: metrics.psnr(fresh(), ref, exposure),
+        "RMSE, MSE, relMSE, trimmed relMSE": lambda: (metrics.rmse(fresh(), ref), metrics.rel_mse(fresh(), ref),
+                                                      metrics.rel_mse(fresh(), ref, trim=metrics.REL_MSE_TRIM)),
+        "counts, mean radiance": lambda: (metrics.invalid_pixel_counts(fresh()),
+                                          metrics.mean_radiance_rel_error(fresh(), ref)),
+        "display exposure": lambda: metrics.display_exposure(ref),
+        "noise yardsticks": lambda: yardsticks.noise_yardsticks(fresh(), reference, 128),
+        "region metrics": lambda: runner.score_regions(scene, fresh(), reference, 128),
+        "ΔE00 map at 1024²": lambda: ciede2000.delta_e2000_linear(big_img, big_ref, exposure),
+    }
+
+
+def measure(calls: dict, rounds: int) -> dict[str, float]:
+    """Median seconds per call over ``rounds`` interleaved rounds, after one untimed round."""
+    for call in calls.values():
+        call()
+    times = {name: [] for name in calls}
+    for _ in range(rounds):
+        for name, call in calls.items():
+            t0 = time.perf_counter()
+            call()
+            times[name].append(time.perf_counter() - t0)
+    return {name: statistics.median(ts) for name, ts in times.items()}
+
+
+def table(medians: dict[str, float]) -> list[str]:
+    row = medians["whole row (score + regions)"]
+    lines = ["| what | median (ms) | share of the row | target |", "| --- | --- | --- | --- |"]
+    for name, s in medians.items():
+        share = "" if name.startswith("whole") or "1024" in name or "evaluator" in name else f"{s / row:.0%}"
+        target = (f"≤ {ROW_TARGET_S * 1e3:.0f} ms: **{'met' if s <= ROW_TARGET_S else 'not met'}**"
+                  if name.startswith("whole") else
+                  f"≤ {DELTA_E_1024_TARGET_S * 1e3:.0f} ms: **{'met' if s <= DELTA_E_1024_TARGET_S else 'not met'}**"
+                  if "1024" in name else
+                  f"{medians['flip_mean (flip-evaluator 1.7)'] / medians['flip_mean']:.1f}× flip_mean's"
+                  if "evaluator" in name else "")
+        lines.append(f"| {name} | {s * 1e3:.1f} | {share} | {target} |")
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--rounds", type=int, default=15, help="interleaved rounds")
+    ap.add_argument("--markdown", type=Path, action="append", default=[])
+    args = ap.parse_args(argv)
+    command = markdown_blocks.command_line([sys.argv[0]] + list(sys.argv[1:] if argv is None else argv))
+    scene = resolve_scene("cornell-box")
+    reference = load_reference(scene)
+    regions.region_masks(scene)
+    medians = measure(items(scene, reference, np.asarray(reference.noise)), args.rounds)
+    load = os.getloadavg()[0]
+    body = "\n".join(table(medians) + [
+        "", f"256² `cornell-box` (its stored 128-spp noise batch against its reference; the ΔE00 row upsampled "
+            f"to 1024²), median of {args.rounds} interleaved rounds after a warm-up round, "
+            f"{os.cpu_count()} cores, load average {load:.1f}, {time.strftime('%Y-%m-%d')}. Command: `{command}`."])
+    print(body, flush=True)
+    markdown_blocks.write_blocks(args.markdown, {BLOCK: body}, command)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
