@@ -41,14 +41,6 @@ BLOCK = "scoring.py#cost"
 ROW_TARGET_S, DELTA_E_1024_TARGET_S = 0.15, 0.2
 
 
-def _library_flip_mean(img, ref) -> float:
-    """flip_mean through ``flip_evaluator`` 1.7 on the same exposures (what the harness used before)."""
-    parameters = flip.flip_parameters(ref)
-    fmap, _, _ = flip.flip_library().evaluate(flip.flip_input(ref), flip.flip_input(img), "HDR", applyMagma=False,
-                                              computeMeanError=False, parameters=dict(parameters))
-    return float(np.mean(fmap))
-
-
 def items(scene, reference, image: np.ndarray) -> dict:
     """What is timed: name → a call. A fresh copy of the test image per call, as each row brings its own."""
     ref = reference.image
@@ -62,7 +54,7 @@ def items(scene, reference, image: np.ndarray) -> dict:
         "whole row (score + regions)": lambda: (runner.score(fresh(), reference, 128),
                                                 runner.score_regions(scene, fresh(), reference, 128)),
         "flip_mean": lambda: flip.flip_mean(fresh(), ref),
-        "flip_mean (flip-evaluator 1.7)": lambda: _library_flip_mean(fresh(), ref),
+        "flip_mean (flip-evaluator 1.7)": lambda: float(np.mean(flip.library_flip_map(fresh(), ref))),
         "ΔE00 map + stats": lambda: metrics.delta_e2000_stats(metrics.delta_e2000(fresh(), ref, exposure,
                                                                                   full=True)[1]),
         "SSIM": lambda: metrics.ssim(fresh(), ref, exposure),
