@@ -135,20 +135,22 @@ def flip_map(img, ref, parameters: dict | None = None) -> np.ndarray:
 
     ``parameters`` default to :func:`flip_parameters` of ``ref``, cached per reference content. Computed by
     :mod:`harness.evaluate.hdr_flip` (the library's arithmetic, the reference's side of each exposure
-    computed once per reference); ``flip_evaluator`` computes the same map to ~1e-5 (:func:`library_flip_map`).
+    computed once per reference); ``flip_evaluator`` computes the same map (:func:`library_flip_map`; bit for bit on the
+    references measured).
     """
     from harness.evaluate import hdr_flip  # numba: not loaded by a command that scores no FLIP
 
     img, ref = as_pair(img, ref)
     ref32 = flip_input(ref)
+    digest = hdr_flip.SideCache.digest(ref32)
     if parameters is None:
-        parameters = _cached_parameters(ref32)
+        parameters = _cached_parameters(ref32, digest)
     if parameters is None:
         return np.full(ref.shape[:2], np.nan)
     if parameters["tonemapper"] != TONE_MAPPER:
         raise ValueError(f"HDR-FLIP here tone-maps by {TONE_MAPPER!r} only, not {parameters['tonemapper']!r}")
     fmap = hdr_flip.hdr_flip_map(flip_input(img), ref32, exposure_scales(parameters), ACES_COEFFICIENTS,
-                                 parameters["ppd"])
+                                 parameters["ppd"], digest=digest)
     return fmap.astype(np.float64)
 
 
@@ -170,15 +172,12 @@ def library_flip_map(img, ref, parameters: dict | None = None) -> np.ndarray:
 _PARAMETERS: dict[str, dict | None] = {}
 
 
-def _cached_parameters(ref32: np.ndarray) -> dict | None:
-    from harness.evaluate.hdr_flip import SideCache
-
-    key = SideCache.digest(ref32)
-    if key not in _PARAMETERS:
+def _cached_parameters(ref32: np.ndarray, digest: str) -> dict | None:
+    if digest not in _PARAMETERS:
         if len(_PARAMETERS) >= 16:
             _PARAMETERS.clear()
-        _PARAMETERS[key] = flip_parameters(ref32)
-    found = _PARAMETERS[key]
+        _PARAMETERS[digest] = flip_parameters(ref32)
+    found = _PARAMETERS[digest]
     return None if found is None else dict(found)
 
 

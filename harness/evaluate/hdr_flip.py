@@ -21,9 +21,9 @@ scoring many images against one reference costs only their own side and the comp
 The arithmetic is the authors' C++ library's (``flip-evaluator`` 1.7, ``FLIP.h``) step for step in float32:
 the same constants, the same order of every sum (a convolution adds its taps from the left/top, borders
 clamped), the same separable filters and their normalisation, powf and sqrtf where it takes them. Its map
-agrees to about 1e-6 (tests/evaluate/test_hdr_flip.py states the tolerance it checks). float32 on purpose,
-against the harness's float64 rule: it is the metric's definition as published and computed, and half the
-memory traffic of the convolutions, which are most of the cost.
+agrees to a few 1e-6 per pixel, often bit for bit (tests/evaluate/test_hdr_flip.py states the tolerance it
+checks). float32 on purpose, against the harness's float64 rule: it is the metric's definition as published
+and computed, and half the memory traffic of the convolutions.
 
 Inputs: (H, W, 3) float32 linear-sRGB images, non-negative and finite (:func:`harness.evaluate.flip.flip_input`
 makes them so); the exposure range and the pixels per degree come from :mod:`harness.evaluate.flip`.
@@ -223,12 +223,13 @@ def _lab_f(t):
 
 
 @njit(cache=True)
-def _perceived_at(colour, features, y, x):
-    """Hunt-adjusted CIELAB (L, 0.01·L·a, 0.01·L·b) of the filtered colour at (y, x), clamped in linear RGB,
-    and the edge and point magnitudes of the filtered luminance there."""
-    fy = (colour[0, y, x] + _16) / _116
-    cx = colour[1, y, x] / _500
-    cz = (colour[2, y, x] + colour[3, y, x]) / _200
+def _perceived_at(c_y, c_x, c_z1, c_z2, dx, ddx, dy, ddy):
+    """Hunt-adjusted CIELAB (L, 0.01·L·a, 0.01·L·b) of a pixel's filtered colour, clamped in linear RGB, and
+    the edge and point magnitudes of its filtered luminance. Scalars in: a helper that takes arrays costs
+    numba a reference count per call (renderers/core/rays.py's notes), here 10× the arithmetic."""
+    fy = (c_y + _16) / _116
+    cx = c_x / _500
+    cz = (c_z1 + c_z2) / _200
     xx, yy, zz = (fy + cx) * _ILL[0], fy * _ILL[1], (fy - cz) * _ILL[2]
     r = min(max(_XYZ_RGB[0] * xx + _XYZ_RGB[1] * yy + _XYZ_RGB[2] * zz, _ZERO), _ONE)
     g = min(max(_XYZ_RGB[3] * xx + _XYZ_RGB[4] * yy + _XYZ_RGB[5] * zz, _ZERO), _ONE)
@@ -238,7 +239,6 @@ def _perceived_at(colour, features, y, x):
     zz = (_RGB_XYZ[6] * r + _RGB_XYZ[7] * g + _RGB_XYZ[8] * b) * _INV_ILL[2]
     fx, fy, fz = _lab_f(xx), _lab_f(yy), _lab_f(zz)
     lum = _116 * fy - _16
-    dx, ddx, dy, ddy = features[0, y, x], features[1, y, x], features[2, y, x], features[3, y, x]
     return (lum, _HUNT * lum * (_500 * (fx - fy)), _HUNT * lum * (_200 * (fy - fz)),
             np.sqrt(dx * dx + dy * dy), np.sqrt(ddx * ddx + ddy * ddy))
 
@@ -249,7 +249,8 @@ def _perceived(colour, features, out):
     for y in range(out.shape[1]):
         for x in range(out.shape[2]):
             out[0, y, x], out[1, y, x], out[2, y, x], out[3, y, x], out[4, y, x] = _perceived_at(
-                colour, features, y, x)
+                colour[0, y, x], colour[1, y, x], colour[2, y, x], colour[3, y, x],
+                features[0, y, x], features[1, y, x], features[2, y, x], features[3, y, x])
 
 
 #: The colour pipeline's channels: horizontal pass Y, Cx, Cz (twice, for Cz's two Gaussians); the vertical
@@ -266,6 +267,7 @@ class Workspace:
 
     def __init__(self, h: int, w: int):
         self.ycxcz, self.rows, self.colour = (np.empty((4, h, w), np.float32) for _ in range(3))
+        self.side = np.empty((5, h, w), np.float32)
 
 
 def _filtered(rgb, scale, tone_mapper, ppd, ws: Workspace) -> tuple[np.ndarray, np.ndarray]:
@@ -282,14 +284,15 @@ def _filtered(rgb, scale, tone_mapper, ppd, ws: Workspace) -> tuple[np.ndarray, 
 
 def image_side(rgb: np.ndarray, scale: float, tone_mapper, ppd: float, ws: Workspace | None = None) -> np.ndarray:
     """One image's side of LDR-FLIP at one exposure: (5, H, W) float32, Hunt-adjusted CIELAB of its filtered
-    colour and the edge and point magnitudes of its luminance (:func:`_perceived_at`).
+    colour and the edge and point magnitudes of its luminance (:func:`_perceived_at`); with a workspace ``ws``,
+    its plane ``side`` (valid until its next use), else a new array.
 
     ``rgb`` (H, W, 3) float32 linear, ``scale`` the exposure's factor 2^c (float32), ``tone_mapper`` its six
     coefficients.
     """
     h, w = rgb.shape[:2]
     colour, features = _filtered(rgb, scale, tone_mapper, ppd, ws or Workspace(h, w))
-    out = np.empty((5, h, w), np.float32)
+    out = np.empty((5, h, w), np.float32) if ws is None else ws.side
     _perceived(colour, features, out)
     return out
 
@@ -314,23 +317,23 @@ def _max_distance():
 
 
 @njit(cache=True)
-def _keep_largest_error(ref, colour, features, error):
-    """``error`` = max(``error``, LDR-FLIP against the reference's side ``ref`` (5, H, W)) of the test image whose
-    filtered channels are ``colour`` and ``features`` (:func:`_filtered`), at one exposure."""
+def _keep_largest_error(ref, test, error):
+    """``error`` = max(``error``, LDR-FLIP of ``test`` against ``ref``), both sides (5, H, W) of one exposure.
+
+    Apart from :func:`_perceived`, not fused with it: the fused loop measured 4× slower than the two."""
     cmax = _max_distance()
     pccmax = GPC * cmax
     low_slope = GPT / pccmax
     h, w = error.shape
     for y in range(h):
         for x in range(w):
-            lum, a, b, edge, point = _perceived_at(colour, features, y, x)
-            da, db = ref[1, y, x] - a, ref[2, y, x] - b
-            c = (abs(ref[0, y, x] - lum) + np.sqrt(da * da + db * db)) ** GQC
+            da, db = ref[1, y, x] - test[1, y, x], ref[2, y, x] - test[2, y, x]
+            c = (abs(ref[0, y, x] - test[0, y, x]) + np.sqrt(da * da + db * db)) ** GQC
             if c < pccmax:
                 c *= low_slope
             else:
                 c = GPT + ((c - pccmax) / (cmax - pccmax)) * (_ONE - GPT)
-            f = (_SQRT_HALF * max(abs(ref[3, y, x] - edge), abs(ref[4, y, x] - point))) ** GQF
+            f = (_SQRT_HALF * max(abs(ref[3, y, x] - test[3, y, x]), abs(ref[4, y, x] - test[4, y, x]))) ** GQF
             e = c ** (_ONE - f)
             if e > error[y, x]:
                 error[y, x] = e
@@ -347,7 +350,7 @@ class SideCache:
     """A reference's sides (:func:`image_side`) by (content digest, shape, exposure factor, pixels per degree,
     tone mapper), least recently used dropped beyond ``max_bytes``.
 
-    Keyed by the reference's content (a BLAKE2 digest of its float32 pixels, ~1 ms at 256²), not by the array
+    Keyed by the reference's content (a SHA-256 digest of its float32 pixels, ~0.5 ms at 256²), not by the array
     object: a reference changed in place, or a new array with other pixels, is a new key, and never gets an
     entry made for other pixels.
     """
@@ -359,7 +362,7 @@ class SideCache:
 
     @staticmethod
     def digest(ref: np.ndarray) -> str:
-        return hashlib.blake2b(np.ascontiguousarray(ref, np.float32).data, digest_size=16).hexdigest()
+        return hashlib.sha256(np.ascontiguousarray(ref, np.float32).data).hexdigest()
 
     def side(self, ref: np.ndarray, digest: str, scale, tone_mapper, ppd: float) -> np.ndarray:
         key = (digest, ref.shape, float(scale), float(F(ppd)), tuple(float(F(t)) for t in tone_mapper))
@@ -385,17 +388,19 @@ REFERENCE_SIDES = SideCache()
 
 
 def hdr_flip_map(test: np.ndarray, ref: np.ndarray, scales, tone_mapper, ppd: float,
-                 cache: SideCache | None = REFERENCE_SIDES) -> np.ndarray:
+                 cache: SideCache | None = REFERENCE_SIDES, digest: str | None = None) -> np.ndarray:
     """Per-pixel HDR-FLIP (H, W) float32 of ``test`` against ``ref`` ((H, W, 3) float32, non-negative, finite)
     over the exposure factors ``scales`` (:func:`exposure_scales`): each pixel's largest LDR-FLIP error.
 
-    The reference's side of each exposure comes from ``cache`` (None: computed afresh).
+    The reference's side of each exposure comes from ``cache`` (None: computed afresh); ``digest`` is
+    :meth:`SideCache.digest` of ``ref``, where the caller has it already.
     """
-    digest = SideCache.digest(ref) if cache is not None else None
+    if cache is not None and digest is None:
+        digest = SideCache.digest(ref)
     ws = Workspace(*ref.shape[:2])
     error = np.zeros(ref.shape[:2], np.float32)
     for scale in scales:
         ref_side = (cache.side(ref, digest, scale, tone_mapper, ppd) if cache is not None
-                    else image_side(ref, scale, tone_mapper, ppd, ws))
-        _keep_largest_error(ref_side, *_filtered(test, scale, tone_mapper, ppd, ws), error)
+                    else image_side(ref, scale, tone_mapper, ppd))
+        _keep_largest_error(ref_side, image_side(test, scale, tone_mapper, ppd, ws), error)
     return error
