@@ -34,6 +34,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
+import threading
 from collections import OrderedDict
 
 import numpy as np
@@ -359,6 +360,7 @@ class SideCache:
         self.max_bytes = max_bytes
         self.entries: OrderedDict[tuple, np.ndarray] = OrderedDict()
         self.hits = self.misses = 0
+        self._lock = threading.Lock()  # a Dask worker may score in threads; an entry is computed outside it
 
     @staticmethod
     def digest(ref: np.ndarray) -> str:
@@ -366,21 +368,24 @@ class SideCache:
 
     def side(self, ref: np.ndarray, digest: str, scale, tone_mapper, ppd: float) -> np.ndarray:
         key = (digest, ref.shape, float(scale), float(F(ppd)), tuple(float(F(t)) for t in tone_mapper))
-        found = self.entries.get(key)
-        if found is not None:
-            self.hits += 1
-            self.entries.move_to_end(key)
-            return found
-        self.misses += 1
+        with self._lock:
+            found = self.entries.get(key)
+            if found is not None:
+                self.hits += 1
+                self.entries.move_to_end(key)
+                return found
+            self.misses += 1
         found = image_side(ref, scale, tone_mapper, ppd)
         found.setflags(write=False)
-        self.entries[key] = found
-        while sum(a.nbytes for a in self.entries.values()) > self.max_bytes and len(self.entries) > 1:
-            self.entries.popitem(last=False)
+        with self._lock:
+            self.entries[key] = found
+            while sum(a.nbytes for a in self.entries.values()) > self.max_bytes and len(self.entries) > 1:
+                self.entries.popitem(last=False)
         return found
 
     def clear(self) -> None:
-        self.entries.clear()
+        with self._lock:
+            self.entries.clear()
 
 
 #: The process's cache of reference sides (8 exposures of a 256² reference: 10 MiB).
