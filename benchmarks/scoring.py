@@ -44,7 +44,8 @@ from harness.workflows import runner
 
 BLOCK = "scoring.py#cost"
 ROW_TARGET_S, DELTA_E_1024_TARGET_S = 0.15, 0.2
-BEFORE_ROW, BEFORE_DELTA_E = "whole row, as before (FLIP by flip-evaluator 1.7)", "ΔE00 map at 1024², as before (one pass)"
+BEFORE_ROW = "whole row, as before (FLIP by flip-evaluator 1.7)"
+BEFORE_DELTA_E = "ΔE00 map at 1024², as before (one pass)"
 
 
 def items(scene, reference, image: np.ndarray) -> dict:

@@ -159,12 +159,13 @@ def _tone(v, scale, tc):
 
 @njit(cache=True)
 def _exposed_ycxcz(rgb, scale, tc, out):
-    """``rgb`` × ``scale``, tone-mapped by t(x) = (t₀x² + t₁x + t₂)/(t₃x² + t₄x + t₅), clamped to [0, 1], in
-    YCxCz: ``out`` (3, H, W) as Y, Cx, Cz; ``out[3]`` the normalised Y, (Y + 16)/116, of the feature pipeline."""
+    """``rgb`` × ``scale``, tone-mapped by t(x) = (t₀x² + t₁x + t₂)/(t₃x² + t₄x + t₅), clamped to [0, 1],
+    in YCxCz: ``out`` (4, H, W) as Y, Cx, Cz and the feature pipeline's normalised Y, (Y + 16)/116."""
     h, w = rgb.shape[0], rgb.shape[1]
     for y in range(h):
         for x in range(w):
-            c0, c1, c2 = _tone(rgb[y, x, 0], scale, tc), _tone(rgb[y, x, 1], scale, tc), _tone(rgb[y, x, 2], scale, tc)
+            c0, c1, c2 = (_tone(rgb[y, x, 0], scale, tc), _tone(rgb[y, x, 1], scale, tc),
+                          _tone(rgb[y, x, 2], scale, tc))
             xx = _RGB_XYZ[0] * c0 + _RGB_XYZ[1] * c1 + _RGB_XYZ[2] * c2
             yy = _RGB_XYZ[3] * c0 + _RGB_XYZ[4] * c1 + _RGB_XYZ[5] * c2
             zz = _RGB_XYZ[6] * c0 + _RGB_XYZ[7] * c1 + _RGB_XYZ[8] * c2
@@ -226,8 +227,8 @@ def _lab_f(t):
 @njit(cache=True)
 def _perceived_at(c_y, c_x, c_z1, c_z2, dx, ddx, dy, ddy):
     """Hunt-adjusted CIELAB (L, 0.01·L·a, 0.01·L·b) of a pixel's filtered colour, clamped in linear RGB, and
-    the edge and point magnitudes of its filtered luminance. Scalars in: a helper that takes arrays costs
-    numba a reference count per call (renderers/core/rays.py's notes), here 10× the arithmetic."""
+    the edge and point magnitudes of its filtered luminance. Scalars in: a numba helper that takes arrays
+    pays reference counting per call (renderers/core/rays.py's notes)."""
     fy = (c_y + _16) / _116
     cx = c_x / _500
     cz = (c_z1 + c_z2) / _200
@@ -264,7 +265,8 @@ _FEATURE_COLUMNS, _FEATURE_COLUMN_WEIGHTS = np.array([0, 1, 2, 2]), np.array([0,
 
 
 class Workspace:
-    """The filtering's scratch planes for one image size, reused across exposures and calls."""
+    """Scratch planes for one image size: the filtering's, and the test image's side, reused across the
+    exposures of one map."""
 
     def __init__(self, h: int, w: int):
         self.ycxcz, self.rows, self.colour = (np.empty((4, h, w), np.float32) for _ in range(3))
