@@ -22,8 +22,8 @@ the library's: element ``n // 2`` of the sorted luminances.
 
 The map is computed by :mod:`harness.evaluate.hdr_flip`: the authors' library's arithmetic (the
 ``flip-evaluator`` package, ``FLIP.h``), with the reference's side of each exposure done once per
-reference, so a sweep pays only each image's own side (~10× faster than the library at 256²). The library
-stays a dependency, to check that against (:func:`library_flip_map`). It
+reference, so a sweep pays only each image's own side (~16× less CPU than the library at 256²,
+BENCHMARKS.md). The library stays a dependency, to check that against (:func:`library_flip_map`). It
 would also pick the exposures itself; we compute them here and pass them in
 (:func:`flip_parameters`), so the viewing conditions a number was made under
 are known and recorded, and so a mostly black reference cannot stretch them:
@@ -135,8 +135,8 @@ def flip_map(img, ref, parameters: dict | None = None) -> np.ndarray:
 
     ``parameters`` default to :func:`flip_parameters` of ``ref``, cached per reference content. Computed by
     :mod:`harness.evaluate.hdr_flip` (the library's arithmetic, the reference's side of each exposure
-    computed once per reference); ``flip_evaluator`` computes the same map (:func:`library_flip_map`; bit for bit on the
-    references measured).
+    computed once per reference); ``flip_evaluator`` computes the same map to a few 1e-6 per pixel
+    (:func:`library_flip_map`).
     """
     from harness.evaluate import hdr_flip  # numba: not loaded by a command that scores no FLIP
 
