@@ -188,10 +188,12 @@ def delta_e2000(lab_1, lab_2) -> np.ndarray:
     return _delta_e2000(*l_1, *l_2).reshape(lab_1.shape[:-1])
 
 
-#: Pixels per pass of :func:`delta_e2000_linear`: the formula's ~60 temporaries of a 256² image (512 KiB each)
-#: stay in this machine's caches; at 1024² whole-image temporaries (8 MiB each) made it memory-bound, 1.5-1.8×
-#: slower per pixel (measured, benchmarks/scoring.py). Each pixel's value is the same either way.
-CHUNK_PIXELS = 1 << 16
+#: Pixels per pass of :func:`delta_e2000_linear`: each of the formula's ~60 temporaries is then 128 KiB and they
+#: stay in this machine's caches (1 MiB of L2 a core), also while other processes share them. Whole-image
+#: temporaries (8 MiB each at 1024²) made it memory-bound; measured on this 2-core machine under load, CPU time
+#: at 1024²: 2^13-2^15 pixels 134-150 ms, 2^16 300-340 ms, one pass 500-700 ms; at 256², 2^14 10 ms, one pass
+#: 17-21 ms. Each pixel's value is the same either way.
+CHUNK_PIXELS = 1 << 14
 
 
 def delta_e2000_linear(img, ref, exposure: float) -> np.ndarray:
