@@ -20,7 +20,10 @@ largest error. The paper derives the range from the reference alone:
 (:func:`harness.evaluate.pixels.luminance`, FLIP's own), and the median is
 the library's: element ``n // 2`` of the sorted luminances.
 
-The ``flip-evaluator`` package (the authors' code) computes the map. It
+The map is computed by :mod:`harness.evaluate.hdr_flip`: the authors' library's arithmetic (the
+``flip-evaluator`` package, ``FLIP.h``), with the reference's side of each exposure done once per
+reference, so a sweep pays only each image's own side (~16× less CPU than the library at 256²,
+BENCHMARKS.md). The library stays a dependency, to check that against (:func:`library_flip_map`). It
 would also pick the exposures itself; we compute them here and pass them in
 (:func:`flip_parameters`), so the viewing conditions a number was made under
 are known and recorded, and so a mostly black reference cannot stretch them:
@@ -36,9 +39,9 @@ wide 3840-pixel display seen from 0.7 m).
 Inputs are linear-sRGB float images of one shape; a pixel with a NaN or Inf
 is taken as black (the harness's one rule,
 :func:`harness.evaluate.pixels.zero_broken_pixels`) and negative values as 0
-(HDR-FLIP's input is non-negative radiance). ``flip_evaluator`` is imported
-when first needed (:func:`flip_library`): it is a dependency, but ``cbox
---help`` should not load it.
+(HDR-FLIP's input is non-negative radiance). :mod:`~harness.evaluate.hdr_flip` (numba) and
+``flip_evaluator`` are imported when first needed: ``cbox --help``, and a command that scores no FLIP,
+should not load them.
 """
 
 from __future__ import annotations
@@ -119,12 +122,41 @@ def flip_library():
     return flip_evaluator
 
 
+def exposure_scales(parameters: dict) -> list:
+    """The factors 2^c of the exposures ``parameters`` name, as the library computes them (float32)."""
+    from harness.evaluate import hdr_flip
+
+    return hdr_flip.exposure_scales(parameters["startExposure"], parameters["stopExposure"],
+                                    parameters["numExposures"])
+
+
 def flip_map(img, ref, parameters: dict | None = None) -> np.ndarray:
     """Per-pixel HDR-FLIP (H, W) float64 of ``img`` against ``ref``, in [0, 1]; NaN everywhere for a black ``ref``.
 
-    ``parameters`` default to :func:`flip_parameters` of ``ref`` (pass them
-    when scoring many images against one reference).
+    ``parameters`` default to :func:`flip_parameters` of ``ref``, cached per reference content. Computed by
+    :mod:`harness.evaluate.hdr_flip` (the library's arithmetic, the reference's side of each exposure
+    computed once per reference); ``flip_evaluator`` computes the same map to a few 1e-6 per pixel
+    (:func:`library_flip_map`).
     """
+    from harness.evaluate import hdr_flip  # numba: not loaded by a command that scores no FLIP
+
+    img, ref = as_pair(img, ref)
+    ref32 = flip_input(ref)
+    digest = hdr_flip.SideCache.digest(ref32)
+    if parameters is None:
+        parameters = _cached_parameters(ref32, digest)
+    if parameters is None:
+        return np.full(ref.shape[:2], np.nan)
+    if parameters["tonemapper"] != TONE_MAPPER:
+        raise ValueError(f"HDR-FLIP here tone-maps by {TONE_MAPPER!r} only, not {parameters['tonemapper']!r}")
+    fmap = hdr_flip.hdr_flip_map(flip_input(img), ref32, exposure_scales(parameters), ACES_COEFFICIENTS,
+                                 parameters["ppd"], digest=digest)
+    return fmap.astype(np.float64)
+
+
+def library_flip_map(img, ref, parameters: dict | None = None) -> np.ndarray:
+    """:func:`flip_map` computed by the authors' ``flip_evaluator`` (8 exposures of 256²: ~0.4-0.8 s against
+    ~0.05 s), kept to check the harness's own against (tests/evaluate/test_hdr_flip.py, benchmarks/scoring.py)."""
     flip_evaluator = flip_library()
     img, ref = as_pair(img, ref)
     if parameters is None:
@@ -134,6 +166,19 @@ def flip_map(img, ref, parameters: dict | None = None) -> np.ndarray:
     fmap, _, _ = flip_evaluator.evaluate(flip_input(ref), flip_input(img), "HDR", applyMagma=False,
                                          computeMeanError=False, parameters=dict(parameters))
     return np.asarray(fmap, dtype=np.float64).reshape(ref.shape[:2])
+
+
+#: :func:`flip_parameters` by reference content (digest of its float32 pixels); a few references at a time.
+_PARAMETERS: dict[str, dict | None] = {}
+
+
+def _cached_parameters(ref32: np.ndarray, digest: str) -> dict | None:
+    if digest not in _PARAMETERS:
+        if len(_PARAMETERS) >= 16:
+            _PARAMETERS.clear()
+        _PARAMETERS[digest] = flip_parameters(ref32)
+    found = _PARAMETERS[digest]
+    return None if found is None else dict(found)
 
 
 def flip_mean(img, ref, parameters: dict | None = None) -> float:

@@ -119,3 +119,18 @@ def test_as_the_original_on_a_render():
     np.testing.assert_allclose(ours[~grey], theirs[~grey], rtol=1e-10, atol=1e-12)
     assert np.mean(ours) == pytest.approx(np.mean(theirs), rel=1e-12)
     assert np.percentile(ours, 95) == pytest.approx(np.percentile(theirs, 95), rel=1e-12)
+
+
+def test_in_chunks_as_in_one_pass(rgb, monkeypatch):
+    """Computed chunk by chunk (a 1024² image is 16 chunks): every pixel as the whole image in one pass gives,
+    chunks that do not divide the image included."""
+    rng = np.random.default_rng(11)
+    ref = rng.lognormal(-1.5, 1.5, rgb.shape)
+    img = rgb.copy()
+    img[20, 5, 0] = np.nan
+    whole = de.delta_e2000_linear(img, ref, 0.8)
+    assert rgb.shape[0] * rgb.shape[1] <= de.CHUNK_PIXELS  # the default: one chunk here
+    monkeypatch.setattr(de, "CHUNK_PIXELS", 1000)
+    chunked = de.delta_e2000_linear(img, ref, 0.8)
+    np.testing.assert_array_equal(chunked, whole)
+    assert np.isfinite(chunked[20, 5])
