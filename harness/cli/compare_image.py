@@ -75,6 +75,12 @@ def compare_image(
     with_flip: bool = typer.Option(False, "--flip", help="Also score HDR-FLIP (flip_mean): about 1 s per 256² "
                                    "image (8 exposures), more than every other metric together, so it is left "
                                    "out unless asked for here, by a --fail/--warn on flip_mean, or by --report."),
+    all_metrics: bool = typer.Option(False, "--all-metrics", help="With --fail, --warn or --fail-percent, score "
+                                     "every metric, as without them. By default a check scores what it names, "
+                                     "the ΔE00 statistics (the error map's) and the cheap metrics (rmse, mse, "
+                                     "rel_mse, the mean radiance and its error, the NaN/Inf/negative counts), "
+                                     "so that it costs about what idiff's does: SSIM, PSNR, the noise "
+                                     "yardsticks and the regions only when a threshold names them."),
 ) -> None:
     """Score image files against a reference with every image metric, as `cbox compare` scores a render.
 
@@ -83,7 +89,8 @@ def compare_image(
     --warn prints a warning line), 1 when one is (each printed on stderr with
     its value), 2 for bad input (display-referred image without
     --input-transfer, a size other than the reference's, an unknown metric,
-    ...), found before anything is scored.
+    ...), found before anything is scored. With thresholds it scores only
+    what they name and the cheap metrics (--all-metrics: every one).
     """
     if (reference is None) == (scene is None):
         raise typer.BadParameter("give --reference REF or --scene NAME (one of them)", param_hint="--reference")
@@ -91,10 +98,13 @@ def compare_image(
         raise typer.BadParameter("give --fail-percent P and --pixel-threshold T together",
                                  param_hint="--fail-percent" if pixel_threshold is None else "--pixel-threshold")
     thresholds = _thresholds(fail_at, warn_at)
+    keys = _scored_keys(thresholds, fail_percent, with_flip, all_metrics or report)
     from harness.workflows import compare_image as workflow
 
     target = (workflow.load_scene_target(resolve_scene(scene)) if scene is not None
-              else workflow.load_file_target(reference, input_transfer, exposure))
+              else workflow.load_file_target(reference, input_transfer, exposure,
+                                             noise=keys is None or any(k.startswith(workflow.NOISE_PREFIX)
+                                                                       for k in keys)))
     _check_regions(thresholds, target)
     sources = workflow.load_images(images, target, input_transfer, spp, exposure)
     if exposure is not None and all(s.clipped is None for s in (*sources, target)):
@@ -108,7 +118,7 @@ def compare_image(
     for source in sources:
         _warn_clipped(source.path, source.clipped)
         result = workflow.score(source, target, with_flip=with_flip or report
-                                or any(t.metric == "flip_mean" for t in thresholds))
+                                or any(t.metric == "flip_mean" for t in thresholds), keys=keys)
         de = result.delta_e_map  # computed once: the ΔE00 statistics, the error map and --fail-percent's count
         error_map = write_error_map(out, result, target, de)
         scores.append(result)
@@ -122,7 +132,7 @@ def compare_image(
         if result.noise_note:
             info(f"{source.path}: noise yardsticks skipped: {result.noise_note}")
     if not as_json:
-        _print_table(scores)
+        _print_table(scores, [t.metric for t in thresholds])
     info(f"error maps: {out}/*{ERROR_MAP_SUFFIX}")
     if report:
         info(f"report: {write_compare_image_report(out / 'report.html', target, scores, command_line())}")
@@ -150,6 +160,18 @@ def _thresholds(fail_at, warn_at) -> list:
             except ThresholdError as e:
                 raise typer.BadParameter(str(e), param_hint=f"--{level}") from None
     return out
+
+
+def _scored_keys(thresholds, fail_percent, with_flip: bool, every: bool) -> frozenset[str] | None:
+    """The metrics to score (:func:`harness.evaluate.registry.check_metrics`: what the thresholds name and the
+    cheap ones, with the ΔE00 statistics: the error map is written in any case), None for every metric: without
+    thresholds, or ``every`` (--all-metrics, --report)."""
+    if every or not (thresholds or fail_percent is not None):
+        return None
+    from harness.evaluate.metrics import DELTA_E_KEYS
+    from harness.evaluate.registry import check_metrics
+
+    return check_metrics([t.metric for t in thresholds] + list(DELTA_E_KEYS) + (["flip_mean"] if with_flip else []))
 
 
 def _check_regions(thresholds, target) -> None:
@@ -199,12 +221,14 @@ def _verdict(result, thresholds, de, fail_percent, pixel_threshold, th) -> dict 
     return json_safe({"status": status, "checks": checks})
 
 
-def _print_table(scores) -> None:
-    """The metrics `cbox compare` prints, one row per image; then each image's regions, if any.
+def _print_table(scores, named: list[str]) -> None:
+    """The metrics `cbox compare` prints, and those the thresholds name, one row per image (those scored); then
+    each image's regions, if any.
 
     Laid out as pandas' ``to_string`` lays a frame out, without pandas (its import is ~0.5 s of this
     command's time, issue 31)."""
-    columns = ["image", "spp", *(c for c in TABLE_METRICS if any(c in s.row() for s in scores))]
+    shown = dict.fromkeys([*TABLE_METRICS, *(m for m in named if "." not in m)])
+    columns = ["image", "spp", *(c for c in shown if any(c in s.row() for s in scores))]
     rows = [[s.source.label, s.source.spp, *(s.row().get(c) for c in columns[2:])] for s in scores]
     typer.echo(_format_table(columns, rows))
     for s in scores:
