@@ -125,7 +125,13 @@ def rel_mse(img, ref, eps: float = REL_MSE_EPS, trim: float = 0.0) -> float:
 
 def _rel_mse_terms(img: np.ndarray, ref: np.ndarray, eps: float = REL_MSE_EPS) -> np.ndarray:
     """relMSE's per-pixel terms (mean over channels), flat."""
-    return np.mean((img - ref) ** 2 / (ref**2 + eps), axis=-1).ravel()
+    return channel_mean((img - ref) ** 2 / (ref**2 + eps)).ravel()
+
+
+def channel_mean(x: np.ndarray) -> np.ndarray:
+    """``np.mean(x, axis=-1)`` of an (..., 3) array, the same bits (numpy sums a 3-long axis in order, then
+    divides by 3) at a fifth of the cost (numpy's reduction runs its loop once per pixel)."""
+    return (x[..., 0] + x[..., 1] + x[..., 2]) / 3
 
 
 def _trimmed_mean(per_pixel: np.ndarray, trim: float) -> float:

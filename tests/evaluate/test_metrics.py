@@ -418,3 +418,8 @@ def test_all_finite_sees_nan_inf_and_not_an_overflowing_sum():
         img[1, 0, 2] = bad
         assert not all_finite(img)
         assert finite_pixels(img).tolist() == [[True, True], [False, True]]
+
+
+def test_channel_mean_is_numpys_mean_over_the_last_axis_bit_for_bit():
+    x = np.random.default_rng(23).lognormal(0.0, 3.0, size=(64, 64, 3))
+    assert np.array_equal(m.channel_mean(x), np.mean(x, axis=-1))
