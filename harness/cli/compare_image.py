@@ -69,18 +69,24 @@ def compare_image(
                                                        "noise, regions, HDR-FLIP parameters, and with thresholds "
                                                        "its verdict."),
     out: Path = out_folder_option(Path("out/compare-image"), "Folder for each image's ΔE error map "
-                                                             "(LABEL.delta_e.png) and, with --report, report.html."),
+                                                             "(LABEL.delta_e.png, see --error-map) and, with "
+                                                             "--report, report.html."),
     report: bool = typer.Option(False, "--report", help="Also write OUT/report.html: the table and the image "
                                                         "viewer with its error maps."),
     with_flip: bool = typer.Option(False, "--flip", help="Also score HDR-FLIP (flip_mean): about 1 s per 256² "
                                    "image (8 exposures), more than every other metric together, so it is left "
                                    "out unless asked for here, by a --fail/--warn on flip_mean, or by --report."),
     all_metrics: bool = typer.Option(False, "--all-metrics", help="With --fail, --warn or --fail-percent, score "
-                                     "every metric, as without them. By default a check scores what it names, "
-                                     "the ΔE00 statistics (the error map's) and the cheap metrics (rmse, mse, "
-                                     "rel_mse, the mean radiance and its error, the NaN/Inf/negative counts), "
-                                     "so that it costs about what idiff's does: SSIM, PSNR, the noise "
-                                     "yardsticks and the regions only when a threshold names them."),
+                                     "every metric, as without them. By default such a check scores what its "
+                                     "thresholds name and the cheap metrics (rmse, mse, rel_mse, the mean "
+                                     "radiance and its error, the NaN/Inf/negative counts), so that it costs "
+                                     "about what idiff's does: the ΔE00 map, SSIM, PSNR, the noise yardsticks "
+                                     "and the regions only when a threshold (or --error-map) needs them."),
+    error_map: Optional[bool] = typer.Option(
+        None, "--error-map/--no-error-map", help="Write each image's ΔE00 error map, OUT/LABEL.delta_e.png "
+        "(viridis on 0..10, the report's). Default: written, except by a check (--fail, --warn, "
+        "--fail-percent), which writes it only when asked, as idiff writes its difference image with -o.",
+        show_default=False),
 ) -> None:
     """Score image files against a reference with every image metric, as `cbox compare` scores a render.
 
@@ -89,8 +95,9 @@ def compare_image(
     --warn prints a warning line), 1 when one is (each printed on stderr with
     its value), 2 for bad input (display-referred image without
     --input-transfer, a size other than the reference's, an unknown metric,
-    ...), found before anything is scored. With thresholds it scores only
-    what they name and the cheap metrics (--all-metrics: every one).
+    ...), found before anything is scored. With thresholds it is a check:
+    it scores what they name and the cheap metrics (--all-metrics: every
+    one) and writes no error map unless --error-map asks for it.
     """
     if (reference is None) == (scene is None):
         raise typer.BadParameter("give --reference REF or --scene NAME (one of them)", param_hint="--reference")
@@ -98,7 +105,10 @@ def compare_image(
         raise typer.BadParameter("give --fail-percent P and --pixel-threshold T together",
                                  param_hint="--fail-percent" if pixel_threshold is None else "--pixel-threshold")
     thresholds = _thresholds(fail_at, warn_at)
-    keys = _scored_keys(thresholds, fail_percent, with_flip, all_metrics or report)
+    check = bool(thresholds) or fail_percent is not None
+    write_map = error_map if error_map is not None else not check
+    keys = _scored_keys(thresholds, fail_percent is not None or write_map, with_flip,
+                        all_metrics or report or not check)
     from harness.workflows import compare_image as workflow
 
     target = (workflow.load_scene_target(resolve_scene(scene)) if scene is not None
@@ -120,12 +130,12 @@ def compare_image(
         result = workflow.score(source, target, with_flip=with_flip or report
                                 or any(t.metric == "flip_mean" for t in thresholds), keys=keys)
         de = result.delta_e_map  # computed once: the ΔE00 statistics, the error map and --fail-percent's count
-        error_map = write_error_map(out, result, target, de)
+        written = write_error_map(out, result, target, de) if write_map else None
         scores.append(result)
         verdict = _verdict(result, thresholds, de, fail_percent, pixel_threshold, th)
         verdicts.append(verdict)
         if as_json:
-            record = {**result.record(target), "error_map": str(error_map)}
+            record = {**result.record(target), "error_map": None if written is None else str(written)}
             if verdict is not None:
                 record["verdict"] = verdict
             typer.echo(json.dumps(record, allow_nan=False))
@@ -133,7 +143,8 @@ def compare_image(
             info(f"{source.path}: noise yardsticks skipped: {result.noise_note}")
     if not as_json:
         _print_table(scores, [t.metric for t in thresholds])
-    info(f"error maps: {out}/*{ERROR_MAP_SUFFIX}")
+    if write_map:
+        info(f"error maps: {out}/*{ERROR_MAP_SUFFIX}")
     if report:
         info(f"report: {write_compare_image_report(out / 'report.html', target, scores, command_line())}")
     if any(v is not None and v["status"] == "fail" for v in verdicts):
@@ -162,16 +173,17 @@ def _thresholds(fail_at, warn_at) -> list:
     return out
 
 
-def _scored_keys(thresholds, fail_percent, with_flip: bool, every: bool) -> frozenset[str] | None:
-    """The metrics to score (:func:`harness.evaluate.registry.check_metrics`: what the thresholds name and the
-    cheap ones, with the ΔE00 statistics: the error map is written in any case), None for every metric: without
-    thresholds, or ``every`` (--all-metrics, --report)."""
-    if every or not (thresholds or fail_percent is not None):
+def _scored_keys(thresholds, de_map: bool, with_flip: bool, every: bool) -> frozenset[str] | None:
+    """The metrics a check scores (:func:`harness.evaluate.registry.check_metrics`: what its thresholds name and
+    the cheap ones; the ΔE00 statistics too where the map is made anyway, ``de_map``: for --fail-percent or the
+    error map), or None for every metric (``every``: not a check, --all-metrics, --report)."""
+    if every:
         return None
     from harness.evaluate.metrics import DELTA_E_KEYS
     from harness.evaluate.registry import check_metrics
 
-    return check_metrics([t.metric for t in thresholds] + list(DELTA_E_KEYS) + (["flip_mean"] if with_flip else []))
+    return check_metrics([t.metric for t in thresholds] + list(DELTA_E_KEYS if de_map else ())
+                         + (["flip_mean"] if with_flip else []))
 
 
 def _check_regions(thresholds, target) -> None:
