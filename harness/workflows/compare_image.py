@@ -7,6 +7,8 @@ functions ``cbox compare`` scores a render with
 :func:`harness.evaluate.noise.noise_yardsticks`,
 :func:`harness.workflows.runner.score_regions`), so a file written by
 ``cbox render`` scores exactly as ``cbox compare`` scored that render.
+A check scores a chosen set (:func:`score`'s ``keys``), each value the same
+as in the full set.
 
 The reference is a stored scene's (:func:`load_scene_target`: its image,
 variance and noise batch, and its named regions) or an image file
