@@ -82,7 +82,8 @@ def compare_image(
                                      "thresholds name and the cheap metrics (rmse, mse, rel_mse, the mean "
                                      "radiance and its error, the NaN/Inf/negative counts), so that it costs "
                                      "about what idiff's does: the ΔE00 map, SSIM, PSNR, the noise yardsticks "
-                                     "and the regions only when a threshold (or --error-map) needs them."),
+                                     "and the regions only when a threshold (or --error-map) needs them. "
+                                     "--report scores every metric too."),
     error_map: Optional[bool] = typer.Option(
         None, "--error-map/--no-error-map", help="Write each image's ΔE00 error map, OUT/LABEL.delta_e.png "
         "(viridis on 0..10, the report's). Default: written, except by a check (--fail, --warn, "
