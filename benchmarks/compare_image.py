@@ -11,9 +11,11 @@ its interpreter start subtracted the same way.
 The test image is a 16-spp Mitsuba render of ``cornell-box`` by ``cbox render`` (or ``--image``); the reference
 is the scene's stored one (256²).
 
-Then the same without any start-up (``--warm``'s table): one process that has imported both and run each once
+Then the same without any start-up (the warm table): one process that has imported both and run each once
 times, interleaved, OpenImageIO's read-and-compare and ``cbox compare-image``'s whole command in-process
-(``harness.cli.app.main``: reading, scoring, the error map, the table), medians of ``--rounds`` × 5 calls.
+(``harness.cli.app.main``: parsing, reading, scoring, the error map, the table), medians of ``--rounds`` × 5
+calls; and, for comparison, the same command with ``--all-metrics`` (what a check scored before it scored only
+what it names).
 
 ``--markdown FILE`` writes the tables into the file's blocks ``compare_image.py#cost`` and
 ``compare_image.py#warm`` (``benchmarks/markdown_blocks.py``).
@@ -80,44 +82,52 @@ def measure(cmds: dict[str, list[str]], rounds: int) -> dict[str, float]:
     return {k: statistics.median(v) for k, v in times.items()}
 
 
-#: The warm measurement, run in a child process: argv = image, reference, out, rounds; prints two medians.
+#: The warm measurement, run in a child process: argv = image, reference, out, rounds; prints three medians.
 WARM = """
 import contextlib, io, statistics, sys, time
 import OpenImageIO as oiio
 from harness.cli.app import main
 image, reference, out, rounds = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
 args = ["compare-image", image, "--reference", reference, "--fail", "delta_e2000_mean=0.1", "--out", out]
-def ours():
+def cbox(argv):
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         try:
-            main(list(args))
+            main(list(argv))
         except SystemExit:
             pass
+def ours():
+    cbox(args)
+def every():
+    cbox(args + ["--all-metrics"])
 def theirs():
     a, b = oiio.ImageBuf(image), oiio.ImageBuf(reference)
     oiio.ImageBufAlgo.compare(a, b, 1e-3, 1e-6)
-times = {"theirs": [], "ours": []}
-for f in (theirs, ours):
+calls = (("theirs", theirs), ("ours", ours), ("every", every))
+times = {name: [] for name, _ in calls}
+for _, f in calls:
     f()
 for _ in range(rounds):
-    for name, f in (("theirs", theirs), ("ours", ours)):
+    for name, f in calls:
         t0 = time.perf_counter(); f(); times[name].append(time.perf_counter() - t0)
-print(statistics.median(times["theirs"]), statistics.median(times["ours"]))
+print(*(statistics.median(times[name]) for name, _ in calls))
 """
 
 
-def measure_warm(image: Path, reference: Path, out: Path, rounds: int) -> tuple[float, float]:
-    """(OpenImageIO's read and compare, compare-image's command) in one warm process: median seconds per call."""
+def measure_warm(image: Path, reference: Path, out: Path, rounds: int) -> tuple[float, float, float]:
+    """(OpenImageIO's read and compare, compare-image's check, the same with --all-metrics) in one warm process:
+    median seconds per call."""
     proc = subprocess.run([sys.executable, "-c", WARM, str(image), str(reference), str(out), str(rounds)],
                           capture_output=True, text=True, cwd=ROOT, check=True)
-    theirs, ours = map(float, proc.stdout.split())
-    return theirs, ours
+    theirs, ours, every = map(float, proc.stdout.split())
+    return theirs, ours, every
 
 
-def warm_table(theirs: float, ours: float) -> list[str]:
+def warm_table(theirs: float, ours: float, every: float) -> list[str]:
     return ["| in a warm process | median per call (s) | / idiff's |", "| --- | --- | --- |",
             f"| OpenImageIO ImageBufAlgo.compare, both files read (idiff's stand-in) | {theirs:.4f} | **1.0×** |",
-            f"| compare-image --reference FILE --fail delta_e2000_mean=0.1 | {ours:.4f} | **{ours / theirs:.1f}×** |"]
+            f"| compare-image --reference FILE --fail delta_e2000_mean=0.1 | {ours:.4f} | **{ours / theirs:.1f}×** |",
+            f"| the same with --all-metrics (every metric and the noise yardsticks) | {every:.4f} | "
+            f"{every / theirs:.1f}× |"]
 
 
 def table(medians: dict[str, float]) -> list[str]:

@@ -8,6 +8,7 @@ from typing import List, Optional
 
 import typer
 
+from harness.cli.allocator import keep_freed_memory
 from harness.cli.choices import choice_callback
 from harness.cli.common import app, command_line, out_folder_option
 from harness.cli.output import info
@@ -69,12 +70,25 @@ def compare_image(
                                                        "noise, regions, HDR-FLIP parameters, and with thresholds "
                                                        "its verdict."),
     out: Path = out_folder_option(Path("out/compare-image"), "Folder for each image's ΔE error map "
-                                                             "(LABEL.delta_e.png) and, with --report, report.html."),
+                                                             "(LABEL.delta_e.png, see --error-map) and, with "
+                                                             "--report, report.html."),
     report: bool = typer.Option(False, "--report", help="Also write OUT/report.html: the table and the image "
                                                         "viewer with its error maps."),
     with_flip: bool = typer.Option(False, "--flip", help="Also score HDR-FLIP (flip_mean): about 1 s per 256² "
                                    "image (8 exposures), more than every other metric together, so it is left "
                                    "out unless asked for here, by a --fail/--warn on flip_mean, or by --report."),
+    all_metrics: bool = typer.Option(False, "--all-metrics", help="With --fail, --warn or --fail-percent, score "
+                                     "every metric, as without them. By default such a check scores what its "
+                                     "thresholds name and the cheap metrics (rmse, mse, rel_mse, the mean "
+                                     "radiance and its error, the NaN/Inf/negative counts), so that it costs "
+                                     "about what idiff's does: the ΔE00 map, SSIM, PSNR, the noise yardsticks "
+                                     "and the regions only when a threshold (or --error-map) needs them. "
+                                     "--report scores every metric too."),
+    error_map: Optional[bool] = typer.Option(
+        None, "--error-map/--no-error-map", help="Write each image's ΔE00 error map, OUT/LABEL.delta_e.png "
+        "(viridis on 0..10, the report's). Default: written, except by a check (--fail, --warn, "
+        "--fail-percent), which writes it only when asked, as idiff writes its difference image with -o.",
+        show_default=False),
 ) -> None:
     """Score image files against a reference with every image metric, as `cbox compare` scores a render.
 
@@ -83,7 +97,9 @@ def compare_image(
     --warn prints a warning line), 1 when one is (each printed on stderr with
     its value), 2 for bad input (display-referred image without
     --input-transfer, a size other than the reference's, an unknown metric,
-    ...), found before anything is scored.
+    ...), found before anything is scored. With thresholds it is a check:
+    it scores what they name and the cheap metrics (--all-metrics: every
+    one) and writes no error map unless --error-map asks for it.
     """
     if (reference is None) == (scene is None):
         raise typer.BadParameter("give --reference REF or --scene NAME (one of them)", param_hint="--reference")
@@ -91,10 +107,17 @@ def compare_image(
         raise typer.BadParameter("give --fail-percent P and --pixel-threshold T together",
                                  param_hint="--fail-percent" if pixel_threshold is None else "--pixel-threshold")
     thresholds = _thresholds(fail_at, warn_at)
+    keep_freed_memory()  # numpy's temporaries reused, not mapped afresh: a third of a 256² check's time
+    check = bool(thresholds) or fail_percent is not None
+    write_map = error_map if error_map is not None else not check
+    keys = _scored_keys(thresholds, fail_percent is not None or write_map, with_flip,
+                        all_metrics or report or not check)
     from harness.workflows import compare_image as workflow
 
     target = (workflow.load_scene_target(resolve_scene(scene)) if scene is not None
-              else workflow.load_file_target(reference, input_transfer, exposure))
+              else workflow.load_file_target(reference, input_transfer, exposure,
+                                             noise=keys is None or any(k.startswith(workflow.NOISE_PREFIX)
+                                                                       for k in keys)))
     _check_regions(thresholds, target)
     sources = workflow.load_images(images, target, input_transfer, spp, exposure)
     if exposure is not None and all(s.clipped is None for s in (*sources, target)):
@@ -108,22 +131,23 @@ def compare_image(
     for source in sources:
         _warn_clipped(source.path, source.clipped)
         result = workflow.score(source, target, with_flip=with_flip or report
-                                or any(t.metric == "flip_mean" for t in thresholds))
+                                or any(t.metric == "flip_mean" for t in thresholds), keys=keys)
         de = result.delta_e_map  # computed once: the ΔE00 statistics, the error map and --fail-percent's count
-        error_map = write_error_map(out, result, target, de)
+        written = write_error_map(out, result, target, de) if write_map else None
         scores.append(result)
         verdict = _verdict(result, thresholds, de, fail_percent, pixel_threshold, th)
         verdicts.append(verdict)
         if as_json:
-            record = {**result.record(target), "error_map": str(error_map)}
+            record = {**result.record(target), "error_map": None if written is None else str(written)}
             if verdict is not None:
                 record["verdict"] = verdict
             typer.echo(json.dumps(record, allow_nan=False))
         if result.noise_note:
             info(f"{source.path}: noise yardsticks skipped: {result.noise_note}")
     if not as_json:
-        _print_table(scores)
-    info(f"error maps: {out}/*{ERROR_MAP_SUFFIX}")
+        _print_table(scores, [t.metric for t in thresholds])
+    if write_map:
+        info(f"error maps: {out}/*{ERROR_MAP_SUFFIX}")
     if report:
         info(f"report: {write_compare_image_report(out / 'report.html', target, scores, command_line())}")
     if any(v is not None and v["status"] == "fail" for v in verdicts):
@@ -150,6 +174,19 @@ def _thresholds(fail_at, warn_at) -> list:
             except ThresholdError as e:
                 raise typer.BadParameter(str(e), param_hint=f"--{level}") from None
     return out
+
+
+def _scored_keys(thresholds, de_map: bool, with_flip: bool, every: bool) -> frozenset[str] | None:
+    """The metrics a check scores (:func:`harness.evaluate.registry.check_metrics`: what its thresholds name and
+    the cheap ones; the ΔE00 statistics too where the map is made anyway, ``de_map``: for --fail-percent or the
+    error map), or None for every metric (``every``: not a check, --all-metrics, --report)."""
+    if every:
+        return None
+    from harness.evaluate.metrics import DELTA_E_KEYS
+    from harness.evaluate.registry import check_metrics
+
+    return check_metrics([t.metric for t in thresholds] + list(DELTA_E_KEYS if de_map else ())
+                         + (["flip_mean"] if with_flip else []))
 
 
 def _check_regions(thresholds, target) -> None:
@@ -199,12 +236,14 @@ def _verdict(result, thresholds, de, fail_percent, pixel_threshold, th) -> dict 
     return json_safe({"status": status, "checks": checks})
 
 
-def _print_table(scores) -> None:
-    """The metrics `cbox compare` prints, one row per image; then each image's regions, if any.
+def _print_table(scores, named: list[str]) -> None:
+    """The metrics `cbox compare` prints, and those the thresholds name, one row per image (those scored); then
+    each image's regions, if any.
 
     Laid out as pandas' ``to_string`` lays a frame out, without pandas (its import is ~0.5 s of this
     command's time, issue 31)."""
-    columns = ["image", "spp", *(c for c in TABLE_METRICS if any(c in s.row() for s in scores))]
+    shown = dict.fromkeys([*TABLE_METRICS, *(m for m in named if "." not in m)])
+    columns = ["image", "spp", *(c for c in shown if any(c in s.row() for s in scores))]
     rows = [[s.source.label, s.source.spp, *(s.row().get(c) for c in columns[2:])] for s in scores]
     typer.echo(_format_table(columns, rows))
     for s in scores:

@@ -30,8 +30,24 @@ def as_pair(img, ref) -> tuple[np.ndarray, np.ndarray]:
     return as_image(img), as_image(ref)
 
 
+def all_finite(img: np.ndarray) -> bool:
+    """Whether every value of ``img`` is finite.
+
+    One sum settles the common case, an image without NaN or Inf, at a tenth
+    of the per-value test's cost (whose ``all`` over the last axis of 3 is
+    the slow part); a sum that is not finite (a NaN or Inf, or huge finite
+    values that overflow) falls back to that test.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        if np.isfinite(np.sum(img)):
+            return True
+    return bool(np.isfinite(img).all())
+
+
 def finite_pixels(img: np.ndarray) -> np.ndarray:
     """(H, W) bool: pixels whose every channel is finite."""
+    if all_finite(img):
+        return np.ones(np.shape(img)[:-1], dtype=bool)
     return np.all(np.isfinite(img), axis=-1)
 
 

@@ -15,6 +15,7 @@ validates them without importing the mask code, which pulls in SciPy.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Iterable
 
 
 @dataclass(frozen=True)
@@ -30,10 +31,12 @@ class Metric:
     guide_slope: float | None = None
     per_image: bool = False  # computed from one image against the reference (a gate may budget it)
     colour: bool = False  # radiance images only (a colour difference, HDR-FLIP); an AO image is one scalar
+    cheap: bool = False  # a per-image metric of a few passes over the pixels: a check computes it unasked
 
 
-def _m(key, label, definition, better=None, axis=None, slope=None, per_image=True, colour=False) -> Metric:
-    return Metric(key, label, definition, better, axis, slope, per_image, colour)
+def _m(key, label, definition, better=None, axis=None, slope=None, per_image=True, colour=False,
+       cheap=False) -> Metric:
+    return Metric(key, label, definition, better, axis, slope, per_image, colour, cheap)
 
 
 _TABLE = (
@@ -45,9 +48,11 @@ _TABLE = (
     _m("spp", "spp", "samples per pixel of the row (the highest reached)", per_image=False),
     _m("seeds", "seeds", "number of seeds (independent runs) the medians are over", per_image=False),
     _m("time_s", "time (s)", "wall time to reach this spp (median over seeds)", "low", per_image=False),
-    _m("rmse", "RMSE", "root-mean-square error on linear radiance", "low", "RMSE (linear radiance)", -0.5),
-    _m("mse", "MSE", "mean squared error on linear radiance", "low", "MSE", -1.0),
-    _m("rel_mse", "relMSE", "mean of (img−ref)²/(ref²+0.01) on linear radiance", "low", "relMSE", -1.0),
+    _m("rmse", "RMSE", "root-mean-square error on linear radiance", "low", "RMSE (linear radiance)", -0.5,
+       cheap=True),
+    _m("mse", "MSE", "mean squared error on linear radiance", "low", "MSE", -1.0, cheap=True),
+    _m("rel_mse", "relMSE", "mean of (img−ref)²/(ref²+0.01) on linear radiance", "low", "relMSE", -1.0,
+       cheap=True),
     _m("rel_mse_trimmed", "relMSE trim.", "relMSE without the worst pixels (fireflies)", "low",
        "relMSE (trimmed)", -1.0),
     _m("psnr", "PSNR (dB)", "PSNR of the display-encoded images", "high"),
@@ -63,13 +68,13 @@ _TABLE = (
     _m("flip_mean", "FLIP mean", "mean HDR-FLIP on linear radiance (Andersson et al. 2021): how visible the "
        "difference is when flipping between the images, worst over exposures from the reference's brightest "
        "to its median pixel; 0 none, 1 the largest", "low", "mean HDR-FLIP", colour=True),
-    _m("mean_radiance_r", "mean R", "mean radiance of the red channel (broken pixels skipped)"),
-    _m("mean_radiance_g", "mean G", "mean radiance of the green channel (broken pixels skipped)"),
-    _m("mean_radiance_b", "mean B", "mean radiance of the blue channel (broken pixels skipped)"),
-    _m("mean_radiance_rel_error", "mean rad. err", "relative error of the image's mean radiance"),
-    _m("nan_count", "NaN px", "pixels with a NaN channel", "low"),
-    _m("inf_count", "Inf px", "pixels with an infinite channel", "low"),
-    _m("negative_count", "neg px", "pixels with a negative channel", "low"),
+    _m("mean_radiance_r", "mean R", "mean radiance of the red channel (broken pixels skipped)", cheap=True),
+    _m("mean_radiance_g", "mean G", "mean radiance of the green channel (broken pixels skipped)", cheap=True),
+    _m("mean_radiance_b", "mean B", "mean radiance of the blue channel (broken pixels skipped)", cheap=True),
+    _m("mean_radiance_rel_error", "mean rad. err", "relative error of the image's mean radiance", cheap=True),
+    _m("nan_count", "NaN px", "pixels with a NaN channel", "low", cheap=True),
+    _m("inf_count", "Inf px", "pixels with an infinite channel", "low", cheap=True),
+    _m("negative_count", "neg px", "pixels with a negative channel", "low", cheap=True),
     _m("noise_rmse", "RMSE (noise)", "expected RMSE from sampling noise alone at this spp"),
     _m("noise_delta_e2000_mean", "ΔE mean (noise)", "ΔE mean of a simulated noise-only image at this spp",
        colour=True),
@@ -96,6 +101,9 @@ COLOUR_METRICS = frozenset(k for k, m in METRICS.items() if m.colour)
 HIGHER_IS_BETTER = frozenset(k for k, m in METRICS.items() if m.better == "high")
 #: Metrics of one image against the reference: what a gate budget or baseline may name.
 IMAGE_METRICS = tuple(k for k, m in METRICS.items() if m.per_image)
+#: Per-image metrics a check computes unasked (``cbox compare-image`` with thresholds, :func:`check_metrics`): a
+#: pass or two over the pixels each, together under a tenth of one ΔE00 map's cost.
+CHEAP_METRICS = tuple(k for k, m in METRICS.items() if m.cheap)
 #: Metrics the convergence and speed/accuracy charts offer, the default first.
 PLOT_METRICS = ("rmse", "delta_e2000_mean", "rel_mse", "rel_mse_trimmed", "mse", "delta_e2000_p95")
 assert all(METRICS[k].guide_slope is not None for k in PLOT_METRICS)
@@ -120,3 +128,11 @@ def region_metric(key: str) -> tuple[str, str] | None:
         return None
     region, _, metric = key[len(REGION_PREFIX):].rpartition(".")
     return region, metric
+
+
+def check_metrics(named: Iterable[str]) -> frozenset[str]:
+    """What a check that names ``named`` (its thresholds' keys: metrics, or ``region.<region>.<metric>``)
+    computes: those and :data:`CHEAP_METRICS`, and not the costly rest (the ΔE00 map, SSIM, PSNR's display
+    encoding, HDR-FLIP, the noise yardsticks, the regions), which costs several times what idiff's whole
+    comparison does (issue 31)."""
+    return frozenset(CHEAP_METRICS).union(named)

@@ -7,6 +7,8 @@ functions ``cbox compare`` scores a render with
 :func:`harness.evaluate.noise.noise_yardsticks`,
 :func:`harness.workflows.runner.score_regions`), so a file written by
 ``cbox render`` scores exactly as ``cbox compare`` scored that render.
+A check scores a chosen set (:func:`score`'s ``keys``), each value the same
+as in the full set.
 
 The reference is a stored scene's (:func:`load_scene_target`: its image,
 variance and noise batch, and its named regions) or an image file
@@ -39,7 +41,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Sequence
+from typing import Collection, Sequence
 
 import numpy as np
 
@@ -47,6 +49,7 @@ from harness.evaluate import flip, metrics
 from harness.evaluate.ciede2000 import srgb_eotf
 from harness.evaluate import noise as stats
 from harness.evaluate.image_scores import ImageScore, InputImage, Target
+from harness.evaluate.registry import region_metric
 from harness.scenes.model import Scene
 from harness.scenes.quantities import DEFAULT_QUANTITY
 from harness.store.exr import ImageFileError, read_exr
@@ -125,19 +128,24 @@ def load_scene_target(scene: Scene) -> Target:
     return Target(ref, ref.folder / REFERENCE_FILE, scene)
 
 
-def load_file_target(path: Path, transfer: str | None = None, exposure: float | None = None) -> Target:
+def load_file_target(path: Path, transfer: str | None = None, exposure: float | None = None,
+                     noise: bool = True) -> Target:
     """A reference image file; its variance and noise batch when a reference folder's files lie beside it.
 
     That is: ``path`` is a folder's ``reference.exr`` and the folder holds
     ``variance.exr``, ``noise.exr`` and ``provenance.json`` (with ``spp`` and
     ``noise_spp``), as :mod:`harness.store.references` stores them. A bare
-    image is scored as radiance (a scene says otherwise: use one).
+    image is scored as radiance (a scene says otherwise: use one). ``noise=False``
+    reads the image only (no noise yardstick asked for: two files fewer to read).
     """
     path = Path(path)
     file = read_image_file(path)
     image = linear_pixels(file, transfer, exposure)
     folder = path.parent
     stored = [folder / f for f in (VARIANCE_FILE, NOISE_FILE, PROVENANCE_FILE)]
+    if not noise:
+        return Target(Reference(image, None, None, {}, folder, DEFAULT_QUANTITY), path,
+                      noise_note="no noise yardstick asked for", clipped=clipped_fraction(file))
     if path.name != REFERENCE_FILE or not all(f.is_file() for f in stored):
         note = (f"no reference variance: {path} is not a reference folder's {REFERENCE_FILE} with "
                 f"{', '.join(f.name for f in stored)} beside it")
@@ -174,6 +182,9 @@ def load_images(paths: Sequence[Path], target: Target, transfer: str | None = No
 # Scoring
 # --------------------------------------------------------------------------
 
+#: The keys of the noise yardsticks (:func:`harness.evaluate.noise.noise_yardsticks`) start with it.
+NOISE_PREFIX = "noise_"
+
 
 def noise_gap(target: Target, spp: int | None) -> str | None:
     """Why the noise yardsticks cannot be computed for an image at ``spp`` against ``target``; None if they can."""
@@ -184,21 +195,35 @@ def noise_gap(target: Target, spp: int | None) -> str | None:
     return None
 
 
-def score(source: InputImage, target: Target, with_flip: bool = True) -> ImageScore:
+def score(source: InputImage, target: Target, with_flip: bool = True,
+          keys: Collection[str] | None = None) -> ImageScore:
     """Every metric of one test image against the target, computed as ``cbox compare`` computes them
-    (``flip_mean`` only ``with_flip``: :func:`harness.evaluate.metrics.image_metrics`)."""
+    (``flip_mean`` only ``with_flip``: :func:`harness.evaluate.metrics.image_metrics`).
+
+    ``keys`` (:func:`harness.evaluate.registry.check_metrics`' choice for a check) computes only what they
+    name (with what comes at no cost with it, :func:`harness.evaluate.metrics.image_metrics`): the ΔE00 map
+    for a ``delta_e2000_*`` key, HDR-FLIP for ``flip_mean``, the noise yardsticks for a ``noise_*`` key, the
+    scene's regions for a ``region.*`` key; each value the same as with every metric.
+    """
     ref = target.reference
+    every = keys is None
+    keys = frozenset(keys or ())
+    with_de = every or not keys.isdisjoint(metrics.DELTA_E_KEYS)
+    with_noise = every or any(k.startswith(NOISE_PREFIX) for k in keys)
+    with_regions = target.scene is not None and (every or any(region_metric(k) for k in keys))
     # float64 once, where each metric would convert the float32 pixels again (the same values, exactly: the
     # metrics take as_pair's arrays), and the exposure once (each would compute it from the reference again).
     image, ref_image = metrics.as_pair(source.image, ref.image)
     exposure = metrics.display_exposure(ref_image, ref.quantity)
     # the ΔE00 map once: its statistics, the error map and --fail-percent
-    de = pixel_errors(image, ref_image, exposure) if metrics.has_colour(ref.quantity) else None
-    values = metrics.image_metrics(image, ref_image, exposure=exposure, quantity=ref.quantity, with_flip=with_flip,
-                                   delta_e_map=de)
-    note = noise_gap(target, source.spp)
-    yardsticks = stats.noise_yardsticks(image, ref, source.spp, exposure=exposure) if note is None else None
-    regions = runner.score_regions(target.scene, source.image, ref, source.spp) if target.scene is not None else {}
+    de = pixel_errors(image, ref_image, exposure) if with_de and metrics.has_colour(ref.quantity) else None
+    values = metrics.image_metrics(image, ref_image, exposure=exposure, quantity=ref.quantity,
+                                   with_flip=with_flip if every else "flip_mean" in keys, delta_e_map=de,
+                                   keys=None if every else keys)
+    note = noise_gap(target, source.spp) if with_noise else None
+    yardsticks = stats.noise_yardsticks(image, ref, source.spp, exposure=exposure) if with_noise and note is None \
+        else None
+    regions = runner.score_regions(target.scene, source.image, ref, source.spp) if with_regions else {}
     parameters = flip.flip_parameters(ref.image) if "flip_mean" in values else None
     return ImageScore(source, values, yardsticks, note, regions, parameters, de)
 

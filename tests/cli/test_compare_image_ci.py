@@ -144,3 +144,68 @@ def test_flip_only_when_asked_for(render16, tmp_path, capsys):
     assert code == 0 and 0 < flip_mean < 1
     code, out, err = _compare(capsys, tmp_path, render16, "--fail", f"flip_mean={flip_mean / 2}")
     assert code == 1 and json.loads(out)["metrics"]["flip_mean"] == flip_mean and "flip_mean = " in err
+
+
+def test_a_check_scores_what_it_names_and_the_cheap_metrics(render16, tmp_path, capsys):
+    """With thresholds, the named metrics and the cheap ones are scored (a ΔE00 statistic brings the others
+    of its map); SSIM, PSNR, the noise yardsticks and the regions only when named; --all-metrics scores every
+    one. Each value is the same either way."""
+    from harness.evaluate.metrics import DELTA_E_KEYS
+    from harness.evaluate.registry import CHEAP_METRICS
+
+    code, out, _ = _compare(capsys, tmp_path, render16, "--fail", "delta_e2000_mean=0.1")
+    lean = json.loads(out)
+    assert code == 1 and set(lean["metrics"]) == {*CHEAP_METRICS, *DELTA_E_KEYS}
+    assert lean["noise"] is None and lean["noise_note"] is None and lean["regions"] == {}
+    code, out, _ = _compare(capsys, tmp_path, render16, "--fail", "rmse=1")
+    assert code == 0 and set(json.loads(out)["metrics"]) == set(CHEAP_METRICS)  # no ΔE00 map at all
+    code, out, _ = _compare(capsys, tmp_path, render16, "--fail", "delta_e2000_mean=0.1", "--all-metrics")
+    full = json.loads(out)
+    assert code == 1 and {"ssim", "psnr", "rel_mse_trimmed"} <= set(full["metrics"]) and full["regions"]
+    assert full["noise"]["noise_delta_e2000_mean"] > 0
+    assert all(full["metrics"][k] == v for k, v in lean["metrics"].items())
+    code, out, _ = _compare(capsys, tmp_path, render16, "--warn", "ssim=0.1", "--warn", "noise_delta_e2000_mean=100",
+                            "--warn", "region.walls.rmse=10")
+    named = json.loads(out)
+    assert code == 0 and named["verdict"]["status"] == "pass"
+    assert named["metrics"]["ssim"] == full["metrics"]["ssim"] and "psnr" not in named["metrics"]
+    assert named["noise"] == full["noise"] and named["regions"] == full["regions"]
+
+
+def test_a_check_against_a_reference_file_reads_its_noise_files_only_when_named(render16, tmp_path, capsys):
+    """A reference folder's reference.exr: its variance and noise batch are read for a noise threshold (the
+    yardsticks then as against the scene), not for a check that names none; the table shows the named metric."""
+    from harness.store.references import REFERENCE_FILE, load_reference
+    from harness.scenes.library import resolve_scene
+
+    reference = load_reference(resolve_scene("cornell-box")).folder / REFERENCE_FILE
+    args = ("compare-image", str(render16), "--reference", str(reference), "--out", str(tmp_path / "o"))
+    code, out, _ = cbox(capsys, *args, "--json", "--fail", "rmse=1")
+    rec = json.loads(out)
+    assert code == 0 and rec["noise"] is None and rec["noise_note"] is None
+    code, out, _ = cbox(capsys, *args, "--json", "--fail", "noise_rmse=1")
+    on_file = json.loads(out)["noise"]
+    code, out, _ = _compare(capsys, tmp_path, render16, "--fail", "noise_rmse=1")
+    assert code == 0 and on_file == json.loads(out)["noise"] and on_file["noise_rmse"] > 0
+    code, out, _ = cbox(capsys, *args, "--warn", "psnr=100")
+    header = out.splitlines()[0].split()
+    assert code == 0 and "psnr" in header and "ssim" not in header
+
+
+def test_a_check_writes_the_error_map_only_when_asked(render16, tmp_path, capsys):
+    """Without thresholds the error map is written (and --no-error-map leaves it out); a check writes it with
+    --error-map only, which also brings the ΔE00 statistics of the map."""
+    from harness.evaluate.metrics import DELTA_E_KEYS
+
+    written = tmp_path / "o" / "m16.delta_e.png"
+    code, out, _ = _compare(capsys, tmp_path, render16, "--no-error-map")
+    assert code == 0 and json.loads(out)["error_map"] is None and not written.exists()
+    code, out, _ = _compare(capsys, tmp_path, render16, "--fail", "rmse=1")
+    assert code == 0 and json.loads(out)["error_map"] is None and not written.exists()
+    code, out, _ = _compare(capsys, tmp_path, render16, "--fail", "rmse=1", "--error-map")
+    rec = json.loads(out)
+    assert code == 0 and rec["error_map"] == str(written) and written.is_file()
+    assert set(DELTA_E_KEYS) <= set(rec["metrics"]) and "ssim" not in rec["metrics"]
+    written.unlink()
+    code, out, _ = _compare(capsys, tmp_path, render16)
+    assert code == 0 and json.loads(out)["error_map"] == str(written) and written.is_file()

@@ -377,3 +377,49 @@ def test_image_metrics_survives_nan_and_reports_it():
     zeroed = img.copy()
     zeroed[3, 4] = zeroed[7, 7] = 0.0
     assert result["rmse"] == pytest.approx(m.rmse(zeroed, ref), rel=1e-12)
+
+
+@pytest.mark.parametrize("broken", [False, True])
+def test_image_metrics_keys_computes_those_asked_for_with_the_same_values(broken):
+    """``keys`` computes only what they need (and what comes free with it), each value bit-identical to the
+    full set's, with and without broken pixels (the fast paths of an image without NaN or Inf, and the rest)."""
+    img, ref = _random_image(21, (20, 20, 3)), _random_image(22, (20, 20, 3))
+    if broken:
+        img[2, 3] = [np.nan, 0.2, 0.2]
+        img[5, 5, 2] = np.inf
+        img[7, 1, 0] = -0.25
+    full = m.image_metrics(img, ref, with_flip=False)
+    groups = {
+        "rmse": {"rmse", "mse"},
+        "rel_mse": {"rel_mse"},
+        "rel_mse_trimmed": {"rel_mse", "rel_mse_trimmed"},
+        "psnr": {"psnr"},
+        "ssim": {"ssim"},
+        "delta_e2000_p95": set(m.DELTA_E_KEYS),
+        "nan_count": {"nan_count", "inf_count", "negative_count"},
+        "mean_radiance_rel_error": {"mean_radiance_r", "mean_radiance_g", "mean_radiance_b",
+                                    "mean_radiance_rel_error"},
+    }
+    for key, computed in groups.items():
+        got = m.image_metrics(img, ref, with_flip=False, keys=[key])
+        assert set(got) == computed, key
+        assert all(got[k] == full[k] for k in got), key
+    assert m.image_metrics(img, ref, keys=["rmse"]).keys() == {"rmse", "mse"}  # no FLIP unless asked for
+    assert "flip_mean" in m.image_metrics(img, ref, keys=["flip_mean"])
+
+
+def test_all_finite_sees_nan_inf_and_not_an_overflowing_sum():
+    from harness.evaluate.pixels import all_finite, finite_pixels
+
+    assert all_finite(np.ones((2, 2, 3)))
+    assert all_finite(np.full((2, 2, 3), 1e308))  # the sum overflows; every value is finite
+    for bad in (np.nan, np.inf, -np.inf):
+        img = np.ones((2, 2, 3))
+        img[1, 0, 2] = bad
+        assert not all_finite(img)
+        assert finite_pixels(img).tolist() == [[True, True], [False, True]]
+
+
+def test_channel_mean_is_numpys_mean_over_the_last_axis_bit_for_bit():
+    x = np.random.default_rng(23).lognormal(0.0, 3.0, size=(64, 64, 3))
+    assert np.array_equal(m.channel_mean(x), np.mean(x, axis=-1))

@@ -45,3 +45,13 @@ def test_fraction_above():
     errors = np.array([[0.0, 1.0], [2.0, np.nan]])
     assert fraction_above(errors, 1.0) == 0.5  # 2 and NaN (a NaN cannot be shown to pass)
     assert fraction_above(errors, 5.0) == 0.25
+
+
+def test_a_check_computes_what_it_names_and_the_cheap_metrics():
+    from harness.evaluate.registry import CHEAP_METRICS, IMAGE_METRICS, check_metrics
+
+    assert {"rmse", "rel_mse", "mean_radiance_rel_error", "nan_count"} <= set(CHEAP_METRICS) <= set(IMAGE_METRICS)
+    for costly in ("ssim", "psnr", "delta_e2000_mean", "flip_mean", "rel_mse_trimmed", "noise_delta_e2000_mean"):
+        assert costly not in CHEAP_METRICS
+    chosen = check_metrics(["ssim", "region.caustic.rmse"])
+    assert chosen == set(CHEAP_METRICS) | {"ssim", "region.caustic.rmse"} and "psnr" not in chosen
