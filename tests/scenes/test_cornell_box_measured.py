@@ -92,3 +92,16 @@ def test_materials_and_light_are_the_declared_projection_of_the_measured_spectra
     np.testing.assert_allclose(emitter.radiance, DATA["derived_reference_values_colour_science_cie1931_2deg"]
                                ["light_emission_to_linear_sRGB"], atol=0.02)
     assert set(scene.regions) == {"walls", "blocks", "floor", "light", "bleed-red", "bleed-green"}
+
+
+def test_the_rgb_convention_can_be_overridden(scene):
+    """--set colour.rgb_convention=illuminant_E: a derived scene on the illuminant-E projection, its own hash."""
+    from harness.scenes.overrides import load_derived_scene
+    from harness.scenes.spectra import ILLUMINANT_E
+
+    e = load_derived_scene(scene.path, [f"colour.rgb_convention={ILLUMINANT_E}"])
+    assert e.spectral.rgb_convention == ILLUMINANT_E and e.content_hash() != scene.content_hash()
+    white = e.spectral.reflectance("white")
+    assert e.materials["white"].reflectance == reflectance_rgb(white, ILLUMINANT_E)
+    np.testing.assert_allclose(e.materials["white"].reflectance, DATA["derived_reference_values_colour_science_"
+                               "cie1931_2deg"]["illuminant_E_to_linear_sRGB_no_adaptation"]["white"], atol=1e-3)
