@@ -105,3 +105,22 @@ def test_the_rgb_convention_can_be_overridden(scene):
     assert e.materials["white"].reflectance == reflectance_rgb(white, ILLUMINANT_E)
     np.testing.assert_allclose(e.materials["white"].reflectance, DATA["derived_reference_values_colour_science_"
                                "cie1931_2deg"]["illuminant_E_to_linear_sRGB_no_adaptation"]["white"], atol=1e-3)
+
+
+def test_the_stored_reference_is_spectral_and_shows_red_on_the_left(scene):
+    """The stored reference: Mitsuba's spectral variant, this scene's hash; its left wall red, its right wall green;
+    its light the emission_rgb of the light spectrum plus the little the light's own surface reflects (< 2%)."""
+    from harness.store.references import load_reference
+
+    ref = load_reference(scene)
+    assert ref.provenance["variant"].endswith("_spectral") and ref.provenance["scene_hash"] == scene.content_hash()
+    assert ref.provenance["rgb_convention"] == "spectral"
+    masks = region_masks(dataclasses.replace(scene, regions={"red": Region("red", ("red-wall",)),
+                                                             "green": Region("green", ("green-wall",)),
+                                                             "light": Region("light", ("light",))}))
+    red, green = ref.image[masks["red"]].mean(axis=0), ref.image[masks["green"]].mean(axis=0)
+    assert red[0] > 3 * red[1] and green[1] > 1.5 * green[0]
+    assert np.nonzero(masks["red"])[1].mean() < scene.camera.width / 2 < np.nonzero(masks["green"])[1].mean()
+    light = ref.image[masks["light"]].mean(axis=0)
+    expected = np.array(emission_rgb(scene.spectral.spectra["light"]))
+    assert np.all(light >= expected * 0.999) and np.all(light <= expected * 1.02), (light, expected)
