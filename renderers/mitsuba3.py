@@ -19,9 +19,9 @@ projection (the scene's ``rgb_convention``) with the RGB variant. A spectral ren
 ``info["spectral"]`` (:data:`harness.scenes.spectral_scene.SPECTRAL_INFO`: the variant), which
 the results' ``rgb_convention`` column reads. Its film is the same ``hdrfilm``: Mitsuba turns
 each wavelength sample into XYZ with its CIE 1931 2° table, divides by its ``∫ȳ``
-(``MI_CIE_Y_NORMALIZATION``) and converts to linear sRGB, so an emitter of spectrum L seen
-directly gives :func:`harness.scenes.spectra.emission_rgb` (L) up to the tables' difference
-(:data:`CIE_TABLE_NOTE`).
+(``1 / MI_CIE_Y_NORMALIZATION``) and converts to linear sRGB; the adapter rescales that to
+colour-science's Σȳ (:func:`spectral_scale`), so an emitter of spectrum L seen directly gives
+:func:`harness.scenes.spectra.emission_rgb` (L) up to the tables' difference (:data:`CIE_TABLE_NOTE`).
 
 Renders are split into passes of at most :data:`MAX_SAMPLES_PER_PASS` samples
 so memory stays bounded at any spp (the LLVM variant keeps a whole wavefront
@@ -114,7 +114,7 @@ def find_llvm() -> tuple[str | None, str]:
 #: spectral image 0.100% brighter than :func:`~harness.scenes.spectra.emission_rgb`: the adapter multiplies it
 #: by :func:`spectral_scale` to remove that. What remains is the tables' shapes: on the Cornell spectra
 #: (light L, and white, green, red × L) the linear sRGB differs by at most 1.5e-4 for L and white, and
-#: 0.2% (green's R), 0.8% (red's G), 2.3% (green's B) and -1.1% (red's B) in the small channels of the
+#: 0.1% (green's R), 0.8% (red's G), 2.3% (green's B) and -1.1% (red's B) in the small channels of the
 #: coloured products.
 CIE_TABLE_NOTE = ("Mitsuba's CIE table differs from colour-science's per wavelength (sums equal); its film's "
                   "1/106.7503 normalisation is rescaled to colour-science's Σȳ (renderers/mitsuba3.py)")
