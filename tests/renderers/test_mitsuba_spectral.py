@@ -100,7 +100,11 @@ def test_mitsubas_cie_tables_against_colour_sciences():
     """The numbers CIE_TABLE_NOTE gives: equal sums, per-wavelength differences up to 11% of x̄, the film's
     normalisation 0.1% off (which spectral_scale removes), and the light's RGB within 2e-4 after it."""
     Mitsuba3().variant("spectral")
+    from harness.scenes.export.mitsuba import SPECTRAL_RANGE_NM
+
     w, xyz = observer()
+    # Mitsuba samples wavelengths over the observer's own range, colour-science's table's: 360-830 nm.
+    assert (mi.MI_CIE_MIN, mi.MI_CIE_MAX) == SPECTRAL_RANGE_NM == (w[0], w[-1])
     table = np.array(mi.cie1931_xyz(mi.Float(w)), dtype=np.float64).reshape(3, -1).T
     np.testing.assert_allclose(table.sum(axis=0), xyz.sum(axis=0), rtol=2e-6)
     big = xyz > 0.01
