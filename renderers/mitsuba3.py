@@ -11,6 +11,18 @@ found (``DRJIT_LIBLLVM_PATH`` first, then the usual system locations),
 otherwise ``scalar_rgb`` (same images in expectation, about 4x slower). The
 variant used is reported in ``RenderResult.info`` and in ``version()``.
 
+Spectral scenes (:mod:`harness.scenes.spectral_scene`): with the setting ``spectral = auto``
+(the default) a scene that gives any reflectance or emission as a spectrum is rendered by
+``llvm_ad_spectral`` (else ``scalar_spectral``) on those sampled spectra
+(:func:`harness.scenes.export.mitsuba.spectrum_dict`); ``spectral = rgb`` renders its RGB
+projection (the scene's ``rgb_convention``) with the RGB variant. A spectral render says so in
+``info["spectral"]`` (:data:`harness.scenes.spectral_scene.SPECTRAL_INFO`: the variant), which
+the results' ``rgb_convention`` column reads. Its film is the same ``hdrfilm``: Mitsuba turns
+each wavelength sample into XYZ with its CIE 1931 2° table, divides by its ``∫ȳ``
+(``1 / MI_CIE_Y_NORMALIZATION``) and converts to linear sRGB; the adapter rescales that to
+colour-science's Σȳ (:func:`spectral_scale`), so an emitter of spectrum L seen directly gives
+:func:`harness.scenes.spectra.emission_rgb` (L) up to the tables' difference (:data:`CIE_TABLE_NOTE`).
+
 Renders are split into passes of at most :data:`MAX_SAMPLES_PER_PASS` samples
 so memory stays bounded at any spp (the LLVM variant keeps a whole wavefront
 in memory); each pass has its own seed, derived from the user's seed.
@@ -38,10 +50,11 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.adapters.api import AOVS, Checkpoint, RenderResult, Stopwatch, pass_seed, spp_passes
+from harness.adapters.api import AOVS, Checkpoint, RenderResult, Setting, Stopwatch, pass_seed, spp_passes
 from harness.scenes.export import mitsuba as mitsuba_plugins
-from harness.scenes.export.mitsuba import bsdf_dict
+from harness.scenes.export.mitsuba import bsdf_dict, emission_spectrum, has_spectra, material_spectra
 from harness.scenes.model import Scene
+from harness.scenes.spectral_scene import SPECTRAL_INFO
 from harness.scenes.transforms import unit_frame
 from renderers import mitsuba_ao
 
@@ -93,9 +106,33 @@ def find_llvm() -> tuple[str | None, str]:
     )
 
 
+#: How Mitsuba 3.9.1's CIE 1931 2° table (``mi.cie1931_xyz``, 360-830 nm at 1 nm) and its film's normalisation
+#: compare with colour-science's, which :mod:`harness.scenes.spectra` uses (measured in
+#: ``tests/renderers/test_mitsuba_spectral.py``). The tables' sums agree to 1.4e-6, but single wavelengths differ
+#: by up to 11% of x̄, 5% of z̄ and 1.6% of ȳ (largest near 418 nm: another edition of the table). The film
+#: divides by ``1 / MI_CIE_Y_NORMALIZATION`` = 106.7503 where both tables' Σȳ = 106.857, which would make a
+#: spectral image 0.100% brighter than :func:`~harness.scenes.spectra.emission_rgb`: the adapter multiplies it
+#: by :func:`spectral_scale` to remove that. What remains is the tables' shapes: on the Cornell spectra
+#: (light L, and white, green, red × L) the linear sRGB differs by at most 1.5e-4 for L and white, and
+#: 0.1% (green's R), 0.8% (red's G), 2.3% (green's B) and -1.1% (red's B) in the small channels of the
+#: coloured products.
+CIE_TABLE_NOTE = ("Mitsuba's CIE table differs from colour-science's per wavelength (sums equal); its film's "
+                  "1/106.7503 normalisation is rescaled to colour-science's Σȳ (renderers/mitsuba3.py)")
+
+
+def spectral_scale() -> float:
+    """The factor that puts a spectral variant's image on :func:`harness.scenes.spectra.emission_rgb`'s scale:
+    Mitsuba's film divides by 1 / ``MI_CIE_Y_NORMALIZATION``, colour-science's projection by Σȳ (CIE_TABLE_NOTE)."""
+    import mitsuba as mi
+
+    from harness.scenes.spectra import observer
+
+    return float(1.0 / (mi.MI_CIE_Y_NORMALIZATION * observer()[1][:, 1].sum()))
+
+
 @cache
-def _select_variant() -> tuple[str, str]:
-    """Set and return Mitsuba's variant, with a note on why it was chosen."""
+def _select_variant(colour: str = "rgb") -> tuple[str, str]:
+    """Set and return Mitsuba's variant for ``colour`` (``rgb`` or ``spectral``), with a note on why it was chosen."""
     llvm, note = find_llvm()
     if llvm and not os.environ.get("DRJIT_LIBLLVM_PATH"):
         os.environ["DRJIT_LIBLLVM_PATH"] = llvm  # drjit reads it at first use
@@ -103,19 +140,31 @@ def _select_variant() -> tuple[str, str]:
 
     if llvm:
         try:
-            mi.set_variant("llvm_ad_rgb")
+            mi.set_variant(f"llvm_ad_{colour}")
             import drjit as dr
 
             dr.eval(dr.arange(mi.Float, 4) + 1)  # forces LLVM to load now, not mid-render
-            return "llvm_ad_rgb", note
+            return f"llvm_ad_{colour}", note
         except Exception as e:  # a broken LLVM must degrade, not crash
-            note = f"llvm_ad_rgb failed ({type(e).__name__}: {e}); falling back"
-    mi.set_variant("scalar_rgb")
-    return "scalar_rgb", f"{note}; using scalar_rgb (about 4x slower)"
+            note = f"llvm_ad_{colour} failed ({type(e).__name__}: {e}); falling back"
+    mi.set_variant(f"scalar_{colour}")
+    return f"scalar_{colour}", f"{note}; using scalar_{colour} (about 4x slower)"
 
 
-def scene_dict(scene: Scene, spp: int, sampler: str = "independent", aovs: bool = False) -> dict:
-    """The scene as a ``mi.load_dict`` dictionary (Mitsuba must be imported).
+def _use_variant(colour: str) -> tuple[str, str]:
+    """Make ``colour``'s variant (``rgb``, ``spectral``) Mitsuba's current one; one process may render both."""
+    variant, note = _select_variant(colour)
+    import mitsuba as mi
+
+    if mi.variant() != variant:
+        mi.set_variant(variant)
+    return variant, note
+
+
+def scene_dict(scene: Scene, spp: int, sampler: str = "independent", aovs: bool = False,
+               spectral: bool = False) -> dict:
+    """The scene as a ``mi.load_dict`` dictionary (Mitsuba must be imported, in a spectral variant if
+    ``spectral``: then materials and emitters given as spectra get those spectra, not their RGB projection).
 
     The plugins are :mod:`harness.scenes.export.mitsuba`'s, the ones ``cbox export --format mitsuba``
     writes as XML; here the meshes are built in memory. ``sampler`` is a Mitsuba sampler plugin (the
@@ -141,14 +190,16 @@ def scene_dict(scene: Scene, spp: int, sampler: str = "independent", aovs: bool 
     }
     if aovs:
         d["integrator"] = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": d["integrator"]}
-    bsdfs = {name: mi.load_dict(bsdf_dict(m)) for name, m in scene.materials.items()}
+    spectra = material_spectra(scene, spectral)
+    bsdfs = {name: mi.load_dict(bsdf_dict(m, spectra.get(name))) for name, m in scene.materials.items()}
     for i, s in enumerate(scene.spheres):
         d[f"sphere_{i}"] = mitsuba_plugins.sphere_dict(scene, s) | {"bsdf": bsdfs[s.material]}
     for i, m in enumerate(scene.meshes):
         props = mi.Properties()
         props["bsdf"] = bsdfs[m.material]
         if m.is_emitter:
-            props["emitter"] = mi.load_dict(mitsuba_plugins.emitter_dict(m.radiance))
+            props["emitter"] = mi.load_dict(mitsuba_plugins.emitter_dict(m.radiance,
+                                                                         emission_spectrum(scene, m, spectral)))
         mesh = mi.Mesh(m.name, len(m.vertices), len(m.triangles), has_vertex_normals=False,
                        has_vertex_texcoords=False, props=props)
         params = mi.traverse(mesh)
@@ -211,6 +262,10 @@ class Mitsuba3:
     quantities = ("radiance", "ambient_occlusion")
     approximations: tuple[str, ...] = ()
     aovs = AOVS
+    settings = (Setting("spectral", str, "auto", "auto: a scene with spectra renders them with the spectral variant "
+                        "(llvm_ad_spectral, else scalar_spectral), any other scene with the RGB one; rgb: always "
+                        "the RGB variant, on the scene's RGB projection (its rgb_convention)",
+                        choices=("auto", "rgb")),)
 
     def unavailable_reason(self) -> str | None:
         try:
@@ -219,36 +274,47 @@ class Mitsuba3:
             return f"mitsuba is not installed ({e}); pip install mitsuba"
         return None
 
-    def variant(self) -> tuple[str, str]:
-        """(variant in use, why it was chosen)."""
-        return _select_variant()
+    def variant(self, colour: str = "rgb") -> tuple[str, str]:
+        """(the variant for ``colour``, rgb or spectral; why it was chosen), made Mitsuba's current one."""
+        return _use_variant(colour)
 
     def version(self) -> str:
         import mitsuba as mi
 
-        return f"{mi.__version__} ({self.variant()[0]})"
+        return f"{mi.__version__} ({_select_variant('rgb')[0]})"  # a spectral run's variant: info["variant"]
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
-               aovs: Sequence[str] = ()) -> RenderResult:
-        variant, note = self.variant()
+               aovs: Sequence[str] = (), settings: dict | None = None) -> RenderResult:
+        spectral = (settings or {}).get("spectral", "auto") == "auto" and has_spectra(scene)
+        variant, note = _use_variant("spectral" if spectral else "rgb")
         import mitsuba as mi
 
         clock = Stopwatch()
         info = {"variant": variant, "variant_note": note, "threads": _threads()}
+        if spectral:
+            info[SPECTRAL_INFO] = variant
+            info["cie_note"] = CIE_TABLE_NOTE
         cam = scene.camera
         per_pass = max(1, MAX_SAMPLES_PER_PASS // (cam.width * cam.height))
         if unknown := set(aovs) - set(AOVS):
             raise ValueError(f"unknown AOVs {sorted(unknown)}; this renderer gives {', '.join(AOVS)}")
         if aovs and scene.quantity != "radiance":
             raise ValueError(f"AOVs are for radiance images; scene {scene.name!r} is {scene.quantity}")
-        mi_scene = mi.load_dict(scene_dict(scene, per_pass, aovs=bool(aovs)))
+        mi_scene = mi.load_dict(scene_dict(scene, per_pass, aovs=bool(aovs), spectral=spectral))
         if scene.quantity == "ambient_occlusion":
             return self._render_ao(mi_scene, scene, spp, seed, checkpoints, per_pass, info, clock)
 
-        def sums(n: int, s: int) -> tuple[np.ndarray]:
-            return (np.asarray(mi.render(mi_scene, spp=n, seed=s), dtype=np.float64) * n,)
+        scale = spectral_scale() if spectral else 1.0
+        if spectral:
+            info["spectral_scale"] = round(scale, 9)
 
-        _warm_up((scene.content_hash(), bool(aovs)), sums)
+        def sums(n: int, s: int) -> tuple[np.ndarray]:
+            img = np.asarray(mi.render(mi_scene, spp=n, seed=s), dtype=np.float64) * n
+            if spectral:  # colour channels only, not AOVs
+                img[..., :3] *= scale
+            return (img,)
+
+        _warm_up((scene.content_hash(), bool(aovs), variant), sums)
         info["setup_s"] = round(clock.wall(), 3)  # scene load and warm-up, outside time_s
 
         def aux(acc, n: int) -> dict:
@@ -271,7 +337,7 @@ class Mitsuba3:
         def sums(n: int, s: int) -> tuple[np.ndarray, np.ndarray]:
             return mitsuba_ao.ao_pass(mi_scene, scene, maxt, n, s)
 
-        _warm_up((scene.content_hash(), "ao"), sums)
+        _warm_up((scene.content_hash(), "ao", info["variant"]), sums)
         info["setup_s"] = round(clock.wall(), 3)
 
         (s1, s2), image, shots, elapsed, cpu = run_passes(

@@ -31,6 +31,7 @@ from harness.scenes.loader import SCENE_KEYS, parse_scene, read_scene_document
 from harness.scenes.materials import MATERIAL_TYPES, material_fields
 from harness.scenes.model import Scene, SceneError, one_line
 from harness.scenes.quantities import AO_KEYS
+from harness.scenes.spectral_scene import COLOUR_KEYS
 from harness.suggest import did_you_mean
 
 OPTION = "--set"
@@ -78,7 +79,8 @@ def parse_assignment(text: str) -> tuple[str, Any]:
 
 
 def override_keys(doc: dict) -> tuple[str, ...]:
-    """The keys a scene document can be overridden at: camera, render, its materials' fields, its AO table."""
+    """The keys a scene document can be overridden at: camera, render, its materials' fields, its AO table, its
+    colour pipeline (``colour.rgb_convention``: the RGB projection an RGB renderer runs on)."""
     keys = [f"camera.{k}" for k in SCENE_KEYS["camera"]] + [f"render.{k}" for k in SCENE_KEYS["render"]]
     for name, table in (doc.get("materials") or {}).items():
         kind = table.get("type") if isinstance(table, dict) else None
@@ -87,6 +89,8 @@ def override_keys(doc: dict) -> tuple[str, ...]:
             keys += [f"materials.{name}.{f.name}" for f in material_fields(cls)]
     if isinstance(doc.get("ambient_occlusion"), dict):
         keys += [f"ambient_occlusion.{k}" for k in AO_KEYS]
+    if isinstance(doc.get("colour"), dict):
+        keys += [f"colour.{k}" for k in COLOUR_KEYS]
     return tuple(keys)
 
 

@@ -162,10 +162,21 @@ def spectrum_problem(wavelengths: list, values: list, extrapolation: str) -> tup
     return None
 
 
+def _colour():
+    """colour-science, imported lazily (~1.5 s, only when a spectrum is projected), without the warning it prints
+    on import when matplotlib is absent (its plotting, which the harness does not use)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message='"Matplotlib" related API features are not available')
+        import colour
+    return colour
+
+
 @functools.cache
 def observer() -> tuple[np.ndarray, np.ndarray]:
     """The CIE 1931 2° colour-matching functions: wavelengths (n,) in nm at 1 nm, and x̄ȳz̄ (n, 3); read-only."""
-    import colour  # lazily: ~1.5 s, only when a spectrum is projected
+    colour = _colour()
 
     cmfs = colour.MSDS_CMFS[_COLOUR_OBSERVER]
     wavelengths, xyz_bar = np.array(cmfs.wavelengths, dtype=np.float64), np.array(cmfs.values, dtype=np.float64)
@@ -178,7 +189,7 @@ def observer() -> tuple[np.ndarray, np.ndarray]:
 @functools.cache
 def xyz_to_linear_srgb() -> np.ndarray:
     """The XYZ → linear sRGB matrix of IEC 61966-2-1 (D65 white, no adaptation), (3, 3), read-only."""
-    import colour  # lazily, as in observer()
+    colour = _colour()
 
     m = np.array(colour.RGB_COLOURSPACES["sRGB"].matrix_XYZ_to_RGB, dtype=np.float64)
     m.setflags(write=False)

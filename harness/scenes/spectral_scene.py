@@ -27,7 +27,8 @@ the emission by the emitter rule), and the material or mesh holds that RGB,
 so every RGB renderer reads the scene as before. The spectra themselves, and
 which field uses which, are kept in :class:`SpectralContent`
 (``Scene.spectral``) for spectral renderers, and its ``rgb_convention`` is
-the convention a run on the RGB values used. Reflectance spectra must lie in
+the convention a run on the RGB values used (:func:`convention_used`, the results'
+``rgb_convention`` column). Reflectance spectra must lie in
 [0, 1] and so must their projection; emission spectra must be non-negative and
 so must their RGB (an RGB renderer cannot emit a negative channel).
 """
@@ -46,6 +47,21 @@ COLOUR_KEYS = ("observer", "output", "rgb_convention", "light")
 SPECTRUM_KEYS = ("wavelengths_nm", "values", "extrapolation")
 #: The keys of a spectral value (``{ spectrum = "NAME" }``).
 REFERENCE_KEYS = ("spectrum",)
+#: The ``RenderResult.info`` key by which a renderer says it rendered a scene's spectra, not their RGB projection;
+#: its value says how (Mitsuba's variant, ``hero``). Absent or empty: the render used the RGB values.
+SPECTRAL_INFO = "spectral"
+#: The ``rgb_convention`` column of a run that rendered the spectra themselves.
+SPECTRAL_RUN = "spectral"
+
+
+def convention_used(rgb_convention: str, info) -> str:
+    """What a run's colours were, for the results' ``rgb_convention`` column, from the scene's ``rgb_convention``
+    (empty for a scene without spectral content) and the render's ``info``: empty for such a scene,
+    :data:`SPECTRAL_RUN` where the renderer rendered the spectra (``info[SPECTRAL_INFO]``), else the scene's
+    convention, by which the RGB values it rendered were projected."""
+    if not rgb_convention:
+        return ""
+    return SPECTRAL_RUN if (info or {}).get(SPECTRAL_INFO) else rgb_convention
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ from typing import Callable
 
 import numpy as np
 
+from harness.scenes.spectral_scene import convention_used
 from harness.adapters.registry import RendererEntry
 from harness.adapters.settings import canonical
 from harness.evaluate.regions import region_masks, region_noise
@@ -164,6 +165,7 @@ def _provenance(scene: Scene, entry: RendererEntry, info: dict, spp: int, batche
         "settings": entry.settings,
         "renderer_version": entry.renderer.version(),
         "variant": info.get("variant"),
+        **({"rgb_convention": convention_used(scene.spectral.rgb_convention, info)} if scene.spectral else {}),
         "spp": spp,
         "batches": batches,
         "batch_spp": batch_spp,

@@ -45,6 +45,7 @@ from harness.workflows.render import RenderError, RenderTimeout, render_checked
 from harness.workflows.sandbox import run_sandboxed
 from harness.workflows.timing import Timing, measure
 from harness.scenes.model import Scene
+from harness.scenes.spectral_scene import convention_used
 
 STATUSES = ("ok", "skipped", "unavailable", "failed")
 
@@ -88,11 +89,15 @@ class RunRecord:
     # (wall, CPU or None) of each timing of this render when it was re-timed (--time-repeats); time_s is then
     # their median (harness.evaluate.timing_stats). Empty: the one timing time_s.
     time_samples: list = field(default_factory=list, repr=False)
+    # The scene's rgb_convention ("" for a scene without spectra): with the render's info, the row's
+    # rgb_convention column (harness.scenes.spectral_scene.convention_used).
+    scene_rgb_convention: str = ""
 
     @classmethod
     def new(cls, scene: Scene, entry: RendererEntry, spp: int, seed: int, **fields) -> "RunRecord":
         rec = cls(scene.name, entry.name, "ok", spp, seed, scene.content_hash(), scene_settings(scene),
                   canonical(entry.settings), **fields)
+        rec.scene_rgb_convention = scene.spectral.rgb_convention if scene.spectral is not None else ""
         if entry.renderer is not None:
             rec.estimator = estimator_of(entry.renderer)
         if not entry.available:
@@ -125,6 +130,7 @@ class RunRecord:
             "settings": self.settings,
             "estimator": self.estimator,
             "scene_settings": self.scene_settings,
+            "rgb_convention": convention_used(self.scene_rgb_convention, self.info),
             "approximations": json.dumps(list(self.approximations)),
             "spp": self.spp,
             "seed": self.seed,

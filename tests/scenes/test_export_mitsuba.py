@@ -148,3 +148,28 @@ def test_an_ambient_occlusion_scene_is_refused(tmp_path):
 def test_an_unknown_plugin_is_not_written():
     with pytest.raises(ValueError, match="plugin type 'plastic'"):
         export_mitsuba.to_xml({"type": "scene", "b": {"type": "plastic"}}, {})
+
+
+def test_a_spectral_scene_exports_its_spectra_and_renders_as_the_adapter(tmp_path):
+    """cornell-box-measured: the file holds the measured spectra as ``irregular`` plugins (the light's flat surface
+    padded to 360-830 nm), and in the spectral variant renders one pass bit for bit as the adapter (which then
+    rescales by spectral_scale)."""
+    scene, seed = small("cornell-box-measured"), 7
+    xml = export_scene(scene, "mitsuba", tmp_path)
+    root = ET.parse(xml).getroot()
+    spectra = {e.get("name"): e for e in root.iter("spectrum")}
+    assert len(list(root.iter("spectrum"))) == 5 and not list(root.iter("rgb"))
+    waves = [float(x) for x in spectra["radiance"].find("string[@name='wavelengths']").get("value").split(",")]
+    assert waves == [400.0, 500.0, 600.0, 700.0]
+    flat = [e for e in root.iter("spectrum") if e.find("string[@name='values']").get("value") == "0.78, 0.78, 0.78, 0.78"]
+    assert len(flat) == 1 and flat[0].find("string[@name='wavelengths']").get("value") == "360.0, 400.0, 700.0, 830.0"
+    ours = Mitsuba3().render(scene, 1, seed)
+    assert ours.info["variant"].endswith("_spectral")
+    loaded = mi.load_file(str(xml), spp=1, seed=pass_seed(seed, 0))
+    theirs = (np.asarray(mi.render(loaded), dtype=np.float64) * mitsuba3.spectral_scale()).astype(np.float32)
+    assert ours.image.mean() > 0.01
+    np.testing.assert_array_equal(theirs, ours.image)
+    (tmp_path / "rgb").mkdir()
+    rgb = export_mitsuba.write(scene, tmp_path / "rgb", spectral=False)
+    assert not list(ET.parse(rgb).getroot().iter("spectrum"))
+    Mitsuba3().variant()  # back to the RGB variant the module's other tests load files in

@@ -7,6 +7,14 @@ format" chapter) with each mesh a PLY file (:mod:`harness.scenes.export.ply`). B
 and scale the scene to the unit frame (:func:`harness.scenes.transforms.unit_frame`), so the
 export renders bit for bit as the adapter does (``tests/scenes/test_export_mitsuba.py``).
 
+A scene with spectra (``Scene.spectral``, :mod:`harness.scenes.spectral_scene`) is written
+with the sampled spectra themselves, as ``irregular`` spectrum plugins (Mitsuba 3's
+"Spectra" plugins: linear between samples, zero outside them, as our ``extrapolation =
+"zero"``; a ``"constant"`` one gets end samples at :data:`SPECTRAL_RANGE_NM`), and must be
+rendered with a ``*_spectral`` variant (``mitsuba -m llvm_ad_spectral``); values the
+scene gives as RGB stay ``rgb`` (which a spectral variant upsamples). ``spectral=False``
+writes the scene's RGB projection instead, for an RGB variant.
+
 The XML declares ``<default>``s for ``spp``, ``seed``, ``resx`` and ``resy``, so that
 
     mitsuba DIR/scene.xml -o out.exr -D spp=64 -D seed=3
@@ -29,6 +37,7 @@ import numpy as np
 from harness.scenes.export.ply import write_ply
 from harness.scenes.materials import Dielectric, Diffuse, Mirror
 from harness.scenes.model import Mesh, Scene, Sphere, one_line
+from harness.scenes.spectra import Spectrum
 from harness.scenes.transforms import unit_frame
 
 NAME = "mitsuba"
@@ -50,6 +59,9 @@ MAPPING = (
      "`diffuse` and `conductor` are one-sided (black from behind); `dielectric` both sides"),
     ("mirror", "constant specular reflectance R", "`conductor` with `material` none (Fresnel factor 1) and "
                                                   "`specular_reflectance` R"),
+    ("colour", "RGB values (linear sRGB); a spectral scene's sampled spectra",
+     "`rgb`; spectra as `irregular` spectrum plugins, for a `*_spectral` variant (the adapter's `spectral` "
+     "setting)"),
     ("IOR", "`int_ior` inside, `ext_ior` outside, absolute", "`dielectric` `int_ior`, `ext_ior`"),
     ("filter", "box: each pixel the mean over its own square", "`hdrfilm` (rgb, float32) with `rfilter` box"),
     ("depth", "`max_depth` path segments, -1 unbounded", "`path` `max_depth`, the same number (our convention "
@@ -60,6 +72,8 @@ MAPPING = (
 #: The ``<default>`` values an exported file declares besides the resolution: ``-D spp=...`` overrides.
 DEFAULT_SPP = 64
 DEFAULT_SEED = 0
+#: Mitsuba's spectral variants sample wavelengths in this range (``MI_CIE_MIN``, ``MI_CIE_MAX``), nm.
+SPECTRAL_RANGE_NM = (360.0, 830.0)
 
 
 @dataclass(frozen=True)
@@ -79,22 +93,60 @@ class Var:
     tag: str
 
 
-def bsdf_dict(material) -> dict:
-    """A scene material as a Mitsuba 3 BSDF dictionary (harness.scenes.materials names the match)."""
+def spectrum_dict(spectrum: Spectrum) -> dict:
+    """A sampled spectrum as Mitsuba's ``irregular`` plugin: the same samples, so the same linear interpolation and
+    zero outside them; ``extrapolation = "constant"`` adds the end values at the ends of :data:`SPECTRAL_RANGE_NM`."""
+    w, v = list(spectrum.wavelengths_nm), list(spectrum.values)
+    if spectrum.extrapolation == "constant":
+        lo, hi = SPECTRAL_RANGE_NM
+        if w[0] > lo:
+            w, v = [lo] + w, [v[0]] + v
+        if w[-1] < hi:
+            w, v = w + [hi], v + [v[-1]]
+    return {"type": "irregular", "wavelengths": ", ".join(map(_num, w)), "values": ", ".join(map(_num, v))}
+
+
+def colour_dict(rgb, spectrum: Spectrum | None = None) -> dict:
+    """A colour: the spectrum where there is one (spectral variants), else the RGB value."""
+    return spectrum_dict(spectrum) if spectrum is not None else {"type": "rgb", "value": list(rgb)}
+
+
+def bsdf_dict(material, spectra: dict[str, Spectrum] | None = None) -> dict:
+    """A scene material as a Mitsuba 3 BSDF dictionary (harness.scenes.materials names the match); ``spectra``
+    maps a field (``reflectance``) to its spectrum, for a spectral variant."""
+    spectra = spectra or {}
     if isinstance(material, Diffuse):
-        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(material.reflectance)}}
+        return {"type": "diffuse", "reflectance": colour_dict(material.reflectance, spectra.get("reflectance"))}
     if isinstance(material, Mirror):
         # material "none": Fresnel factor 1, so the reflectance is exactly specular_reflectance.
         return {"type": "conductor", "material": "none",
-                "specular_reflectance": {"type": "rgb", "value": list(material.reflectance)}}
+                "specular_reflectance": colour_dict(material.reflectance, spectra.get("reflectance"))}
     if isinstance(material, Dielectric):
         return {"type": "dielectric", "int_ior": material.int_ior, "ext_ior": material.ext_ior}
     raise ValueError(f"material {material.name!r}: {type(material).__name__} has no Mitsuba translation")
 
 
-def emitter_dict(radiance) -> dict:
-    """A one-sided area emitter of constant ``radiance`` (linear sRGB)."""
-    return {"type": "area", "radiance": {"type": "rgb", "value": list(radiance)}}
+def emitter_dict(radiance, spectrum: Spectrum | None = None) -> dict:
+    """A one-sided area emitter of constant ``radiance`` (linear sRGB), or of the emission ``spectrum``."""
+    return {"type": "area", "radiance": colour_dict(radiance, spectrum)}
+
+
+def has_spectra(scene: Scene) -> bool:
+    """Whether the scene gives any material or emitter as a spectrum (then a spectral variant renders those)."""
+    sp = scene.spectral
+    return sp is not None and bool(sp.emitters or any(sp.materials.values()))
+
+
+def material_spectra(scene: Scene, spectral: bool) -> dict[str, dict[str, Spectrum]]:
+    """Each material's spectral fields ({material: {field: spectrum}}), none unless ``spectral``."""
+    sp = scene.spectral
+    if not spectral or sp is None:
+        return {}
+    return {m: {f: sp.spectra[name] for f, name in fields.items()} for m, fields in sp.materials.items()}
+
+
+def emission_spectrum(scene: Scene, mesh: Mesh, spectral: bool) -> Spectrum | None:
+    return scene.spectral.emission(mesh.name) if spectral and scene.spectral is not None else None
 
 
 def integrator_dict(scene: Scene) -> dict:
@@ -146,9 +198,11 @@ def sphere_dict(scene: Scene, sphere: Sphere) -> dict:
     return {"type": "sphere", "center": unit_point(scene, sphere.center), "radius": sphere.radius * unit_frame(scene)[1]}
 
 
-def write(scene: Scene, folder: Path) -> Path:
-    """Write ``scene.xml`` and ``meshes/*.ply`` into ``folder``; return the XML's path."""
+def write(scene: Scene, folder: Path, spectral: bool | None = None) -> Path:
+    """Write ``scene.xml`` and ``meshes/*.ply`` into ``folder``; return the XML's path. ``spectral`` (default:
+    whether the scene has spectra) writes its spectra, for a ``*_spectral`` variant (module docstring)."""
     folder = Path(folder)
+    spectral = has_spectra(scene) if spectral is None else spectral
     (folder / "meshes").mkdir()
     sensor = sensor_dict(scene, Var("spp", "integer"), camera_look_at(scene))
     sensor["sampler"]["seed"] = Var("seed", "integer")
@@ -157,7 +211,8 @@ def write(scene: Scene, folder: Path) -> Path:
     # Shapes in the adapter's order, under its ids (spheres, then meshes), so the two scenes are one.
     # Ids and file names from our names made safe: Mitsuba substitutes `$name` in any attribute.
     bsdf_ids = {name: f"bsdf{i}-{_slug(name)}" for i, name in enumerate(scene.materials)}
-    d |= {bsdf_ids[name]: bsdf_dict(m) for name, m in scene.materials.items()}
+    spectra = material_spectra(scene, spectral)
+    d |= {bsdf_ids[name]: bsdf_dict(m, spectra.get(name)) for name, m in scene.materials.items()}
     for i, s in enumerate(scene.spheres):
         d[f"sphere_{i}"] = sphere_dict(scene, s) | {"bsdf": {"type": "ref", "id": bsdf_ids[s.material]}}
     for i, m in enumerate(scene.meshes):
@@ -166,10 +221,11 @@ def write(scene: Scene, folder: Path) -> Path:
         d[f"mesh_{i}"] = {"type": "ply", "filename": ply, "face_normals": True,
                           "bsdf": {"type": "ref", "id": bsdf_ids[m.material]}}
         if m.is_emitter:
-            d[f"mesh_{i}"]["emitter"] = emitter_dict(m.radiance)
+            d[f"mesh_{i}"]["emitter"] = emitter_dict(m.radiance, emission_spectrum(scene, m, spectral))
     defaults = {"spp": DEFAULT_SPP, "seed": DEFAULT_SEED, "resx": scene.camera.width, "resy": scene.camera.height}
     path = folder / "scene.xml"
-    path.write_text(to_xml(d, defaults, f"{scene.name} ({scene.content_hash()}), exported by cornell-harness"),
+    variant = "; spectra: render with a *_spectral variant (mitsuba -m llvm_ad_spectral)" if spectral else ""
+    path.write_text(to_xml(d, defaults, f"{scene.name} ({scene.content_hash()}), exported by cornell-harness{variant}"),
                     encoding="utf-8")
     return path
 
@@ -183,7 +239,7 @@ def _slug(name: str) -> str:
 #: The XML element of each plugin type used above (the dictionary says only ``type``).
 PLUGIN_TAGS = {"path": "integrator", "perspective": "sensor", "independent": "sampler", "hdrfilm": "film",
                "box": "rfilter", "diffuse": "bsdf", "conductor": "bsdf", "dielectric": "bsdf", "area": "emitter",
-               "ply": "shape", "sphere": "shape"}
+               "ply": "shape", "sphere": "shape", "irregular": "spectrum"}
 
 
 def to_xml(d: dict, defaults: dict[str, int], comment: str = "") -> str:
