@@ -77,6 +77,7 @@ from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, head, 
 from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, SAMPLER_SETTING, Stream,
                                     independent, path_point, vertex_1d, vertex_2d)
 from renderers.core.sampling import jit, power_heuristic
+from renderers.core.wavelengths import N_WAVELENGTHS
 from renderers.hero_wavelength import spectral_tables, trace_hero_paths
 from renderers.core.schedule import render_image
 from renderers.core.settings import with_defaults
@@ -221,30 +222,31 @@ class PathTracer(ToolkitRenderer):
         rr_depth, sampler = s["rr_depth"], s["sampler"]
         if unknown := set(aovs) - set(AOVS):
             raise ValueError(f"unknown AOVs {sorted(unknown)}; this renderer gives {', '.join(AOVS)}")
+        info = {"rr_depth": rr_depth, "rr_q_max": Q_MAX}
         if s["spectral"] == "hero":
             if aovs:
                 raise ValueError("AOVs come from spectral=rgb; spectral=hero renders the image only")
-            return self._render_hero(scene, spp, seed, checkpoints, rr_depth, sampler)
-        aovs = AOVS if aovs else ()  # both come from one pass
-        geom, setup_s = warmed_geometry(scene, lambda g: trace_paths(g, scene, 0, 1, 1, independent(0), rr_depth))
-        result = render_image(scene, spp, seed, lambda *unit: trace_paths(geom, scene, *unit, rr_depth, bool(aovs)),
-                              checkpoints, self.threads, {"rr_depth": rr_depth, "rr_q_max": Q_MAX}, sampler, aovs)
+            geom, setup_s, trace = _hero_paths(scene, rr_depth)
+            info.update(spectral="hero", wavelengths_per_path=N_WAVELENGTHS)
+        else:
+            aovs = AOVS if aovs else ()  # both come from one pass
+            geom, setup_s = warmed_geometry(scene, lambda g: trace_paths(g, scene, 0, 1, 1, independent(0), rr_depth))
+
+            def trace(*unit):
+                return trace_paths(geom, scene, *unit, rr_depth, bool(aovs))
+        result = render_image(scene, spp, seed, trace, checkpoints, self.threads, info, sampler, aovs)
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
         return result
 
-    def _render_hero(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int], rr_depth: int,
-                     sampler: str) -> RenderResult:
-        """``spectral = "hero"``: :func:`renderers.hero_wavelength.trace_hero_paths` on the same schedule and film."""
-        tables = []
 
-        def warm_up(g: SceneGeometry):
-            tables.append(spectral_tables(scene, g))  # refuses an RGB-only field before the kernels compile
-            return trace_hero_paths(g, tables[0], scene, 0, 1, 1, independent(0), rr_depth)
+def _hero_paths(scene: Scene, rr_depth: int):
+    """``spectral = "hero"``: the warmed geometry, its set-up seconds, and the trace function of
+    :func:`renderers.hero_wavelength.trace_hero_paths` for :func:`renderers.core.schedule.render_image`."""
+    tables = []
 
-        geom, setup_s = warmed_geometry(scene, warm_up)
-        result = render_image(scene, spp, seed,
-                              lambda *unit: trace_hero_paths(geom, tables[0], scene, *unit, rr_depth),
-                              checkpoints, self.threads, {"rr_depth": rr_depth, "rr_q_max": Q_MAX, "spectral": "hero",
-                                                          "wavelengths_per_path": 4}, sampler)
-        result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
-        return result
+    def warm_up(g: SceneGeometry):
+        tables.append(spectral_tables(scene, g))  # refuses an RGB-only field before the kernels compile
+        return trace_hero_paths(g, tables[0], scene, 0, 1, 1, independent(0), rr_depth)
+
+    geom, setup_s = warmed_geometry(scene, warm_up)
+    return geom, setup_s, lambda *unit: trace_hero_paths(geom, tables[0], scene, *unit, rr_depth)
