@@ -19,6 +19,8 @@ import pytest
 
 from tests import mutants
 from tests.renderers.test_pathtracer import z_crit
+from harness.adapters.registry import resolve
+from harness.adapters.settings import SettingsError
 from harness.scenes.analytic import (SPECTRAL_FURNACE_EMISSION, furnace_radiance, spectral_furnace_radiance,
                                      spectral_furnace_scene)
 from harness.scenes.library import resolve_scene
@@ -103,6 +105,14 @@ def test_hero_image_is_bit_identical_to_the_pinned_one(case):
                                      settings={**HERO, "sampler": sampler})
     data = np.ascontiguousarray(r.image, np.float32).tobytes() + np.ascontiguousarray(r.variance, np.float32).tobytes()
     assert hashlib.sha256(data).hexdigest() == PINNED[case]
+
+
+def test_the_setting_is_declared_with_rgb_the_default():
+    (entry,) = resolve(["pathtracer[spectral=hero]"])
+    assert entry.settings["spectral"] == "hero" and entry.name == 'pathtracer[spectral="hero"]'
+    assert resolve(["pathtracer"])[0].settings["spectral"] == "rgb"
+    with pytest.raises(SettingsError, match="spectral='hero4': expected one of rgb, hero"):
+        resolve(["pathtracer[spectral=hero4]"])
 
 
 def test_rgb_only_fields_are_refused_with_the_field_named():
