@@ -160,6 +160,37 @@ def test_rgb_only_fields_are_refused_with_the_field_named():
         PathTracer().render(scene, 1, 0, settings=HERO, aovs=("albedo", "normal"))
 
 
+# -- the measured Cornell box against Mitsuba's spectral reference ------------------------------------------
+
+MEASURED = "cornell-box-measured"
+
+
+@pytest.mark.slow  # two 64-spp renders of 256² (~6 s on a quiet 2-core machine, ~40 s on a busy one)
+def test_hero_agrees_with_the_spectral_reference_and_rgb_does_not():
+    """cornell-box-measured (issue 33): the hero image passes the agreement test (the gate's: tiles of 16, the
+    regions, the whole image; α = 0.01 family-wise) against the stored Mitsuba spectral reference, and the RGB
+    path tracer on the scene's RGB projection does not (measured here: hero's smallest p 1.4e-4 against the
+    per-test level 4.3e-6; RGB's 109 of 789 tests reject, worst z = 130 in blue on the red wall, tile mean
+    +193%). Skipped where the scene and its reference are not stored (they come from the ``measured`` branch)."""
+    from harness.evaluate.agreement import agreement_test
+    from harness.evaluate.regions import region_masks
+    from harness.scenes.library import references_root
+    from harness.store.references import load_reference
+
+    if not (references_root() / MEASURED / "reference.exr").exists():
+        pytest.skip(f"no stored {MEASURED} reference in this tree")
+    scene = resolve_scene(MEASURED)
+    ref = load_reference(scene)
+    masks = region_masks(scene)
+    verdict = {}
+    for mode in ("hero", "rgb"):
+        r = PathTracer(threads=2).render(scene, 64, seed=0, settings={"spectral": mode})
+        verdict[mode] = agreement_test(r.image, r.variance, ref.image, ref.variance, tile=16, alpha=0.01,
+                                       regions=masks)
+    assert verdict["hero"].passed, verdict["hero"].failures[:3]
+    assert not verdict["rgb"].passed and max(abs(f["z"]) for f in verdict["rgb"].failures) > 10
+
+
 # -- the mutants (tests/mutants/spectral.py) ------------------------------------------------------------
 
 SPECTRAL_MUTANTS = [m.name for m in mutants.MUTANTS if m.name.startswith("hero_")]
