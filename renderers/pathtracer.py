@@ -38,6 +38,15 @@ the film are the shared toolkit's (``renderers/core/``).
   -1 unbounded): emission at vertex k counts if k ≤ max_depth, NEE at vertex
   k adds a segment and counts if k + 1 ≤ max_depth.
 
+Spectral rendering (the ``spectral`` setting): ``rgb`` (the default) renders
+the scene's RGB values, as above; ``hero`` renders a spectral scene's spectra
+(``Scene.spectral``) by hero-wavelength sampling, 4 wavelengths per path
+(Wilkie et al. 2014; :mod:`renderers.hero_wavelength`, which this module
+dispatches to), with the same sampling decisions, film, variance and
+determinism, on the scene model's linear-sRGB scale (a spectral emitter seen
+directly is ``emission_rgb`` of its spectrum). A scene with RGB-only
+reflectances or emitters is refused in ``hero`` mode, with the field named.
+
 Random numbers: vertex k of a path uses the named dimensions of
 :mod:`renderers.core.sampler` (emitter pick and point, BSDF direction,
 roulette), drawn by the ``sampler`` setting's sampler (default ``pmj02``,
@@ -68,6 +77,8 @@ from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, head, 
 from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, SAMPLER_SETTING, Stream,
                                     independent, path_point, vertex_1d, vertex_2d)
 from renderers.core.sampling import jit, power_heuristic
+from renderers.core.wavelengths import N_WAVELENGTHS
+from renderers.hero_wavelength import spectral_tables, trace_hero_paths
 from renderers.core.schedule import render_image
 from renderers.core.settings import with_defaults
 
@@ -190,13 +201,20 @@ def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels
     return (L, aux) if aovs else L
 
 
+#: The ``spectral`` setting's values: the scene's RGB values, or its spectra by hero-wavelength sampling.
+SPECTRAL_MODES = ("rgb", "hero")
+
+
 class PathTracer(ToolkitRenderer):
     """Our path tracer (Embree, vectorised wavefront, multithreaded)."""
 
     name = "pathtracer"
     aovs = AOVS
     settings = (Setting("rr_depth", int, RR_DEPTH, "path vertex from which Russian roulette may end a path",
-                        low=1, high=1000), SAMPLER_SETTING)
+                        low=1, high=1000), SAMPLER_SETTING,
+                Setting("spectral", str, "rgb", "rgb: render the scene's RGB values; hero: render a spectral scene's "
+                        "spectra by hero-wavelength sampling, 4 wavelengths per path (Wilkie et al. 2014), to the "
+                        "same linear sRGB (refuses RGB-only materials and emitters)", choices=SPECTRAL_MODES))
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None, aovs: Sequence[str] = ()) -> RenderResult:
@@ -204,9 +222,31 @@ class PathTracer(ToolkitRenderer):
         rr_depth, sampler = s["rr_depth"], s["sampler"]
         if unknown := set(aovs) - set(AOVS):
             raise ValueError(f"unknown AOVs {sorted(unknown)}; this renderer gives {', '.join(AOVS)}")
-        aovs = AOVS if aovs else ()  # both come from one pass
-        geom, setup_s = warmed_geometry(scene, lambda g: trace_paths(g, scene, 0, 1, 1, independent(0), rr_depth))
-        result = render_image(scene, spp, seed, lambda *unit: trace_paths(geom, scene, *unit, rr_depth, bool(aovs)),
-                              checkpoints, self.threads, {"rr_depth": rr_depth, "rr_q_max": Q_MAX}, sampler, aovs)
+        info = {"rr_depth": rr_depth, "rr_q_max": Q_MAX}
+        if s["spectral"] == "hero":
+            if aovs:
+                raise ValueError("AOVs come from spectral=rgb; spectral=hero renders the image only")
+            geom, setup_s, trace = _hero_paths(scene, rr_depth)
+            info.update(spectral="hero", wavelengths_per_path=N_WAVELENGTHS)
+        else:
+            aovs = AOVS if aovs else ()  # both come from one pass
+            geom, setup_s = warmed_geometry(scene, lambda g: trace_paths(g, scene, 0, 1, 1, independent(0), rr_depth))
+
+            def trace(*unit):
+                return trace_paths(geom, scene, *unit, rr_depth, bool(aovs))
+        result = render_image(scene, spp, seed, trace, checkpoints, self.threads, info, sampler, aovs)
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
         return result
+
+
+def _hero_paths(scene: Scene, rr_depth: int):
+    """``spectral = "hero"``: the warmed geometry, its set-up seconds, and the trace function of
+    :func:`renderers.hero_wavelength.trace_hero_paths` for :func:`renderers.core.schedule.render_image`."""
+    tables = []
+
+    def warm_up(g: SceneGeometry):
+        tables.append(spectral_tables(scene, g))  # refuses an RGB-only field before the kernels compile
+        return trace_hero_paths(g, tables[0], scene, 0, 1, 1, independent(0), rr_depth)
+
+    geom, setup_s = warmed_geometry(scene, warm_up)
+    return geom, setup_s, lambda *unit: trace_hero_paths(geom, tables[0], scene, *unit, rr_depth)

@@ -4,6 +4,12 @@
   cube, every face of albedo ρ emitting Le, the camera inside. Built directly
   from the dataclasses (no file); the stress suite (:mod:`harness.stress`)
   and the path tracer's tests use it.
+- **Spectral furnace** (:func:`spectral_furnace_scene`, :func:`spectral_furnace_radiance`):
+  the white furnace with a non-flat albedo spectrum ρ(λ) and an emission
+  spectrum L(λ) (issue 33's validation of spectral renderers): per
+  wavelength Le/(1-ρ), projected to linear sRGB as the scene model projects
+  an emitter. Its RGB projection is an ordinary scene, whose RGB answer
+  differs from the spectral one: the error of rendering it in RGB.
 - **Specular furnace** (:func:`specular_furnace_scene`,
   :func:`specular_furnace_camera_in_glass`): the furnace with lossless glass
   (a sphere and a cube) and a mirror sphere inside. Lossless specular
@@ -31,6 +37,9 @@ import numpy as np
 from harness.scenes.loader import load_scene
 from harness.scenes.materials import Dielectric, Mirror
 from harness.scenes.model import Camera, Diffuse, Mesh, Scene, Sphere
+from harness.scenes.spectra import (ILLUMINANT_E, OBSERVER, OUTPUT, SCENE_LIGHT, Spectrum, emission_rgb, observer,
+                                    reflectance_rgb, xyz_to_linear_srgb)
+from harness.scenes.spectral_scene import SpectralContent
 
 # ----------------------------------------------------------------------------------------
 # White furnace
@@ -84,6 +93,62 @@ def furnace_radiance(albedo: float, radiance: float, max_depth: int) -> float:
     if max_depth < 0:
         return math.inf if albedo >= 1.0 else radiance / (1.0 - albedo)
     return radiance * sum(albedo**k for k in range(max_depth))
+
+
+# ----------------------------------------------------------------------------------------
+# Spectral furnace: the white furnace with a spectral albedo and a spectral emitter
+# ----------------------------------------------------------------------------------------
+
+#: The spectral furnace's albedo ρ(λ): a green band (0.85 at 530 nm) over a low floor, far from flat, so that
+#: L/(1-ρ) per wavelength and per RGB channel disagree. Sampled over the observer's whole range, 360-830 nm.
+SPECTRAL_FURNACE_ALBEDO = Spectrum((360.0, 450.0, 500.0, 530.0, 560.0, 620.0, 830.0),
+                                   (0.15, 0.2, 0.6, 0.85, 0.6, 0.3, 0.1))
+#: Its emission L(λ): a warm ramp, 0.6 at 360 nm to 1.4 at 830 nm.
+SPECTRAL_FURNACE_EMISSION = Spectrum((360.0, 830.0), (0.6, 1.4))
+
+
+def spectral_furnace_scene(max_depth: int = -1, res: int = 16, convention: str = ILLUMINANT_E) -> Scene:
+    """:func:`furnace_scene` with albedo :data:`SPECTRAL_FURNACE_ALBEDO` and emission :data:`SPECTRAL_FURNACE_EMISSION`.
+
+    A spectral scene as the loader makes one: ``Scene.spectral`` binds the
+    material's reflectance and the box's emission to the spectra, and the
+    material and mesh hold their RGB projection (the reflectance by
+    ``convention``, the emission by :func:`harness.scenes.spectra.emission_rgb`),
+    which RGB renderers read. The spectral answer is
+    :func:`spectral_furnace_radiance`; an RGB renderer converges instead to
+    :func:`furnace_radiance` of the projected values, channel by channel.
+    """
+    rho, le = SPECTRAL_FURNACE_ALBEDO, SPECTRAL_FURNACE_EMISSION
+    base = furnace_scene(0.0, 0.0, max_depth, res)
+    light = le if convention == SCENE_LIGHT else None
+    spectral = SpectralContent(OBSERVER, OUTPUT, convention, "light" if light else None,
+                               {"albedo": rho, "light": le}, {"grey": {"reflectance": "albedo"}}, {"box": "light"})
+    name = "spectral-furnace"
+    return dataclasses.replace(
+        base, name=name, path=Path("stress") / f"{name}.toml",
+        materials={"grey": Diffuse("grey", reflectance_rgb(rho, convention, light))},
+        meshes=(dataclasses.replace(base.meshes[0], radiance=emission_rgb(le)),), spectral=spectral,
+        description=f"spectral furnace: closed cube, a green-band albedo spectrum under a warm emission spectrum "
+                    f"(RGB projection: {convention})")
+
+
+def spectral_furnace_radiance(max_depth: int = -1) -> np.ndarray:
+    """The spectral furnace's radiance in linear sRGB, (3,): M · Σ_λ S(λ) x̄(λ) / Σ_λ ȳ(λ).
+
+    Per wavelength the furnace is the white one (:func:`furnace_radiance`):
+    S(λ) = L(λ)/(1-ρ(λ)), or L(λ)·Σ_{k<D} ρ(λ)^k at max_depth D, since light of
+    one wavelength stays at that wavelength. The spectrum S is projected
+    exactly as :func:`harness.scenes.spectra.emission_rgb` projects an
+    emitter (the sums over the observer's 1 nm table, the same matrix M), so
+    a spectral renderer on that scale converges to this.
+    """
+    grid, xyz_bar = observer()
+    rho, le = SPECTRAL_FURNACE_ALBEDO.at(grid), SPECTRAL_FURNACE_EMISSION.at(grid)
+    if max_depth < 0:
+        s = le / (1.0 - rho)
+    else:
+        s = le * sum(rho**k for k in range(max_depth))
+    return xyz_to_linear_srgb() @ (s @ xyz_bar / xyz_bar[:, 1].sum())
 
 
 # ----------------------------------------------------------------------------------------

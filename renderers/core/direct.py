@@ -24,11 +24,34 @@ from __future__ import annotations
 
 from renderers.core.bsdf import bsdf_eval, bsdf_pdf
 from renderers.core.geometry import offset_origin
-from renderers.core.lights import sample_emitter, solid_angle_pdf, towards_emitter
+from renderers.core.lights import sample_emitter, solid_angle_pdf, solid_angle_pdf_along, towards_emitter
 from renderers.core.rays import shadow_segment
 from renderers.core.sampling import jit, power_heuristic
 
 _NONE = ((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0))
+_NONE_GEOMETRY = ((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.0, 0, 0.0, 0.0)
+
+
+@jit
+def light_sample(x, n, mat, u, geo, mis):
+    """The colour-free part of :func:`sample_ld`: ``(found, origin, direction, tfar, emitter triangle, cos θ_x,
+    g)``, g = cos θ_x cos θ_y / r² / p_A · w, so that a channel (or wavelength) of radiance Le and BSDF weight
+    ρ' adds ``bsdf_eval(mat, ρ', cos θ_x) · Le · g``. Used by :func:`sample_ld` (RGB) and the hero-wavelength
+    path tracer (:mod:`renderers.hero_wavelength`, whose radiance is per wavelength)."""
+    if geo.emitter_ids.size == 0:
+        return (False,) + _NONE_GEOMETRY
+    y, ny, e, pe = sample_emitter(u[0], u[1], u[2], geo)
+    wi, dist2, cos_x, cos_y = towards_emitter(x, n, y, ny)
+    if not (cos_x > 0.0 and pe > 0.0):
+        return (False,) + _NONE_GEOMETRY
+    w = power_heuristic(solid_angle_pdf(pe, dist2, cos_y), bsdf_pdf(mat, cos_x)) if mis else 1.0
+    g = cos_x * cos_y / dist2 * w / pe
+    # Between the two offset points, stopping short of the light (which must not shadow itself).
+    a = offset_origin(x, n, geo.offset)
+    sd, tfar, sl = shadow_segment(a, offset_origin(y, ny, geo.offset))
+    if not sl > 0.0:
+        return (False,) + _NONE_GEOMETRY
+    return True, a, sd, tfar, e, cos_x, g
 
 
 @jit
@@ -43,20 +66,20 @@ def sample_ld(x, n, mat, weight, u, geo, mis):
     (3-tuple) it adds if unoccluded; every pdf division guarded (no
     emitter, a zero pdf, an emitter seen from behind: not found).
     """
-    if geo.emitter_ids.size == 0:
-        return (False,) + _NONE
-    y, ny, e, pe = sample_emitter(u[0], u[1], u[2], geo)
-    wi, dist2, cos_x, cos_y = towards_emitter(x, n, y, ny)
-    if not (cos_x > 0.0 and pe > 0.0):
-        return (False,) + _NONE
-    w = power_heuristic(solid_angle_pdf(pe, dist2, cos_y), bsdf_pdf(mat, cos_x)) if mis else 1.0
-    g = cos_x * cos_y / dist2 * w / pe
-    # Between the two offset points, stopping short of the light (which must not shadow itself).
-    a = offset_origin(x, n, geo.offset)
-    sd, tfar, sl = shadow_segment(a, offset_origin(y, ny, geo.offset))
-    if not sl > 0.0:
+    found, a, sd, tfar, e, cos_x, g = light_sample(x, n, mat, u, geo, mis)
+    if not found:
         return (False,) + _NONE
     c = (bsdf_eval(mat, weight[0], cos_x) * geo.radiance[e, 0] * g,
          bsdf_eval(mat, weight[1], cos_x) * geo.radiance[e, 1] * g,
          bsdf_eval(mat, weight[2], cos_x) * geo.radiance[e, 2] * g)
     return True, a, sd, tfar, c
+
+
+@jit
+def emission_weight(pdf_bsdf, pa, t, cos_o) -> float:
+    """MIS weight of emission found at distance ``t`` by a ray sampled with solid-angle pdf ``pdf_bsdf``, against
+    light sampling's area pdf ``pa`` of that point (power heuristic, Veach 1997 eq. 9.13); a pdf of 0 marks a
+    ray light sampling could not have made (a camera ray, a delta-BSDF sample): weight 1. The hero-wavelength
+    path tracer's; the RGB one keeps its own copy, ``renderers.pathtracer._emission_weight``, which its mutants
+    (tests/mutants/pathtracer.py) patch in place."""
+    return 1.0 if pdf_bsdf == 0.0 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))

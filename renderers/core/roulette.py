@@ -29,6 +29,12 @@ Q_MAX = 0.99
 
 
 @jit
+def survival_probability(bmax, scale) -> float:
+    """The probability ``q`` that a path of largest throughput component ``bmax`` goes on (module docstring)."""
+    return min(bmax / scale, Q_MAX)
+
+
+@jit
 def continue_path(mat, valid, cos_w, f, beta, scale, u_rr, roulette):
     """Throughput after a BSDF sample at cosine ``cos_w`` with weight ``f``: (alive, β', pdf of the sample).
 
@@ -42,10 +48,28 @@ def continue_path(mat, valid, cos_w, f, beta, scale, u_rr, roulette):
     if bmax <= 0.0:
         return False, beta, 0.0
     if roulette:
-        survive = min(bmax / scale, Q_MAX)
+        survive = survival_probability(bmax, scale)
         # Written so a NaN throughput ends the path (NaN < x is false): its NaN
         # has already reached L, where the NaN count reports it.
         if not u_rr < survive:
             return False, beta, 0.0
         b0, b1, b2 = b0 / survive, b1 / survive, b2 / survive
     return True, (b0, b1, b2), bsdf_pdf(mat, cos_w)
+
+
+@jit
+def continue_spectral_path(mat, valid, cos_w, f, beta, scale, u_rr, roulette):
+    """:func:`continue_path` for a throughput of 4 wavelengths (4-tuples ``f`` and ``beta``; the hero-wavelength
+    path tracer, :mod:`renderers.hero_wavelength`): the same rule on the largest of the four."""
+    if not valid:
+        return False, beta, 0.0
+    b0, b1, b2, b3 = beta[0] * f[0], beta[1] * f[1], beta[2] * f[2], beta[3] * f[3]
+    bmax = max(max(b0, b1), max(b2, b3))
+    if bmax <= 0.0:
+        return False, beta, 0.0
+    if roulette:
+        survive = survival_probability(bmax, scale)
+        if not u_rr < survive:  # a NaN throughput ends the path, as in continue_path
+            return False, beta, 0.0
+        b0, b1, b2, b3 = b0 / survive, b1 / survive, b2 / survive, b3 / survive
+    return True, (b0, b1, b2, b3), bsdf_pdf(mat, cos_w)

@@ -8,7 +8,11 @@ instead of hand arithmetic in the kernels:
   ray inside its pixel;
 - then each path vertex (depth 1, 2, ...: the surface the depth-th segment
   reaches) owns :data:`DIMS_PER_VERTEX` dimensions, at the offsets named
-  below, whether or not the integrator uses them all.
+  below, whether or not the integrator uses them all;
+- :data:`WAVELENGTH`, the hero wavelength of a spectral path
+  (:mod:`renderers.hero_wavelength`), is the last dimension a number can
+  have, so that no vertex reaches it and the RGB renders' numbers are those
+  they had before it existed.
 
 A dimension is a pure function of (depth, offset), so a decision that is
 skipped (no emitter, a path ended) never shifts the numbers of the ones
@@ -66,6 +70,9 @@ BSDF_U = 3
 BSDF_V = 4
 ROULETTE = 5
 DIMS_PER_VERTEX = 6
+#: The hero wavelength's number (:mod:`renderers.core.wavelengths`): dimension 2^24 - 1, the last one
+#: :func:`renderers.core.rng.uniform` takes, past any vertex a path reaches (vertex ~2.8 million).
+WAVELENGTH = (1 << 24) - 1
 
 INDEPENDENT, PMJ02, SOBOL = 0, 1, 2
 #: Sampler names (the ``sampler`` setting) and their ids in a :class:`Stream`.

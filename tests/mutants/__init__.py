@@ -35,7 +35,8 @@ limit, for the mutants of :data:`ISOLATED` that once made a run never end).
 The package: what a mutant is (:mod:`tests.mutants.model`), the bugs, one
 module per renderer family (:mod:`tests.mutants.pathtracer`,
 :mod:`~tests.mutants.photon_mapping`, :mod:`~tests.mutants.ambient_occlusion`,
-:mod:`~tests.mutants.probes`, :mod:`~tests.mutants.denoising`), gathered in
+:mod:`~tests.mutants.probes`, :mod:`~tests.mutants.denoising`, :mod:`~tests.mutants.whitted`,
+:mod:`~tests.mutants.spectral`), gathered in
 :mod:`tests.mutants.catalogue`, and applying them (:mod:`tests.mutants.patching`);
 the names used outside are re-exported here. Used by
 ``tests/gate/test_gate_power.py``, ``tests/renderers/test_ao.py`` and

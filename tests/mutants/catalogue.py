@@ -2,7 +2,8 @@
 
 One module per renderer family holds its bugs (:mod:`tests.mutants.pathtracer`,
 :mod:`~tests.mutants.photon_mapping`, :mod:`~tests.mutants.ambient_occlusion`,
-:mod:`~tests.mutants.probes`, :mod:`~tests.mutants.denoising`, :mod:`~tests.mutants.whitted`); a new algorithm
+:mod:`~tests.mutants.probes`, :mod:`~tests.mutants.denoising`, :mod:`~tests.mutants.whitted`,
+:mod:`~tests.mutants.spectral`); a new algorithm
 adds its module here. :data:`LOW_POWER` lists the mutants below the gate's
 resolution (with why, and what catches them instead), :data:`ISOLATED` those
 that once hung the gate.
@@ -10,10 +11,10 @@ that once hung the gate.
 
 from __future__ import annotations
 
-from tests.mutants import ambient_occlusion, denoising, pathtracer, photon_mapping, probes, whitted
+from tests.mutants import ambient_occlusion, denoising, pathtracer, photon_mapping, probes, spectral, whitted
 from tests.mutants.model import Mutant
 
-FAMILIES = (pathtracer, photon_mapping, ambient_occlusion, probes, denoising, whitted)
+FAMILIES = (pathtracer, photon_mapping, ambient_occlusion, probes, denoising, whitted, spectral)
 MUTANTS: tuple[Mutant, ...] = tuple(m for family in FAMILIES for m in family.MUTANTS)
 
 BY_NAME = {m.name: m for m in MUTANTS}
@@ -43,6 +44,10 @@ LOW_POWER: dict[str, str] = {
                "(no diffuse interreflection, no caustics), with no budget to hold it to. Caught by "
                "tests/renderers/test_whitted.py::test_mutant_is_caught (the normal-incidence transmittance, the "
                "umbra, the polygon formula, the constant ambient's ρ·La)" for m in whitted.MUTANTS},
+    # The path tracer's spectral = "hero" mode (issue 33): the gate renders rgb only, where these change nothing.
+    **{m.name: "the gate has no expectation for the path tracer's spectral=hero mode, and in its rgb mode the "
+               "mutated code does not run. Caught by tests/renderers/test_hero_wavelength.py::test_mutant_is_caught "
+               "(the spectral furnace's closed form)" for m in spectral.MUTANTS},
 }
 assert set(LOW_POWER) <= set(BY_NAME)
 
