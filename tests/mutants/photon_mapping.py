@@ -82,4 +82,12 @@ MUTANTS: tuple[Mutant, ...] = (
         (("            phi /= photons\n", "", SPPM),),
         "sppm",
     ),
+    Mutant(
+        "sppm_radius_in_pixels_not_world_units",
+        "SPPM's initial radius set to initial_radius scene units: the count of pixel footprints used as a length, "
+        "not multiplied by the footprint at the visible point (2 units on a Cornell box 2 units wide)",
+        (('            self.radius[new] = self.s["initial_radius"] * footprints(self.cone[new], vp.distance[new])\n',
+          '            self.radius[new] = self.s["initial_radius"]\n', SPPM),),
+        "sppm",
+    ),
 )
