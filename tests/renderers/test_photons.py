@@ -278,10 +278,11 @@ def test_sppm_in_the_white_furnace(sampler):
     fall from 4 to 16 to 64 iterations (pmj02, whose border starts above the answer: be smaller after 64
     than after 4 and 16), the interior stay within 1% and the whole image end within 3%, for every sampler.
 
-    Measured (seed 0, 32², 8192 photons per iteration, initial radius 1 footprint): border -5.3%, -4.6%,
-    -3.0% after 4, 16, 64 iterations; interior -0.63%, -0.32%, -0.14%; image -4.1% → -2.2%. pmj02: border
-    +2.9%, -3.5%, -1.4%, interior -0.07% and image -1.1% at 64; sobol: border -6.6%, -3.6%, -2.9%,
-    interior -0.12%, image -2.2%. (Stratified photons and visible points are sub-Poisson, so the radius
+    Measured (seed 0, 32², 8192 photons per iteration, initial radius 1 footprint at each wall point,
+    0.063 units median): border -3.7%, -3.66%, -2.2% after 4, 16, 64 iterations; interior -0.96%,
+    -0.33%, -0.08%; image -3.0% → -1.7%. pmj02: border +4.1%, -2.2%, -0.57%, interior +0.07% and image
+    -0.41% at 64; sobol: border -5.0%, -2.4%, -2.1%, interior -0.24%, image -1.6%. (Before issue 34, from
+    1 footprint at the bounding sphere's radius, 1.73 away: border -5.3%, -4.6%, -3.0%.) (Stratified photons and visible points are sub-Poisson, so the radius
     update's counts, hence the border's bias, differ from the independent sampler's: not investigated
     further.)
     """
