@@ -136,8 +136,7 @@ def test_sppm_radius_ignores_geometry_the_camera_does_not_see():
     Measured (seed 0, 24², 20 000 photons per iteration, 64 iterations): far mirror -2.11%, cut -2.22%
     (RMS over the pixels 18.7% both); from the old radius (``initial_radius_world`` set to it) -14.8%
     and -1.76%, a factor 8.4 (RMS 18.5% and 9.4%: the cut scene's old radius, 4 pixel widths, was twice
-    the new one). A radius of 2 scene units instead of 2 footprints (mutant
-    ``sppm_radius_in_pixels_not_world_units``): about -90% in both.
+    the new one). A radius of 2 scene units instead of 2 footprints: -92% in both.
     """
     errors = []
     for half in (4.0, 0.0):
@@ -149,6 +148,22 @@ def test_sppm_radius_ignores_geometry_the_camera_does_not_see():
     far, cut = errors
     assert abs(far) <= 2.0 * abs(cut), errors
     assert abs(far) < 0.05, errors
+
+
+@pytest.mark.parametrize("look_up", [False, True], ids=["direct", "through-the-mirror"])
+def test_sppm_initial_radius_is_pixel_footprints_along_the_camera_path(look_up):
+    """The patch seen from 0.6 above, straight down or in the mirror 0.9 above the camera (a path of
+    0.9 + 1.5 = 2.4): a pixel's radius starts at 2 footprints, 2 · length · 2 tan(15°)/8 at an 8² image's
+    centre (√Ω a little less off the axis: cos^(3/2) θ, θ ≤ 9°); initial_radius_world overrides it."""
+    scene = mirror_lit_patch(4.0, res=8)
+    if look_up:
+        scene = dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, look_at=(1.3, 0.0, 1.5)))
+    length = 2.4 if look_up else 0.6
+    res = SPPM(threads=2).render(scene, 1, 0, settings={"photons_per_iteration": 1000})
+    assert res.info["initial_radius_median"] == pytest.approx(2 * length * 2 * math.tan(math.radians(15)) / 8,
+                                                              rel=0.03)
+    res = SPPM(threads=2).render(scene, 1, 0, settings={"photons_per_iteration": 1000, "initial_radius_world": 0.05})
+    assert res.info["initial_radius_median"] == 0.05
 
 
 def test_normal_test_keeps_wall_photons_off_the_floor():
