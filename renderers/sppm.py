@@ -26,16 +26,41 @@ variance both vanish: the estimator is consistent, and Knaus & Zwicker 2011
 (§4) show its MSE falls as n^(-2/3) at best, for α = 2/3 (against n^(-1) for an
 unbiased one); α = 1 keeps the first radius forever and converges to a blurred image.
 
-The initial radius is ``initial_radius`` pixel footprints: the width of one
-pixel at the distance from the camera to the centre of the scene's bounds
-(:func:`pixel_footprint`). The default, 2, is for caustics, what SPPM is
-for: on cornell-box-caustics (seed 0) the caustic's relMSE reaches 0.05 in
-1.0 s and 0.01 in 5.5 s, against 5.2 s and about 80 s from 4 footprints,
-whose larger discs smooth the image-wide noise sooner (ΔE mean ≤ 2 in 2.8 s
-against about 5 s) but blur the caustic's edge for longer (BENCHMARKS.md).
-More photons per iteration do not make up for a large start: the radius
-shrinks by the ratio of photons kept to photons gathered, so per iteration,
-not per photon.
+The initial radius of a pixel is ``initial_radius`` (default 2) **pixel
+footprints at its visible point**, in scene units
+(:func:`footprints`): the width of the pixel's cone, √Ω_pixel, times the
+camera path's length to the point, where Ω_pixel = (2 tan_x/W)(2 tan_y/H)
+cos³θ is the pinhole's solid angle of the pixel at angle θ off the axis
+(the spread of the camera ray's differentials, Igehy 1999; pbrt-v4 §10.1.1,
+``CameraBase::Approximate_dp_dxy``, estimates texture footprints the same
+way). Through mirrors and glass the path's whole length counts: a
+flat mirror keeps the cone's angle, so the footprint grows with the
+distance travelled; a curved one focuses or spreads it, which this rule
+ignores (the footprint is a first guess: the radius shrinks from it). The
+foreshortening on the surface (1/cos at the point) is ignored too: the disc's
+radius is the footprint's narrow width. A pixel's radius is set the first
+iteration its camera path finds a visible point, and shrinks from there.
+This follows the geometry the camera sees, as Hachisuka's reference code
+(smallppm: 2 pixel widths over the visible points' bounding box) and not
+the scene's bounds (Mitsuba 0.6's ``sppm``: 5 pixel widths of the bounding
+sphere; ours before issue 34: 2 at the scene's centre), which an off-screen
+mirror or wall inflates: a small patch lit through a mirror reaching far
+off-screen started at 19 pixel widths and read -14.8% after 64 iterations,
+against -1.8% with the mirror cut to what lights it; from its own
+footprint -2.1% in both (tests/renderers/test_photons.py,
+``test_sppm_radius_ignores_geometry_the_camera_does_not_see``).
+``initial_radius_world`` > 0 overrides it with one radius in scene units for
+every pixel (pbrt-v4's ``radius`` parameter, whose default is 1).
+
+The default, 2 footprints, is for caustics, what SPPM is for: on
+cornell-box-caustics (seed 0) from 2 footprints at the scene's centre the
+caustic's relMSE reached 0.05 in 1.0 s and 0.01 in 5.5 s, against 5.2 s
+and about 80 s from 4, whose larger discs smooth the image-wide noise
+sooner (ΔE mean ≤ 2 in 2.8 s against about 5 s) but blur the caustic's edge
+for longer; the per-point footprint's figures are in BENCHMARKS.md
+(``benchmarks/photons_before_after.py``). More photons per iteration do
+not make up for a large start: the radius shrinks by the ratio of photons
+kept to photons gathered, so per iteration, not per photon.
 
 spp is iterations. The render is progressive: the checkpoints 1, 2, 4, ...
 come from one run. Every pass is keyed from the seed
@@ -82,9 +107,12 @@ class SPPM(ToolkitRenderer):
         Setting("alpha", float, 2 / 3, "fraction of each iteration's photons kept; the radius shrinks with it "
                 "(Hachisuka & Jensen 2009; 2/3 is Knaus & Zwicker 2011's optimum, 1 never shrinks)",
                 low=0.01, high=1.0),
-        Setting("initial_radius", float, 2.0, "starting gather radius, in pixel footprints at the scene's centre "
-                "(2: see the module docstring)",
+        Setting("initial_radius", float, 2.0, "starting gather radius, in pixel footprints at each pixel's visible "
+                "point (the pixel's cone width times the camera path's length; 2: see the module docstring)",
                 low=1e-3, high=1000.0),
+        Setting("initial_radius_world", float, 0.0, "starting gather radius in scene units for every pixel, "
+                "overriding initial_radius (pbrt-v4's radius); 0: from the pixel footprints",
+                low=0.0, high=1e6),
         Setting("sampler", str, "independent", "random numbers of the camera passes (one sequence per pixel over "
                 "the iterations) and of each photon pass (one sequence over its photons): independent, pmj02 or "
                 "sobol (renderers.core.sampler)", choices=tuple(SAMPLERS)),
@@ -115,22 +143,32 @@ class SPPM(ToolkitRenderer):
         image = state.image(spp)
         if spp in checkpoints:
             shots.append(Checkpoint(spp, image, elapsed, cpu_time_s=cpu))
+        seen = state.r0 > 0
         info = dict(s, threads=threads, setup_s=round(setup_s, 3), rays=geom.rays, photons_per_iteration=photons,
-                    initial_radius_world=state.r0, final_radius_median=float(np.median(state.radius)))
+                    initial_radius_median=float(np.median(state.r0[seen])) if seen.any() else 0.0,
+                    final_radius_median=float(np.median(state.radius[seen])) if seen.any() else 0.0)
         return RenderResult(image, elapsed, spp, seed, shots, info, None, cpu_time_s=cpu)
 
 
-def pixel_footprint(scene: Scene) -> float:
-    """Width of one pixel, in scene units, at the distance from the camera to the centre of the scene's bounds.
+def pixel_cone_widths(camera) -> np.ndarray:
+    """(pixels,) √Ω of each pixel of a pinhole ``camera``, row-major: the width of its cone at distance 1.
 
-    At least at the bounding sphere's radius: a camera at the centre (a furnace) still sees walls.
+    Ω = (2 tan_x/W)(2 tan_y/H)·cos³θ at the pixel's centre, θ its angle off
+    the optical axis (a pixel of the image plane at distance 1, seen from
+    the pinhole: area over squared distance, times the cosine of its tilt).
     """
-    lo, hi = scene.bounds()
-    cam = scene.camera
-    dist = max(float(np.linalg.norm(0.5 * (lo + hi) - np.asarray(cam.position, np.float64))),
-               0.5 * float(np.linalg.norm(hi - lo)))
-    tx, _ = cam.tan_half_fov()
-    return 2.0 * dist * tx / cam.width
+    tx, ty = camera.tan_half_fov()
+    w, h = camera.width, camera.height
+    sx = 2.0 * (np.arange(w) + 0.5) / w - 1.0
+    sy = 1.0 - 2.0 * (np.arange(h) + 0.5) / h
+    cos = 1.0 / np.sqrt(1.0 + (sx[None, :] * tx) ** 2 + (sy[:, None] * ty) ** 2)
+    return np.sqrt((2.0 * tx / w) * (2.0 * ty / h) * cos ** 3).ravel()
+
+
+def footprints(cone_width: np.ndarray, distance: np.ndarray) -> np.ndarray:
+    """A pixel's footprint at its visible point, in scene units: its cone's width times the camera path's
+    length (mirrors and glass included: see the module docstring)."""
+    return cone_width * distance
 
 
 class Progress:
@@ -140,21 +178,38 @@ class Progress:
         self.geom, self.scene, self.s = geom, scene, settings
         cam = scene.camera
         self.pixels = cam.width * cam.height
-        self.r0 = settings["initial_radius"] * pixel_footprint(scene)
+        self.cone = pixel_cone_widths(cam)
         self.ld = np.zeros((self.pixels, 3))
         self.n = np.zeros(self.pixels)
-        self.radius = np.full(self.pixels, self.r0)
+        # 0: not set yet (the pixel has not found a visible point); r0 keeps each pixel's start for the record.
+        self.radius = np.zeros(self.pixels)
+        self.r0 = np.zeros(self.pixels)
         self.tau = np.zeros((self.pixels, 3))
 
     def image(self, iterations: int) -> np.ndarray:
-        """The estimate after ``iterations``: Ld/n + τ/(n·π·r²), float32 (height, width, 3)."""
+        """The estimate after ``iterations``: Ld/n + τ/(n·π·r²), float32 (height, width, 3).
+
+        A pixel whose radius is not set has gathered nothing (τ = 0): Ld/n alone.
+        """
         cam = self.scene.camera
-        L = self.ld / iterations + self.tau / (iterations * math.pi * self.radius ** 2)[:, None]
+        area = iterations * math.pi * self.radius ** 2
+        photons = np.divide(self.tau, area[:, None], out=np.zeros_like(self.tau), where=area[:, None] > 0)
+        L = self.ld / iterations + photons
         return L.reshape(cam.height, cam.width, 3).astype(np.float32)
+
+    def _start_radii(self, vp: VisiblePoints) -> None:
+        """Set the radius of every pixel that found its first visible point this iteration."""
+        new = vp.found & (self.radius == 0.0)
+        if self.s["initial_radius_world"] > 0:
+            self.radius[new] = self.s["initial_radius_world"]
+        else:
+            self.radius[new] = self.s["initial_radius"] * footprints(self.cone[new], vp.distance[new])
+        self.r0[new] = self.radius[new]
 
     def iterate(self, camera: Stream, photon: Stream, threads: int, photons: int) -> None:
         """One iteration: the camera pass drawing from ``camera``, ``photons`` photons from ``photon``."""
         vp = self._camera_pass(camera, threads)
+        self._start_radii(vp)
         found = np.flatnonzero(vp.found)
         phi, m = np.zeros((self.pixels, 3)), np.zeros(self.pixels)
         if found.size:

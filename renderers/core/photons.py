@@ -25,7 +25,17 @@ Using Photon Mapping", ch. 5) and the photon pass of each SPPM iteration
   specular bounces and nothing else (L S+ D, :data:`STORE_CAUSTIC`, Jensen's
   caustic map; the path ends there); every diffuse hit but the first
   (:data:`STORE_INDIRECT`: SPPM, whose direct light is next-event estimated
-  at the visible points, pbrt-v4 §16.2).
+  at the visible points, pbrt-v4 §16.2). In every mode only on surfaces
+  that reflect (diffuse reflectance ρ > 0 in some channel): a photon on a
+  black surface can only be used by a visible point on that surface, whose
+  estimate ρ/π·E is 0, or through the normal test by a coplanar neighbour's
+  disc that reaches over the seam; so a map's stored count
+  (``global_photons``, ``caustic_photons``) counts photons that can
+  contribute (issue 34: 83% of a map on the black top of a light). The
+  seam loses the photons beyond it, as a disc at a corner does (the
+  estimate's border bias, docs/photon-mapping.md). The normalisation does
+  not change: each photon's flux is the emitted power over the photons
+  *emitted* (:func:`shoot`), whatever is stored.
 - ``max_depth`` (segments from the camera to the light): a photon stored
   after k segments from the light is only useful with at least one camera
   segment, so photons are traced while k + 1 ≤ max_depth; the estimates
@@ -165,10 +175,13 @@ def _scatter(hits, rays, spec, stream, first, depth, mode, extend, geo, out):
         if not faces(mat, cos_o):
             continue  # a one-sided surface's back: absorbed
         power = (rays.beta[i, 0], rays.beta[i, 1], rays.beta[i, 2])
+        rho = (geo.reflectance[p, 0], geo.reflectance[p, 1], geo.reflectance[p, 2])
         diffuse = not is_delta(mat)
         if diffuse:
             caustic = spec[i] and depth >= 2
-            if mode == STORE_ALL or (mode == STORE_CAUSTIC and caustic) or (mode == STORE_INDIRECT and depth >= 2):
+            reflects = rho[0] > 0.0 or rho[1] > 0.0 or rho[2] > 0.0  # ρ = 0: no estimate here can use it
+            if reflects and (mode == STORE_ALL or (mode == STORE_CAUSTIC and caustic)
+                             or (mode == STORE_INDIRECT and depth >= 2)):
                 _store(out.photons, ns, x, power, d, n, depth, caustic)
                 ns += 1
             if mode == STORE_CAUSTIC:
@@ -176,7 +189,6 @@ def _scatter(hits, rays, spec, stream, first, depth, mode, extend, geo, out):
         if not extend:
             continue
         pt = path_point(stream, first + rays.path[i])
-        rho = (geo.reflectance[p, 0], geo.reflectance[p, 1], geo.reflectance[p, 2])
         u = sample_2d(stream, pt, bounce_dim(depth, BOUNCE_U))
         wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, rho, geo.eta[p], u[0], u[1])
         if not valid:

@@ -49,11 +49,12 @@ class VisiblePoints(NamedTuple):
     depth: np.ndarray  # (m,) int64 camera segments to the point
     found: np.ndarray  # (m,) bool
     incoming: np.ndarray  # (m, 3) float64 unit direction of the segment that reached the point
+    distance: np.ndarray  # (m,) float64 the path's length from where the walk started (the camera) to the point
 
 
 def visible_buffer(m: int) -> VisiblePoints:
     return VisiblePoints(np.zeros((m, 3)), np.zeros((m, 3)), np.zeros((m, 3)), np.zeros(m, np.int64),
-                         np.zeros(m, bool), np.zeros((m, 3)))
+                         np.zeros(m, bool), np.zeros((m, 3)), np.zeros(m))
 
 
 class Walk(NamedTuple):
@@ -103,6 +104,7 @@ def _step(hits, rays, walk, depth, extend, roulette, geo, out):
         if not faces(mat, cos_o):
             continue
         q = rays.path[i]
+        out.vp.distance[q] += t  # one live ray per path: its segments add up to the path's length
         beta = (rays.beta[i, 0], rays.beta[i, 1], rays.beta[i, 2])
         if walk.emission and geo.light_pdf_area[p] > 0.0 and cos_o > 0.0:
             for c in range(3):

@@ -82,4 +82,12 @@ MUTANTS: tuple[Mutant, ...] = (
         (("            phi /= photons\n", "", SPPM),),
         "sppm",
     ),
+    Mutant(
+        "sppm_footprint_area_not_width",
+        "SPPM's pixel footprint taken as its area, the pixel's solid angle times the squared distance (Ω·t²), "
+        "instead of its width (√Ω·t): on a 256² image the radius starts about 100 times too small, so few photons "
+        "are gathered and the estimate is noise",
+        (("    return cone_width * distance\n", "    return cone_width ** 2 * distance ** 2\n", SPPM),),
+        "sppm",
+    ),
 )

@@ -17,16 +17,20 @@ import pytest
 
 from harness.adapters.seeds import pass_key
 from harness.evaluate.convergence import loglog_slope
-from harness.scenes.analytic import (LIGHT_A, LIGHT_B, LIGHT_H, LIGHT_LE, furnace_radiance, furnace_scene,
-                                     mirrored_light_image, mirrored_light_scene, polygon_irradiance,
+import dataclasses
+
+from harness.scenes.analytic import (LIGHT_A, LIGHT_B, LIGHT_H, LIGHT_LE, MIRROR_LIGHT_H, furnace_radiance,
+                                     furnace_scene, mirrored_light_image, mirrored_light_scene, polygon_irradiance,
                                      rectangle_light_scene)
 from harness.scenes.library import resolve_scene
+from harness.scenes.model import Camera
 
 pytest.importorskip("embreex")
 
 from renderers.core.geometry import SceneGeometry  # noqa: E402
 from renderers.core.photon_map import KERNELS, PhotonMap, kernel_weight  # noqa: E402
-from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, Photons, shoot  # noqa: E402
+from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, STORE_INDIRECT, Photons, shoot  # noqa: E402
+from renderers.core.roulette import Q_MAX  # noqa: E402
 from renderers.core.sampler import SAMPLERS  # noqa: E402
 from renderers.photonmap import PhotonMapper  # noqa: E402
 from renderers.sppm import SPPM  # noqa: E402
@@ -46,14 +50,16 @@ def test_kernels_integrate_to_one_over_their_disc(kernel):
 
 @pytest.mark.parametrize("sampler", SAMPLERS)
 def test_direct_photons_carry_the_emitted_flux(sampler):
-    """In a black closed box every photon lands on a wall at once: their flux sums to π·Le·A (exactly,
-    up to float32), whatever was emitted."""
-    scene = furnace_scene(0.0, 1.0, res=4)
+    """In a closed box every photon lands on a wall at once: the flux of those first landings sums to
+    π·Le·A (exactly, up to float32), whatever was emitted. (The box is grey, ρ = 0.5: on black walls
+    nothing would be stored, test_no_photon_is_stored_on_a_black_surface.)"""
+    scene = furnace_scene(0.5, 1.0, res=4)
     geom = SceneGeometry(scene)
     ph, emitted = shoot(geom, scene, pass_key(0, 0, 1), 5000, STORE_ALL, threads=2, sampler=sampler)
-    assert emitted == 5000 and len(ph) == 5000 and (ph.depth == 1).all() and not ph.caustic.any()
+    first = ph.depth == 1
+    assert emitted == 5000 and first.sum() == 5000 and len(ph) > 5000 and not ph.caustic.any()
     area = 6 * 2.0 * 2.0
-    assert ph.power.astype(np.float64).sum(axis=0) == pytest.approx([math.pi * area] * 3, rel=1e-5)
+    assert ph.power[first].astype(np.float64).sum(axis=0) == pytest.approx([math.pi * area] * 3, rel=1e-5)
 
 
 def test_caustic_map_holds_only_photons_that_came_through_specular_surfaces():
@@ -66,6 +72,98 @@ def test_caustic_map_holds_only_photons_that_came_through_specular_surfaces():
     for s in scene.spheres:
         gap = np.linalg.norm(ph.position - np.asarray(s.center), axis=1) - s.radius
         assert np.abs(gap).min() > 1e-4
+
+
+@pytest.mark.parametrize("mode", [STORE_ALL, STORE_CAUSTIC, STORE_INDIRECT])
+def test_no_photon_is_stored_on_a_black_surface(mode):
+    """The mirrored light's panel is black (ρ = 0) and faces the mirror: photons coming back from the
+    mirror land on it, where no estimate can use them (issue 34: 83% of a map there). None is stored,
+    in any map, so the stored count is the floor's; the flux per photon is still the power over the
+    photons emitted (photons on the floor directly under the mirror's image carry the same flux as
+    before)."""
+    scene = mirrored_light_scene(8)
+    geom = SceneGeometry(scene)
+    ph, emitted = shoot(geom, scene, pass_key(0, 0, 1), 4000, mode, threads=2, stored=True)
+    assert len(ph) >= 4000 and emitted >= len(ph)
+    on_panel = np.abs(ph.position[:, 2] - MIRROR_LIGHT_H) < 1e-3
+    assert on_panel.sum() == 0
+    assert (np.abs(ph.position[:, 2]) < 1e-3).all()  # every one on the floor, the only surface that reflects
+    # max_depth 3: every one came light → mirror → floor, with flux π·Le·A / emitted, over the mirror's
+    # roulette probability (ρ = 1, capped at Q_MAX).
+    assert (ph.depth == 2).all()
+    area = 4 * LIGHT_A * LIGHT_B
+    assert ph.power[:, 0].astype(np.float64) == pytest.approx(math.pi * LIGHT_LE * area / (emitted * Q_MAX), rel=1e-5)
+
+
+def test_photonmap_counts_stored_photons_and_records_the_emitted():
+    """``caustic_photons`` counts stored photons (all on the floor, none on the black panel); the photons
+    emitted to store them are in the render's info."""
+    scene = mirrored_light_scene(8)
+    res = PhotonMapper(threads=2).render(scene, 1, 0, settings={"caustic_photons": 3000, "global_photons": 0})
+    assert 3000 <= res.info["caustic_stored"] < 3000 + (1 << 14)
+    assert res.info["caustic_emitted"] > res.info["caustic_stored"]
+
+
+def mirror_lit_patch(mirror_half: float, res: int = 24):
+    """The mirrored light's scene cut to a small floor patch (x in [1.1, 1.5], |y| ≤ 0.2) seen from above
+    by a narrow camera, lit through the mirror only. The mirror spans x, y in ±``mirror_half``
+    around (0, 0), or, with ``mirror_half`` = 0, only x in [0, 0.65], |y| ≤ 0.25: what light from the
+    panel's mirror image to the patch crosses."""
+    base = mirrored_light_scene(res)
+    floor, panel, mirror = base.meshes
+    patch = np.array([[1.1, -0.2, 0.0], [1.5, -0.2, 0.0], [1.5, 0.2, 0.0], [1.1, 0.2, 0.0]])
+    if mirror_half:
+        m = mirror_half
+        cover = np.array([[-m, -m, 0.0], [-m, m, 0.0], [m, m, 0.0], [m, -m, 0.0]])
+    else:
+        cover = np.array([[0.0, -0.25, 0.0], [0.0, 0.25, 0.0], [0.65, 0.25, 0.0], [0.65, -0.25, 0.0]])
+    cover[:, 2] = mirror.vertices[0, 2]
+    camera = Camera(position=(1.3, 0.0, 0.6), look_at=(1.3, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov_deg=30.0,
+                    fov_axis="smaller", width=res, height=res)
+    return dataclasses.replace(base, camera=camera, meshes=(dataclasses.replace(floor, vertices=patch), panel,
+                                                            dataclasses.replace(mirror, vertices=cover)))
+
+
+def test_sppm_radius_ignores_geometry_the_camera_does_not_see():
+    """A small patch lit through a mirror that reaches far off-screen (±4: the scene's bounding sphere
+    is 5.7 across, and the old radius, 2 pixel widths at the distance of its centre, was 19 pixel widths
+    at the patch) converges as fast as with the mirror cut to what lights the patch: SPPM's radius starts
+    from each visible point's pixel footprint, which the off-screen mirror does not change (issue 34:
+    the error at 64 iterations within 2×). The error is the patch's mean relative error against the
+    polygon formula (the issue's figure: the bias a large start leaves; the per-pixel noise is the
+    same in both scenes, as the same photons land on the patch).
+
+    Measured (seed 0, 24², 20 000 photons per iteration, 64 iterations): far mirror -2.11%, cut -2.22%
+    (RMS over the pixels 18.7% both); from the old radius (``initial_radius_world`` set to it) -14.8%
+    and -1.76%, a factor 8.4 (RMS 18.5% and 9.4%: the cut scene's old radius, 4 pixel widths, was twice
+    the new one). A radius of 2 scene units instead of 2 footprints: -92% in both.
+    """
+    errors = []
+    for half in (4.0, 0.0):
+        scene = mirror_lit_patch(half)
+        exact, mask = mirrored_light_image(scene)
+        assert mask.all()
+        res = SPPM(threads=2).render(scene, 64, 0, settings={"photons_per_iteration": 20000})
+        errors.append(float(np.mean(res.image.astype(np.float64)[..., 0] / exact[..., 0] - 1)))
+    far, cut = errors
+    assert abs(far) <= 2.0 * abs(cut), errors
+    assert abs(far) < 0.05, errors
+
+
+@pytest.mark.parametrize("look_up", [False, True], ids=["direct", "through-the-mirror"])
+def test_sppm_initial_radius_is_pixel_footprints_along_the_camera_path(look_up):
+    """The patch seen from 0.6 above, straight down or in the mirror 0.9 above the camera (a path of
+    0.9 + 1.5 = 2.4): a pixel's radius starts at 2 footprints, 2 · length · 2 tan(15°)/8 at an 8² image's
+    centre (√Ω a little less off the axis: cos^(3/2) θ, θ ≤ 9°); initial_radius_world overrides it."""
+    scene = mirror_lit_patch(4.0, res=8)
+    if look_up:
+        scene = dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, look_at=(1.3, 0.0, 1.5)))
+    length = 2.4 if look_up else 0.6
+    res = SPPM(threads=2).render(scene, 1, 0, settings={"photons_per_iteration": 1000})
+    assert res.info["initial_radius_median"] == pytest.approx(2 * length * 2 * math.tan(math.radians(15)) / 8,
+                                                              rel=0.03)
+    res = SPPM(threads=2).render(scene, 1, 0, settings={"photons_per_iteration": 1000, "initial_radius_world": 0.05})
+    assert res.info["initial_radius_median"] == 0.05
 
 
 def test_normal_test_keeps_wall_photons_off_the_floor():
@@ -131,10 +229,14 @@ def test_sppm_and_photonmap_converge_to_the_mirrored_lights_polygon_formula(samp
     caustic map gets closer with more photons. Pixels within 0.15 of the floor's edge or of the panel's
     shadow boundary are left out (a density estimate blurs across both).
 
-    Measured (seed 0, 24², 130 pixels): SPPM's RMS relative error 5.2%, 3.4%, 1.9% after 4, 16, 64
-    iterations of 20 000 photons, mean -0.04% at 64; photonmap at 16 spp: 13.0% with 62 500 caustic
-    photons, 8.3% with 250 000. pmj02: SPPM 4.4%, 3.0%, 2.1% (mean +0.2%), photonmap 14.0%, 7.6%; sobol:
-    SPPM 2.8%, 2.3%, 1.6% (mean -0.06%), photonmap 9.7%, 7.4%.
+    Measured (seed 0, 24², 130 pixels): SPPM's RMS relative error 9.7%, 6.1%, 3.5% after 4, 16, 64
+    iterations of 20 000 photons, mean +0.19% at 64; photonmap at 16 spp: 11.5% with 62 500 caustic
+    photons, 8.2% with 250 000. pmj02: SPPM 9.7%, 6.4%, 3.8% (mean +0.3%), photonmap 11.3%, 7.5%; sobol:
+    SPPM 7.3%, 4.4%, 3.4% (mean +0.2%), photonmap 8.9%, 6.6%. (Issue 34: SPPM's radius starts at 2
+    footprints at each floor point, 0.16 units median, against 0.23 from the scene's centre before,
+    which gave 5.2%, 3.4%, 1.9% with more bias in the early iterations; the photon mapper's maps no
+    longer hold photons on the panel's black top, so the same stored count is all on the floor, 2.7
+    times as many emitted (688 128 for 250 000 stored), and less noisy: 13.0% and 8.3% before.)
     """
     scene = mirrored_light_scene(24)
     exact, mask = mirrored_light_image(scene, margin=0.15)
@@ -148,7 +250,7 @@ def test_sppm_and_photonmap_converge_to_the_mirrored_lights_polygon_formula(samp
     res = SPPM(threads=2).render(scene, 64, 0, checkpoints=(4, 16, 64),
                                  settings={"photons_per_iteration": 20000, "sampler": sampler})
     rms = [error(c.image)[0] for c in res.checkpoints]
-    assert rms[0] > rms[1] > rms[2] and rms[2] < 0.03, rms
+    assert rms[0] > rms[1] > rms[2] and rms[2] < 0.045, rms
     assert abs(error(res.image)[1]) < 0.01
     pm = [error(PhotonMapper(threads=2).render(scene, 16, 0, settings={"caustic_photons": n, "global_photons": 0,
                                                                        "sampler": sampler}).image)[0]
@@ -191,10 +293,11 @@ def test_sppm_in_the_white_furnace(sampler):
     fall from 4 to 16 to 64 iterations (pmj02, whose border starts above the answer: be smaller after 64
     than after 4 and 16), the interior stay within 1% and the whole image end within 3%, for every sampler.
 
-    Measured (seed 0, 32², 8192 photons per iteration, initial radius 1 footprint): border -5.3%, -4.6%,
-    -3.0% after 4, 16, 64 iterations; interior -0.63%, -0.32%, -0.14%; image -4.1% → -2.2%. pmj02: border
-    +2.9%, -3.5%, -1.4%, interior -0.07% and image -1.1% at 64; sobol: border -6.6%, -3.6%, -2.9%,
-    interior -0.12%, image -2.2%. (Stratified photons and visible points are sub-Poisson, so the radius
+    Measured (seed 0, 32², 8192 photons per iteration, initial radius 1 footprint at each wall point,
+    0.063 units median): border -3.7%, -3.66%, -2.2% after 4, 16, 64 iterations; interior -0.96%,
+    -0.33%, -0.08%; image -3.0% → -1.7%. pmj02: border +4.1%, -2.2%, -0.57%, interior +0.07% and image
+    -0.41% at 64; sobol: border -5.0%, -2.4%, -2.1%, interior -0.24%, image -1.6%. (Before issue 34, from
+    1 footprint at the bounding sphere's radius, 1.73 away: border -5.3%, -4.6%, -3.0%.) (Stratified photons and visible points are sub-Poisson, so the radius
     update's counts, hence the border's bias, differ from the independent sampler's: not investigated
     further.)
     """
@@ -212,7 +315,7 @@ def test_sppm_in_the_white_furnace(sampler):
         assert border[0] > border[1] > border[2], border
     assert abs(img[64][inner].mean()) < 0.01 and abs(img[64].mean()) < 0.03
     # α = 2/3: the radius shrinks (N' = N + αM); with α left out it would stay at its start.
-    assert res.info["final_radius_median"] < 0.8 * res.info["initial_radius_world"], res.info
+    assert res.info["final_radius_median"] < 0.8 * res.info["initial_radius_median"], res.info
 
 
 # -- determinism -------------------------------------------------------------------------------
