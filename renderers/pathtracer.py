@@ -65,6 +65,7 @@ import numpy as np
 
 from harness.adapters.api import AOVS, RenderResult, Setting
 from harness.scenes.model import Scene
+from harness.scenes.spectral_scene import SPECTRAL_INFO
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.bsdf import bsdf_sample, faces, is_delta, refraction_scale
 from renderers.core.camera import camera_basis, camera_rays
@@ -227,7 +228,7 @@ class PathTracer(ToolkitRenderer):
             if aovs:
                 raise ValueError("AOVs come from spectral=rgb; spectral=hero renders the image only")
             geom, setup_s, trace = _hero_paths(scene, rr_depth)
-            info.update(spectral="hero", wavelengths_per_path=N_WAVELENGTHS)
+            info.update({SPECTRAL_INFO: "hero", "wavelengths_per_path": N_WAVELENGTHS})
         else:
             aovs = AOVS if aovs else ()  # both come from one pass
             geom, setup_s = warmed_geometry(scene, lambda g: trace_paths(g, scene, 0, 1, 1, independent(0), rr_depth))

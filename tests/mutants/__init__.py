@@ -43,7 +43,7 @@ the names used outside are re-exported here. Used by
 ``benchmarks/gate_power.py`` only.
 """
 
-from tests.mutants.catalogue import BY_NAME, FAMILIES, ISOLATED, LOW_POWER, MUTANTS
+from tests.mutants.catalogue import BY_NAME, FAMILIES, ISOLATED, LOW_POWER, MUTANTS, SPECTRAL
 from tests.mutants.model import (AMBIENT, AO, CORE, DDGI, INTEGRATORS, OIDN, PATHTRACER, PHOTONMAP, PROBES, ROOT,
                                  SOURCE, SPPM, WHITTED, Mutant, Patch)
 from tests.mutants.patching import (GATE_TOML, INTEGRATOR_FILES, SHARED_CORE, Verdict, cost, gate_config,
@@ -53,6 +53,6 @@ from tests.mutants.patching import (GATE_TOML, INTEGRATOR_FILES, SHARED_CORE, Ve
 
 __all__ = ["AMBIENT", "AO", "BY_NAME", "CORE", "DDGI", "FAMILIES", "GATE_TOML", "INTEGRATORS", "INTEGRATOR_FILES",
            "ISOLATED", "LOW_POWER", "MUTANTS", "OIDN", "PATHTRACER", "PHOTONMAP", "PROBES", "ROOT", "SHARED_CORE",
-           "SOURCE", "SPPM", "WHITTED", "Mutant", "Patch", "Verdict", "cost", "gate_config", "imports_module", "integrator",
+           "SOURCE", "SPECTRAL", "SPPM", "WHITTED", "Mutant", "Patch", "Verdict", "cost", "gate_config", "imports_module", "integrator",
            "label", "load_module", "load_mutant", "module_name", "original_source", "patched_source",
            "patched_sources", "pathtracer_gate_config", "run_isolated", "run_until_failure", "verdict"]

@@ -44,12 +44,12 @@ LOW_POWER: dict[str, str] = {
                "(no diffuse interreflection, no caustics), with no budget to hold it to. Caught by "
                "tests/renderers/test_whitted.py::test_mutant_is_caught (the normal-incidence transmittance, the "
                "umbra, the polygon formula, the constant ambient's ρ·La)" for m in whitted.MUTANTS},
-    # The path tracer's spectral = "hero" mode (issue 33): the gate renders rgb only, where these change nothing.
-    **{m.name: "the gate has no expectation for the path tracer's spectral=hero mode, and in its rgb mode the "
-               "mutated code does not run. Caught by tests/renderers/test_hero_wavelength.py::test_mutant_is_caught "
-               "(the spectral furnace's closed form)" for m in spectral.MUTANTS},
 }
 assert set(LOW_POWER) <= set(BY_NAME)
+
+#: Mutants of the path tracer's ``spectral = "hero"`` mode: the gate runs them on its hero expectation only
+#: (:func:`tests.mutants.patching.gate_config`'s ``spectral``).
+SPECTRAL = frozenset(m.name for m in spectral.MUTANTS)
 
 #: Mutants that once made a gate run never end (a NaN throughput survived Russian roulette, so in the
 #: closed furnace the path bounced forever): tests and the benchmark run them in a child process with a

@@ -163,14 +163,17 @@ def load_mutant(name: str, tmp_dir: str | Path) -> RendererEntry:
 GATE_TOML = SOURCE.parent.parent / "gate.toml"
 
 
-def gate_config(renderer: str, path: str | Path = GATE_TOML):
-    """The project's gate config (alpha, baseline, margins) with only ``renderer``'s expectations."""
+def gate_config(renderer: str, path: str | Path = GATE_TOML, spectral: bool = False):
+    """The project's gate config (alpha, baseline, margins) with only ``renderer``'s expectations: those of its
+    ``spectral = "hero"`` mode with ``spectral``, else the others (an RGB mutant's code never runs in hero
+    mode, and a hero render costs ~45 s: the RGB mutants' gate runs stay as they were)."""
     import dataclasses
 
     from harness.gate.config import load_config
 
     cfg = load_config(path)
-    keep = [e for e in cfg.expectations if e.renderer == renderer]
+    keep = [e for e in cfg.expectations
+            if e.renderer == renderer and ((e.settings or {}).get("spectral") == "hero") == spectral]
     assert keep, f"{path}: no {renderer} expectation"
     return dataclasses.replace(cfg, expectations=keep)
 

@@ -1,6 +1,7 @@
 """The hero-wavelength path tracer's mutants (renderers/hero_wavelength.py: the ``spectral = "hero"`` mode of the
-path tracer). The gate holds no hero expectation, so each is listed in :data:`tests.mutants.catalogue.LOW_POWER`;
-tests/renderers/test_hero_wavelength.py::test_mutant_is_caught shows the spectral furnace failing each."""
+path tracer). The gate's hero expectation (cornell-box-measured against Mitsuba's spectral reference) fails each
+(tests/gate/test_gate_power.py, slow), and tests/renderers/test_hero_wavelength.py::test_mutant_is_caught shows the
+spectral furnace failing each."""
 
 from __future__ import annotations
 

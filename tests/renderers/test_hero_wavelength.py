@@ -193,14 +193,14 @@ def test_hero_agrees_with_the_spectral_reference_and_rgb_does_not():
 
 # -- the mutants (tests/mutants/spectral.py) ------------------------------------------------------------
 
-SPECTRAL_MUTANTS = [m.name for m in mutants.MUTANTS if m.name.startswith("hero_")]
+SPECTRAL_MUTANTS = sorted(mutants.SPECTRAL)
 
 
 @pytest.mark.slow  # each compiles a copy of the toolkit and the hero integrator (~30-60 s)
 @pytest.mark.parametrize("name", SPECTRAL_MUTANTS)
 def test_mutant_is_caught(name, tmp_path_factory):
-    """Each spectral mutant fails the spectral furnace (the gate has no hero expectation: tests/mutants/catalogue.py's
-    LOW_POWER says so)."""
+    """Each spectral mutant fails the spectral furnace (the closed form; the gate's cornell-box-measured expectation
+    fails each too: tests/gate/test_gate_power.py::test_gate_detects_mutant)."""
     assert len(SPECTRAL_MUTANTS) == 3
     module = mutants.load_module(name, tmp_path_factory.mktemp("hero-mutants"))
     with pytest.raises(AssertionError):
