@@ -228,3 +228,14 @@ def test_a_moved_module_or_name_is_caught():
     assert "has no 'no_such_method'" in missing_name("harness.workflows.executor.DaskExecutor.no_such_method")
     assert file_paths("see `harness/nothing.py`, docs/images/probes-* and docs/images/probes-{a,b}.svg.") == [
         "harness/nothing.py"]
+
+
+def test_the_demos_spectral_headline_is_the_one_docs_spectral_md_measured():
+    """`cbox demo` ends with issue 33's headline (harness/cli/run.py): its three figures are those of the
+    table benchmarks/spectral.py wrote into docs/spectral.md (whole image: illuminant_E, scene_light, floor)."""
+    from harness.cli.run import SPECTRAL_HEADLINE
+
+    row = re.search(r"^\| whole image \| \*\*([\d.]+)\*\* \| ([\d.]+) \| ([\d.]+) \|$",
+                    (ROOT / "docs" / "spectral.md").read_text(), re.M)
+    assert row, "docs/spectral.md has no per-pixel row for the whole image"
+    assert re.findall(r"\d+\.\d+", SPECTRAL_HEADLINE) == list(row.groups())
