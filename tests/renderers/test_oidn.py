@@ -142,10 +142,10 @@ def test_denoised_renderer_denoises_every_checkpoint_and_counts_its_time(caustic
 
 
 def test_mitsuba_denoised_the_same_way(furnace):
-    """mitsuba+oidn: Mitsuba's settings (none) plus the denoiser's; the furnace's flat 5 comes back near 5
+    """mitsuba+oidn: Mitsuba's settings (``spectral``) plus the denoiser's; the furnace's flat 5 comes back near 5
     (measured at seed 0: Mitsuba's 4 spp mean 5.076, denoised 5.131; within 5%)."""
     entry = resolve(["mitsuba+oidn[quality=fast]"])[0]
-    assert entry.available and set(entry.settings) == {"quality", "aux"}
+    assert entry.available and set(entry.settings) == {"spectral", "quality", "aux"}
     r = entry.renderer.render(furnace, 4, 0, settings=dict(entry.settings))
     assert r.variance is None and r.info["denoiser"] == "OIDN (quality fast, aux prefiltered)"
     assert abs(float(r.image.mean()) / 5.0 - 1.0) < 0.05
