@@ -25,7 +25,9 @@ anticonservative.
 renderer reports it, floored at the reference renderer's noise model
 (``var_ref · ref_spp / spp``: same per-sample variance as the reference; the
 gate passes the floored image, :func:`harness.gate.checks.evaluate`); without
-one, the noise model alone, which is exact for the reference renderer itself.
+one, the noise model alone, which is exact for the reference renderer itself
+(:func:`render_agreement`: the gate's test, and the ``agreement`` column of
+``cbox compare``'s unbiased renderers).
 """
 
 from __future__ import annotations
@@ -36,6 +38,8 @@ from typing import Mapping
 
 import numpy as np
 from scipy.stats import norm
+
+from harness.evaluate import metrics, noise
 
 CHANNELS = "RGB"
 
@@ -162,3 +166,18 @@ def agreement_test(img: np.ndarray, var_img: np.ndarray, ref: np.ndarray, var_re
     failures.sort(key=lambda f: (f["p"], -abs(f["z"]) if math.isfinite(f["z"]) else -math.inf))
     return Agreement(not failures, alpha, tests, level, z_tiles, p_tiles, z_global, p_global, tile, failures,
                      z_regions, p_regions)
+
+
+def render_agreement(image: np.ndarray, variance: np.ndarray | None, spp: int, ref: np.ndarray, ref_var: np.ndarray,
+                     ref_spp: int, tile: int = 16, alpha: float = 0.01,
+                     regions: Mapping[str, np.ndarray] | None = None) -> Agreement:
+    """:func:`agreement_test` of a render at ``spp``: NaN/Inf pixels taken as black, its own ``variance`` (if it
+    reports one) floored at the reference's noise model at ``spp``.
+
+    The floor, because where samples are skewed (a caustic seen through glass) a tile whose few bright paths did
+    not come reads low with a variance estimate that is low too, and its own variance alone turns that into a
+    false alarm (2 of 20 clean gate runs, docs/gate-detection.md).
+    """
+    model = noise.render_variance(ref_var, ref_spp, spp)
+    var = model if variance is None else np.maximum(variance, model)
+    return agreement_test(metrics.zero_broken_pixels(image), var, ref, ref_var, tile, alpha, regions)

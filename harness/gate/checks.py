@@ -15,7 +15,7 @@ from typing import Mapping
 
 import numpy as np
 
-from harness.evaluate import agreement, bias_extrapolation, convergence, metrics, noise, outliers, variance_check
+from harness.evaluate import agreement, bias_extrapolation, convergence, metrics, outliers, variance_check
 from harness.evaluate import regions as named_regions
 from harness.evaluate.registry import HIGHER_IS_BETTER, region_metric
 from harness.gate.config import Consistency, Expectation, GateConfig
@@ -282,15 +282,11 @@ def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateC
                     f"{m['nan_count']} NaN and {m['inf_count']} Inf pixels" + _first_bad_pixel(rec.image), bad, 0)]
     agr = None
     if exp.unbiased:
-        # The renderer's own variance, floored at the reference renderer's noise model at this spp (as the
-        # outlier test does): where samples are skewed (a caustic seen through glass), a tile whose few
-        # bright paths did not come reads low with a variance estimate that is low too, and its own
-        # variance alone turns that into a false alarm (2 of 20 clean gate runs, docs/gate-detection.md).
-        model = noise.render_variance(ref.variance, ref.spp, rec.spp)
-        var = model if rec.variance is None else np.maximum(rec.variance, model)
+        # The renderer's own variance floored at the noise model (as the outlier test does: render_agreement).
         clean = metrics.zero_broken_pixels(rec.image)
         share = statistical_alpha(cfg.alpha)
-        agr = agreement.agreement_test(clean, var, ref.image, ref.variance, exp.tile, share, masks)
+        agr = agreement.render_agreement(rec.image, rec.variance, rec.spp, ref.image, ref.variance, ref.spp,
+                                         exp.tile, share, masks)
         checks.append(Check(exp.name, "agreement", agr.passed, agr.message() + _alpha_note(cfg.alpha),
                             agr.p_min, agr.level))
         checks.append(_variance_check(exp, rec, clean, ref, cfg.alpha))
