@@ -1,8 +1,8 @@
 """Issue 34's photon changes, before and after, in one run: time to caustic relMSE on ``cornell-box-caustics``.
 
-"Before" is a git worktree of the code before the change (``--before``,
-default ``/work/wt/photons-before``: ``git worktree add --detach
-/work/wt/photons-before c731790``), "after" this tree. Each (version,
+"Before" is a git worktree of the code before the change (``--before``;
+by default the script makes one of commit :data:`BEFORE_COMMIT` in
+``out/photons-before`` with ``git worktree add --detach``), "after" this tree. Each (version,
 renderer, seed) cell runs in a child process with that tree first on
 ``PYTHONPATH`` (the same venv, the same harness: only ``renderers/``
 differs) through the convergence workflow
@@ -57,10 +57,15 @@ def cell(tree: Path, renderer: str, spp: str, seed: int, out: Path) -> None:
     table.to_csv(out / "table.csv", index=False)
 
 
+#: The commit before issue 34's photon changes (main at the start of that work).
+BEFORE_COMMIT = "c731790"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--before", type=Path, default=Path("/work/wt/photons-before"),
-                    help="a worktree of the code before the change (default /work/wt/photons-before)")
+    ap.add_argument("--before", type=Path, default=None,
+                    help=f"a worktree of the code before the change (default: made of {BEFORE_COMMIT} in "
+                         "out/photons-before)")
     ap.add_argument("--seeds", type=int, default=3, help="seeds 0 .. N-1 of each (version, renderer)")
     ap.add_argument("--out", type=Path, default=Path("out/bench-photons-before-after"),
                     help="experiment folders (resumable)")
@@ -74,7 +79,10 @@ def main() -> None:
         return
     from harness.evaluate.convergence import time_to_target
 
-    trees = {"before": args.before.resolve(), "after": HERE}
+    before = args.before or HERE / "out" / "photons-before"
+    if args.before is None and not before.exists():
+        subprocess.run(["git", "worktree", "add", "--detach", str(before), BEFORE_COMMIT], cwd=HERE, check=True)
+    trees = {"before": before.resolve(), "after": HERE}
     tables: dict[tuple[str, str], list[pd.DataFrame]] = {}
     for seed in range(args.seeds):
         for renderer, spp in RUNS.items():
