@@ -169,7 +169,7 @@ def compare_table(rows: list[dict], time_basis: str = "wall") -> str:
 
     frame = pd.DataFrame(rows)
     times = ("time_s", "cpu_time_s") if time_basis == "cpu" else ("time_s",)
-    cols = [c for c in ("renderer", "status", "agreement", "spp", *times, *TABLE_METRICS, "info_target_reached")
+    cols = [c for c in ("renderer", "status", "spp", *times, *TABLE_METRICS, "agreement", "info_target_reached")
             if c in frame]
     shown = frame[cols].copy()
     notes = []
