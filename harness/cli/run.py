@@ -140,6 +140,7 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
             rec = cmp.render_to_target(entry, sc, ref, target[0], target[1], seed, max_spp)
         else:
             rec = runner.run_one(entry, sc, spp, seed, ref)
+        cmp.judge_agreement(rec, sc, ref)
         records.append(rec)
         bar.advance(f"{rec.renderer} {rec.status}")
         if as_json and repeats == 1:  # as it finishes; with repeats, once they are all in

@@ -181,6 +181,27 @@ def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, m
         spp, previous = min(2 * spp, max_spp), value
 
 
+#: Family-wise false-alarm rate of the agreement test :func:`judge_agreement` gives a run (its ``agreement``
+#: column): a correct renderer reads "fail" in 1% of runs.
+AGREEMENT_ALPHA = 0.01
+
+
+def judge_agreement(rec: runner.RunRecord, scene: Scene, reference: Reference) -> None:
+    """An ok run of an unbiased renderer gets the gate's agreement test against the reference
+    (:func:`harness.evaluate.agreement.render_agreement`: tiles of 16, the scene's regions, family-wise
+    :data:`AGREEMENT_ALPHA`) as ``rec.agreement`` ("pass" or "fail") and ``rec.agreement_p_min``; other runs are
+    left as they are. Here, not in :func:`runner.run_one`: the gate runs its own test at its own level, and
+    SciPy's statistics stay out of every command that renders."""
+    from harness.evaluate import agreement  # imports scipy.stats (~1 s)
+    from harness.evaluate import regions as named_regions
+
+    if rec.status != "ok" or rec.estimator != "unbiased" or rec.image is None:
+        return
+    agr = agreement.render_agreement(rec.image, rec.variance, rec.spp, reference.image, reference.variance,
+                                     reference.spp, alpha=AGREEMENT_ALPHA, regions=named_regions.region_masks(scene))
+    rec.agreement, rec.agreement_p_min = ("pass" if agr.passed else "fail"), agr.p_min
+
+
 def store_comparison(out: Path, scene: Scene, records: Sequence[runner.RunRecord], command: str,
                      time_basis: str = "wall", time_repeats: int = 1) -> None:
     """A comparison as an experiment folder: images, results table, CSV and JSON (a report can then be built).

@@ -32,7 +32,7 @@ from typing import Sequence
 
 import numpy as np
 
-from harness.evaluate import agreement, metrics
+from harness.evaluate import metrics
 from harness.evaluate import noise as stats
 from harness.evaluate import regions as named_regions
 from harness.evaluate import timing_stats
@@ -92,9 +92,8 @@ class RunRecord:
     # The scene's rgb_convention ("" for a scene without spectra): with the render's info, the row's
     # rgb_convention column (harness.scenes.spectral_scene.convention_used).
     scene_rgb_convention: str = ""
-    # An unbiased render's agreement test against the reference (harness.evaluate.agreement.render_agreement,
-    # the gate's: tiles of 16, the scene's regions, family-wise α = AGREEMENT_ALPHA): "pass" or "fail", and
-    # its smallest p; None for other estimators or without a reference.
+    # An unbiased render's agreement test against the reference, as cbox compare gives it
+    # (harness.workflows.compare.judge_agreement): "pass" or "fail", and its smallest p; None otherwise.
     agreement: str | None = None
     agreement_p_min: float | None = None
 
@@ -255,11 +254,6 @@ def render_sandboxed(entry: RendererEntry, scene: Scene, spp: int, seed: int, ch
                          cpu_time_s=out.cpu_times[0]), out.timings[0])
 
 
-#: Family-wise false-alarm rate of the agreement test a run of an unbiased renderer gets (its ``agreement``
-#: column): a correct renderer reads "fail" in 1% of runs.
-AGREEMENT_ALPHA = 0.01
-
-
 def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: Reference | None,
             checkpoints: Sequence[int] = (), time_limit_s: float | None = None) -> RunRecord:
     """Render and score one renderer; never raises for the renderer's own failures.
@@ -290,11 +284,6 @@ def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: 
     else:
         rec.metrics = score(result.image, reference, spp)
         rec.regions = score_regions(scene, result.image, reference, spp, result.variance)
-        if rec.estimator == "unbiased":
-            agr = agreement.render_agreement(result.image, result.variance, spp, reference.image, reference.variance,
-                                             reference.spp, alpha=AGREEMENT_ALPHA,
-                                             regions=named_regions.region_masks(scene))
-            rec.agreement, rec.agreement_p_min = ("pass" if agr.passed else "fail"), agr.p_min
     return rec
 
 

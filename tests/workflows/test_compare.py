@@ -157,17 +157,18 @@ def test_repeats_carry_cpu_time_when_the_render_path_records_it(scene, monkeypat
 
 
 def test_an_unbiased_run_gets_the_gates_agreement_verdict():
-    """run_one gives an unbiased render the gate's agreement test (family-wise α = 0.01 at seed 0): the reference
-    plus its own noise passes; the same 1% dark (Biased1Percent: ~30 sd on the whole image at 64 spp) fails; a
-    renderer that declares another estimator gets no verdict."""
+    """judge_agreement gives an unbiased render the gate's agreement test (family-wise α = 0.01 at seed 0): the
+    reference plus its own noise passes; the same 1% dark (Biased1Percent: ~30 sd on the whole image at 64 spp)
+    fails; a renderer that declares another estimator gets no verdict."""
     from harness.store.references import load_reference
 
     scene = resolve_scene("cornell-box")
     ref = load_reference(scene)
     fair, dark, consistent = resolve(["tests.user_renderers:ScaledMitsubaNoise", "tests.user_renderers:Biased1Percent",
                                       "tests.user_renderers:ShrinkingBias"])
-    ok = runner.run_one(fair, scene, 64, 0, ref)
+    ok, bad, other = (runner.run_one(e, scene, 64, 0, ref) for e in (fair, dark, consistent))
+    for rec in (ok, bad, other):
+        cmp.judge_agreement(rec, scene, ref)
     assert ok.row()["agreement"] == "pass" and ok.agreement_p_min > 1e-5
-    bad = runner.run_one(dark, scene, 64, 0, ref)
     assert bad.row()["agreement"] == "fail" and bad.agreement_p_min < 1e-9
-    assert "agreement" not in runner.run_one(consistent, scene, 64, 0, ref).row()
+    assert "agreement" not in other.row()
