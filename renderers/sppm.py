@@ -83,6 +83,7 @@ from scipy.spatial import cKDTree
 from harness.adapters.api import Checkpoint, RenderResult, Setting, Stopwatch, default_threads, pass_key
 from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
+from renderers.core.camera import pixel_cone_widths
 from renderers.core.geometry import SceneGeometry
 from renderers.core.photon_map import depth_budget, pairs_that_count
 from renderers.core.photons import BATCH, STORE_INDIRECT, trace_photons
@@ -150,21 +151,6 @@ class SPPM(ToolkitRenderer):
         return RenderResult(image, elapsed, spp, seed, shots, info, None, cpu_time_s=cpu)
 
 
-def pixel_cone_widths(camera) -> np.ndarray:
-    """(pixels,) √Ω of each pixel of a pinhole ``camera``, row-major: the width of its cone at distance 1.
-
-    Ω = (2 tan_x/W)(2 tan_y/H)·cos³θ at the pixel's centre, θ its angle off
-    the optical axis (a pixel of the image plane at distance 1, seen from
-    the pinhole: area over squared distance, times the cosine of its tilt).
-    """
-    tx, ty = camera.tan_half_fov()
-    w, h = camera.width, camera.height
-    sx = 2.0 * (np.arange(w) + 0.5) / w - 1.0
-    sy = 1.0 - 2.0 * (np.arange(h) + 0.5) / h
-    cos = 1.0 / np.sqrt(1.0 + (sx[None, :] * tx) ** 2 + (sy[:, None] * ty) ** 2)
-    return np.sqrt((2.0 * tx / w) * (2.0 * ty / h) * cos ** 3).ravel()
-
-
 def footprints(cone_width: np.ndarray, distance: np.ndarray) -> np.ndarray:
     """A pixel's footprint at its visible point, in scene units: its cone's width times the camera path's
     length (mirrors and glass included: see the module docstring)."""
@@ -178,7 +164,7 @@ class Progress:
         self.geom, self.scene, self.s = geom, scene, settings
         cam = scene.camera
         self.pixels = cam.width * cam.height
-        self.cone = pixel_cone_widths(cam)
+        self.cone = pixel_cone_widths(cam)  # renderers.core.camera: the pixel convention
         self.ld = np.zeros((self.pixels, 3))
         self.n = np.zeros(self.pixels)
         # 0: not set yet (the pixel has not found a visible point); r0 keeps each pixel's start for the record.

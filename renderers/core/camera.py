@@ -66,6 +66,22 @@ def camera_rays(basis, width, height, first, pixels, stream, rays):
         set_path(rays, i, i, (1.0, 1.0, 1.0), 0.0)
 
 
+def pixel_cone_widths(camera: Camera) -> np.ndarray:
+    """(pixels,) √Ω of each pixel of a pinhole ``camera``, row-major: the width of its cone at distance 1
+    (SPPM's initial radius, :mod:`renderers.sppm`).
+
+    Ω = (2 tan_x/W)(2 tan_y/H)·cos³θ at the pixel's centre, θ its angle off
+    the optical axis (a pixel of the image plane at distance 1, seen from
+    the pinhole: area over squared distance, times the cosine of its tilt).
+    """
+    tx, ty = camera.tan_half_fov()
+    w, h = camera.width, camera.height
+    sx = 2.0 * (np.arange(w) + 0.5) / w - 1.0
+    sy = 1.0 - 2.0 * (np.arange(h) + 0.5) / h
+    cos = 1.0 / np.sqrt(1.0 + (sx[None, :] * tx) ** 2 + (sy[:, None] * ty) ** 2)
+    return np.sqrt((2.0 * tx / w) * (2.0 * ty / h) * cos ** 3).ravel()
+
+
 def project_to_pixels(camera: Camera, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Where world ``points`` (n, 3) land on the image: (film (n, 2) float64, pixel (n,) int64).
 
