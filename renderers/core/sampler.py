@@ -100,12 +100,11 @@ class Stream(NamedTuple):
     pixels: int
     first_sample: int
     batches: int  # 1 for independent
-    matrices: np.ndarray  # renderers.core.sobol.SOBOL_MATRICES
 
 
 def independent(key: np.uint64, pixels: int = 1, first_sample: int = 0) -> Stream:
     """The ``independent`` stream of pass ``key``: uniform(key, path, dim), whatever the pixel."""
-    return Stream(INDEPENDENT, np.uint64(key), max(pixels, 1), first_sample, 1, SOBOL_MATRICES)
+    return Stream(INDEPENDENT, np.uint64(key), max(pixels, 1), first_sample, 1)
 
 
 def pass_stream(sampler: str, seed: int, index: int, pixels: int, first_sample: int,
@@ -120,7 +119,7 @@ def pass_stream(sampler: str, seed: int, index: int, pixels: int, first_sample: 
     kind = SAMPLERS[sampler]
     if kind == INDEPENDENT:
         return independent(pass_key(seed, index), pixels, first_sample)
-    return Stream(kind, pass_key(seed, 0, SEQUENCE_STREAM), pixels, first_sample, batches, SOBOL_MATRICES)
+    return Stream(kind, pass_key(seed, 0, SEQUENCE_STREAM), pixels, first_sample, batches)
 
 
 def sequence_stream(sampler: str, key: np.uint64, pixels: int = 1, first_sample: int = 0) -> Stream:
@@ -135,7 +134,7 @@ def sequence_stream(sampler: str, key: np.uint64, pixels: int = 1, first_sample:
     kind = SAMPLERS[sampler]
     if kind == INDEPENDENT:
         return independent(key, pixels, first_sample)
-    return Stream(kind, np.uint64(key), max(pixels, 1), first_sample, 1, SOBOL_MATRICES)
+    return Stream(kind, np.uint64(key), max(pixels, 1), first_sample, 1)
 
 
 @jit_inline
@@ -160,7 +159,7 @@ def sample_1d(st, point, dim) -> float:
     if st.kind == INDEPENDENT:
         return uniform(seed, index, dim)
     if st.kind == SOBOL:
-        return sobol_1d(seed, index, dim, st.matrices)
+        return sobol_1d(seed, index, dim, SOBOL_MATRICES)
     return padded_1d(seed, index, dim)
 
 
@@ -171,7 +170,7 @@ def sample_2d(st, point, dim):
     if st.kind == INDEPENDENT:
         return uniform(seed, index, dim), uniform(seed, index, dim + 1)
     if st.kind == SOBOL:
-        return sobol_1d(seed, index, dim, st.matrices), sobol_1d(seed, index, dim + 1, st.matrices)
+        return sobol_1d(seed, index, dim, SOBOL_MATRICES), sobol_1d(seed, index, dim + 1, SOBOL_MATRICES)
     return padded_2d(seed, index, dim)
 
 

@@ -73,7 +73,7 @@ def test_independent_stream_is_the_counter_based_rng():
 def test_each_batch_of_a_pixel_is_stratified_progressively(kind):
     """Exact: a batch's first 2^m camera samples of a pixel, for every m ≤ 8, and the next aligned block,
     are (0, m, 2)-nets; for pmj02 so is every later 2D decision (a vertex's BSDF direction)."""
-    st = Stream(kind, KEY, PIXELS, 0, BATCHES, SOBOL_MATRICES)
+    st = Stream(kind, KEY, PIXELS, 0, BATCHES)
     dims = [CAMERA_U] + ([vertex_dim(3, 3)] if kind == PMJ02 else [])
     for pixel in (0, 3):
         for batch in (0, BATCHES - 1):
@@ -113,7 +113,7 @@ def test_an_independent_photon_stream_is_the_counter_based_rng():
 def test_numbers_do_not_depend_on_how_samples_are_cut_into_passes(kind):
     """A sample's numbers are a function of (seed, pixel, sample index, dimension): the same whether it is
     drawn in a pass that starts at sample 0 or in a later one (first_sample 12)."""
-    whole = Stream(kind, KEY, PIXELS, 0, BATCHES, SOBOL_MATRICES)
+    whole = Stream(kind, KEY, PIXELS, 0, BATCHES)
     later = whole._replace(first_sample=12)
     samples = np.arange(12, 40)
     for dim in (CAMERA_U, vertex_dim(2, 1)):
