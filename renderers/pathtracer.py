@@ -70,11 +70,10 @@ from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.bsdf import bsdf_sample, faces, is_delta, refraction_scale
 from renderers.core.camera import camera_basis, camera_rays
 from renderers.core.direct import sample_ld
-from renderers.core.geometry import SceneGeometry, offset_origin, ray_hit
+from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest, trace_unoccluded
 from renderers.core.lights import solid_angle_pdf_along
 from renderers.core.roulette import Q_MAX, RR_DEPTH, continue_path
-from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, head, ray_buffer, set_path, set_ray,
-                                 set_shadow, shadow_buffer)
+from renderers.core.rays import RayBuffer, ShadowBuffer, add_unoccluded, set_path, set_ray, set_shadow, wavefront
 from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, SAMPLER_SETTING, Stream,
                                     independent, path_point, vertex_1d, vertex_2d)
 from renderers.core.sampling import jit, power_heuristic
@@ -182,24 +181,38 @@ def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels
     with ``aovs``, (estimates, aux): aux (m, 6) holds each path's albedo and normal (:func:`_write_aovs`)."""
     m = stop - first
     cam = scene.camera
-    unbounded = scene.max_depth < 0
-    geo = geom.tables()
     L = np.zeros((m, 3))
     aux = np.zeros((m if aovs else 0, 6))
-    cur, nxt = ray_buffer(m), ray_buffer(m)  # double buffer: shade reads one wavefront, writes the next
-    out = Bounce(L, shadow_buffer(m), nxt, aux, np.ones(aux.shape[0], dtype=np.bool_))
-    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, cur)
-    n, depth = m, 1  # live rays; segments so far, the current ray included
-    while n:
-        rays = head(cur, n)
-        extend = unbounded or depth + 1 <= scene.max_depth
-        ns, n = _shade(geom.closest_hits(rays), rays, stream, first, depth, extend, depth >= rr_depth, geo, out)
-        if ns:
-            seg = head(out.shadow, ns)
-            add_unoccluded(L, seg, geom.unoccluded(seg.o, seg.d, seg.t))
-        cur, out = out.nxt, out._replace(nxt=cur)
-        depth += 1
+    traced = _trace(geom.tables(), camera_basis(cam), cam.width, cam.height, first, pixels, stream, scene.max_depth,
+                    rr_depth, wavefront(m, geom.has_spheres), L, aux, np.ones(aux.shape[0], dtype=np.bool_))
+    geom.count(traced)
     return (L, aux) if aovs else L
+
+
+@jit
+def _trace(geo, basis, width, height, first, pixels, stream, max_depth, rr_depth, wf, L, aux, aux_open):
+    """The bounce loop of :func:`trace_paths`, one kernel per work unit: camera rays, then per bounce the
+    closest hits, :func:`_shade`, and the shadow segments' queries, until no path is left. Returns the rays
+    traced. One kernel because a kernel called from Python per bounce cost ~0.3 ms of argument typing
+    (:func:`renderers.core.geometry.trace_closest`)."""
+    cur, nxt = wf.cur, wf.nxt  # double buffer: shade reads one wavefront, writes the next
+    camera_rays(basis, width, height, first, pixels, stream, cur)
+    n, depth, traced = L.shape[0], 1, 0  # live rays; segments so far, the current ray included
+    while n:
+        hits = Hits(wf.prim[:n], wf.t_sphere[:n])
+        trace_closest(geo, cur, hits.prim, hits.t_sphere, wf.record)
+        extend = max_depth < 0 or depth + 1 <= max_depth
+        ns, n_next = _shade(hits, cur, stream, first, depth, extend, depth >= rr_depth, geo,
+                            Bounce(L, wf.shadow, nxt, aux, aux_open))
+        traced += n + ns
+        if ns:
+            visible = wf.visible[:ns]
+            trace_unoccluded(geo, wf.shadow, visible, wf.record)
+            add_unoccluded(L, wf.shadow, visible)
+        cur, nxt = nxt, cur
+        n = n_next
+        depth += 1
+    return traced
 
 
 #: The ``spectral`` setting's values: the scene's RGB values, or its spectra by hero-wavelength sampling.

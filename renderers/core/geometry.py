@@ -67,6 +67,7 @@ class Tables(NamedTuple):
     n_triangles: int  # T: primitives from T on are spheres
     sphere_center: np.ndarray  # (S, 3)
     sphere_radius: np.ndarray  # (S,)
+    embree: int  # handle of the committed Embree scene, for kernels that trace (trace_closest, trace_unoccluded)
 
 
 class Hits(NamedTuple):
@@ -123,10 +124,11 @@ class SceneGeometry:
         """Every per-primitive table, for numba kernels (one argument)."""
         return Tables(self.v0, self.e1, self.e2, self.normal, self.reflectance, self.radiance, self.material,
                       self.emitters.pdf_area, self.emitters.ids, self.emitters.cdf, self.offset, self.eta,
-                      self.n_triangles, self.sphere_center, self.sphere_radius)
+                      self.n_triangles, self.sphere_center, self.sphere_radius, self._embree.handle)
 
     # -- ray queries -------------------------------------------------------
-    def _count(self, n: int) -> None:
+    def count(self, n: int) -> None:
+        """Add ``n`` rays a kernel traced itself (:func:`trace_closest`, :func:`trace_unoccluded`) to ``rays``."""
         with self._rays_lock:
             self.rays += n
 
@@ -139,7 +141,7 @@ class SceneGeometry:
         """
         if len(origins) == 0:
             return np.zeros(0, np.int32)
-        self._count(len(origins))
+        self.count(len(origins))
         prim = np.empty(len(origins), np.int32)
         closest_triangles(self._embree.handle, origins, directions, prim, ray_record())
         return prim
@@ -162,7 +164,7 @@ class SceneGeometry:
         """True where nothing lies along origin + t·direction for t in (0, tfar); float32 inputs."""
         if len(origins) == 0:
             return np.zeros(0, bool)
-        self._count(len(origins))
+        self.count(len(origins))
         visible = np.empty(len(origins), bool)
         segments_clear(self._embree.handle, origins, directions, tfar, visible, ray_record())
         if self.has_spheres:
@@ -239,6 +241,31 @@ def _nearer_spheres(prim, o, d, g, t):
                 best = ts
                 prim[i] = g.n_triangles + s
         t[i] = best
+
+
+@jit
+def trace_closest(g, rays, prim, t_sphere, rec):
+    """:meth:`SceneGeometry.closest_hits` inside a kernel, for rays 0 .. ``prim.size`` - 1 of the
+    :class:`renderers.core.rays.RayBuffer` ``rays``: primitive ids into ``prim`` (-1: miss), sphere hits'
+    distances into ``t_sphere`` (as long as ``prim``; empty in a scene without spheres). ``rec``:
+    :func:`renderers.core.embree.ray_record`.
+
+    A renderer whose bounce loop is a kernel calls this instead of the method: each call of a kernel from
+    Python costs ~0.3 ms of numba's argument typing when it takes the scene's tables (a named tuple of arrays),
+    which was a fifth of the path tracer's time (BENCHMARKS.md).
+    """
+    closest_triangles(g.embree, rays.o32, rays.d32, prim, rec)
+    if g.sphere_radius.size > 0:
+        _nearer_spheres(prim, rays.o, rays.d, g, t_sphere)
+
+
+@jit
+def trace_unoccluded(g, segments, visible, rec):
+    """:meth:`SceneGeometry.unoccluded` inside a kernel: ``visible[k]`` for segments 0 .. ``visible.size`` - 1
+    of the :class:`renderers.core.rays.ShadowBuffer` ``segments``."""
+    segments_clear(g.embree, segments.o, segments.d, segments.t, visible, rec)
+    if g.sphere_radius.size > 0:
+        _spheres_occlude(segments.o, segments.d, segments.t, g.sphere_center, g.sphere_radius, visible)
 
 
 @jit

@@ -34,6 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from renderers.core.embree import ray_record
 from renderers.core.sampling import jit
 
 #: tfar of a shadow segment, relative to its length: stop short of the far
@@ -68,6 +69,26 @@ def ray_buffer(m: int) -> RayBuffer:
 def shadow_buffer(m: int) -> ShadowBuffer:
     return ShadowBuffer(np.empty((m, 3), np.float32), np.empty((m, 3), np.float32), np.empty(m, np.float32),
                         np.empty(m, np.int64), np.empty((m, 3)))
+
+
+class Wavefront(NamedTuple):
+    """Every buffer of a bounce loop that runs inside one kernel (:func:`wavefront`): the rays being traced and
+    those the bounce writes (swapped each bounce), the shadow segments, and what the queries answer
+    (:func:`renderers.core.geometry.trace_closest`, :func:`renderers.core.geometry.trace_unoccluded`)."""
+
+    cur: RayBuffer
+    nxt: RayBuffer
+    shadow: ShadowBuffer
+    prim: np.ndarray  # (m,) int32 closest primitive, -1: missed
+    t_sphere: np.ndarray  # (m,) float64 sphere hits' distances; (0,) in a scene without spheres
+    visible: np.ndarray  # (m,) bool: shadow segment unoccluded
+    record: np.ndarray  # Embree's packet record (renderers.core.embree.ray_record)
+
+
+def wavefront(m: int, spheres: bool) -> Wavefront:
+    """The buffers of a bounce loop over ``m`` paths, in a scene with or without spheres."""
+    return Wavefront(ray_buffer(m), ray_buffer(m), shadow_buffer(m), np.empty(m, np.int32),
+                     np.empty(m if spheres else 0), np.empty(m, np.bool_), ray_record())
 
 
 def head(buf, n: int):
@@ -121,8 +142,9 @@ def set_shadow(buf, k, o, d, tfar, path, value):
 
 @jit
 def add_unoccluded(L, shadow, visible):
-    """L[path] += contribution of every shadow segment that Embree found unoccluded, in segment order."""
-    for k in range(shadow.path.size):
+    """L[path] += contribution of shadow segment k wherever ``visible[k]``, in segment order (segments
+    0 .. ``visible.size`` - 1)."""
+    for k in range(visible.size):
         if visible[k]:
             for c in range(3):
                 L[shadow.path[k], c] += shadow.c[k, c]

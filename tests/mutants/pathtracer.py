@@ -39,8 +39,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "swap_rb",
         "radiance returned in BGR order (as OpenCV wants) instead of RGB: red and blue swapped",
-        (("        depth += 1\n    return (L, aux) if aovs else L\n",
-          "        depth += 1\n    L = L[:, ::-1].copy()\n    return (L, aux) if aovs else L\n"),),
+        (("    geom.count(traced)\n    return (L, aux) if aovs else L\n",
+          "    geom.count(traced)\n    L = L[:, ::-1].copy()\n    return (L, aux) if aovs else L\n"),),
     ),
     Mutant(
         "energy_loss_1pct",
@@ -53,8 +53,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "nan_one_pixel",
         "lens-distortion weight r'/r applied to each path's radiance, from the pixel's offset to the principal "
         "point: 0/0 = NaN at that one pixel",
-        (("        depth += 1\n    return (L, aux) if aovs else L\n",
-          "        depth += 1\n"
+        (("    geom.count(traced)\n    return (L, aux) if aovs else L\n",
+          "    geom.count(traced)\n"
           "    # Lens-distortion weight r'/r of each path's pixel, r its offset from the principal point.\n"
           "    pix = (first + np.arange(m)) % pixels\n"
           "    r = np.hypot(pix % cam.width - cam.width // 2, pix // cam.width - cam.height // 2)\n"
