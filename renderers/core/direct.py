@@ -26,13 +26,13 @@ from renderers.core.bsdf import bsdf_eval, bsdf_pdf
 from renderers.core.geometry import offset_origin
 from renderers.core.lights import sample_emitter, solid_angle_pdf, solid_angle_pdf_along, towards_emitter
 from renderers.core.rays import shadow_segment
-from renderers.core.sampling import jit, power_heuristic
+from renderers.core.sampling import jit, jit_inline, power_heuristic
 
 _NONE = ((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0))
 _NONE_GEOMETRY = ((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.0, 0, 0.0, 0.0)
 
 
-@jit
+@jit_inline
 def light_sample(x, n, mat, u, geo, mis):
     """The colour-free part of :func:`sample_ld`: ``(found, origin, direction, tfar, emitter triangle, cos θ_x,
     g)``, g = cos θ_x cos θ_y / r² / p_A · w, so that a channel (or wavelength) of radiance Le and BSDF weight
@@ -54,7 +54,7 @@ def light_sample(x, n, mat, u, geo, mis):
     return True, a, sd, tfar, e, cos_x, g
 
 
-@jit
+@jit_inline
 def sample_ld(x, n, mat, weight, u, geo, mis):
     """A light sample for shading point ``x`` (normal ``n`` on the side lit, material ``mat``).
 

@@ -186,13 +186,13 @@ def camera_sample(st, point):
     return sample_2d(st, point, CAMERA_U)
 
 
-@jit
+@jit_inline
 def vertex_1d(st, point, depth, offset) -> float:
     """One number of vertex ``depth`` of the path at ``point`` (pbrt's Get1D)."""
     return sample_1d(st, point, vertex_dim(depth, offset))
 
 
-@jit
+@jit_inline
 def vertex_2d(st, point, depth, offset):
     """Two numbers of vertex ``depth`` of the path at ``point``, from ``offset`` on, stratified jointly."""
     return sample_2d(st, point, vertex_dim(depth, offset))
