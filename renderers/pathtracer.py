@@ -50,7 +50,9 @@ reflectances or emitters is refused in ``hero`` mode, with the field named.
 Random numbers: vertex k of a path uses the named dimensions of
 :mod:`renderers.core.sampler` (emitter pick and point, BSDF direction,
 roulette), drawn by the ``sampler`` setting's sampler (default ``pmj02``,
-the best efficiency measured: docs/sampling.md). Robustness: maths in
+the best efficiency measured: docs/sampling.md); the ``variance`` setting
+(:data:`renderers.core.sampler.VARIANCE_SETTING`) trades the reported
+variance for one randomisation's stratification, for timing runs. Robustness: maths in
 float64; every pdf division is guarded (a zero pdf gives a zero
 contribution, never NaN or Inf); a one-sided surface
 hit from its back side reflects and emits nothing and ends the path (glass
@@ -74,8 +76,8 @@ from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit,
 from renderers.core.lights import solid_angle_pdf_along
 from renderers.core.roulette import Q_MAX, RR_DEPTH, continue_path
 from renderers.core.rays import RayBuffer, ShadowBuffer, add_unoccluded, set_path, set_ray, set_shadow, wavefront
-from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, SAMPLER_SETTING, Stream,
-                                    independent, path_point, vertex_1d, vertex_2d)
+from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, SAMPLER_SETTING, VARIANCE_SETTING,
+                                    Stream, independent, path_point, vertex_1d, vertex_2d)
 from renderers.core.sampling import jit, power_heuristic
 from renderers.core.wavelengths import N_WAVELENGTHS
 from renderers.hero_wavelength import spectral_tables, trace_hero_paths
@@ -225,7 +227,7 @@ class PathTracer(ToolkitRenderer):
     name = "pathtracer"
     aovs = AOVS
     settings = (Setting("rr_depth", int, RR_DEPTH, "path vertex from which Russian roulette may end a path",
-                        low=1, high=1000), SAMPLER_SETTING,
+                        low=1, high=1000), SAMPLER_SETTING, VARIANCE_SETTING,
                 Setting("spectral", str, "rgb", "rgb: render the scene's RGB values; hero: render a spectral scene's "
                         "spectra by hero-wavelength sampling, 4 wavelengths per path (Wilkie et al. 2014), to the "
                         "same linear sRGB (refuses RGB-only materials and emitters)", choices=SPECTRAL_MODES))
@@ -248,7 +250,8 @@ class PathTracer(ToolkitRenderer):
 
             def trace(*unit):
                 return trace_paths(geom, scene, *unit, rr_depth, bool(aovs))
-        result = render_image(scene, spp, seed, trace, checkpoints, self.threads, info, sampler, aovs)
+        result = render_image(scene, spp, seed, trace, checkpoints, self.threads, info, sampler, aovs,
+                              variance=s["variance"] == "batches")
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
         return result
 

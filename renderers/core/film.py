@@ -69,13 +69,14 @@ def accumulate_sums(acc, first, values):
 
 class Film:
     """Sums over the samples of a (height, width) image, three channels, float64; per batch if ``batches`` > 1;
-    and of the auxiliary images named ``aovs``, three channels each."""
+    and of the auxiliary images named ``aovs``, three channels each. Without ``variance``, only the image's
+    sums are kept and :meth:`variance` is None."""
 
-    def __init__(self, width: int, height: int, batches: int = 1, aovs: tuple[str, ...] = ()):
+    def __init__(self, width: int, height: int, batches: int = 1, aovs: tuple[str, ...] = (), variance: bool = True):
         self.shape = (height, width, 3)
         self.pixels = width * height
         self.acc = np.zeros((self.pixels, 3))
-        self.acc2 = np.zeros((self.pixels, 3))  # sums of squares, for the variance
+        self.acc2 = np.zeros((self.pixels, 3)) if variance else None  # sums of squares, for the variance
         self.acc_b = np.zeros((batches, self.pixels, 3)) if batches > 1 else None
         self.aov_names = tuple(aovs)
         self.acc_aov = np.zeros((self.pixels, 3 * len(aovs))) if aovs else None
@@ -83,7 +84,10 @@ class Film:
     def add(self, first: int, values: np.ndarray, first_sample: int = 0, aux: np.ndarray | None = None) -> None:
         """Estimates (m, 3) of paths first .. first + m - 1 of a pass (in order, after the paths before them)
         whose first sample per pixel is ``first_sample``; ``aux`` (m, 3·len(aovs)): their auxiliary values."""
-        accumulate(self.acc, self.acc2, first, values)
+        if self.acc2 is None:
+            accumulate_sums(self.acc, first, values)
+        else:
+            accumulate(self.acc, self.acc2, first, values)
         if self.acc_b is not None:
             accumulate_batches(self.acc_b, first, first_sample, values)
         if self.acc_aov is not None:
@@ -99,8 +103,9 @@ class Film:
         return (self.acc / n).reshape(self.shape).astype(np.float32)
 
     def variance(self, n: int) -> np.ndarray | None:
-        """Per-pixel variance of :meth:`image` ``(n)``, float32; None for one sample (no estimate)."""
-        if n < 2:
+        """Per-pixel variance of :meth:`image` ``(n)``, float32; None for one sample (no estimate) or a film
+        kept without it."""
+        if n < 2 or self.acc2 is None:
             return None
         if self.acc_b is not None:
             return self._batch_variance(n)

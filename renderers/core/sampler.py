@@ -85,6 +85,14 @@ SAMPLER_SETTING = Setting("sampler", str, "pmj02",
                           "random numbers: independent, pmj02 (progressive (0,2)-sequences per decision) or sobol "
                           f"(Owen-scrambled, all dimensions); the last two report the variance of {BATCHES} "
                           "independent batches", choices=tuple(SAMPLERS))
+#: How a render of ours gets the variance it reports (``variance`` setting): ``batches`` as above, or ``none``.
+VARIANCE_MODES = ("batches", "none")
+VARIANCE_SETTING = Setting("variance", str, "batches",
+                           f"batches: a low-discrepancy sampler's samples per pixel are {BATCHES} independent "
+                           "randomisations whose spread is the variance reported (the gate's z-test needs it; "
+                           "independent: the per-sample variance); none: one randomisation, all its "
+                           "stratification (lower error at the same spp), and no variance reported: for timing and "
+                           "efficiency runs, which the gate's statistical checks then skip", choices=VARIANCE_MODES)
 #: ``pass_key`` stream of a low-discrepancy render's key (one key for all passes: a sequence spans them).
 SEQUENCE_STREAM = 16
 

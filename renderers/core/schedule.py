@@ -38,7 +38,7 @@ import numpy as np
 from harness.adapters.api import Checkpoint, RenderResult, Stopwatch, default_threads, spp_passes
 from harness.scenes.model import Scene
 from renderers.core.film import Film
-from renderers.core.sampler import Stream, pass_stream
+from renderers.core.sampler import BATCHES, Stream, pass_stream
 
 MAX_UNIT_PATHS = 1 << 15
 MIN_UNIT_PATHS = 1 << 13
@@ -108,11 +108,13 @@ def render_image(
     info: dict | None = None,
     sampler: str = "independent",
     aovs: Sequence[str] = (),
+    variance: bool = True,
 ) -> RenderResult:
     """Run ``trace`` over every (pixel, sample) and average into an image, with its variance and checkpoints.
 
     ``sampler`` names one of :data:`renderers.core.sampler.SAMPLERS`; a
-    low-discrepancy one gets its variance from independent batches. With
+    low-discrepancy one gets its variance from independent batches; without ``variance``
+    it is one randomisation and the result reports no variance. With
     ``aovs`` (names, :data:`harness.adapters.api.AOVS`), ``trace`` returns
     (estimates, aux) and the result and its checkpoints carry those images.
     """
@@ -122,9 +124,10 @@ def render_image(
     pixels = cam.width * cam.height
     passes = list(spp_passes(spp, _NO_CAP, checkpoints))
     starts = np.concatenate([[0], np.cumsum(passes)[:-1]]).astype(int)
-    streams = [pass_stream(sampler, seed, k, pixels, int(starts[k])) for k in range(len(passes))]
+    streams = [pass_stream(sampler, seed, k, pixels, int(starts[k]), BATCHES if variance else 1)
+               for k in range(len(passes))]
     batches = streams[0].batches
-    film = Film(cam.width, cam.height, batches, tuple(aovs))
+    film = Film(cam.width, cam.height, batches, tuple(aovs), variance)
     threads = threads or default_threads()
     done, shots = 0, []
     clock = Stopwatch()
