@@ -46,9 +46,8 @@ from harness.scenes.model import Scene
 from renderers.core.bsdf import bsdf_eval, bsdf_sample, faces, is_delta, refraction_scale
 from renderers.core.camera import camera_basis, camera_rays
 from renderers.core.direct import emission_weight, light_sample
-from renderers.core.geometry import SceneGeometry, offset_origin, ray_hit
-from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, head, ray_buffer, set_path, set_ray,
-                                 set_shadow, shadow_buffer)
+from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest, trace_unoccluded
+from renderers.core.rays import RayBuffer, ShadowBuffer, add_unoccluded, set_path, set_ray, set_shadow, wavefront
 from renderers.core.roulette import RR_DEPTH, continue_spectral_path
 from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, WAVELENGTH, Stream, path_point,
                                     sample_1d, vertex_1d, vertex_2d)
@@ -202,23 +201,34 @@ def trace_hero_paths(geom: SceneGeometry, spec: SpectralTables, scene: Scene, fi
     :func:`renderers.pathtracer.trace_paths` but per wavelength (module docstring)."""
     m = stop - first
     cam = scene.camera
-    unbounded = scene.max_depth < 0
-    geo = geom.tables()
     L = np.zeros((m, 3))
     lam, sensor, beta = np.empty((m, N_WAVELENGTHS), np.int64), np.empty((m, N_WAVELENGTHS, 3)), \
         np.empty((m, N_WAVELENGTHS))
     _start_paths(stream, first, spec, lam, sensor, beta)
-    cur, nxt = ray_buffer(m), ray_buffer(m)
-    out = HeroBounce(L, shadow_buffer(m), nxt, lam, sensor, beta)
-    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, cur)
-    n, depth = m, 1
-    while n:
-        rays = head(cur, n)
-        extend = unbounded or depth + 1 <= scene.max_depth
-        ns, n = _shade(geom.closest_hits(rays), rays, stream, first, depth, extend, depth >= rr_depth, geo, spec, out)
-        if ns:
-            seg = head(out.shadow, ns)
-            add_unoccluded(L, seg, geom.unoccluded(seg.o, seg.d, seg.t))
-        cur, out = out.nxt, out._replace(nxt=cur)
-        depth += 1
+    geom.count(_trace(geom.tables(), spec, camera_basis(cam), cam.width, cam.height, first, pixels, stream,
+                      scene.max_depth, rr_depth, wavefront(m, geom.has_spheres), L, lam, sensor, beta))
     return L
+
+
+@jit
+def _trace(geo, spec, basis, width, height, first, pixels, stream, max_depth, rr_depth, wf, L, lam, sensor, beta):
+    """The bounce loop of :func:`trace_hero_paths` as one kernel, as :func:`renderers.pathtracer._trace` (why
+    there); returns the rays traced."""
+    cur, nxt = wf.cur, wf.nxt
+    camera_rays(basis, width, height, first, pixels, stream, cur)
+    n, depth, traced = L.shape[0], 1, 0
+    while n:
+        hits = Hits(wf.prim[:n], wf.t_sphere[:n])
+        trace_closest(geo, cur, hits.prim, hits.t_sphere, wf.record)
+        extend = max_depth < 0 or depth + 1 <= max_depth
+        ns, n_next = _shade(hits, cur, stream, first, depth, extend, depth >= rr_depth, geo, spec,
+                            HeroBounce(L, wf.shadow, nxt, lam, sensor, beta))
+        traced += n + ns
+        if ns:
+            visible = wf.visible[:ns]
+            trace_unoccluded(geo, wf.shadow, visible, wf.record)
+            add_unoccluded(L, wf.shadow, visible)
+        cur, nxt = nxt, cur
+        n = n_next
+        depth += 1
+    return traced
