@@ -14,12 +14,17 @@ On ``cornell-box`` at the same resolution, spp and max_depth for both:
     over the seeds: ours with the sampler of best efficiency (checkpoints of one
     progressive render, every power of two from 16), Mitsuba with its best (one
     timed render per spp of :data:`MITSUBA_SPPS`), interpolated log-log between
-    the renders that bracket it.
+    the renders that bracket it;
+(f) where one thread's time per path goes, with the scene's max_depth: the
+    whole bounce loop per work unit, and Embree's queries alone (timed in a
+    Python copy of the loop that must give the kernel's estimates bit for
+    bit), against Mitsuba's whole path per thread (threads ÷ its paths/s).
 
 Each throughput figure is the median of ``--repeats`` timed runs; the ratios
 printed are ours/Mitsuba (paths/s, efficiency, time to target) and our rays/s
-over raw rays/s. ``--markdown FILE`` (repeatable) writes (a)-(c), (d) and (e) into the file's blocks
-``pathtracer.py#throughput``, ``#efficiency`` and ``#time-to-target`` (``benchmarks/markdown_blocks.py``).
+over raw rays/s. ``--markdown FILE`` (repeatable) writes (a)-(c), (d), (e) and (f) into the file's blocks
+``pathtracer.py#throughput``, ``#efficiency``, ``#time-to-target`` and ``#breakdown``
+(``benchmarks/markdown_blocks.py``); (f) runs with (a)-(c), part ``abc``.
 Run (about 15 minutes on 2 cores):
 
     .venv/bin/python benchmarks/pathtracer.py --spp 64 --repeats 5 --json --markdown BENCHMARKS.md
@@ -46,10 +51,17 @@ from harness.evaluate.convergence import time_to_target
 from harness.scenes.library import resolve_scene
 from harness.scenes.model import Scene, triangle_arrays
 from harness.store.references import load_reference
-from renderers.core.sampler import SAMPLER_SETTING, SAMPLERS
+from renderers import pathtracer
+from renderers.core.adapter import warmed_geometry
+from renderers.core.camera import camera_basis, camera_rays
+from renderers.core.embree import closest_triangles, segments_clear
+from renderers.core.geometry import Hits
+from renderers.core.rays import add_unoccluded, wavefront
+from renderers.core.roulette import RR_DEPTH
+from renderers.core.sampler import SAMPLER_SETTING, SAMPLERS, independent, pass_stream
 from harness.adapters.api import default_threads
 from renderers.mitsuba3 import Mitsuba3, scene_dict
-from renderers.pathtracer import PathTracer
+from renderers.pathtracer import PathTracer, trace_paths
 
 RAW_BATCH = 1 << 17  # rays per embreex call in (a): large, its best case
 MITSUBA_SAMPLERS = ("independent", "multijitter", "ldsampler")
@@ -100,6 +112,71 @@ def ours(scene: Scene, spp: int, repeats: int, sampler: str) -> dict:
     rays = statistics.median(r.info["rays"] for r in runs)
     paths = scene.camera.width * scene.camera.height * spp
     return {"time_s": t, "paths_per_s": paths / t, "rays_per_s": rays / t, "rays_per_path": rays / paths}
+
+
+def time_per_path(scene: Scene, sampler: str, units: int) -> dict:
+    """Where one thread's time per path goes (ns): the whole bounce loop (:func:`renderers.pathtracer.trace_paths`,
+    one work unit of 2^15 paths at a time), and Embree's queries alone, timed in :func:`_replay_queries`. The rest
+    is shading, sampling and the buffers. Medians over ``units`` consecutive units of one pass."""
+    cam = scene.camera
+    pixels, m = cam.width * cam.height, 1 << 15
+    stream = pass_stream(sampler, 0, 0, pixels, 0)
+    geom, _ = warmed_geometry(scene, lambda g: trace_paths(g, scene, 0, 1, 1, independent(0)))
+    whole, queries = [], []
+    for k in range(units):
+        t0 = time.perf_counter()
+        estimates = trace_paths(geom, scene, k * m, (k + 1) * m, pixels, stream)
+        whole.append(time.perf_counter() - t0)
+        replayed, spent = _replay_queries(geom, scene, k * m, m, pixels, stream)
+        assert np.array_equal(estimates, replayed), "the replay no longer traces the kernel's rays"
+        queries.append(spent)
+    ns = {"whole": statistics.median(whole) / m * 1e9, "embree": statistics.median(queries) / m * 1e9}
+    return {**ns, "rest": ns["whole"] - ns["embree"]}
+
+
+def _replay_queries(geom, scene: Scene, first: int, m: int, pixels: int, stream) -> tuple[np.ndarray, float]:
+    """The estimates of paths ``first .. first + m - 1`` and the seconds spent in Embree's queries: a Python copy
+    of :func:`renderers.pathtracer._trace`'s loop (no spheres) that calls the same kernels, bounce by bounce, and
+    times the two queries (called with plain arrays: their call costs ~1 µs). :func:`time_per_path` checks that
+    it gives the kernel's estimates bit for bit."""
+    assert not geom.has_spheres
+    cam, geo = scene.camera, geom.tables()
+    wf, L = wavefront(m, False), np.zeros((m, 3))
+    cur, nxt = wf.cur, wf.nxt
+    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, cur)
+    n, depth, spent = m, 1, 0.0
+    while n:
+        prim = wf.prim[:n]
+        t0 = time.perf_counter()
+        closest_triangles(geo.embree, cur.o32, cur.d32, prim, wf.record)
+        spent += time.perf_counter() - t0
+        extend = scene.max_depth < 0 or depth + 1 <= scene.max_depth
+        ns, n = pathtracer._shade(Hits(prim, wf.t_sphere[:n]), cur, stream, first, depth, extend, depth >= RR_DEPTH,
+                                  geo, pathtracer.Bounce(L, wf.shadow, nxt, np.zeros((0, 6)), np.ones(0, np.bool_)))
+        if ns:
+            visible = wf.visible[:ns]
+            t0 = time.perf_counter()
+            segments_clear(geo.embree, wf.shadow.o, wf.shadow.d, wf.shadow.t, visible, wf.record)
+            spent += time.perf_counter() - t0
+            add_unoccluded(L, wf.shadow, visible)
+        cur, nxt = nxt, cur
+        depth += 1
+    return L, spent
+
+
+def breakdown_markdown(per_path: dict, mitsuba_paths_per_s: float, threads: int) -> list[str]:
+    """(f): one thread's ns per path, ours per sampler, against Mitsuba's whole path per thread."""
+    samplers = list(per_path)
+    mi = threads / mitsuba_paths_per_s * 1e9
+    rows = [("whole path (the bounce loop)", "whole"), ("Embree's queries (closest hit + shadow)", "embree"),
+            ("shading, sampling, buffers (the rest)", "rest")]
+    lines = ["| ns per path, one thread | " + " | ".join(f"ours `{s}`" for s in samplers) + " |",
+             "| --- |" + " --- |" * len(samplers)]
+    lines += [f"| {name} | " + " | ".join(f"{per_path[s][key]:.0f} ({per_path[s][key] / mi:.2f}× Mitsuba's path)"
+                                          for s in samplers) + " |" for name, key in rows]
+    lines.append(f"| Mitsuba `path`, whole path ({threads} threads ÷ paths/s of (c)) | "
+                 + " | ".join(f"{mi:.0f}" for _ in samplers) + " |")
+    return lines
 
 
 def mitsuba(scene: Scene, spp: int, repeats: int) -> dict:
@@ -204,6 +281,7 @@ def main() -> None:
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--seeds", type=int, default=3, help="seeds of (d) and (e) (medians over them)")
+    ap.add_argument("--units", type=int, default=20, help="work units of 2^15 paths timed one by one for (f)")
     ap.add_argument("--efficiency-spp", type=int, default=256, help="spp of the efficiency comparison (d)")
     ap.add_argument("--target", type=float, default=1.0, help="ΔE mean of the time-to-target comparison (e)")
     ap.add_argument("--max-spp", type=int, default=1024, help="largest spp rendered for (e)")
@@ -237,6 +315,15 @@ def main() -> None:
             results["depths"][label][f"ours {sampler}"] = {**o, "ours_over_mitsuba": o["paths_per_s"] / m["paths_per_s"],
                                                           "our_rays_over_raw": o["rays_per_s"] / raw}
     blocks = {"pathtracer.py#throughput": throughput_markdown(results)} if "abc" in parts else {}
+    if "abc" in parts:
+        per_path = {sampler: time_per_path(base, sampler, args.units) for sampler in ("independent", "pmj02")}
+        first = next(iter(results["depths"].values()))
+        print(f"--- (f) one thread, ns per path ({args.units} units of 2^15 paths)")
+        for sampler, ns in per_path.items():
+            print(f"ours ({sampler}): whole {ns['whole']:.0f}, Embree {ns['embree']:.0f}, rest {ns['rest']:.0f}")
+        print(f"mitsuba: whole {threads / first['mitsuba']['paths_per_s'] * 1e9:.0f} (per thread)")
+        results["ns_per_path"] = per_path
+        blocks["pathtracer.py#breakdown"] = breakdown_markdown(per_path, first["mitsuba"]["paths_per_s"], threads)
     if not {"d", "e"} & parts:
         if args.json:
             print(json.dumps(results, indent=1))
