@@ -94,10 +94,11 @@ from renderers.core.ambient_radiance import bounces_left, radiosity_ambient, sce
 from renderers.core.bsdf import DIELECTRIC, LAMBERT, MIRROR, faces, fresnel_dielectric, reflect, refract
 from renderers.core.camera import camera_basis, camera_rays
 from renderers.core.direct import sample_ld
-from renderers.core.geometry import SceneGeometry, offset_origin, ray_hit
+from renderers.core.embree import ray_record
+from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest, trace_unoccluded
 from renderers.core.occlusion import DEFAULT_AO_MAX_DISTANCE, occlusion_segment
-from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, head, ray_buffer, set_path, set_ray,
-                                 set_shadow, shadow_buffer)
+from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, ray_buffer, set_path, set_ray, set_shadow,
+                                 shadow_buffer)
 from renderers.core.sampler import Stream, independent, path_point, sample_1d, sample_2d
 from renderers.core.sampling import jit
 from renderers.core.schedule import render_image
@@ -106,6 +107,7 @@ from renderers.core.settings import with_defaults
 AMBIENTS = ("none", "constant", "ao")
 NONE, CONSTANT, AO = 0, 1, 2
 SHADOW_MODES = ("boolean", "attenuate", "ignore")
+BOOLEAN, ATTENUATE, IGNORE = 0, 1, 2
 MAX_DEPTH = 64
 MAX_LIGHT_SAMPLES = 1024
 MAX_AO_SAMPLES = 1024
@@ -123,6 +125,7 @@ class Options(NamedTuple):
     ambient: int  # NONE, CONSTANT or AO
     ao_samples: int
     ao_tfar: float
+    shadows: int  # BOOLEAN, ATTENUATE or IGNORE (transparent_shadows)
 
 
 class Tree(NamedTuple):
@@ -207,8 +210,9 @@ def _shade(hits, rays, stream, first, depth, extend, geo, opt, la, out):
 
 @jit
 def _start_segments(seg, rays, end):
-    """Shadow segment k as ray k (float64, path k) and the point ``end[k]`` where it stops."""
-    for k in range(seg.path.size):
+    """Shadow segment k as ray k (float64, path k) and the point ``end[k]`` where it stops, for k < ``end``'s
+    rows."""
+    for k in range(end.shape[0]):
         o = (np.float64(seg.o[k, 0]), np.float64(seg.o[k, 1]), np.float64(seg.o[k, 2]))
         d = (np.float64(seg.d[k, 0]), np.float64(seg.d[k, 1]), np.float64(seg.d[k, 2]))
         inv = 1.0 / math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
@@ -253,8 +257,8 @@ def _cross(hits, rays, end, attenuate, geo, T, nxt):
 
 @jit
 def _add_transmitted(L, seg, T):
-    """L[path] += T·contribution of every shadow segment, in segment order."""
-    for k in range(seg.path.size):
+    """L[path] += T·contribution of shadow segments 0 .. ``T.size`` - 1, in segment order."""
+    for k in range(T.size):
         if T[k] > 0.0:
             for c in range(3):
                 L[seg.path[k], c] += seg.c[k, c] * T[k]
@@ -264,61 +268,96 @@ def shadow_transmittance(geom: SceneGeometry, seg: ShadowBuffer, attenuate: bool
     """Per shadow segment, the fraction of its light that arrives (module docstring): ``attenuate``, the
     product of the Fresnel transmittances of the dielectric interfaces it crosses straight; otherwise
     (``ignore``) 1 unless an opaque surface blocks it. (k,) float64."""
-    k = len(seg.path)
-    T = np.ones(k)
-    if k == 0:
-        return T
-    geo = geom.tables()
-    cur, nxt, end = ray_buffer(k), ray_buffer(k), np.empty((k, 3))
+    T = np.ones(len(seg.path))
+    geom.count(_transmittance(geom.tables(), seg, attenuate, T, ray_record()))
+    return T
+
+
+# Allocators the kernels call: the toolkit's buffers, compiled (a ray tree's width is known per depth only).
+_ray_buffer, _shadow_buffer = jit(ray_buffer), jit(shadow_buffer)
+
+
+@jit
+def _transmittance(geo, seg, attenuate, T, rec):
+    """:func:`shadow_transmittance` into ``T`` (ones) for segments 0 .. ``T.size`` - 1 of ``seg``: straight rays
+    from interface to interface (:func:`_cross`), at most :data:`MAX_INTERFACES` steps, in this one kernel (as
+    :func:`_trace`). Returns the rays traced."""
+    k = T.size
+    cur, nxt, end = _ray_buffer(k), _ray_buffer(k), np.empty((k, 3))
     _start_segments(seg, cur, end)
-    n = k
+    n, traced = k, 0
     for _ in range(MAX_INTERFACES):
         if not n:
             break
-        live = head(cur, n)
-        n = _cross(geom.closest_hits(live), live, end, attenuate, geo, T, nxt)
+        hits = Hits(np.empty(n, np.int32), np.empty(n if geo.sphere_radius.size > 0 else 0))
+        trace_closest(geo, cur, hits.prim, hits.t_sphere, rec)
+        traced += n
+        n = _cross(hits, cur, end, attenuate, geo, T, nxt)
         cur, nxt = nxt, cur
-    T[cur.path[:n]] = 0.0  # still inside glass after MAX_INTERFACES crossings
-    return T
+    for i in range(n):
+        T[cur.path[i]] = 0.0  # still inside glass after MAX_INTERFACES crossings
+    return traced
+
+
+@jit
+def _light(L, seg, ns, shadows, geo, rec):
+    """Add what shadow segments 0 .. ``ns`` - 1 carry, by the ``transparent_shadows`` rule; returns the rays
+    traced."""
+    if shadows == BOOLEAN:
+        visible = np.empty(ns, np.bool_)
+        trace_unoccluded(geo, seg, visible, rec)
+        add_unoccluded(L, seg, visible)
+        return ns
+    T = np.ones(ns)
+    traced = _transmittance(geo, seg, shadows == ATTENUATE, T, rec)
+    _add_transmitted(L, seg, T)
+    return traced
+
+
+@jit
+def _trace(geo, basis, width, height, first, pixels, stream, max_depth, opt, la, L, rec):
+    """The ray trees of paths ``first`` .. ``first`` + ``L``'s rows - 1 into ``L``, breadth first, one kernel per
+    work unit (as :func:`renderers.pathtracer._trace`: a kernel called from Python per depth costs numba's
+    argument typing each time): camera rays, then per depth the closest hits, :func:`_shade`, the shadow
+    segments (:func:`_light`) and the occlusion segments. Returns the rays traced."""
+    m = L.shape[0]
+    cur = _ray_buffer(m)
+    camera_rays(basis, width, height, first, pixels, stream, cur)
+    n, depth, traced = m, 1, 0
+    while n:
+        extend = depth + 1 <= max_depth
+        ao = opt.ambient == AO and extend
+        hits = Hits(np.empty(n, np.int32), np.empty(n if geo.sphere_radius.size > 0 else 0))
+        trace_closest(geo, cur, hits.prim, hits.t_sphere, rec)
+        out = Tree(L, _shadow_buffer(n * opt.light_samples if extend else 0),
+                   _shadow_buffer(n * opt.ao_samples if ao else 0), _ray_buffer(2 * n if extend else 0))
+        ns, no, n_next = _shade(hits, cur, stream, first, depth, extend, geo, opt, la, out)
+        traced += n
+        if ns:
+            traced += _light(L, out.shadow, ns, opt.shadows, geo, rec)
+        if no:
+            visible = np.empty(no, np.bool_)
+            trace_unoccluded(geo, out.occ, visible, rec)
+            add_unoccluded(L, out.occ, visible)
+            traced += no
+        cur = out.nxt
+        n = n_next
+        depth += 1
+    return traced
 
 
 class Tracer:
     """One render's trace function (:data:`renderers.core.schedule.TraceFn`)."""
 
-    def __init__(self, geom: SceneGeometry, scene: Scene, opt: Options, la: np.ndarray, max_depth: int,
-                 shadows: str):
-        self.geom, self.scene, self.opt, self.la, self.max_depth, self.shadows = geom, scene, opt, la, max_depth, shadows
+    def __init__(self, geom: SceneGeometry, scene: Scene, opt: Options, la: np.ndarray, max_depth: int):
+        self.geom, self.scene, self.opt, self.la, self.max_depth = geom, scene, opt, la, max_depth
 
     def trace(self, first: int, stop: int, pixels: int, stream: Stream) -> np.ndarray:
-        geom, opt, cam = self.geom, self.opt, self.scene.camera
-        m = stop - first
-        geo = geom.tables()
-        L = np.zeros((m, 3))
-        cur = ray_buffer(m)
-        camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, cur)
-        n, depth = m, 1
-        while n:
-            rays = head(cur, n)
-            extend = depth + 1 <= self.max_depth
-            ao = opt.ambient == AO and extend
-            out = Tree(L, shadow_buffer(n * opt.light_samples if extend else 0),
-                       shadow_buffer(n * opt.ao_samples if ao else 0), ray_buffer(2 * n if extend else 0))
-            ns, no, n = _shade(geom.closest_hits(rays), rays, stream, first, depth, extend, geo, opt, self.la, out)
-            if ns:
-                self.light(L, head(out.shadow, ns))
-            if no:
-                seg = head(out.occ, no)
-                add_unoccluded(L, seg, geom.unoccluded(seg.o, seg.d, seg.t))
-            cur = out.nxt
-            depth += 1
+        cam = self.scene.camera
+        L = np.zeros((stop - first, 3))
+        self.geom.count(_trace(self.geom.tables(), camera_basis(cam), cam.width, cam.height, first, pixels, stream,
+                               self.max_depth, self.opt, self.la, L, ray_record()))
         return L
-
-    def light(self, L: np.ndarray, seg: ShadowBuffer) -> None:
-        """Add what the shadow segments carry, by the ``transparent_shadows`` rule."""
-        if self.shadows == "boolean":
-            add_unoccluded(L, seg, self.geom.unoccluded(seg.o, seg.d, seg.t))
-        else:
-            _add_transmitted(L, seg, shadow_transmittance(self.geom, seg, self.shadows == "attenuate"))
 
 
 def ambient_table(geom: SceneGeometry, scene: Scene, ambient: str, max_depth: int) -> np.ndarray:
@@ -334,15 +373,9 @@ def ambient_table(geom: SceneGeometry, scene: Scene, ambient: str, max_depth: in
     return np.ascontiguousarray(la.reshape(max_depth + 1, 3))
 
 
-def warm_up(geom: SceneGeometry, tracer: Tracer) -> None:
-    """Compile (or load) every kernel of a render, outside its time: one path, and one shadow segment through
-    each transparent-shadow rule (a path of one sample may cast none)."""
+def warm_up(tracer: Tracer) -> None:
+    """Compile (or load) the render's kernel outside its time: one path."""
     tracer.trace(0, 1, 1, independent(0))
-    seg = shadow_buffer(1)
-    for a in seg:
-        a[:] = 0
-    seg.d[:, 2] = seg.t[:] = 1.0
-    _add_transmitted(np.zeros((1, 3)), seg, shadow_transmittance(geom, seg, True))
 
 
 class Whitted(ToolkitRenderer):
@@ -373,13 +406,13 @@ class Whitted(ToolkitRenderer):
         s = with_defaults(self.settings, settings)
         depth = s["max_depth"] if scene.max_depth < 0 else min(s["max_depth"], scene.max_depth)
         opt = Options(s["light_samples"], AMBIENTS.index(s["ambient"]), s["ao_samples"],
-                      DEFAULT_AO_MAX_DISTANCE * scene.extent())
+                      DEFAULT_AO_MAX_DISTANCE * scene.extent(), SHADOW_MODES.index(s["transparent_shadows"]))
         made = {}
 
         def prepare(geom: SceneGeometry) -> None:
             la = ambient_table(geom, scene, s["ambient"], depth)
-            made["tracer"] = Tracer(geom, scene, opt, la, depth, s["transparent_shadows"])
-            warm_up(geom, made["tracer"])
+            made["tracer"] = Tracer(geom, scene, opt, la, depth)
+            warm_up(made["tracer"])
 
         geom, setup_s = warmed_geometry(scene, prepare)
         tracer = made["tracer"]
