@@ -3,7 +3,8 @@
 Whitted 1980, "An improved illumination model for shaded display" (CACM
 23(6)), as pbrt-v3 §1.3.6 and pbrt-v4's ``WhittedIntegrator`` write it, on the
 toolkit (``renderers/core/``). Per camera sample the ray tree is followed
-breadth first (a wavefront per depth, no recursion per ray):
+breadth first (a wavefront per depth, no recursion per ray; all depths of a
+work unit in one kernel, :func:`_trace`, as the path tracer's):
 
 - **Emission** a ray meets (seen directly, or through mirrors and glass) is
   added with the tree's weight β.
