@@ -160,17 +160,15 @@ def walk_to_diffuse(geom: SceneGeometry, scene: Scene, rays: RayBuffer, stream: 
     wf = wavefront(len(rays.path), geom.has_spheres)
     for mine, theirs in zip(wf.cur, rays):  # the walk starts from a copy: the caller's buffer is never written
         mine[...] = theirs
-    return _walk_from(geom, scene, wf, stream, first, depth, dim_base, emission, nee, bounded, paths)
+    return _walk_from(geom, scene, wf, Walk(stream, first, dim_base, emission, nee), depth, bounded,
+                      len(rays.path) if paths is None else paths)
 
 
-def _walk_from(geom: SceneGeometry, scene: Scene, wf: Wavefront, stream: Stream, first: int, depth: int = 1,
-               dim_base: int = 0, emission: bool = True, nee: bool = True, bounded: bool = True,
-               paths: int | None = None) -> tuple[np.ndarray, VisiblePoints]:
+def _walk_from(geom: SceneGeometry, scene: Scene, wf: Wavefront, walk: Walk, depth: int, bounded: bool,
+               paths: int) -> tuple[np.ndarray, VisiblePoints]:
     """:func:`walk_to_diffuse` from the rays in ``wf.cur`` (all of them), which it overwrites."""
-    paths = len(wf.cur.path) if paths is None else paths
     L, vp = np.zeros((paths, 3)), visible_buffer(paths)
-    geom.count(_walk(geom.tables(), Walk(stream, first, dim_base, emission, nee), depth, scene.max_depth,
-                     scene.max_depth < 0 or not bounded, wf, L, vp))
+    geom.count(_walk(geom.tables(), walk, depth, scene.max_depth, scene.max_depth < 0 or not bounded, wf, L, vp))
     return L, vp
 
 
@@ -204,7 +202,8 @@ def camera_visible_points(geom: SceneGeometry, scene: Scene, first: int, stop: i
     cam = scene.camera
     wf = wavefront(stop - first, geom.has_spheres)
     camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, wf.cur)
-    return _walk_from(geom, scene, wf, stream, first)
+    return _walk_from(geom, scene, wf, Walk(stream, first, dim_base=0, emission=True, nee=True), depth=1,
+                      bounded=True, paths=stop - first)
 
 
 @jit
