@@ -61,9 +61,9 @@ import numpy as np
 
 from harness.scenes.model import Scene
 from renderers.core.bsdf import bsdf_sample, faces, is_delta, refraction_scale
-from renderers.core.geometry import SceneGeometry, offset_origin, ray_hit
+from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest
 from renderers.core.lights import sample_emitter
-from renderers.core.rays import RayBuffer, head, ray_buffer, set_path, set_ray
+from renderers.core.rays import RayBuffer, set_path, set_ray, wavefront
 from renderers.core.roulette import Q_MAX
 from renderers.core.sampler import Stream, path_point, sample_1d, sample_2d, sequence_stream
 from renderers.core.sampling import cosine_hemisphere, jit
@@ -159,13 +159,33 @@ def _store(out, k, x, power, d, n, depth, caustic):
 
 
 @jit
-def _scatter(hits, rays, spec, stream, first, depth, mode, extend, geo, out):
+def _photon_buffer(size):
+    """Room for ``size`` photons (:class:`Photons`), inside a kernel."""
+    return Photons(np.empty((size, 3), np.float32), np.empty((size, 3), np.float32), np.empty((size, 3), np.float32),
+                   np.empty((size, 3), np.float32), np.empty(size, np.int16), np.empty(size, np.bool_))
+
+
+@jit
+def _grown(photons, n, size):
+    """The first ``n`` photons of ``photons`` in a buffer of ``size`` rows."""
+    out = _photon_buffer(size)
+    out.position[:n] = photons.position[:n]
+    out.power[:n] = photons.power[:n]
+    out.direction[:n] = photons.direction[:n]
+    out.normal[:n] = photons.normal[:n]
+    out.depth[:n] = photons.depth[:n]
+    out.caustic[:n] = photons.caustic[:n]
+    return out
+
+
+@jit
+def _scatter(hits, rays, spec, stream, first, depth, mode, extend, geo, out, ns):
     """One bounce of a photon wavefront (photon ``first`` + path of ``stream``): store where the mode says,
     then scatter or absorb.
 
-    Returns (photons stored into ``out.photons``, photons going on into ``out.rays``).
+    Stores photons into ``out.photons`` from row ``ns`` on (the photons of the bounces before are above it).
+    Returns (rows of ``out.photons`` now filled, photons going on into ``out.rays``).
     """
-    ns = 0
     nn = 0
     for i in range(hits.prim.size):
         p = hits.prim[i]
@@ -210,22 +230,36 @@ def trace_photons(geom: SceneGeometry, scene: Scene, stream: Stream, first: int,
     """The photons ``first .. stop-1`` of ``stream`` (:func:`renderers.core.sampler.sequence_stream`: one
     sequence over a map's photons), traced and stored by ``mode`` (not normalised)."""
     m = stop - first
-    geo = geom.tables()
     if m <= 0 or not geom.has_emitters or not (scene.max_depth < 0 or scene.max_depth >= 2):
         return empty_photons()
-    cur, spec = ray_buffer(m), np.empty(m, bool)
-    out = Scattered(empty_photons(m), ray_buffer(m), np.empty(m, bool))
+    photons, n, traced = _trace(geom.tables(), stream, first, scene.max_depth, mode, wavefront(m, geom.has_spheres),
+                                np.empty(m, np.bool_), np.empty(m, np.bool_), _photon_buffer(2 * m))
+    geom.count(traced)
+    return Photons(*(a[:n] for a in photons))
+
+
+@jit
+def _trace(geo, stream, first, max_depth, mode, wf, spec, spec_nxt, photons):
+    """The bounce loop of :func:`trace_photons` as one kernel, as :func:`renderers.pathtracer._trace` (why
+    there): emission, then per bounce the closest hits and :func:`_scatter`, each bounce's stored photons
+    written after the last one's into ``photons`` (grown when a bounce could overflow it), so they come out
+    in bounce order. Returns (the buffer, photons stored, rays traced)."""
+    cur, nxt = wf.cur, wf.nxt  # double buffers: a bounce reads one wavefront and its flags, writes the next
     _emit(stream, first, geo, cur, spec)
-    parts, n, depth = [], m, 1
+    n, depth, ns, traced = spec.size, 1, 0, 0  # live photons; segments from the light; photons stored; rays
     while n:
-        rays = head(cur, n)
-        extend = scene.max_depth < 0 or depth + 2 <= scene.max_depth
-        ns, n = _scatter(geom.closest_hits(rays), rays, spec[:n], stream, first, depth, mode, extend, geo, out)
-        if ns:
-            parts.append(Photons(*(a[:ns].copy() for a in out.photons)))
-        cur, spec, out = out.rays, out.spec, out._replace(rays=cur, spec=spec)
+        if ns + n > photons.depth.size:  # each live photon stores at most one
+            photons = _grown(photons, ns, max(2 * photons.depth.size, ns + n))
+        hits = Hits(wf.prim[:n], wf.t_sphere[:n])
+        trace_closest(geo, cur, hits.prim, hits.t_sphere, wf.record)
+        traced += n
+        extend = max_depth < 0 or depth + 2 <= max_depth
+        ns, n = _scatter(hits, cur, spec, stream, first, depth, mode, extend, geo,
+                         Scattered(photons, nxt, spec_nxt), ns)
+        cur, nxt = nxt, cur
+        spec, spec_nxt = spec_nxt, spec
         depth += 1
-    return join(parts)
+    return photons, ns, traced
 
 
 def shoot(geom: SceneGeometry, scene: Scene, key: np.uint64, count: int, mode: int, threads: int,

@@ -31,9 +31,9 @@ from harness.scenes.model import Scene
 from renderers.core.bsdf import bsdf_sample, faces, is_delta, lambert_pdf, lambert_sample, refraction_scale
 from renderers.core.camera import camera_basis, camera_rays
 from renderers.core.direct import sample_ld
-from renderers.core.geometry import SceneGeometry, offset_origin, ray_hit
-from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, head, ray_buffer, set_path, set_ray,
-                                 set_shadow, shadow_buffer)
+from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest, trace_unoccluded
+from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, Wavefront, set_path, set_ray, set_shadow,
+                                 wavefront)
 from renderers.core.roulette import RR_DEPTH, continue_path
 from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, Stream, path_point,
                                     sample_1d, sample_2d, vertex_dim)
@@ -157,25 +157,42 @@ def walk_to_diffuse(geom: SceneGeometry, scene: Scene, rays: RayBuffer, stream: 
     ignores the scene's max_depth (a caller that counts depth itself, from a
     later vertex).
     """
-    m = len(rays.path)
-    paths = m if paths is None else paths
-    geo = geom.tables()
-    walk = Walk(stream, first, dim_base, emission, nee)
-    out = Found(np.zeros((paths, 3)), visible_buffer(paths), shadow_buffer(m), ray_buffer(m))
-    cur = rays
-    unbounded = scene.max_depth < 0 or not bounded
-    n = m
+    wf = wavefront(len(rays.path), geom.has_spheres)
+    for mine, theirs in zip(wf.cur, rays):  # the walk starts from a copy: the caller's buffer is never written
+        mine[...] = theirs
+    return _walk_from(geom, scene, wf, Walk(stream, first, dim_base, emission, nee), depth, bounded,
+                      len(rays.path) if paths is None else paths)
+
+
+def _walk_from(geom: SceneGeometry, scene: Scene, wf: Wavefront, walk: Walk, depth: int, bounded: bool,
+               paths: int) -> tuple[np.ndarray, VisiblePoints]:
+    """:func:`walk_to_diffuse` from the rays in ``wf.cur`` (all of them), which it overwrites."""
+    L, vp = np.zeros((paths, 3)), visible_buffer(paths)
+    geom.count(_walk(geom.tables(), walk, depth, scene.max_depth, scene.max_depth < 0 or not bounded, wf, L, vp))
+    return L, vp
+
+
+@jit
+def _walk(geo, walk, depth, max_depth, unbounded, wf, L, vp):
+    """The bounce loop of :func:`walk_to_diffuse` as one kernel, as :func:`renderers.pathtracer._trace` (why
+    there): per bounce the closest hits, :func:`_step`, and the NEE segments' queries, until no path is left.
+    Returns the rays traced."""
+    cur, nxt = wf.cur, wf.nxt  # double buffer: a bounce reads one wavefront, writes the next
+    n, traced = cur.path.size, 0
     while n:
-        live = head(cur, n)
-        extend = unbounded or depth + 1 <= scene.max_depth
-        ns, n = _step(geom.closest_hits(live), live, walk, depth, extend, depth >= RR_DEPTH, geo, out)
+        hits = Hits(wf.prim[:n], wf.t_sphere[:n])
+        trace_closest(geo, cur, hits.prim, hits.t_sphere, wf.record)
+        extend = unbounded or depth + 1 <= max_depth
+        ns, n_next = _step(hits, cur, walk, depth, extend, depth >= RR_DEPTH, geo, Found(L, vp, wf.shadow, nxt))
+        traced += n + ns
         if ns:
-            seg = head(out.shadow, ns)
-            add_unoccluded(out.L, seg, geom.unoccluded(seg.o, seg.d, seg.t))
-        # The caller's buffer is read once, never written.
-        cur, out = out.nxt, out._replace(nxt=ray_buffer(m) if cur is rays else cur)
+            visible = wf.visible[:ns]
+            trace_unoccluded(geo, wf.shadow, visible, wf.record)
+            add_unoccluded(L, wf.shadow, visible)
+        cur, nxt = nxt, cur
+        n = n_next
         depth += 1
-    return out.L, out.vp
+    return traced
 
 
 def camera_visible_points(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels: int,
@@ -183,9 +200,10 @@ def camera_visible_points(geom: SceneGeometry, scene: Scene, first: int, stop: i
     """Camera paths ``first .. stop-1`` of a pass (path j sees pixel j mod ``pixels``) to their visible points,
     their numbers drawn from the pass's ``stream``."""
     cam = scene.camera
-    rays = ray_buffer(stop - first)
-    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, rays)
-    return walk_to_diffuse(geom, scene, rays, stream, first)
+    wf = wavefront(stop - first, geom.has_spheres)
+    camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, wf.cur)
+    return _walk_from(geom, scene, wf, Walk(stream, first, dim_base=0, emission=True, nee=True), depth=1,
+                      bounded=True, paths=stop - first)
 
 
 @jit

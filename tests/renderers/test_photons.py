@@ -29,9 +29,13 @@ pytest.importorskip("embreex")
 
 from renderers.core.geometry import SceneGeometry  # noqa: E402
 from renderers.core.photon_map import KERNELS, PhotonMap, kernel_weight  # noqa: E402
-from renderers.core.photons import STORE_ALL, STORE_CAUSTIC, STORE_INDIRECT, Photons, shoot  # noqa: E402
+from renderers.core.camera import camera_basis, camera_rays  # noqa: E402
+from renderers.core.photons import (STORE_ALL, STORE_CAUSTIC, STORE_INDIRECT, Photons, shoot,  # noqa: E402
+                                    trace_photons)
+from renderers.core.rays import ray_buffer  # noqa: E402
 from renderers.core.roulette import Q_MAX  # noqa: E402
-from renderers.core.sampler import SAMPLERS  # noqa: E402
+from renderers.core.sampler import SAMPLERS, sequence_stream  # noqa: E402
+from renderers.core.visible_points import camera_visible_points, walk_to_diffuse  # noqa: E402
 from renderers.photonmap import PhotonMapper  # noqa: E402
 from renderers.sppm import SPPM  # noqa: E402
 
@@ -61,6 +65,37 @@ def test_direct_photons_carry_the_emitted_flux(sampler):
     area = 6 * 2.0 * 2.0
     assert ph.power[first].astype(np.float64).sum(axis=0) == pytest.approx([math.pi * area] * 3, rel=1e-5)
 
+
+
+def test_a_batchs_photons_come_out_bounce_by_bounce_past_the_first_buffer():
+    """trace_photons' kernel writes each bounce's photons after the last one's into a buffer of twice the
+    photons emitted, grown when a bounce could overflow it. In a bright furnace (ρ = 0.9: ~10 stored per
+    emitted) it grows, and the photons still come out in bounce order, the first landings (one per photon
+    emitted, the box being closed) with the whole emitted flux."""
+    scene = furnace_scene(0.9, 1.0, res=4)
+    m = 2000
+    ph = trace_photons(SceneGeometry(scene), scene, sequence_stream("independent", pass_key(0, 0, 1)), 0, m, STORE_ALL)
+    assert len(ph) > 4 * m and isinstance(ph, Photons)
+    assert (np.diff(ph.depth) >= 0).all()
+    first = ph.depth == 1
+    assert first.sum() == m
+    assert ph.power[first].astype(np.float64).sum(axis=0) == pytest.approx([math.pi * 6 * 2.0 * 2.0 * m] * 3,
+                                                                           rel=1e-5)
+
+
+def test_walk_to_diffuse_leaves_the_callers_rays_and_walks_them_as_the_camera_pass_does():
+    """walk_to_diffuse traces a copy of the caller's rays (never writes them); from camera rays it gives
+    the camera pass's light and visible points bit for bit (through glass and a mirror: several bounces)."""
+    scene = resolve_scene("cornell-box-caustics").with_resolution(16, 16)
+    geom, cam, stream = SceneGeometry(scene), scene.camera, sequence_stream("independent", pass_key(0, 0, 3))
+    rays = ray_buffer(512)
+    camera_rays(camera_basis(cam), cam.width, cam.height, 100, 256, stream, rays)
+    before = [a.copy() for a in rays]
+    L, vp = walk_to_diffuse(geom, scene, rays, stream, 100)
+    assert all(np.array_equal(a, b) for a, b in zip(rays, before))
+    L_cam, vp_cam = camera_visible_points(geom, scene, 100, 612, 256, stream)
+    assert np.array_equal(L, L_cam) and all(np.array_equal(a, b) for a, b in zip(vp, vp_cam))
+    assert vp.found.sum() > 400 and (vp.depth[vp.found] > 1).any()
 
 def test_caustic_map_holds_only_photons_that_came_through_specular_surfaces():
     scene = resolve_scene("cornell-box-caustics").with_resolution(8, 8)
