@@ -60,6 +60,7 @@ from renderers.core.rays import add_unoccluded, wavefront
 from renderers.core.roulette import RR_DEPTH
 from renderers.core.sampler import SAMPLER_SETTING, SAMPLERS, independent, pass_stream
 from harness.adapters.api import default_threads
+from harness.cli.allocator import keep_freed_memory
 from renderers.mitsuba3 import Mitsuba3, scene_dict
 from renderers.pathtracer import PathTracer, trace_paths
 
@@ -291,6 +292,7 @@ def main() -> None:
     ap.add_argument("--markdown", type=Path, action="append", default=[],
                     help="write the parts run into this file's blocks pathtracer.py#... (repeatable)")
     args = ap.parse_args()
+    keep_freed_memory()  # as every cbox command runs (harness.cli.allocator): ours measured as users run it
     base = resolve_scene(args.scene)
     threads = default_threads()
     parts = set(args.parts.split(","))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 
+from harness.cli.allocator import keep_freed_memory
 from harness.cli import interrupt
 
 with interrupt.starting():  # a Ctrl-C during these imports (seconds): one line and exit 130, no traceback
@@ -40,6 +41,7 @@ def _main(args: list[str] | None) -> None:
     set_verbosity(Verbosity.NORMAL)  # until --quiet or --verbose says otherwise (tests call main() again and again)
     use_renderer_files(())  # until --renderers gives some (as above)
     cut = False  # a KeyboardInterrupt reached here
+    keep_freed_memory()  # a program's choice, made here rather than in a library a user may import
     try:
         check_environment()
         rv = command_tree().main(args=args, prog_name="cbox", standalone_mode=False)

@@ -8,7 +8,6 @@ from typing import List, Optional
 
 import typer
 
-from harness.cli.allocator import keep_freed_memory
 from harness.cli.choices import choice_callback
 from harness.cli.common import app, command_line, out_folder_option
 from harness.cli.output import info
@@ -107,7 +106,6 @@ def compare_image(
         raise typer.BadParameter("give --fail-percent P and --pixel-threshold T together",
                                  param_hint="--fail-percent" if pixel_threshold is None else "--pixel-threshold")
     thresholds = _thresholds(fail_at, warn_at)
-    keep_freed_memory()  # numpy's temporaries reused, not mapped afresh: a third of a 256² check's time
     check = bool(thresholds) or fail_percent is not None
     write_map = error_map if error_map is not None else not check
     keys = _scored_keys(thresholds, fail_percent is not None or write_map, with_flip,
