@@ -44,7 +44,7 @@ import numpy as np
 from harness.scenes.materials import Dielectric
 from harness.scenes.model import Scene
 from renderers.core.bsdf import bsdf_eval, bsdf_sample, faces, is_delta, refraction_scale
-from renderers.core.camera import camera_basis, camera_rays
+from renderers.core.camera import camera_rays, image_plane
 from renderers.core.direct import emission_weight, light_sample
 from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest, trace_unoccluded
 from renderers.core.rays import RayBuffer, ShadowBuffer, add_unoccluded, set_path, set_ray, set_shadow, wavefront
@@ -63,6 +63,16 @@ class SpectralTables(NamedTuple):
     rho_row: np.ndarray  # (N,) int64 per primitive: its row of rho
     le: np.ndarray  # (K', N_BINS) emission spectra on the nodes
     le_row: np.ndarray  # (N,) int64 per primitive: its row of le, -1 for a non-emitter
+
+
+class HeroPaths(NamedTuple):
+    """A work unit's per-path state: linear-sRGB radiance, and per wavelength the table nodes, sensor weights and
+    throughput (as :class:`HeroBounce` names them)."""
+
+    L: np.ndarray
+    lam: np.ndarray
+    sensor: np.ndarray
+    beta: np.ndarray
 
 
 class HeroBounce(NamedTuple):
@@ -205,17 +215,19 @@ def trace_hero_paths(geom: SceneGeometry, spec: SpectralTables, scene: Scene, fi
     lam, sensor, beta = np.empty((m, N_WAVELENGTHS), np.int64), np.empty((m, N_WAVELENGTHS, 3)), \
         np.empty((m, N_WAVELENGTHS))
     _start_paths(stream, first, spec, lam, sensor, beta)
-    geom.count(_trace(geom.tables(), spec, camera_basis(cam), cam.width, cam.height, first, pixels, stream,
-                      scene.max_depth, rr_depth, wavefront(m, geom.has_spheres), L, lam, sensor, beta))
+    geom.count(_trace(geom.tables(), spec, image_plane(cam), first, pixels, stream, (scene.max_depth, rr_depth),
+                      wavefront(m, geom.has_spheres), HeroPaths(L, lam, sensor, beta)))
     return L
 
 
 @jit
-def _trace(geo, spec, basis, width, height, first, pixels, stream, max_depth, rr_depth, wf, L, lam, sensor, beta):
+def _trace(geo, spec, plane, first, pixels, stream, depths, wf, paths):
     """The bounce loop of :func:`trace_hero_paths` as one kernel, as :func:`renderers.pathtracer._trace` (why
     there); returns the rays traced."""
+    max_depth, rr_depth = depths
+    L, lam, sensor, beta = paths
     cur, nxt = wf.cur, wf.nxt
-    camera_rays(basis, width, height, first, pixels, stream, cur)
+    camera_rays(plane.basis, plane.width, plane.height, first, pixels, stream, cur)
     n, depth, traced = L.shape[0], 1, 0
     while n:
         hits = Hits(wf.prim[:n], wf.t_sphere[:n])

@@ -70,7 +70,7 @@ from harness.scenes.model import Scene
 from harness.scenes.spectral_scene import SPECTRAL_INFO
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.bsdf import bsdf_sample, faces, is_delta, refraction_scale
-from renderers.core.camera import camera_basis, camera_rays
+from renderers.core.camera import camera_rays, image_plane
 from renderers.core.direct import sample_ld
 from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest, trace_unoccluded
 from renderers.core.lights import solid_angle_pdf_along
@@ -83,6 +83,14 @@ from renderers.core.wavelengths import N_WAVELENGTHS
 from renderers.hero_wavelength import spectral_tables, trace_hero_paths
 from renderers.core.schedule import render_image
 from renderers.core.settings import with_defaults
+
+
+class Paths(NamedTuple):
+    """A work unit's per-path outputs: radiance ``L`` (m, 3) and the AOVs (``aux``, rows while ``aux_open``)."""
+
+    L: np.ndarray
+    aux: np.ndarray
+    aux_open: np.ndarray
 
 
 class Bounce(NamedTuple):
@@ -185,20 +193,22 @@ def trace_paths(geom: SceneGeometry, scene: Scene, first: int, stop: int, pixels
     cam = scene.camera
     L = np.zeros((m, 3))
     aux = np.zeros((m if aovs else 0, 6))
-    traced = _trace(geom.tables(), camera_basis(cam), cam.width, cam.height, first, pixels, stream, scene.max_depth,
-                    rr_depth, wavefront(m, geom.has_spheres), L, aux, np.ones(aux.shape[0], dtype=np.bool_))
+    traced = _trace(geom.tables(), image_plane(cam), first, pixels, stream, (scene.max_depth, rr_depth),
+                    wavefront(m, geom.has_spheres), Paths(L, aux, np.ones(aux.shape[0], dtype=np.bool_)))
     geom.count(traced)
     return (L, aux) if aovs else L
 
 
 @jit
-def _trace(geo, basis, width, height, first, pixels, stream, max_depth, rr_depth, wf, L, aux, aux_open):
+def _trace(geo, plane, first, pixels, stream, depths, wf, paths):
     """The bounce loop of :func:`trace_paths`, one kernel per work unit: camera rays, then per bounce the
     closest hits, :func:`_shade`, and the shadow segments' queries, until no path is left. Returns the rays
     traced. One kernel because a kernel called from Python per bounce cost ~0.3 ms of argument typing
-    (:func:`renderers.core.geometry.trace_closest`)."""
+    (:func:`renderers.core.geometry.trace_closest`). ``depths``: (max_depth, rr_depth)."""
+    max_depth, rr_depth = depths
+    L, aux, aux_open = paths
     cur, nxt = wf.cur, wf.nxt  # double buffer: shade reads one wavefront, writes the next
-    camera_rays(basis, width, height, first, pixels, stream, cur)
+    camera_rays(plane.basis, plane.width, plane.height, first, pixels, stream, cur)
     n, depth, traced = L.shape[0], 1, 0  # live rays; segments so far, the current ray included
     while n:
         hits = Hits(wf.prim[:n], wf.t_sphere[:n])

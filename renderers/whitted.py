@@ -93,7 +93,7 @@ from harness.scenes.model import Scene
 from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.ambient_radiance import bounces_left, radiosity_ambient, scene_surfaces
 from renderers.core.bsdf import DIELECTRIC, LAMBERT, MIRROR, faces, fresnel_dielectric, reflect, refract
-from renderers.core.camera import camera_basis, camera_rays
+from renderers.core.camera import camera_rays, image_plane
 from renderers.core.direct import sample_ld
 from renderers.core.embree import ray_record
 from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest, trace_unoccluded
@@ -316,14 +316,14 @@ def _light(L, seg, ns, shadows, geo, rec):
 
 
 @jit
-def _trace(geo, basis, width, height, first, pixels, stream, max_depth, opt, la, L, rec):
+def _trace(geo, plane, first, pixels, stream, max_depth, opt, la, L, rec):
     """The ray trees of paths ``first`` .. ``first`` + ``L``'s rows - 1 into ``L``, breadth first, one kernel per
     work unit (as :func:`renderers.pathtracer._trace`: a kernel called from Python per depth costs numba's
     argument typing each time): camera rays, then per depth the closest hits, :func:`_shade`, the shadow
     segments (:func:`_light`) and the occlusion segments. Returns the rays traced."""
     m = L.shape[0]
     cur = _ray_buffer(m)
-    camera_rays(basis, width, height, first, pixels, stream, cur)
+    camera_rays(plane.basis, plane.width, plane.height, first, pixels, stream, cur)
     n, depth, traced = m, 1, 0
     while n:
         extend = depth + 1 <= max_depth
@@ -356,7 +356,7 @@ class Tracer:
     def trace(self, first: int, stop: int, pixels: int, stream: Stream) -> np.ndarray:
         cam = self.scene.camera
         L = np.zeros((stop - first, 3))
-        self.geom.count(_trace(self.geom.tables(), camera_basis(cam), cam.width, cam.height, first, pixels, stream,
+        self.geom.count(_trace(self.geom.tables(), image_plane(cam), first, pixels, stream,
                                self.max_depth, self.opt, self.la, L, ray_record()))
         return L
 

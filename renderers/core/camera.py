@@ -16,6 +16,8 @@ samples in path order (:mod:`renderers.core.film` relies on it).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import math
 
 import numpy as np
@@ -24,6 +26,18 @@ from harness.scenes.model import Camera
 from renderers.core.rays import set_path, set_ray
 from renderers.core.sampler import camera_sample, path_point
 from renderers.core.sampling import jit
+
+
+class ImagePlane(NamedTuple):
+    """What :func:`camera_rays` needs of a camera, as one argument for the kernels that call it."""
+
+    basis: np.ndarray  # camera_basis
+    width: int
+    height: int
+
+
+def image_plane(camera: Camera) -> ImagePlane:
+    return ImagePlane(camera_basis(camera), camera.width, camera.height)
 
 
 def camera_basis(camera: Camera) -> np.ndarray:

@@ -107,6 +107,7 @@ class Scattered(NamedTuple):
     photons: Photons
     rays: RayBuffer
     spec: np.ndarray  # (m,) bool
+    row: int  # the row of ``photons`` this bounce stores from (the bounces before filled those above)
 
 
 def empty_photons(n: int = 0) -> Photons:
@@ -179,14 +180,14 @@ def _grown(photons, n, size):
 
 
 @jit
-def _scatter(hits, rays, spec, stream, first, depth, mode, extend, geo, out, ns):
+def _scatter(hits, rays, spec, stream, first, depth, mode, extend, geo, out):
     """One bounce of a photon wavefront (photon ``first`` + path of ``stream``): store where the mode says,
     then scatter or absorb.
 
-    Stores photons into ``out.photons`` from row ``ns`` on (the photons of the bounces before are above it).
+    Stores photons into ``out.photons`` from row ``out.row`` on.
     Returns (rows of ``out.photons`` now filled, photons going on into ``out.rays``).
     """
-    nn = 0
+    ns, nn = out.row, 0
     for i in range(hits.prim.size):
         p = hits.prim[i]
         if p < 0:
@@ -255,7 +256,7 @@ def _trace(geo, stream, first, max_depth, mode, wf, spec, spec_nxt, photons):
         traced += n
         extend = max_depth < 0 or depth + 2 <= max_depth
         ns, n = _scatter(hits, cur, spec, stream, first, depth, mode, extend, geo,
-                         Scattered(photons, nxt, spec_nxt), ns)
+                         Scattered(photons, nxt, spec_nxt, ns))
         cur, nxt = nxt, cur
         spec, spec_nxt = spec_nxt, spec
         depth += 1

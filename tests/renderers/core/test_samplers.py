@@ -22,7 +22,6 @@ from renderers.core.rng import uniform
 from renderers.core.photons import EMIT_DIR_U, EMIT_U, BOUNCE_U, bounce_dim
 from renderers.core.sampler import (BATCHES, CAMERA_U, PMJ02, SOBOL, Stream, independent, path_point, sample_1d,
                                     sample_2d, sequence_stream, vertex_dim)
-from renderers.core.sobol import SOBOL_MATRICES
 from renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")
