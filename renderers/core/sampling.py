@@ -65,9 +65,11 @@ def drop_stale_kernel_caches(root: Path = _RENDERERS) -> bool:
 drop_stale_kernel_caches()
 jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 #: :data:`jit` for the few helpers every kernel calls per decision whose body LLVM will not inline by itself
-#: (:mod:`renderers.core.sampler`'s ``path_point``, ``sample_1d``, ``sample_2d``: a branch per sampler, so
-#: their compiled body is large): numba inlines them into each caller. Without it, the photon kernels, which
-#: drew raw numbers before they drew through the sampler, ran 30-80% slower (measured 2026-12-03).
+#: (:mod:`renderers.core.sampler`'s ``path_point``, ``sample_1d``, ``sample_2d``, ``vertex_1d``,
+#: ``vertex_2d``: a branch per sampler, so their compiled body is large; :mod:`renderers.core.direct`'s
+#: ``light_sample`` and ``sample_ld``, whose calls passed the scene's tables as ~100 flattened arguments):
+#: numba inlines them into each caller. Without it, the photon kernels, which drew raw numbers before they
+#: drew through the sampler, ran 30-80% slower (measured 2026-12-03); the path tracer ~8% (2026-12-04).
 jit_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
