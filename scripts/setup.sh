@@ -84,4 +84,17 @@ if [[ $have != "$want" && $have != "${want%\[test\]}[test]" ]]; then
   fi
   echo "$want" > "$stamp"
 fi
+# --- numba kernels -----------------------------------------------------------
+# Compiled once into numba's on-disk cache (__pycache__), so that the first `cbox demo` does not spend its
+# first minute compiling (BENCHMARKS.md: the demo 3:42 cold, 2:43 after this). Again only when the sources
+# of the kernels changed; a failure here is not setup's: renders compile what they need when first used.
+kernels_want=$(cat renderers/*.py renderers/core/*.py harness/evaluate/*.py | sha256sum | cut -d' ' -f1)
+if [[ $(cat .venv/.cbox-kernels 2>/dev/null || true) != "$kernels_want" ]]; then
+  say "compiling the renderers' kernels into numba's cache (about a minute, once)"
+  if .venv/bin/python scripts/compile_kernels.py 2>.venv/.cbox-kernels.log; then
+    echo "$kernels_want" > .venv/.cbox-kernels
+  else
+    say "compiling kernels failed (see .venv/.cbox-kernels.log); renders will compile them when first used"
+  fi
+fi
 say "ready: .venv/bin/cbox --help"
