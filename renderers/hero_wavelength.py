@@ -46,8 +46,8 @@ from harness.scenes.model import Scene
 from renderers.core.bsdf import bsdf_eval, bsdf_sample, faces, is_delta, refraction_scale
 from renderers.core.camera import camera_rays, image_plane
 from renderers.core.direct import emission_weight, light_sample
-from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest, trace_unoccluded
-from renderers.core.rays import RayBuffer, ShadowBuffer, add_unoccluded, set_path, set_ray, set_shadow, wavefront
+from renderers.core.geometry import SceneGeometry, add_unoccluded_light, offset_origin, ray_hit, wavefront_hits
+from renderers.core.rays import RayBuffer, ShadowBuffer, set_path, set_ray, set_shadow, wavefront
 from renderers.core.roulette import RR_DEPTH, continue_spectral_path
 from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, WAVELENGTH, Stream, path_point,
                                     sample_1d, vertex_1d, vertex_2d)
@@ -230,16 +230,12 @@ def _trace(geo, spec, plane, first, pixels, stream, depths, wf, paths):
     camera_rays(plane.basis, plane.width, plane.height, first, pixels, stream, cur)
     n, depth, traced = L.shape[0], 1, 0
     while n:
-        hits = Hits(wf.prim[:n], wf.t_sphere[:n])
-        trace_closest(geo, cur, hits.prim, hits.t_sphere, wf.record)
+        hits = wavefront_hits(geo, wf, cur, n)
         extend = max_depth < 0 or depth + 1 <= max_depth
         ns, n_next = _shade(hits, cur, stream, first, depth, extend, depth >= rr_depth, geo, spec,
                             HeroBounce(L, wf.shadow, nxt, lam, sensor, beta))
         traced += n + ns
-        if ns:
-            visible = wf.visible[:ns]
-            trace_unoccluded(geo, wf.shadow, visible, wf.record)
-            add_unoccluded(L, wf.shadow, visible)
+        add_unoccluded_light(geo, L, wf.shadow, wf.visible[:ns], wf.record)
         cur, nxt = nxt, cur
         n = n_next
         depth += 1

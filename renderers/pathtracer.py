@@ -72,10 +72,10 @@ from renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from renderers.core.bsdf import bsdf_sample, faces, is_delta, refraction_scale
 from renderers.core.camera import camera_rays, image_plane
 from renderers.core.direct import sample_ld
-from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest, trace_unoccluded
+from renderers.core.geometry import SceneGeometry, add_unoccluded_light, offset_origin, ray_hit, wavefront_hits
 from renderers.core.lights import solid_angle_pdf_along
 from renderers.core.roulette import Q_MAX, RR_DEPTH, continue_path
-from renderers.core.rays import RayBuffer, ShadowBuffer, add_unoccluded, set_path, set_ray, set_shadow, wavefront
+from renderers.core.rays import RayBuffer, ShadowBuffer, set_path, set_ray, set_shadow, wavefront
 from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, SAMPLER_SETTING, VARIANCE_SETTING,
                                     Stream, independent, path_point, vertex_1d, vertex_2d)
 from renderers.core.sampling import jit, power_heuristic
@@ -211,16 +211,12 @@ def _trace(geo, plane, first, pixels, stream, depths, wf, paths):
     camera_rays(plane.basis, plane.width, plane.height, first, pixels, stream, cur)
     n, depth, traced = L.shape[0], 1, 0  # live rays; segments so far, the current ray included
     while n:
-        hits = Hits(wf.prim[:n], wf.t_sphere[:n])
-        trace_closest(geo, cur, hits.prim, hits.t_sphere, wf.record)
+        hits = wavefront_hits(geo, wf, cur, n)
         extend = max_depth < 0 or depth + 1 <= max_depth
         ns, n_next = _shade(hits, cur, stream, first, depth, extend, depth >= rr_depth, geo,
                             Bounce(L, wf.shadow, nxt, aux, aux_open))
         traced += n + ns
-        if ns:
-            visible = wf.visible[:ns]
-            trace_unoccluded(geo, wf.shadow, visible, wf.record)
-            add_unoccluded(L, wf.shadow, visible)
+        add_unoccluded_light(geo, L, wf.shadow, wf.visible[:ns], wf.record)
         cur, nxt = nxt, cur
         n = n_next
         depth += 1

@@ -96,9 +96,10 @@ from renderers.core.bsdf import DIELECTRIC, LAMBERT, MIRROR, faces, fresnel_diel
 from renderers.core.camera import camera_rays, image_plane
 from renderers.core.direct import sample_ld
 from renderers.core.embree import ray_record
-from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest, trace_unoccluded
+from renderers.core.geometry import (Hits, SceneGeometry, add_unoccluded_light, offset_origin, ray_hit,
+                                     trace_closest)
 from renderers.core.occlusion import DEFAULT_AO_MAX_DISTANCE, occlusion_segment
-from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, ray_buffer, set_path, set_ray, set_shadow,
+from renderers.core.rays import (RayBuffer, ShadowBuffer, ray_buffer, set_path, set_ray, set_shadow,
                                  shadow_buffer)
 from renderers.core.sampler import Stream, independent, path_point, sample_1d, sample_2d
 from renderers.core.sampling import jit
@@ -305,9 +306,7 @@ def _light(L, seg, ns, shadows, geo, rec):
     """Add what shadow segments 0 .. ``ns`` - 1 carry, by the ``transparent_shadows`` rule; returns the rays
     traced."""
     if shadows == BOOLEAN:
-        visible = np.empty(ns, np.bool_)
-        trace_unoccluded(geo, seg, visible, rec)
-        add_unoccluded(L, seg, visible)
+        add_unoccluded_light(geo, L, seg, np.empty(ns, np.bool_), rec)
         return ns
     T = np.ones(ns)
     traced = _transmittance(geo, seg, shadows == ATTENUATE, T, rec)
@@ -337,9 +336,7 @@ def _trace(geo, plane, first, pixels, stream, max_depth, opt, la, L, rec):
         if ns:
             traced += _light(L, out.shadow, ns, opt.shadows, geo, rec)
         if no:
-            visible = np.empty(no, np.bool_)
-            trace_unoccluded(geo, out.occ, visible, rec)
-            add_unoccluded(L, out.occ, visible)
+            add_unoccluded_light(geo, L, out.occ, np.empty(no, np.bool_), rec)
             traced += no
         cur = out.nxt
         n = n_next

@@ -41,6 +41,7 @@ from harness.scenes.model import Scene, triangle_arrays
 from renderers.core.bsdf import material_tables
 from renderers.core.embree import EmbreeScene, closest_triangles, ray_record, segments_clear
 from renderers.core.lights import emitter_tables
+from renderers.core.rays import add_unoccluded
 from renderers.core.sampling import jit
 
 #: Ray-origin offset relative to the scene's size: far above float32 hit-point
@@ -257,6 +258,25 @@ def trace_closest(g, rays, prim, t_sphere, rec):
     closest_triangles(g.embree, rays.o32, rays.d32, prim, rec)
     if g.sphere_radius.size > 0:
         _nearer_spheres(prim, rays.o, rays.d, g, t_sphere)
+
+
+@jit
+def wavefront_hits(g, wf, rays, n):
+    """The closest hits of rays 0 .. ``n`` - 1 of ``rays`` (``wf.cur`` or ``wf.nxt`` of the
+    :class:`renderers.core.rays.Wavefront` ``wf``), into ``wf``'s hit buffers: :func:`trace_closest`, as a
+    :class:`Hits` of views. The first step of every bounce of a bounce loop that is one kernel."""
+    hits = Hits(wf.prim[:n], wf.t_sphere[:n])
+    trace_closest(g, rays, hits.prim, hits.t_sphere, wf.record)
+    return hits
+
+
+@jit
+def add_unoccluded_light(g, L, segments, visible, rec):
+    """``L[path] +=`` what shadow segment k carries wherever nothing blocks it, for segments 0 ..
+    ``visible.size`` - 1 (``visible`` is filled here): :func:`trace_unoccluded`, then
+    :func:`renderers.core.rays.add_unoccluded`."""
+    trace_unoccluded(g, segments, visible, rec)
+    add_unoccluded(L, segments, visible)
 
 
 @jit

@@ -61,7 +61,7 @@ import numpy as np
 
 from harness.scenes.model import Scene
 from renderers.core.bsdf import bsdf_sample, faces, is_delta, refraction_scale
-from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest
+from renderers.core.geometry import SceneGeometry, offset_origin, ray_hit, wavefront_hits
 from renderers.core.lights import sample_emitter
 from renderers.core.rays import RayBuffer, set_path, set_ray, wavefront
 from renderers.core.roulette import Q_MAX
@@ -251,8 +251,7 @@ def _trace(geo, stream, first, max_depth, mode, wf, spec, spec_nxt, photons):
     while n:
         if ns + n > photons.depth.size:  # each live photon stores at most one
             photons = _grown(photons, ns, max(2 * photons.depth.size, ns + n))
-        hits = Hits(wf.prim[:n], wf.t_sphere[:n])
-        trace_closest(geo, cur, hits.prim, hits.t_sphere, wf.record)
+        hits = wavefront_hits(geo, wf, cur, n)
         traced += n
         extend = max_depth < 0 or depth + 2 <= max_depth
         ns, n = _scatter(hits, cur, spec, stream, first, depth, mode, extend, geo,

@@ -31,8 +31,8 @@ from harness.scenes.model import Scene
 from renderers.core.bsdf import bsdf_sample, faces, is_delta, lambert_pdf, lambert_sample, refraction_scale
 from renderers.core.camera import camera_basis, camera_rays
 from renderers.core.direct import sample_ld
-from renderers.core.geometry import Hits, SceneGeometry, offset_origin, ray_hit, trace_closest, trace_unoccluded
-from renderers.core.rays import (RayBuffer, ShadowBuffer, add_unoccluded, Wavefront, set_path, set_ray, set_shadow,
+from renderers.core.geometry import SceneGeometry, add_unoccluded_light, offset_origin, ray_hit, wavefront_hits
+from renderers.core.rays import (RayBuffer, ShadowBuffer, Wavefront, set_path, set_ray, set_shadow,
                                  wavefront)
 from renderers.core.roulette import RR_DEPTH, continue_path
 from renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, Stream, path_point,
@@ -180,15 +180,11 @@ def _walk(geo, walk, depth, max_depth, unbounded, wf, L, vp):
     cur, nxt = wf.cur, wf.nxt  # double buffer: a bounce reads one wavefront, writes the next
     n, traced = cur.path.size, 0
     while n:
-        hits = Hits(wf.prim[:n], wf.t_sphere[:n])
-        trace_closest(geo, cur, hits.prim, hits.t_sphere, wf.record)
+        hits = wavefront_hits(geo, wf, cur, n)
         extend = unbounded or depth + 1 <= max_depth
         ns, n_next = _step(hits, cur, walk, depth, extend, depth >= RR_DEPTH, geo, Found(L, vp, wf.shadow, nxt))
         traced += n + ns
-        if ns:
-            visible = wf.visible[:ns]
-            trace_unoccluded(geo, wf.shadow, visible, wf.record)
-            add_unoccluded(L, wf.shadow, visible)
+        add_unoccluded_light(geo, L, wf.shadow, wf.visible[:ns], wf.record)
         cur, nxt = nxt, cur
         n = n_next
         depth += 1
