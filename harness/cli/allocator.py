@@ -21,7 +21,6 @@ freed blocks in the heap for the next temporary: the process keeps up to
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import functools
 
 #: Blocks below this come from the heap and are reused after being freed (glibc's largest dynamic threshold).
@@ -36,7 +35,9 @@ _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 def keep_freed_memory() -> bool:
     """Raise glibc's mmap and trim thresholds for this process (once); False where there is no glibc."""
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        # The C library this process already runs on: find_library("c") would run ldconfig (~4 ms), which
+        # every cbox command now pays since harness.cli.app calls this at its start.
+        libc = ctypes.CDLL(None)
         mallopt = libc.mallopt
         libc.gnu_get_libc_version  # glibc's own symbol: another libc's mallopt may read these numbers otherwise
     except (OSError, AttributeError):
