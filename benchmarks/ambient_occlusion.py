@@ -10,20 +10,20 @@ explains them):
    ``--frames`` timed frames of the screen-space pass after one warm-up
    frame, the pass the adapter times, G-buffer excluded), and RMSE, relMSE,
    SSIM image-wide and RMSE per region, from the harness's own scoring
-   (:func:`harness.workflows.runner.run_one`). AO images have no ΔE.
-2. **``ao`` against spp and time**: :func:`harness.workflows.converge.run_experiment`
+   (:func:`cornell_harness.workflows.runner.run_one`). AO images have no ΔE.
+2. **``ao`` against spp and time**: :func:`cornell_harness.workflows.converge.run_experiment`
    (what ``cbox converge`` runs; resumable in ``OUT/ao``) at spp 1, 2, 4, ...,
    ``--max-spp`` for ``--seeds`` seeds: RMSE and SSIM (medians over seeds) per
    spp and time, and the log-log slope of RMSE (mean over seeds, 95% CI).
 3. **The crossover**: the spp and time at which ``ao`` becomes more accurate
    than the best SSAO setting of part 1, by RMSE and by SSIM, interpolated
    log-log between checkpoints (per seed, median over seeds:
-   :func:`harness.evaluate.convergence.time_to_target`).
+   :func:`cornell_harness.evaluate.convergence.time_to_target`).
 4. **``ambient`` against full GI on ``cornell-box``**: ΔE mean image-wide and
    per region for ``ambient`` (radiosity ambient), ``ambient[ambient=oracle]``,
    ``ambient[ambient=none]``, ``pyrender`` (all at ``--ambient-spp``), and the
    path tracer at equal time: its spp chosen, as ``cbox compare --time-budget``
-   does (:func:`harness.workflows.compare.spp_for_time_budget`), for the wall
+   does (:func:`cornell_harness.workflows.compare.spp_for_time_budget`), for the wall
    time ``ambient`` (radiosity) took.
 5. **SSAO's artefacts**, each with a figure written to ``--images``:
    screen borders (the same pixels rendered as a centred crop, whose frame
@@ -61,21 +61,21 @@ from scipy.spatial import cKDTree
 
 import markdown_blocks
 from markdown_blocks import bold, minus
-from harness.adapters.registry import resolve
-from harness.adapters.settings import resolve_settings
-from harness.evaluate.convergence import slope_over_seeds, time_to_target
-from harness.evaluate.regions import region_masks
-from harness.scenes.library import resolve_scene
-from harness.scenes.model import Region
-from harness.store.atomic import write_json_atomic
-from harness.store.references import load_reference
-from harness.workflows import runner
-from harness.workflows.compare import spp_for_time_budget
-from harness.workflows.converge import parse_spp_list, run_experiment
-from renderers.core.gbuffer import gbuffer, view_space
-from renderers.core.geometry import SceneGeometry
-from harness.adapters.api import default_threads
-from renderers.ssao import SSAO, resolved_radius, screen_space_pass
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.adapters.settings import resolve_settings
+from cornell_harness.evaluate.convergence import slope_over_seeds, time_to_target
+from cornell_harness.evaluate.regions import region_masks
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.model import Region
+from cornell_harness.store.atomic import write_json_atomic
+from cornell_harness.store.references import load_reference
+from cornell_harness.workflows import runner
+from cornell_harness.workflows.compare import spp_for_time_budget
+from cornell_harness.workflows.converge import parse_spp_list, run_experiment
+from cornell_harness.renderers.core.gbuffer import gbuffer, view_space
+from cornell_harness.renderers.core.geometry import SceneGeometry
+from cornell_harness.adapters.api import default_threads
+from cornell_harness.renderers.ssao import SSAO, resolved_radius, screen_space_pass
 
 AO_SCENE, GI_SCENE = "cornell-box-ao", "cornell-box"
 #: Part 1's settings: (label, renderer spec).
@@ -146,7 +146,7 @@ def ssao_settings(spec: str) -> dict:
 def ssao_image(scene, spec: str, threads: int, frames: int = 0) -> tuple[np.ndarray, list[float]]:
     """A (H, W) of ssao ``spec`` on ``scene`` (miss_value where nothing is hit) and, with ``frames``, the
     wall times (s) of that many frames of the screen-space pass after one warm-up frame, as the adapter
-    times one (:meth:`renderers.ssao.SSAO.render`)."""
+    times one (:meth:`cornell_harness.renderers.ssao.SSAO.render`)."""
     s = resolve_settings(SSAO(), ssao_settings(spec))
     g = gbuffer(scene, SceneGeometry(scene))
     pos, nrm = view_space(g, scene.camera)

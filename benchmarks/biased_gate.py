@@ -35,13 +35,13 @@ import numpy as np
 from scipy import stats
 
 from benchmarks import markdown_blocks
-from harness.evaluate import bias_extrapolation
-from harness.evaluate.agreement import sidak_level
-from harness.gate.config import BiasLimit, load_config
-from harness.gate.run import GateJob, render_bias_efforts
-from harness.adapters.registry import resolve
-from harness.scenes.library import resolve_scene
-from harness.store.references import load_reference
+from cornell_harness.evaluate import bias_extrapolation
+from cornell_harness.evaluate.agreement import sidak_level
+from cornell_harness.gate.config import BiasLimit, load_config
+from cornell_harness.gate.run import GateJob, render_bias_efforts
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
 
 ROOT = Path(__file__).resolve().parent.parent
 BLOCK = "biased_gate.py"

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import markdown_blocks
 
-from harness.adapters.registry import resolve
-from harness.scenes.library import resolve_scene
-from harness.store.references import load_reference
-from harness.workflows.runner import run_one
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
+from cornell_harness.workflows.runner import run_one
 
 #: (label, how to read it from a run record)
 FIGURES = (

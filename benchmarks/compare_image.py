@@ -13,7 +13,7 @@ is the scene's stored one (256²).
 
 Then the same without any start-up (the warm table): one process that has imported both and run each once
 times, interleaved, OpenImageIO's read-and-compare and ``cbox compare-image``'s whole command in-process
-(``harness.cli.app.main``: parsing, reading, scoring, the error map, the table), medians of ``--rounds`` × 5
+(``cornell_harness.cli.app.main``: parsing, reading, scoring, the error map, the table), medians of ``--rounds`` × 5
 calls; and, for comparison, the same command with ``--all-metrics`` (what a check scored before it scored only
 what it names).
 
@@ -35,8 +35,8 @@ import time
 from pathlib import Path
 
 import markdown_blocks
-from harness.scenes.library import resolve_scene
-from harness.store.references import REFERENCE_FILE, load_reference
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import REFERENCE_FILE, load_reference
 
 BLOCK = "compare_image.py#cost"
 WARM_BLOCK = "compare_image.py#warm"
@@ -57,7 +57,7 @@ def _wall(cmd: list[str]) -> float:
 
 
 def commands(image: Path, reference: Path, out: Path) -> dict[str, list[str]]:
-    py, cbox = sys.executable, [sys.executable, "-m", "harness", "compare-image", str(image)]
+    py, cbox = sys.executable, [sys.executable, "-m", "cornell_harness", "compare-image", str(image)]
     idiff = shutil.which("idiff")
     cmds = {"python -c pass (interpreter start)": [py, "-c", "pass"]}
     if idiff:
@@ -86,7 +86,7 @@ def measure(cmds: dict[str, list[str]], rounds: int) -> dict[str, float]:
 WARM = """
 import contextlib, io, statistics, sys, time
 import OpenImageIO as oiio
-from harness.cli.app import main
+from cornell_harness.cli.app import main
 image, reference, out, rounds = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
 args = ["compare-image", image, "--reference", reference, "--fail", "delta_e2000_mean=0.1", "--out", out]
 def cbox(argv):
@@ -154,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
         image = args.image
         if image is None:
             image = Path(tmp) / "m16.exr"
-            subprocess.run([sys.executable, "-m", "harness", "render", "--scene", "cornell-box", "-r", "mitsuba",
+            subprocess.run([sys.executable, "-m", "cornell_harness", "render", "--scene", "cornell-box", "-r", "mitsuba",
                             "--spp", "16", "--out", str(image)], check=True, capture_output=True, cwd=ROOT)
         medians = measure(commands(image, reference, Path(tmp) / "out"), args.rounds)
         warm = measure_warm(image, reference, Path(tmp) / "warm", 5 * args.rounds)

@@ -2,17 +2,17 @@
 overhead per task, what a cell ships back, and what the client spends per cell.
 
 1. **Scaling**: a fixed sweep, ``pathtracer`` on ``cornell-box`` (256², spp 1-16, seeds 0..N-1: N cells),
-   through :func:`harness.workflows.converge.run_experiment` (what ``cbox converge`` runs) on each backend:
+   through :func:`cornell_harness.workflows.converge.run_experiment` (what ``cbox converge`` runs) on each backend:
    in-process (``CBOX_THREADS`` = every core), ``--workers 1`` (one process, every core) and ``--workers
    2`` (two processes, one core each). Each run in a fresh folder, workers warmed first (renderer loaded,
    numba's cache read, one render); the three backends open at once and their runs interleaved round by
    round (the machine's other load falls on all three), medians over ``--repeats``: cells per minute, and
    the cells' own render time (the rest of a cell is scoring its five checkpoints and storing it).
 2. **Overhead per task**: ``--tasks`` tasks that do nothing through
-   :meth:`harness.workflows.executor.DaskExecutor.run` on 1 and 2 workers: wall time per task (ms),
+   :meth:`cornell_harness.workflows.executor.DaskExecutor.run` on 1 and 2 workers: wall time per task (ms),
    submission to result in the client, i.e. the scheduler's and the transfers' cost of a cell.
 3. **Bytes**: each cell's packed result as shipped back (rows + final image, zlib;
-   :func:`harness.workflows.executor.pack`) and what is sent once per worker (the scene and the reference).
+   :func:`cornell_harness.workflows.executor.pack`) and what is sent once per worker (the scene and the reference).
 4. **Client per cell**: unpacking a result and writing the cell (image, rows) and ``results.parquet``, the
    work only the client does, at the sweep's table size.
 
@@ -34,13 +34,13 @@ import time
 from pathlib import Path
 
 import markdown_blocks
-from harness.adapters.api import default_threads
-from harness.adapters.registry import resolve
-from harness.scenes.library import resolve_scene
-from harness.store.references import load_reference
-from harness.workflows import cells as cells_module
-from harness.workflows.converge import parse_spp_list, run_experiment
-from harness.workflows.executor import DaskExecutor, Task, open_executor, pack, unpack
+from cornell_harness.adapters.api import default_threads
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
+from cornell_harness.workflows import cells as cells_module
+from cornell_harness.workflows.converge import parse_spp_list, run_experiment
+from cornell_harness.workflows.executor import DaskExecutor, Task, open_executor, pack, unpack
 
 SPPS = parse_spp_list("1-16")
 
@@ -86,9 +86,9 @@ def client_cost(scene, ref, cells: int, table_cells: int) -> tuple[float, float]
     to write ``results.parquet`` holding ``table_cells`` cells' rows."""
     import pandas as pd
 
-    from harness.store.experiments import RESULTS_FILE, write_parquet_atomic
-    from harness.workflows.cells import Cell
-    from harness.workflows.converge import store_cell
+    from cornell_harness.store.experiments import RESULTS_FILE, write_parquet_atomic
+    from cornell_harness.workflows.cells import Cell
+    from cornell_harness.workflows.converge import store_cell
 
     (entry,) = resolve(["pathtracer"])
     packed = pack(cells_module.render_cell_task(Cell("pathtracer__seed0", entry.spec, {}, 0, tuple(SPPS),

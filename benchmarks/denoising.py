@@ -12,7 +12,7 @@ prefiltered albedo and normal, its recommended mode) and, to show what the auxil
    beside it; and converge's bias²/variance split per region at the top spp; a figure of where the bias sits
    (the seeds' mean image against the reference).
 3. **Equal quality**: for ΔE mean <= 2, ΔE mean <= 1 and relMSE <= 1e-2, the spp each renderer needs
-   (:func:`harness.evaluate.convergence.time_to_target` with spp as the clock: per seed, interpolated log-log;
+   (:func:`cornell_harness.evaluate.convergence.time_to_target` with spp as the clock: per seed, interpolated log-log;
    median) and the time that takes by a cost model measured quietly (part 5), beside the runs' own times.
 4. **Beside each other**: the path tracer and the denoiser at 4 spp, the denoiser at ``--max-spp`` and the
    reference (seed 0), for each scene.
@@ -21,7 +21,7 @@ prefiltered albedo and normal, its recommended mode) and, to show what the auxil
    model of part 3.
 
 Everything runs through the harness's converge workflow in-process
-(:func:`harness.workflows.converge.run_experiment`, what ``cbox converge`` runs; ``cbox report OUT/<scene>`` gives
+(:func:`cornell_harness.workflows.converge.run_experiment`, what ``cbox converge`` runs; ``cbox report OUT/<scene>`` gives
 the HTML report of either experiment). Results are cached in ``--out``: running again renders only what is missing.
 
 Run: ``.venv/bin/python benchmarks/denoising.py --summary BENCHMARKS.md``: writes docs/denoising.md whole
@@ -46,18 +46,18 @@ import numpy as np
 import pandas as pd
 from PIL import Image, ImageDraw
 
-from harness.adapters.registry import resolve
-from harness.evaluate import metrics
-from harness.evaluate.convergence import time_to_target
-from harness.scenes.library import resolve_scene
-from harness.store.references import load_reference
-from harness.workflows.converge import parse_spp_list
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.evaluate import metrics
+from cornell_harness.evaluate.convergence import time_to_target
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
+from cornell_harness.workflows.converge import parse_spp_list
 import markdown_blocks
 from irradiance_probes import COLOURS, PT_COLOUR, bias_figure, experiment, fmt, write_svg
-from reports.charts import convergence_table
-from reports.plots import Series, line_plot_svg
-from harness.adapters.api import default_threads
-from renderers.oidn import denoise
+from cornell_harness.reports.charts import convergence_table
+from cornell_harness.reports.plots import Series, line_plot_svg
+from cornell_harness.adapters.api import default_threads
+from cornell_harness.renderers.oidn import denoise
 
 SCENES = {"cornell-box": ("walls", "boxes", "floor", "back-edge", "light"),
           "cornell-box-caustics": ("caustic", "glass-shadow", "walls", "mirror", "glass")}
@@ -179,7 +179,7 @@ def costs(scene, spp: int, repeats: int) -> dict:
     """What the AOVs add to a path tracer render, and what one denoise takes, per mode: medians of interleaved
     repeats, so the machine's drift hits both sides of each ratio alike. Returns the cost model
     (:func:`modelled_time`): seconds per spp, the AOVs' time ratio, seconds per denoise by (quality, aux)."""
-    from renderers.pathtracer import PathTracer
+    from cornell_harness.renderers.pathtracer import PathTracer
 
     pt, times = PathTracer(), {"plain": [], "aovs": []}
     pt.render(scene, 1, 0, aovs=("albedo",))  # compiles and warms both
@@ -210,27 +210,27 @@ def costs(scene, spp: int, repeats: int) -> dict:
 PAGE_HEAD = """# Denoised path tracing (OIDN): what it buys, what it costs, the bias it keeps
 
 The issue's experiment, written by `{command}` (it regenerates this whole page; cached cells in `--out` are
-not rendered again). `pathtracer+oidn` (`renderers/oidn.py`) is our path tracer's image denoised by Intel Open
+not rendered again). `pathtracer+oidn` (`src/cornell_harness/renderers/oidn.py`) is our path tracer's image denoised by Intel Open
 Image Denoise 2.5 (CPU device, `hdr`, quality `high`) with the albedo and normal the path tracer writes at each
 path's first non-delta hit, following mirrors and glass. Three ways of using those auxiliary images are compared:
 `prefiltered` (the default and OIDN's recommended mode: albedo and normal denoised first, then the beauty with
 `cleanAux`), `noisy` (passed as rendered) and `none` (the beauty alone). The path tracer (`pmj02` sampler) is
 the baseline; every image is scored against the stored Mitsuba reference of the scene (16384 spp).
 
-Method: the harness's converge workflow in-process (`harness.workflows.converge.run_experiment`, what `cbox
+Method: the harness's converge workflow in-process (`cornell_harness.workflows.converge.run_experiment`, what `cbox
 converge` runs), spp 1, 2, 4, ... {max_spp} for the denoisers and up to {pt_max_spp} for the path tracer (so that
 it reaches the targets), seeds 0..{last_seed}. A denoiser is biased: what it keeps wrong is read from the mean over
 seeds (each seed's error is a bias plus noise; the mean's standard error says how much of a difference is noise).
 The denoiser is declared `biased`: no variance, never a z-test; the gate holds it to budgets and a consistency
 check (`gate.toml`).
 
-The regions are the scenes' own (`harness/evaluate/regions.py`): on `cornell-box`, `back-edge` is the line where
+The regions are the scenes' own (`src/cornell_harness/evaluate/regions.py`): on `cornell-box`, `back-edge` is the line where
 the back wall meets the floor (contact shadow), `boxes` carries the colour bled from the red and green walls, and
 `light` is the emitter seen directly; on `cornell-box-caustics`, `caustic` is the light focused under the glass
 sphere, `glass-shadow` the shadow beside it, `glass` and `mirror` the spheres themselves.
 
 ΔE is ΔE2000 at the reference's display exposure; relMSE is (x - r)² / (r² + 0.01) per pixel; FLIP is HDR-FLIP
-with explicit exposures (`harness/evaluate/flip.py`).
+with explicit exposures (`src/cornell_harness/evaluate/flip.py`).
 
 """
 

@@ -2,15 +2,15 @@
 
 Issue 14 asked for a path-tracing core at least as fast as Mitsuba 3; one option it named is calling
 Embree directly from numba. This measures what that buys on the ray query alone: the toolkit's
-:mod:`renderers.core.embree` (embreex's bundled ``libembree4``, a scene built through the C API, a numba
+:mod:`cornell_harness.renderers.core.embree` (embreex's bundled ``libembree4``, a scene built through the C API, a numba
 loop over 8-ray packets, ``rtcIntersect8``, bound by name so numba's cache keeps it) against embreex's
 ``run``, which loops over the single-ray call in Cython. These random rays are incoherent: the packets'
-gain is on a wavefront's coherent rays (module docstring of ``renderers.core.embree``).
+gain is on a wavefront's coherent rays (module docstring of ``cornell_harness.renderers.core.embree``).
 
 Both answer the same closest-hit queries on ``cornell-box``'s triangles (float32, as Embree takes):
 ``--rays`` rays from a point inside the box in uniformly random directions, one thread each, the median of
 ``--repeats`` timed runs after a warm-up; the primitive ids must agree exactly. Since issue 14 the kernel
-measured is the toolkit's own (``renderers.core.embree.closest_triangles``), which every renderer uses.
+measured is the toolkit's own (``cornell_harness.renderers.core.embree.closest_triangles``), which every renderer uses.
 
 Run: ``.venv/bin/python benchmarks/embree_direct.py`` (a few seconds).
 """
@@ -23,9 +23,9 @@ import time
 
 import numpy as np
 
-from harness.scenes.library import resolve_scene
-from harness.scenes.model import triangle_arrays
-from renderers.core.embree import EmbreeScene, closest_triangles, ray_record
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.model import triangle_arrays
+from cornell_harness.renderers.core.embree import EmbreeScene, closest_triangles, ray_record
 
 
 def median_seconds(fn, repeats: int) -> float:
@@ -63,7 +63,7 @@ def main() -> None:
     batch_s = median_seconds(lambda: ex.run(o, d, query="INTERSECT"), a.repeats)
     agree = float((prim == expected).mean())
     print(f"| closest hit, cornell-box, {a.rays} rays, 1 thread, median of {a.repeats} | Mrays/s |\n|---|---|\n"
-          f"| `renderers.core.embree.closest_triangles` (numba, 8-ray packets) | "
+          f"| `cornell_harness.renderers.core.embree.closest_triangles` (numba, 8-ray packets) | "
           f"{a.rays / direct_s / 1e6:.1f} |\n"
           f"| embreex batched `run(query='INTERSECT')` | {a.rays / batch_s / 1e6:.1f} |\n\n"
           f"ratio {batch_s / direct_s:.2f}; primitive ids agree on {agree:.4%} of rays")

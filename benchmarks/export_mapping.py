@@ -2,7 +2,7 @@
 
     .venv/bin/python -m benchmarks.export_mapping --markdown docs/export.md
 
-The tables are :func:`harness.scenes.export.mapping_table`, the format modules' ``MAPPING`` rows: written
+The tables are :func:`cornell_harness.scenes.export.mapping_table`, the format modules' ``MAPPING`` rows: written
 here so the page cannot drift from the code (``tests/scenes/test_export_docs.py`` checks that it has not).
 A format whose module is missing from this tree is left as it is, with a line on stderr.
 """
@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from benchmarks import markdown_blocks
-from harness.scenes.export import FORMATS, mapping_table
+from cornell_harness.scenes.export import FORMATS, mapping_table
 
 #: The block of docs/export.md that holds each format's table (benchmarks/markdown_blocks.py).
 BLOCKS = {"mapping-mitsuba": "mitsuba", "mapping-luxcore": "luxcore", "mapping-pbrt-v4": "pbrt-v4"}

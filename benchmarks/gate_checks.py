@@ -16,7 +16,7 @@ Run (13 minutes on the shared 2-core machine, most of it the 20 clean runs of th
     often the tiled agreement test would.
 (3) False alarms of the whole gate: every expectation of ``gate.toml``, every
     check, at seed offsets 0 .. seeds-1 (baseline checks at offset 0 only,
-    as :func:`harness.gate.run.run_gate` does), with the margins of the new
+    as :func:`cornell_harness.gate.run.run_gate` does), with the margins of the new
     checks on correct renderers (ŝ against its tolerance, the largest
     pixel |z| against the outlier threshold).
 (4) The spread ŝ of our path tracer's z at 8-64 spp (256 comes from (3)),
@@ -30,7 +30,7 @@ Run (13 minutes on the shared 2-core machine, most of it the 20 clean runs of th
 
         .venv/bin/python -m benchmarks.gate_checks --seeds 20 --budgets-only --markdown docs/gate-detection.md
 
-Tests (1)-(2) and (4) call ``runner.run_one`` and ``harness.gate.checks.evaluate``
+Tests (1)-(2) and (4) call ``runner.run_one`` and ``cornell_harness.gate.checks.evaluate``
 directly (``run_gate`` minus the image metrics, which these checks do not
 use); (3) is ``run_gate`` itself, in this process (``sandbox=False``: the
 same images as the CLI's child processes). With ``--markdown``, the file
@@ -54,15 +54,15 @@ import numpy as np
 from scipy.stats import binom
 
 from benchmarks import markdown_blocks
-from harness.adapters.registry import resolve
-from harness.evaluate import outliers, variance_check
-from harness.evaluate.regions import region_masks
-from harness.gate.checks import STATISTICAL_TESTS, evaluate, statistical_alpha
-from harness.gate.config import Expectation, load_config
-from harness.gate.run import run_gate
-from harness.scenes.library import resolve_scene
-from harness.store.references import load_reference
-from harness.workflows import runner
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.evaluate import outliers, variance_check
+from cornell_harness.evaluate.regions import region_masks
+from cornell_harness.gate.checks import STATISTICAL_TESTS, evaluate, statistical_alpha
+from cornell_harness.gate.config import Expectation, load_config
+from cornell_harness.gate.run import run_gate
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
+from cornell_harness.workflows import runner
 
 ROOT = Path(__file__).resolve().parent.parent
 

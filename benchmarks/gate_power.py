@@ -2,14 +2,14 @@
 
 Everything runs the ``pathtracer`` expectations of ``gate.toml`` (their
 scenes, spp, seeds, tiles, α and baseline; the other renderers' expectations
-are left out) through :func:`harness.gate.run.run_gate`.
+are left out) through :func:`cornell_harness.gate.run.run_gate`.
 
 (1) False alarms: the unmutated path tracer, with ``--seeds`` seed offsets
     (0, 1, ...). A gate run has several expectations, each a family-wise
     α-level test, so a run is a false alarm with probability at most
     1 - (1 - α)^E for E expectations; the count over seeds is binomial.
 (2) Power: every mutant of ``tests/mutants/`` (a realistic bug patched into
-    a copy of ``renderers/pathtracer.py``) at the gate's seeds, which must
+    a copy of ``src/cornell_harness/renderers/pathtracer.py``) at the gate's seeds, which must
     fail. For each: detected or not, the failing checks, the smallest
     p-value or the margin, and where.
 (3) Effect size, with common random numbers: a mutant and the unmutated
@@ -47,13 +47,13 @@ from scipy.stats import binom, norm
 
 from benchmarks import markdown_blocks
 from tests import mutants
-from harness.evaluate.agreement import region_sums, tile_sums
-from harness.evaluate.regions import region_masks
-from harness.evaluate.registry import HIGHER_IS_BETTER
-from harness.gate.run import load_baseline, run_gate
-from harness.store.references import load_reference
-from harness.scenes.library import resolve_scene
-from harness.adapters.api import default_threads
+from cornell_harness.evaluate.agreement import region_sums, tile_sums
+from cornell_harness.evaluate.regions import region_masks
+from cornell_harness.evaluate.registry import HIGHER_IS_BETTER
+from cornell_harness.gate.run import load_baseline, run_gate
+from cornell_harness.store.references import load_reference
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.adapters.api import default_threads
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -100,7 +100,7 @@ def _tests(label: str, mut_image, clean_image, clean_var, ref, tile: int, masks:
 
 
 def _mu(d: np.ndarray, var: np.ndarray) -> np.ndarray:
-    """|d|/√var; 0 where both are 0, inf where only the variance is (as harness.evaluate.agreement does)."""
+    """|d|/√var; 0 where both are 0, inf where only the variance is (as cornell_harness.evaluate.agreement does)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         mu = np.abs(d) / np.sqrt(var)
     mu[(var <= 0) & (d == 0)] = 0.0

@@ -1,15 +1,15 @@
 """Irradiance probes (DDGI): error against time, the equal-time crossover with the path tracer, the heuristics' bias.
 
 Three measurements on ``cornell-box``, each printed as markdown tables (docs/irradiance-probes.md explains them),
-all from :func:`harness.workflows.converge.run_experiment` called in-process (the code ``cbox converge`` runs;
-sweeps built by :func:`harness.adapters.registry.sweep`, as ``--sweep`` does), then
-:func:`harness.evaluate.summary.summary_table` (the ``summary.parquet`` ``cbox converge`` writes, with the
+all from :func:`cornell_harness.workflows.converge.run_experiment` called in-process (the code ``cbox converge`` runs;
+sweeps built by :func:`cornell_harness.adapters.registry.sweep`, as ``--sweep`` does), then
+:func:`cornell_harness.evaluate.summary.summary_table` (the ``summary.parquet`` ``cbox converge`` writes, with the
 bias²/variance split per region; ``cbox report OUT/probes`` adds the HTML report):
 
 1. **Error against time and spp** for ``probes`` at grid 4, 6, 8, 12 (rays 256), rays_per_probe 64, 256, 1024
    (grid 8) and iterations 0, 16, 48, spp 1, 2, 4, ..., ``--max-spp``, seeds 0 .. ``--seeds``-1: per configuration
    the probe updates' time, ΔE2000 mean at 1, 16 and max spp, where it plateaus (the spp at which ΔE mean is within
-   10% of its max-spp value, per seed, median: :func:`harness.evaluate.convergence.time_to_target` with spp as the
+   10% of its max-spp value, per seed, median: :func:`cornell_harness.evaluate.convergence.time_to_target` with spp as the
    clock), the log-log slope of ΔE mean over the last two octaves (0: a plateau), ΔE of the seeds' mean image (half
    the camera and probe noise), the signed error of the mean radiance, and bias² and variance in the walls and boxes
    (the summary's per-region split: what no spp removes, and the seed-to-seed noise of camera and probes).
@@ -26,7 +26,7 @@ bias²/variance split per region; ``cbox report OUT/probes`` adds the HTML repor
 
 Figures (``--images``, default docs/images): ``probes-{grid,rays,iterations}.svg`` (ΔE mean against time, with the
 path tracer), ``probes-spp.svg`` (against spp), ``probes-equal-time.svg``, ``probes-heuristics.svg`` (bias² per
-region): the harness's own charts (:mod:`reports.plots`), made standalone on a white page; ``probes-bias.png``
+region): the harness's own charts (:mod:`cornell_harness.reports.plots`), made standalone on a white page; ``probes-bias.png``
 (where the bias sits) and ``probes-leak.png`` (two-rooms, visibility on and off).
 
 Results are cached in ``--out`` (the experiments' parquet cells and EXR images): running the command again renders
@@ -60,20 +60,20 @@ from scipy.ndimage import gaussian_filter
 
 import markdown_blocks
 from markdown_blocks import bold, minus
-from harness.adapters.registry import resolve, sweep
-from harness.adapters.settings import parse_sweep
-from harness.evaluate import metrics
-from harness.evaluate.convergence import slope_over_seeds, time_to_target
-from harness.evaluate.regions import region_masks
-from harness.scenes.library import resolve_scene
-from harness.store.atomic import atomic_path
-from harness.store.experiments import SUMMARY_FILE, cell_name, final_images
-from harness.store.exr import read_exr
-from harness.store.references import load_reference
-from harness.evaluate.summary import summary_table
-from harness.workflows.converge import parse_spp_list, run_experiment
-from reports.charts import convergence_table
-from reports.plots import BarGroup, Series, bars_svg, line_plot_svg
+from cornell_harness.adapters.registry import resolve, sweep
+from cornell_harness.adapters.settings import parse_sweep
+from cornell_harness.evaluate import metrics
+from cornell_harness.evaluate.convergence import slope_over_seeds, time_to_target
+from cornell_harness.evaluate.regions import region_masks
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.atomic import atomic_path
+from cornell_harness.store.experiments import SUMMARY_FILE, cell_name, final_images
+from cornell_harness.store.exr import read_exr
+from cornell_harness.store.references import load_reference
+from cornell_harness.evaluate.summary import summary_table
+from cornell_harness.workflows.converge import parse_spp_list, run_experiment
+from cornell_harness.reports.charts import convergence_table
+from cornell_harness.reports.plots import BarGroup, Series, bars_svg, line_plot_svg
 
 SCENE = "cornell-box"
 LEAK_SCENE, LEAK_SPP = "two-rooms", 64

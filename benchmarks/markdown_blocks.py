@@ -21,7 +21,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from harness.store.atomic import write_text_atomic
+from cornell_harness.store.atomic import write_text_atomic
 
 ROOT = Path(__file__).resolve().parents[1]
 NAME = r"[\w.#/-]+"

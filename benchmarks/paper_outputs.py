@@ -42,7 +42,7 @@ FIGURE_DPI = 110
 def markdown_table(summary_csv: Path, summary: pd.DataFrame) -> list[str]:
     """The readable summary's decisive columns (those of ``summary.tex``, but a column no renderer has a value
     in), each value with its 95% interval."""
-    from reports.summary_columns import decisive_columns, spec
+    from cornell_harness.reports.summary_columns import decisive_columns, spec
 
     readable = pd.read_csv(summary_csv)
     headers = [spec(k).text for k in decisive_columns(list(summary.columns))]
@@ -67,7 +67,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     command = markdown_blocks.command_line([sys.argv[0]] + list(sys.argv[1:] if argv is None else argv))
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "harness", *COMMAND, "--out", str(args.out), "--quiet"], check=True, cwd=ROOT)
+    subprocess.run([sys.executable, "-m", "cornell_harness", *COMMAND, "--out", str(args.out), "--quiet"], check=True, cwd=ROOT)
     took = time.perf_counter() - t0
     out = (ROOT / args.out) if not args.out.is_absolute() else args.out
 

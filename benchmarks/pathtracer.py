@@ -46,23 +46,23 @@ import pandas as pd
 
 import markdown_blocks
 
-from harness.evaluate import metrics
-from harness.evaluate.convergence import time_to_target
-from harness.scenes.library import resolve_scene
-from harness.scenes.model import Scene, triangle_arrays
-from harness.store.references import load_reference
-from renderers import pathtracer
-from renderers.core.adapter import warmed_geometry
-from renderers.core.camera import camera_basis, camera_rays
-from renderers.core.embree import closest_triangles, segments_clear
-from renderers.core.geometry import Hits
-from renderers.core.rays import add_unoccluded, wavefront
-from renderers.core.roulette import RR_DEPTH
-from renderers.core.sampler import SAMPLER_SETTING, SAMPLERS, independent, pass_stream
-from harness.adapters.api import default_threads
-from harness.cli.allocator import keep_freed_memory
-from renderers.mitsuba3 import Mitsuba3, scene_dict
-from renderers.pathtracer import PathTracer, trace_paths
+from cornell_harness.evaluate import metrics
+from cornell_harness.evaluate.convergence import time_to_target
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.model import Scene, triangle_arrays
+from cornell_harness.store.references import load_reference
+from cornell_harness.renderers import pathtracer
+from cornell_harness.renderers.core.adapter import warmed_geometry
+from cornell_harness.renderers.core.camera import camera_basis, camera_rays
+from cornell_harness.renderers.core.embree import closest_triangles, segments_clear
+from cornell_harness.renderers.core.geometry import Hits
+from cornell_harness.renderers.core.rays import add_unoccluded, wavefront
+from cornell_harness.renderers.core.roulette import RR_DEPTH
+from cornell_harness.renderers.core.sampler import SAMPLER_SETTING, SAMPLERS, independent, pass_stream
+from cornell_harness.adapters.api import default_threads
+from cornell_harness.cli.allocator import keep_freed_memory
+from cornell_harness.renderers.mitsuba3 import Mitsuba3, scene_dict
+from cornell_harness.renderers.pathtracer import PathTracer, trace_paths
 
 RAW_BATCH = 1 << 17  # rays per embreex call in (a): large, its best case
 MITSUBA_SAMPLERS = ("independent", "multijitter", "ldsampler")
@@ -116,7 +116,7 @@ def ours(scene: Scene, spp: int, repeats: int, sampler: str) -> dict:
 
 
 def time_per_path(scene: Scene, sampler: str, units: int) -> dict:
-    """Where one thread's time per path goes (ns): the whole bounce loop (:func:`renderers.pathtracer.trace_paths`,
+    """Where one thread's time per path goes (ns): the whole bounce loop (:func:`cornell_harness.renderers.pathtracer.trace_paths`,
     one work unit of 2^15 paths at a time), and Embree's queries alone, timed in :func:`_replay_queries`. The rest
     is shading, sampling and the buffers. Medians over ``units`` consecutive units of one pass."""
     cam = scene.camera
@@ -137,7 +137,7 @@ def time_per_path(scene: Scene, sampler: str, units: int) -> dict:
 
 def _replay_queries(geom, scene: Scene, first: int, m: int, pixels: int, stream) -> tuple[np.ndarray, float]:
     """The estimates of paths ``first .. first + m - 1`` and the seconds spent in Embree's queries: a Python copy
-    of :func:`renderers.pathtracer._trace`'s loop (no spheres) that calls the same kernels, bounce by bounce, and
+    of :func:`cornell_harness.renderers.pathtracer._trace`'s loop (no spheres) that calls the same kernels, bounce by bounce, and
     times the two queries (called with plain arrays: their call costs ~1 µs). :func:`time_per_path` checks that
     it gives the kernel's estimates bit for bit."""
     assert not geom.has_spheres
@@ -292,7 +292,7 @@ def main() -> None:
     ap.add_argument("--markdown", type=Path, action="append", default=[],
                     help="write the parts run into this file's blocks pathtracer.py#... (repeatable)")
     args = ap.parse_args()
-    keep_freed_memory()  # as every cbox command runs (harness.cli.allocator): ours measured as users run it
+    keep_freed_memory()  # as every cbox command runs (cornell_harness.cli.allocator): ours measured as users run it
     base = resolve_scene(args.scene)
     threads = default_threads()
     parts = set(args.parts.split(","))

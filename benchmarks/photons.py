@@ -11,10 +11,10 @@ not single times):
    a k = 30 nearest-neighbour query (the photon mapper's default) per
    point; and the issue's target, 1 M photons traced and indexed in ≤ 2 s.
 3. **Time to error**: ``pathtracer``, ``photonmap`` and ``sppm`` through the
-   harness's convergence workflow (:func:`harness.workflows.converge.run_experiment`,
+   harness's convergence workflow (:func:`cornell_harness.workflows.converge.run_experiment`,
    what ``cbox converge`` runs; resumable in ``--out``), and the median
    time over seeds at which each reaches a caustic-region relMSE of 0.05 and
-   0.01 and an image-wide ΔE mean of 2 (:func:`harness.evaluate.convergence.time_to_target`).
+   0.01 and an image-wide ΔE mean of 2 (:func:`cornell_harness.evaluate.convergence.time_to_target`).
    photonmap's budget is its photon counts as well as spp (its error stops
    falling with spp at its bias): it runs at spp 1..64 for 250k and 1M
    stored photons per map; SPPM also from a larger initial radius, with 1
@@ -38,16 +38,16 @@ from scipy.spatial import cKDTree
 
 import markdown_blocks
 
-from harness.adapters.registry import resolve
-from harness.adapters.seeds import pass_key
-from harness.evaluate.convergence import time_to_target
-from harness.scenes.library import resolve_scene
-from harness.store.references import load_reference
-from harness.workflows.converge import parse_spp_list, run_experiment
-from renderers.core.geometry import SceneGeometry
-from renderers.core.photons import STORE_ALL, shoot
-from harness.adapters.api import default_threads
-from renderers.pathtracer import PathTracer
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.adapters.seeds import pass_key
+from cornell_harness.evaluate.convergence import time_to_target
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
+from cornell_harness.workflows.converge import parse_spp_list, run_experiment
+from cornell_harness.renderers.core.geometry import SceneGeometry
+from cornell_harness.renderers.core.photons import STORE_ALL, shoot
+from cornell_harness.adapters.api import default_threads
+from cornell_harness.renderers.pathtracer import PathTracer
 
 TARGETS = (("region.caustic.rel_mse", 0.05), ("region.caustic.rel_mse", 0.01), ("delta_e2000_mean", 2.0))
 METRIC_LABELS = {"region.caustic.rel_mse": "caustic relMSE", "delta_e2000_mean": "ΔE mean"}

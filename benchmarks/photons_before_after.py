@@ -4,13 +4,13 @@
 by default the script makes one of commit :data:`BEFORE_COMMIT` in
 ``out/photons-before`` with ``git worktree add --detach``), "after" this tree. Each (version,
 renderer, seed) cell runs in a child process with that tree first on
-``PYTHONPATH`` (the same venv, the same harness: only ``renderers/``
+``PYTHONPATH`` (the same venv, the same harness: only ``src/cornell_harness/renderers/``
 differs) through the convergence workflow
-(:func:`harness.workflows.converge.run_experiment`, what ``cbox converge``
+(:func:`cornell_harness.workflows.converge.run_experiment`, what ``cbox converge``
 runs; resumable in ``--out``), the versions interleaved seed by seed so
 that both see the same machine load. The table is the median over seeds of
 the time at which each first reaches a caustic-region relMSE of 0.05 and
-0.01 (:func:`harness.evaluate.convergence.time_to_target`), in CPU time
+0.01 (:func:`cornell_harness.evaluate.convergence.time_to_target`), in CPU time
 (the work: what other processes on a shared machine move least), wall time,
 and spp (SPPM's iterations: what no load moves), each with after / before. What changed: SPPM's initial radius (pixel footprints at each
 visible point instead of at the scene's centre) and where photons are
@@ -44,14 +44,18 @@ RUNS = {"sppm": "1,2,4,...,128", "photonmap": "1,2,4,...,64"}
 
 
 def cell(tree: Path, renderer: str, spp: str, seed: int, out: Path) -> None:
-    """Run in the child: one renderer, one seed, from ``tree``'s renderers (first on sys.path)."""
-    from harness.adapters.registry import resolve
-    from harness.scenes.library import resolve_scene
-    from harness.store.references import load_reference
-    from harness.workflows.converge import parse_spp_list, run_experiment
-    import renderers
+    """Run in the child: one renderer, one seed, from ``tree``'s package (first on sys.path). The "before" commit
+    predates the one-package layout: its modules are ``harness.*`` and ``renderers``."""
+    import importlib
 
-    assert Path(renderers.__file__).resolve().is_relative_to(tree.resolve()), renderers.__file__
+    top, renderers = ("cornell_harness", "cornell_harness.renderers") if (tree / "src").is_dir() else ("harness", "renderers")
+    resolve = importlib.import_module(f"{top}.adapters.registry").resolve
+    resolve_scene = importlib.import_module(f"{top}.scenes.library").resolve_scene
+    load_reference = importlib.import_module(f"{top}.store.references").load_reference
+    converge = importlib.import_module(f"{top}.workflows.converge")
+    parse_spp_list, run_experiment = converge.parse_spp_list, converge.run_experiment
+    package = importlib.import_module(renderers)
+    assert Path(package.__file__).resolve().is_relative_to(tree.resolve()), package.__file__
     scene = resolve_scene("cornell-box-caustics")
     table = run_experiment(out, scene, load_reference(scene), resolve([renderer]), parse_spp_list(spp), [seed])
     table.to_csv(out / "table.csv", index=False)
@@ -77,7 +81,7 @@ def main() -> None:
         tree, renderer, spp, seed, out = args.cell
         cell(Path(tree), renderer, spp, int(seed), Path(out))
         return
-    from harness.evaluate.convergence import time_to_target
+    from cornell_harness.evaluate.convergence import time_to_target
 
     before = args.before or HERE / "out" / "photons-before"
     if args.before is None and not before.exists():
@@ -90,7 +94,8 @@ def main() -> None:
                 out = (args.out / f"{version}-{renderer}-seed{seed}").resolve()
                 if not (out / "table.csv").exists():
                     print(f"{version} {renderer} seed {seed} ...", flush=True)
-                    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tree), str(HERE / "benchmarks")]))
+                    code = tree / "src" if (tree / "src").is_dir() else tree
+                    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(code), str(HERE / "benchmarks")]))
                     subprocess.run([sys.executable, str(Path(__file__).resolve()), "--cell", str(tree), renderer, spp,
                                     str(seed), str(out)], env=env, check=True, cwd=tree)
                 tables.setdefault((version, renderer), []).append(pd.read_csv(out / "table.csv"))

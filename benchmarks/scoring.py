@@ -1,8 +1,8 @@
 """The cost of scoring one results row (issue 34: ≤ 0.15 s at 256² with every metric, FLIP included; ΔE00 at
 1024² ≤ 0.2 s).
 
-A row is what :func:`harness.workflows.runner.score` and :func:`~harness.workflows.runner.score_regions` compute
-for each (renderer, spp, seed) of a sweep: every image metric (:func:`harness.evaluate.metrics.image_metrics`,
+A row is what :func:`cornell_harness.workflows.runner.score` and :func:`~cornell_harness.workflows.runner.score_regions` compute
+for each (renderer, spp, seed) of a sweep: every image metric (:func:`cornell_harness.evaluate.metrics.image_metrics`,
 FLIP included), the noise yardsticks and the named regions' metrics. The test image is the reference's stored
 independent noise batch (a real 128-spp render of ``cornell-box``, 256²), scored against the stored reference as
 a sweep scores its rows: the same reference object for every row, a new test image array each time.
@@ -17,7 +17,7 @@ targets are judged on the CPU time: on a machine that others load, wall time cou
 ``flip_mean (flip-evaluator 1.7)`` is the authors' library on the same images and exposures; the two "as
 before" items are the row and the 1024² ΔE00 map computed as the harness did before (FLIP's map by that
 library, ΔE00 in one pass over the image): the ratios come from one run. ΔE00 at 1024² is
-:func:`harness.evaluate.ciede2000.delta_e2000_linear` on the image and reference upsampled 4× (nearest).
+:func:`cornell_harness.evaluate.ciede2000.delta_e2000_linear` on the image and reference upsampled 4× (nearest).
 
 ``--markdown FILE`` writes the table into the file's block ``scoring.py#cost`` (``benchmarks/markdown_blocks.py``).
 
@@ -36,11 +36,11 @@ from pathlib import Path
 import numpy as np
 
 import markdown_blocks
-from harness.evaluate import ciede2000, flip, metrics, regions
-from harness.evaluate import noise as yardsticks
-from harness.scenes.library import resolve_scene
-from harness.store.references import load_reference
-from harness.workflows import runner
+from cornell_harness.evaluate import ciede2000, flip, metrics, regions
+from cornell_harness.evaluate import noise as yardsticks
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
+from cornell_harness.workflows import runner
 
 BLOCK = "scoring.py#cost"
 ROW_TARGET_S, DELTA_E_1024_TARGET_S = 0.15, 0.2

@@ -1,15 +1,15 @@
 """RGB rendering of the real Cornell box: ΔE00 per region between RGB and spectral rendering, with the noise floor.
 
 The scene is ``cornell-box-measured`` (Cornell's measured spectra); the spectral side is its stored reference
-(Mitsuba 3's spectral variant, ``harness/references/cornell-box-measured``). The RGB side is Mitsuba 3's RGB
+(Mitsuba 3's spectral variant, ``src/cornell_harness/references/cornell-box-measured``). The RGB side is Mitsuba 3's RGB
 variant (``mitsuba[spectral=rgb]``) on the scene's RGB projection, under each convention of
-:data:`harness.scenes.spectra.RGB_CONVENTIONS`: ``illuminant_E`` (reflectance under the equal-energy
+:data:`cornell_harness.scenes.spectra.RGB_CONVENTIONS`: ``illuminant_E`` (reflectance under the equal-energy
 illuminant, ``mi.cornell_box()``'s values) and ``scene_light`` (white-balanced to the scene's own light; the
 scene's default), the first a derived scene (``--set colour.rgb_convention=illuminant_E``). Both use the same
 emission rule, so the light seen directly is the same colour in all three images.
 
 Figures, per named region of the scene and the whole image, against the reference, at one exposure (the
-reference's, :func:`harness.evaluate.metrics.exposure_scale`):
+reference's, :func:`cornell_harness.evaluate.metrics.exposure_scale`):
 
 - *mean ΔE00*: the mean over the region's pixels of the per-pixel CIEDE2000;
 - *ΔE00 of the mean*: the CIEDE2000 between the region's mean colours, the systematic colour shift with the
@@ -39,14 +39,14 @@ import numpy as np
 
 import markdown_blocks
 
-from harness.evaluate import metrics
-from harness.evaluate.ciede2000 import delta_e2000_linear
-from harness.evaluate.regions import region_masks
-from harness.scenes.library import resolve_scene
-from harness.scenes.overrides import load_derived_scene
-from harness.scenes.spectra import ILLUMINANT_E, SCENE_LIGHT
-from harness.store.references import load_reference
-from renderers.mitsuba3 import Mitsuba3
+from cornell_harness.evaluate import metrics
+from cornell_harness.evaluate.ciede2000 import delta_e2000_linear
+from cornell_harness.evaluate.regions import region_masks
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.overrides import load_derived_scene
+from cornell_harness.scenes.spectra import ILLUMINANT_E, SCENE_LIGHT
+from cornell_harness.store.references import load_reference
+from cornell_harness.renderers.mitsuba3 import Mitsuba3
 
 SCENE = "cornell-box-measured"
 FIGURE = Path("docs/images/spectral-delta-e.png")
@@ -87,7 +87,7 @@ def write_figure(path: Path, rows: list[tuple[str, tuple[float, float], list[tup
     """Rows of ΔE00 maps side by side, each panel titled, each row on its own viridis scale with its colour bar."""
     from PIL import Image, ImageDraw
 
-    from reports.images import apply_colormap
+    from cornell_harness.reports.images import apply_colormap
 
     h, w = rows[0][2][0][1].shape
     pad, title, bar = 8, 14, 22

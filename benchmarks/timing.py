@@ -1,7 +1,7 @@
 """Wall time against CPU time under load (issue 30): when ``--time-basis cpu`` is the better choice, measured.
 
 Two renderers (``pathtracer`` and ``mitsuba`` by default) render ``cornell-box`` at a fixed spp through the
-harness's one render path (:func:`harness.workflows.runner.run_one`, which records ``time_s``,
+harness's one render path (:func:`cornell_harness.workflows.runner.run_one`, which records ``time_s``,
 ``cpu_time_s``, the load and the calibration kernel), interleaved A B A B for ``--rounds`` rounds, under
 each condition in turn:
 
@@ -31,9 +31,9 @@ from pathlib import Path
 import numpy as np
 
 import markdown_blocks
-from harness.adapters.registry import resolve
-from harness.scenes.library import resolve_scene
-from harness.workflows import runner
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.workflows import runner
 
 BLOCK = "timing.py#load"
 BURNER = "while 1: pass"
@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
         runner.run_one(e, scene, 1, 0, None)
     t0 = time.perf_counter()
     results = {int(n): measure(entries, scene, args.spp, args.rounds, int(n)) for n in args.burners.split(",")}
-    from harness.adapters.api import machine_cores
+    from cornell_harness.adapters.api import machine_cores
 
     lines = table(results, names, machine_cores())
     took = time.perf_counter() - t0

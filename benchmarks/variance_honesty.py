@@ -18,7 +18,7 @@ replaces only their rows of the table, saying so under it.
     reference here uses; the reference's variance of a block mean is the
     block's sum over k⁴). The renderer's variance is then used as reported
     (F = 1: false alarms) and divided by 2 and 4 and multiplied by 4 (power),
-    through :func:`harness.evaluate.variance_check.variance_check` at the
+    through :func:`cornell_harness.evaluate.variance_check.variance_check` at the
     gate's level (the Šidák share of ``alpha``).
 (2) ``ao`` on ``cornell-box-ao`` at the gate's 64 spp and full resolution,
     seeds ``0 .. ao-seeds-1``: z = (render − reference)/√(reported + reference
@@ -48,12 +48,12 @@ import numpy as np
 from scipy.stats import chi2
 
 from benchmarks import markdown_blocks
-from harness.adapters.registry import resolve
-from harness.evaluate.variance_check import variance_check
-from harness.gate.checks import statistical_alpha
-from harness.gate.config import load_config
-from harness.scenes.library import resolve_scene
-from harness.store.references import load_reference
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.evaluate.variance_check import variance_check
+from cornell_harness.gate.checks import statistical_alpha
+from cornell_harness.gate.config import load_config
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
 
 ROOT = Path(__file__).resolve().parent.parent
 BLOCK = "variance_honesty.py"

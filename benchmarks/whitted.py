@@ -3,9 +3,9 @@ region, and what soft shadows cost. Writes docs/whitted.md whole and its figure 
 
 1. **The table.** On ``cornell-box`` and ``cornell-box-caustics``, at equal time: every renderer gets
    ``--budget`` seconds (wall), its spp chosen from calibration renders as ``cbox compare --time-budget``
-   chooses it (:func:`harness.workflows.compare.calibrate_time_budget`, seed 0), then renders ``--seeds``
-   seeds (:func:`harness.workflows.runner.run_one`). Per region (the scene's own and the study's,
-   :mod:`harness.evaluate.missing_light`): the share of the reference's light missing and the bias of the
+   chooses it (:func:`cornell_harness.workflows.compare.calibrate_time_budget`, seed 0), then renders ``--seeds``
+   seeds (:func:`cornell_harness.workflows.runner.run_one`). Per region (the scene's own and the study's,
+   :mod:`cornell_harness.evaluate.missing_light`): the share of the reference's light missing and the bias of the
    region's mean radiance, each ± its standard error *over seeds* (with the reference's own error), and the
    mean ΔE00 over seeds. Columns: ``whitted`` with each ``transparent_shadows`` mode at ``ambient=none`` (so
    that the shadow rule's light is all there is) and each ``ambient`` mode at ``transparent_shadows=attenuate``
@@ -31,15 +31,15 @@ import pandas as pd
 
 import markdown_blocks
 from irradiance_probes import write_svg
-from harness.adapters.registry import resolve
-from harness.evaluate import metrics
-from harness.evaluate.convergence import time_to_target
-from harness.evaluate.missing_light import region_table, study_columns, study_masks
-from harness.evaluate.regions import region_noise
-from harness.scenes.library import resolve_scene
-from harness.store.references import load_reference
-from harness.workflows import compare, runner
-from reports.plots import PALETTE, Series, line_plot_svg
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.evaluate import metrics
+from cornell_harness.evaluate.convergence import time_to_target
+from cornell_harness.evaluate.missing_light import region_table, study_columns, study_masks
+from cornell_harness.evaluate.regions import region_noise
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
+from cornell_harness.workflows import compare, runner
+from cornell_harness.reports.plots import PALETTE, Series, line_plot_svg
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The Whitted renderer's spec: its entry point where installed, else its class (an older editable install).
@@ -283,7 +283,7 @@ def main() -> None:
 
 PAGE = """# Recursive ray tracing and its hacks, measured
 
-Issue 32: `whitted` (`renderers/whitted.py`) is recursive ray tracing as the lecture argues against it: perfect
+Issue 32: `whitted` (`src/cornell_harness/renderers/whitted.py`) is recursive ray tracing as the lecture argues against it: perfect
 mirror and glass recursion with Fresnel to `max_depth`, direct light from the area light by `light_samples`
 shadow rays per hit, no diffuse interreflection, and an ambient term (`none`, `constant`, `ao`). A shadow ray
 that meets glass follows `transparent_shadows`: `boolean` (blocked), `attenuate` (Pierce's shadow attenuation:
@@ -304,11 +304,11 @@ region is the rule's alone; its ambient terms with the default rule, `attenuate`
   added), from the results rows' `region.<name>.mean_radiance_rel_error`;
 - **bias of the mean**: mean(renderer) − mean(reference), radiance;
 - each ± one standard error **over the seeds** (their spread, plus the reference's own error from its
-  per-pixel variance; `harness/evaluate/missing_light.py`); a renderer whose image does not change with the
+  per-pixel variance; `src/cornell_harness/evaluate/missing_light.py`); a renderer whose image does not change with the
   seed has only the reference's;
 - **ΔE00 mean**: the region's mean CIEDE2000 (`region.<name>.delta_e2000_mean`), mean over seeds.
 
-Regions are the scenes' own, plus the study's (`harness/evaluate/missing_light.py`, not written into the
+Regions are the scenes' own, plus the study's (`src/cornell_harness/evaluate/missing_light.py`, not written into the
 scene files, whose region lists other tests and the gate pin; regions are not in the content hash): on
 `cornell-box-caustics` `floor` and `back-edge` (as on `cornell-box`), and on `cornell-box` `penumbra`, the floor
 pixels whose centre sees more than 5% and less than 95% of the light's area: the boxes' soft shadow edges.

@@ -2,7 +2,7 @@
 
 ``scripts/setup.sh`` runs this once after installing, so that the first ``cbox demo`` (or render) does not
 spend its first minute compiling: on this 2-core machine the demo took 3:42 with cold caches and 2:50 with
-warm ones (BENCHMARKS.md, issue 34). Each of our renderers (:class:`renderers.core.adapter.ToolkitRenderer`,
+warm ones (BENCHMARKS.md, issue 34). Each of our renderers (:class:`cornell_harness.renderers.core.adapter.ToolkitRenderer`,
 found through the ``cbox.renderers`` entry points) renders each demo scene it can model at 8×8, 2 spp with
 checkpoints (numba compiles per argument type, not per size), and HDR-FLIP scores one tiny image. A renderer
 that is unavailable or fails is reported on one line and skipped: compiling is an optimisation, never a reason
@@ -16,11 +16,11 @@ import time
 
 import numpy as np
 
-from harness.adapters.registry import discover, missing_features
-from harness.cli.run import DEMO_SCENES
-from harness.evaluate.flip import flip_map
-from harness.scenes.library import resolve_scene
-from renderers.core.adapter import ToolkitRenderer
+from cornell_harness.adapters.registry import discover, missing_features
+from cornell_harness.cli.run import DEMO_SCENES
+from cornell_harness.evaluate.flip import flip_map
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.renderers.core.adapter import ToolkitRenderer
 
 
 def main() -> int:

@@ -1,11 +1,11 @@
-"""Write harness/references/cornell-box/scene.toml from Mitsuba 3's ``mi.cornell_box()``.
+"""Write src/cornell_harness/references/cornell-box/scene.toml from Mitsuba 3's ``mi.cornell_box()``.
 
 Geometry, materials, light and camera are taken from Mitsuba's own scene
 dictionary, so the file can be cross-checked against Mitsuba directly. Two
 settings differ on purpose (see the header this writes): a box pixel filter and
 unbounded ``max_depth``. Run it only to regenerate the file:
 
-    python scripts/make_cornell_box.py > harness/references/cornell-box/scene.toml
+    python scripts/make_cornell_box.py > src/cornell_harness/references/cornell-box/scene.toml
 """
 
 import mitsuba as mi
@@ -88,7 +88,7 @@ def main() -> None:
 
 #: The named regions of the stored scene (not part of its content hash).
 REGIONS = [
-    "# Named image regions, for per-region metrics (harness/evaluate/regions.py): a pixel belongs to a",
+    "# Named image regions, for per-region metrics (src/cornell_harness/evaluate/regions.py): a pixel belongs to a",
     "# region when every camera ray through it first hits one of the region's objects. Regions do not",
     "# change the image, so they are not part of the scene's content hash (the reference stays valid).",
     "[regions.walls]", 'objects = ["back", "red-wall", "green-wall"]',

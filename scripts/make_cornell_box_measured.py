@@ -1,10 +1,10 @@
-"""Write harness/references/cornell-box-measured/scene.toml from Cornell's measured box data.
+"""Write src/cornell_harness/references/cornell-box-measured/scene.toml from Cornell's measured box data.
 
-The data are ``harness/scenes/data/cornell-pcg.json`` (Cornell Program of Computer
+The data are ``src/cornell_harness/scenes/data/cornell-pcg.json`` (Cornell Program of Computer
 Graphics, "Cornell Box Data"): geometry in millimetres, the camera, the measured
 reflectance spectra of the white, green and red surfaces and the light's emission
 spectrum. The scene keeps the published numbers: lengths in mm with
-``length_scale = 0.001`` (:mod:`harness.scenes.units`), spectra as sampled.
+``length_scale = 0.001`` (:mod:`cornell_harness.scenes.units`), spectra as sampled.
 
 What this script decides, and the header it writes says:
 - every quad is wound so that its front side (our convention: counter-clockwise seen
@@ -17,7 +17,7 @@ What this script decides, and the header it writes says:
 
 Run it only to regenerate the file:
 
-    python scripts/make_cornell_box_measured.py > harness/references/cornell-box-measured/scene.toml
+    python scripts/make_cornell_box_measured.py > src/cornell_harness/references/cornell-box-measured/scene.toml
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-DATA = Path(__file__).resolve().parents[1] / "harness" / "scenes" / "data" / "cornell-pcg.json"
+DATA = Path(__file__).resolve().parents[1] / "src" / "cornell_harness" / "scenes" / "data" / "cornell-pcg.json"
 #: The box's interior, for orienting the walls' normals inwards (mm).
 INSIDE = np.array([278.0, 274.4, 279.6])
 #: How far from a coloured wall (mm) the colour-bleeding strips reach.
@@ -105,7 +105,7 @@ def main() -> None:
     position = np.array(cam["position"], dtype=np.float64)
     out = [
         "# The real Cornell box: Cornell's measured geometry (mm), camera and spectra, from",
-        "# harness/scenes/data/cornell-pcg.json (Cornell University Program of Computer Graphics,",
+        "# src/cornell_harness/scenes/data/cornell-pcg.json (Cornell University Program of Computer Graphics,",
         '# "Cornell Box Data"), written by scripts/make_cornell_box_measured.py. Lengths are as',
         "# published, in mm, with length_scale = 0.001 (scene units: metres). Every quad is wound to",
         "# face into the box (out of a block); the ceiling has the light's cut-out and the light",
@@ -169,7 +169,7 @@ def regions() -> list[str]:
     red_x = 549.6  # the red wall's nearest point to the box's axis
     big = 1e4
     return [
-        "# Named image regions (harness/evaluate/regions.py); boxes in mm, like the geometry.",
+        "# Named image regions (src/cornell_harness/evaluate/regions.py); boxes in mm, like the geometry.",
         "[regions.walls]", 'objects = ["back", "red-wall", "green-wall"]',
         'description = "the back wall and the two coloured side walls"', "",
         "[regions.blocks]", 'objects = ["short-block", "tall-block"]', 'description = "both blocks, every visible face"',

@@ -77,7 +77,7 @@ if [[ $have != "$want" && $have != "${want%\[test\]}[test]" ]]; then
   # so this script prints only its own lines.
   log=.venv/.cbox-pip.log
   if ! { .venv/bin/python -m pip install -q --upgrade pip && .venv/bin/python -m pip install -q -e ".$extras"; } \
-      >"$log" 2>&1 || ! .venv/bin/python -c 'import harness.cli.app, renderers.mitsuba3' 2>>"$log"; then
+      >"$log" 2>&1 || ! .venv/bin/python -c 'import cornell_harness.cli.app, cornell_harness.renderers.mitsuba3' 2>>"$log"; then
     cat "$log" >&2
     say "installation failed (pip's output above, also in $log)"
     exit 1
@@ -88,7 +88,7 @@ fi
 # Compiled once into numba's on-disk cache (__pycache__), so that the first `cbox demo` does not spend its
 # first minute compiling (BENCHMARKS.md: the demo 3:42 cold, 2:43 after this). Again only when the sources
 # of the kernels changed; a failure here is not setup's: renders compile what they need when first used.
-kernels_want=$(cat renderers/*.py renderers/core/*.py harness/evaluate/*.py | sha256sum | cut -d' ' -f1)
+kernels_want=$(cat src/cornell_harness/renderers/*.py src/cornell_harness/renderers/core/*.py src/cornell_harness/evaluate/*.py | sha256sum | cut -d' ' -f1)
 if [[ $(cat .venv/.cbox-kernels 2>/dev/null || true) != "$kernels_want" ]]; then
   say "compiling the renderers' kernels into numba's cache (about a minute, once)"
   if .venv/bin/python scripts/compile_kernels.py 2>.venv/.cbox-kernels.log; then

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-CORNELL = ROOT / "harness" / "references" / "cornell-box" / "scene.toml"
+CORNELL = ROOT / "src" / "cornell_harness" / "references" / "cornell-box" / "scene.toml"
 
 #: One white quad lit by a small emitter, seen by a camera: every field the format has.
 MINIMAL_SCENE = """\
@@ -69,14 +69,14 @@ def run_cbox(*args: str, timeout: float = 600, env_path: Path | None = None,
     env = {**os.environ, **(env_extra or {})}
     if env_path is not None:
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(env_path), env.get("PYTHONPATH")]))
-    return subprocess.run([sys.executable, "-m", "harness", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "cornell_harness", *args], capture_output=True, text=True,
                           timeout=timeout, cwd=ROOT, env=env)
 
 
 def cbox_in_process(capsys, *args: str) -> tuple[int, str, str]:
     """``cbox ARGS`` in this process: (exit code, stdout, stderr); faster than :func:`run_cbox`, for the CLI's
     own behaviour (a fresh interpreter is for what a user's shell sees)."""
-    from harness.cli.app import main
+    from cornell_harness.cli.app import main
 
     with pytest.raises(SystemExit) as e:
         main(list(args))

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from harness.evaluate import metrics
-from harness.store.references import Reference
-from harness.scenes.loader import load_scene
+from cornell_harness.evaluate import metrics
+from cornell_harness.store.references import Reference
+from cornell_harness.scenes.loader import load_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 EVIL = '<script>alert("x")</script> & more'
@@ -32,14 +32,14 @@ RENDERERS = {
 
 
 def scene(width: int = 32, height: int = 32):
-    return load_scene(ROOT / "harness" / "references" / "cornell-box").with_resolution(width, height)
+    return load_scene(ROOT / "src" / "cornell_harness" / "references" / "cornell-box").with_resolution(width, height)
 
 
 def _stored_reference(h: int, w: int) -> np.ndarray | None:
     """The stored Cornell-box reference, box-filtered down to (h, w) when 256 is a multiple of both."""
-    from harness.store.exr import read_exr
+    from cornell_harness.store.exr import read_exr
 
-    path = ROOT / "harness" / "references" / "cornell-box" / "reference.exr"
+    path = ROOT / "src" / "cornell_harness" / "references" / "cornell-box" / "reference.exr"
     try:
         full = np.asarray(read_exr(path), dtype=np.float64)
     except Exception:
@@ -65,7 +65,7 @@ def reference(sc, spp: int = 4096) -> Reference:
             "spp": spp, "batches": 64, "batch_spp": spp // 64, "date": "2025-01-02T03:04:05+00:00",
             "scene_hash": sc.content_hash(), "seeds": list(range(1_000_000_000, 1_000_000_064)),
             "noise_spp": 64, "machine": "x86_64, 2 CPUs"}
-    return Reference(img, variance, noise, prov, ROOT / "harness" / "references" / "cornell-box")
+    return Reference(img, variance, noise, prov, ROOT / "src" / "cornell_harness" / "references" / "cornell-box")
 
 
 def render(ref: np.ndarray, name: str, spp: int, seed: int) -> np.ndarray:
@@ -84,7 +84,7 @@ def make_case(
     not_run: bool = True,
     with_summary: bool = True,
 ) -> dict:
-    """Everything :func:`reports.html.write_report` takes, plus the raw images by (name, seed, spp)."""
+    """Everything :func:`cornell_harness.reports.html.write_report` takes, plus the raw images by (name, seed, spp)."""
     sc = scene(width, height)
     ref = reference(sc)
     exposure = metrics.exposure_scale(ref.image)
@@ -151,9 +151,9 @@ def make_case(
 
 
 def write_case(path, case: dict, **overrides) -> Path:
-    """:func:`reports.html.write_report` on the case; without the figure files unless ``figures=True`` (the
+    """:func:`cornell_harness.reports.html.write_report` on the case; without the figure files unless ``figures=True`` (the
     tests of figures ask for them; converting them to PDF and PNG takes seconds)."""
-    from reports.html import write_report
+    from cornell_harness.reports.html import write_report
 
     kwargs = {k: case[k] for k in ("scene", "reference", "runs", "images", "summary", "thresholds",
                                    "provenance", "command")}

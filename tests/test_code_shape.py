@@ -1,11 +1,11 @@
 """The toolkit's shape, checked on the sources (issue 27): what a reviewer would otherwise grep for.
 
 - every numba kernel and helper of ours takes at most :data:`MAX_KERNEL_PARAMETERS` parameters (outputs and
-  inputs travel as NamedTuples of arrays, as :class:`renderers.core.rays.RayBuffer` does);
+  inputs travel as NamedTuples of arrays, as :class:`cornell_harness.renderers.core.rays.RayBuffer` does);
 - no integrator draws raw ``uniform(key, path, dim)`` numbers: every decision goes through
-  :mod:`renderers.core.sampler`, so the ``sampler`` setting means the same in each;
+  :mod:`cornell_harness.renderers.core.sampler`, so the ``sampler`` setting means the same in each;
 - light sampling towards a shading point (pbrt-v4's ``SampleLd``) is written once,
-  :func:`renderers.core.direct.sample_ld`: no other module turns an emitter sample into a shadow ray.
+  :func:`cornell_harness.renderers.core.direct.sample_ld`: no other module turns an emitter sample into a shadow ray.
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ import pytest
 
 from tests.conftest import ROOT
 
-RENDERERS = ROOT / "renderers"
+RENDERERS = ROOT / "src" / "cornell_harness" / "renderers"
 MAX_KERNEL_PARAMETERS = 10
 #: Where raw counter-based numbers may be drawn: the generator itself and the samplers built on it.
-RAW_DRAWS_ALLOWED = {"renderers/core/rng.py", "renderers/core/sampler.py", "renderers/core/sobol.py"}
+RAW_DRAWS_ALLOWED = {"src/cornell_harness/renderers/core/rng.py", "src/cornell_harness/renderers/core/sampler.py", "src/cornell_harness/renderers/core/sobol.py"}
 
 
 def sources() -> list[Path]:
@@ -52,7 +52,7 @@ def test_no_integrator_draws_raw_numbers():
     raw = {str(p.relative_to(ROOT)): lines for p in sources()
            if str(p.relative_to(ROOT)) not in RAW_DRAWS_ALLOWED
            and (lines := calls(ast.parse(p.read_text(encoding="utf-8")), "uniform"))}
-    assert raw == {}, f"draw through renderers.core.sampler (path_point, sample_1d/2d), not uniform(): {raw}"
+    assert raw == {}, f"draw through cornell_harness.renderers.core.sampler (path_point, sample_1d/2d), not uniform(): {raw}"
 
 
 def test_light_sampling_is_written_once():
@@ -62,8 +62,8 @@ def test_light_sampling_is_written_once():
                if calls(ast.parse(p.read_text(encoding="utf-8")), "towards_emitter")}
     emitters = {str(p.relative_to(ROOT)) for p in sources()
                 if calls(ast.parse(p.read_text(encoding="utf-8")), "sample_emitter")}
-    assert towards == {"renderers/core/direct.py"}
-    assert emitters == {"renderers/core/direct.py", "renderers/core/photons.py"}
+    assert towards == {"src/cornell_harness/renderers/core/direct.py"}
+    assert emitters == {"src/cornell_harness/renderers/core/direct.py", "src/cornell_harness/renderers/core/photons.py"}
 
 
 def test_the_checks_see_what_they_check(tmp_path):

@@ -163,16 +163,18 @@ def test_command_line_names_the_script_from_the_repository_root():
         ".venv/bin/python benchmarks/caustics.py --seeds 5 --markdown BENCHMARKS.md")
 
 
-#: A repository path in the docs (``harness/workflows/converge.py``, ``renderers/core/``).
-_FILE = re.compile(r"(?<![\w/.])(?:harness|renderers|reports|tests|benchmarks|scripts|docs)/[\w./*{},-]*")
+#: A repository path in the docs (``src/cornell_harness/workflows/converge.py``, ``src/cornell_harness/renderers/core/``).
+_FILE = re.compile(r"(?<![\w/.])(?:src/cornell_harness|tests|benchmarks|scripts|docs)/[\w./*{},-]*")
 
 
 def file_paths(text: str) -> list[str]:
     """The repository paths ``text`` names, globs (``probes-*``, ``{a,b}``) left out."""
     paths = (m.rstrip(".,") for m in _FILE.findall(text))
     return [p for p in paths if not set("*{}") & set(p)]
-#: A dotted name in our packages (``harness.workflows.converge.run_experiment``).
-DOTTED = re.compile(r"(?<![\w/.])((?:harness|renderers|reports)(?:\.\w+)+)")
+
+
+#: A dotted name in our packages (``cornell_harness.workflows.converge.run_experiment``).
+DOTTED = re.compile(r"(?<![\w/.])(cornell_harness(?:\.\w+)+)")
 
 
 def _names(tree) -> dict[str, ast.AST]:
@@ -192,7 +194,7 @@ def _names(tree) -> dict[str, ast.AST]:
     return out
 
 
-def missing_name(dotted: str, root: Path = ROOT) -> str | None:
+def missing_name(dotted: str, root: Path = ROOT / "src") -> str | None:
     """Why ``dotted`` names nothing in the tree (None if it does): the longest prefix that is a module or package,
     then its attribute (and a class's attribute) by the module's source."""
     parts = dotted.split(".")
@@ -222,18 +224,18 @@ def test_every_file_and_module_the_docs_name_exists(page):
 
 
 def test_a_moved_module_or_name_is_caught():
-    assert missing_name("harness.workflows.converge.run_experiment") is None
-    assert missing_name("harness.workflows.executor.DaskExecutor.run") is None
-    assert "has no 'summary'" in missing_name("harness.workflows.converge.summary")
-    assert "has no 'no_such_method'" in missing_name("harness.workflows.executor.DaskExecutor.no_such_method")
-    assert file_paths("see `harness/nothing.py`, docs/images/probes-* and docs/images/probes-{a,b}.svg.") == [
-        "harness/nothing.py"]
+    assert missing_name("cornell_harness.workflows.converge.run_experiment") is None
+    assert missing_name("cornell_harness.workflows.executor.DaskExecutor.run") is None
+    assert "has no 'summary'" in missing_name("cornell_harness.workflows.converge.summary")
+    assert "has no 'no_such_method'" in missing_name("cornell_harness.workflows.executor.DaskExecutor.no_such_method")
+    assert file_paths("see `src/cornell_harness/nothing.py`, docs/images/probes-* and docs/images/probes-{a,b}.svg.") == [
+        "src/cornell_harness/nothing.py"]
 
 
 def test_the_demos_spectral_headline_is_the_one_docs_spectral_md_measured():
-    """`cbox demo` ends with issue 33's headline (harness/cli/run.py): its three figures are those of the
+    """`cbox demo` ends with issue 33's headline (src/cornell_harness/cli/run.py): its three figures are those of the
     table benchmarks/spectral.py wrote into docs/spectral.md (whole image: illuminant_E, scene_light, floor)."""
-    from harness.cli.run import SPECTRAL_HEADLINE
+    from cornell_harness.cli.run import SPECTRAL_HEADLINE
 
     row = re.search(r"^\| whole image \| \*\*([\d.]+)\*\* \| ([\d.]+) \| ([\d.]+) \|$",
                     (ROOT / "docs" / "spectral.md").read_text(), re.M)

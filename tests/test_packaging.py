@@ -4,7 +4,7 @@ The wheel is built from this tree (``pip wheel --no-deps``) and installed
 with ``--no-deps`` into a new venv whose only view of the dependencies is a
 ``.pth`` line naming this project's venv's site-packages: a path line adds
 the folder but runs none of its ``.pth`` files, so the editable install of
-this checkout stays invisible and every ``harness``/``renderers``/``reports``
+this checkout stays invisible and every ``cornell_harness``
 import comes from the wheel. Commands run from an empty folder.
 """
 
@@ -56,10 +56,13 @@ def _clean_env(tmp: Path) -> dict:
 
 def test_wheel_carries_the_stored_scenes_references_and_templates(wheel):
     names = set(zipfile.ZipFile(wheel).namelist())
-    stored = sorted(p.relative_to(ROOT / "harness").as_posix() for p in (ROOT / "harness" / "references").glob("*/*")
-                    if p.is_file())
-    assert stored and {f"harness/{p}" for p in stored} <= names
-    assert "reports/templates/report.html.j2" in names
+    package = ROOT / "src" / "cornell_harness"
+    stored = sorted(p.relative_to(package).as_posix() for p in (package / "references").glob("*/*") if p.is_file())
+    assert stored and {f"cornell_harness/{p}" for p in stored} <= names
+    assert "cornell_harness/reports/templates/report.html.j2" in names
+    # One top-level import package: none of the generic names other distributions on PyPI use.
+    tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
+    assert tops == {"cornell_harness"}, tops
     meta = next(n for n in names if n.endswith(".dist-info/METADATA"))
     text = zipfile.ZipFile(wheel).read(meta).decode()
     assert "License-Expression: MIT" in text  # an SPDX string (PEP 639), not a TOML table
@@ -67,7 +70,7 @@ def test_wheel_carries_the_stored_scenes_references_and_templates(wheel):
 
 def test_installed_wheel_lists_scenes_and_compares_from_an_empty_folder(venv, tmp_path):
     cbox, env = venv / "bin" / "cbox", _clean_env(tmp_path)
-    where = _run([str(venv / "bin" / "python"), "-c", "import harness; print(harness.__file__)"], cwd=tmp_path,
+    where = _run([str(venv / "bin" / "python"), "-c", "import cornell_harness; print(cornell_harness.__file__)"], cwd=tmp_path,
                  env=env)
     assert where.stdout.startswith(str(venv)), where.stdout + where.stderr  # the wheel, not this checkout
     scenes = _run([str(cbox), "scenes"], cwd=tmp_path, env=env)

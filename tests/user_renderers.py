@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.adapters.api import RenderResult
-from harness.adapters.settings import Setting
+from cornell_harness.adapters.api import RenderResult
+from cornell_harness.adapters.settings import Setting
 
 ALL = frozenset({"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"})
 
@@ -138,7 +138,7 @@ class ScaledMitsubaNoise(FlatGrey):
     SCALE = 1.0
 
     def render(self, scene, spp, seed, checkpoints=()):
-        from harness.store.references import load_reference
+        from cornell_harness.store.references import load_reference
 
         ref = load_reference(scene)
         rng = np.random.default_rng(seed)
@@ -223,7 +223,7 @@ class LyingVariance(FlatGrey):
                 Setting("variance_factor", float, 100.0, "reported variance / true variance", low=1e-6, high=1e6))
 
     def render(self, scene, spp, seed, checkpoints=(), settings=None):
-        from harness.store.references import load_reference
+        from cornell_harness.store.references import load_reference
 
         ref = load_reference(scene)
         rng = np.random.default_rng(seed)
@@ -247,7 +247,7 @@ class HotPixel(FlatGrey):
                 Setting("factor", float, 2.0, "factor on that pixel", low=0.0, high=1e6))
 
     def render(self, scene, spp, seed, checkpoints=(), settings=None):
-        from harness.store.references import load_reference
+        from cornell_harness.store.references import load_reference
 
         ref = load_reference(scene)
         rng = np.random.default_rng(seed)
@@ -269,7 +269,7 @@ class ShrinkingBias(FlatGrey):
     settings = (Setting("photons", int, 100, "photons: the relative bias is 1/√photons", low=1),)
 
     def render(self, scene, spp, seed, checkpoints=(), settings=None):
-        from harness.store.references import load_reference
+        from cornell_harness.store.references import load_reference
 
         img = load_reference(scene).image * (1.0 + 1.0 / np.sqrt(settings["photons"]))
         return RenderResult(img.astype(np.float32), 0.01, spp, seed)
@@ -323,7 +323,7 @@ class SeededShrinkingBias(FlatGrey):
                 Setting("offset", float, 0.0, "a relative bias that more photons do not remove", low=-0.5, high=0.5))
 
     def render(self, scene, spp, seed, checkpoints=(), settings=None):
-        from harness.store.references import load_reference
+        from cornell_harness.store.references import load_reference
 
         shared = np.random.default_rng(seed).normal(0.0, 0.003)
         own = np.random.default_rng([seed, settings["photons"]]).normal(0.0, 0.001)

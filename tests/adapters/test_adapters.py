@@ -9,10 +9,10 @@ import pytest
 
 from tests.conftest import CORNELL, ROOT, run_cbox
 from tests.user_renderers import FlatGrey
-from harness.workflows import runner
-from harness.adapters.api import Setting, SettingsError
-from harness.adapters.registry import RendererError, discover, load_spec, resolve
-from harness.scenes.loader import load_scene
+from cornell_harness.workflows import runner
+from cornell_harness.adapters.api import Setting, SettingsError
+from cornell_harness.adapters.registry import RendererError, discover, load_spec, resolve
+from cornell_harness.scenes.loader import load_scene
 
 
 
@@ -40,7 +40,7 @@ def test_load_spec_errors(spec, words):
 
 def test_estimator_is_declared_checked_and_recorded():
     """No ``estimator``: unbiased; a declared one is recorded in every row; a bad one is refused by the accessor too."""
-    from harness.adapters.registry import ESTIMATORS, estimator_of
+    from cornell_harness.adapters.registry import ESTIMATORS, estimator_of
     from tests.user_renderers import BadEstimator, FlatGrey
 
     assert ESTIMATORS == ("unbiased", "consistent", "biased")
@@ -115,7 +115,7 @@ def test_cli_render_with_user_renderer(tmp_path):
     proc = run_cbox("render", "--scene", "cornell-box", "--renderer", "tests.user_renderers:FlatGrey",
                     "--spp", "1", "--out", str(out), env_path=ROOT)
     assert proc.returncode == 0, proc.stderr
-    from harness.store.exr import read_exr
+    from cornell_harness.store.exr import read_exr
 
     img = read_exr(out)
     assert img.shape == (256, 256, 3) and float(img.mean()) == pytest.approx(0.25)
@@ -142,10 +142,10 @@ def test_pyrender_is_skipped_on_the_caustics_scene_without_rendering():
     The entry is built as if pyrender were available (no GPU needed): the
     skip comes from the features alone, before any render is attempted.
     """
-    from harness.adapters.registry import RendererEntry, missing_features
-    from renderers.mitsuba3 import Mitsuba3
-    from renderers.pathtracer import PathTracer
-    from renderers.raster.pyrender_adapter import Pyrender
+    from cornell_harness.adapters.registry import RendererEntry, missing_features
+    from cornell_harness.renderers.mitsuba3 import Mitsuba3
+    from cornell_harness.renderers.pathtracer import PathTracer
+    from cornell_harness.renderers.raster.pyrender_adapter import Pyrender
 
     scene = load_scene(CORNELL.parent.parent / "cornell-box-caustics" / "scene.toml").with_resolution(8, 8)
     renderer = Pyrender()
@@ -178,8 +178,8 @@ class Recorder(FlatGrey):
 def test_the_render_path_hands_every_setting_validated_typed_and_defaulted():
     """However the entry was made (from a spec, or by hand with text values), the renderer gets every declared
     setting, typed, defaults filled; a bad value is refused before it renders; one declaring none gets none."""
-    from harness.adapters.registry import RendererEntry
-    from harness.workflows.render import render_checked
+    from cornell_harness.adapters.registry import RendererEntry
+    from cornell_harness.workflows.render import render_checked
 
     scene = load_scene(CORNELL).with_resolution(4, 4)
     Recorder.seen.clear()
@@ -200,7 +200,7 @@ def test_the_render_path_hands_every_setting_validated_typed_and_defaulted():
 def test_declarations_are_read_in_one_place():
     """attribute(): a declaration's default when a renderer declares nothing (or None), sequences as tuples; a
     name that is not a declaration is an error, not a silent default."""
-    from harness.adapters.api import DECLARATIONS, attribute
+    from cornell_harness.adapters.api import DECLARATIONS, attribute
 
     bare = object()
     assert {k: attribute(bare, k) for k in ("aovs", "estimator", "deterministic", "quantities", "settings",

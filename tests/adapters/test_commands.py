@@ -1,9 +1,9 @@
-"""Command-line renderers declared as data (harness/adapters/commands.py), run on fake programs.
+"""Command-line renderers declared as data (src/cornell_harness/adapters/commands.py), run on fake programs.
 
 The fake program is a Python script written into tmp_path and run with this interpreter; it writes an EXR
 whose every pixel is ``spp + seed / 1000`` (so a test sees which run made which image), and fails, hangs or
 writes the wrong size when told to. In this process the scene is exported in a fake format, this module
-(``NAME``, ``FEATURES``, ``MAPPING``, ``write``: harness.scenes.export's interface); a sandboxed render
+(``NAME``, ``FEATURES``, ``MAPPING``, ``write``: cornell_harness.scenes.export's interface); a sandboxed render
 re-reads the renderers file in a child process, where only the real formats exist.
 """
 
@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.adapters import commands, registry
-from harness.adapters.commands import CommandRenderer, RenderersFileError, read_file, spec_of
-from harness.adapters.registry import RendererError, resolve
-from harness.scenes import export
-from harness.scenes.library import resolve_scene
-from harness.scenes.model import FEATURES
-from harness.workflows import runner
+from cornell_harness.adapters import commands, registry
+from cornell_harness.adapters.commands import CommandRenderer, RenderersFileError, read_file, spec_of
+from cornell_harness.adapters.registry import RendererError, resolve
+from cornell_harness.scenes import export
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.model import FEATURES
+from cornell_harness.workflows import runner
 
 # --- the fake export format ------------------------------------------------------------------------------------
 
@@ -48,7 +48,7 @@ def fake_format(monkeypatch):
 PROGRAM = """\
 import os, sys, time
 import numpy as np
-from harness.store.exr import write_exr
+from cornell_harness.store.exr import write_exr
 
 args = dict(a.split("=", 1) for a in sys.argv[1:])
 mode = args.get("mode", "ok")
@@ -187,7 +187,7 @@ def _sandbox_format() -> str | None:
     return None
 
 
-@pytest.mark.skipif(_sandbox_format() is None, reason="no export format module yet (harness.scenes.export.*): a "
+@pytest.mark.skipif(_sandbox_format() is None, reason="no export format module yet (cornell_harness.scenes.export.*): a "
                                                       "sandboxed child must export the scene for real")
 def test_a_hanging_program_is_killed_at_the_time_limit(tmp_path, scene):
     path = renderers_file(tmp_path, "hang", scene_format=_sandbox_format())
@@ -202,10 +202,10 @@ def test_a_hanging_program_is_killed_at_the_time_limit(tmp_path, scene):
     assert not _running(int(pid))
 
 
-@pytest.mark.skipif(_sandbox_format() is None, reason="no export format module yet (harness.scenes.export.*): a "
+@pytest.mark.skipif(_sandbox_format() is None, reason="no export format module yet (cornell_harness.scenes.export.*): a "
                                                       "sandboxed child must export the scene for real")
 def test_the_programs_memory_counts_against_the_sandboxs_bound(tmp_path, scene):
-    from harness.workflows.sandbox import run_sandboxed
+    from cornell_harness.workflows.sandbox import run_sandboxed
 
     """The program holds 400 MB for 600 s: killed by the 300 MB bound before its sleep ends. The time bound
     (300 s, past any start-up under load, short of the sleep) is out of reach, so a slow start on a busy
@@ -215,7 +215,7 @@ def test_the_programs_memory_counts_against_the_sandboxs_bound(tmp_path, scene):
     assert out.ended == "memory" and out.peak_rss_mb > 300 and out.time_s < 300, (out.ended, out.message)
 
 
-@pytest.mark.skipif(_sandbox_format() is None, reason="no export format module yet (harness.scenes.export.*): a "
+@pytest.mark.skipif(_sandbox_format() is None, reason="no export format module yet (cornell_harness.scenes.export.*): a "
                                                       "sandboxed child must export the scene for real")
 def test_cpu_time_is_the_programs_own(tmp_path, scene):
     """The program burns 0.3 s of CPU: a render's cpu_time_s counts it (a child's CPU time, not this process's),
@@ -326,7 +326,7 @@ def test_declared_names_resolve_through_the_option_and_the_environment(tmp_path,
     # The spec alone names it in any process: what the sandbox and Dask workers are given.
     registry.use_renderer_files(())
     assert resolve([entry.spec])[0].name == "fake-cli"
-    from harness.workflows.cells import entry_for
+    from cornell_harness.workflows.cells import entry_for
 
     assert entry_for(entry.spec, {}).renderer.declaration == entry.renderer.declaration
 

@@ -8,10 +8,10 @@ import pandas as pd
 import pytest
 
 from tests.conftest import ROOT, run_cbox
-from harness.adapters.registry import resolve
-from harness.adapters.settings import Setting, SettingsError, label, parse_sweep, split_spec
-from harness.scenes.library import resolve_scene
-from harness.workflows import runner
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.adapters.settings import Setting, SettingsError, label, parse_sweep, split_spec
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.workflows import runner
 
 
 def test_spec_with_settings_is_split_and_validated():

@@ -2,7 +2,7 @@
 
 import pytest
 
-from harness.cli import output
+from cornell_harness.cli import output
 
 
 @pytest.fixture(autouse=True)

@@ -1,10 +1,10 @@
-"""harness.cli.allocator: glibc's thresholds raised once per process, where there is glibc."""
+"""cornell_harness.cli.allocator: glibc's thresholds raised once per process, where there is glibc."""
 
 from __future__ import annotations
 
 import platform
 
-from harness.cli.allocator import keep_freed_memory
+from cornell_harness.cli.allocator import keep_freed_memory
 
 
 def test_the_thresholds_are_set_where_there_is_glibc():

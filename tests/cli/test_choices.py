@@ -8,8 +8,8 @@ import pytest
 import typer
 from typer._click.core import Context
 
-from harness.cli.app import command_tree
-from harness.cli.choices import CHOICE_OPTIONS, canonical_choice
+from cornell_harness.cli.app import command_tree
+from cornell_harness.cli.choices import CHOICE_OPTIONS, canonical_choice
 
 
 def _options():

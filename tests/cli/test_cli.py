@@ -81,7 +81,7 @@ def test_demo_writes_report(tmp_path):
     assert summary.loc["pathtracer", "slope_rmse_spp"] < 0 and summary.loc["pathtracer", "variance"] > 0
     assert (tmp_path / "figures" / "bias-variance.svg").exists()  # the report's plots, as figures too
     # The caustics scene: its own full report, and a section of the main one that links to it.
-    # ... and the Whitted variants of the section "Recursive ray tracing and its hacks" (reports/whitted.py).
+    # ... and the Whitted variants of the section "Recursive ray tracing and its hacks" (src/cornell_harness/reports/whitted.py).
     status = dict(zip(caustics["renderer"], caustics["status"]))
     whitted = {k: v for k, v in status.items() if k == "whitted" or k.startswith("whitted[")}  # default: "whitted"
     assert {k: v for k, v in status.items() if k not in whitted} == \

@@ -1,6 +1,6 @@
 """The CLI's habits: quiet logs, one error style with did-you-mean, the strict spp grammar, --version, --json.
 
-Most run ``cbox`` in this process (:func:`harness.cli.app.main` with a list of
+Most run ``cbox`` in this process (:func:`cornell_harness.cli.app.main` with a list of
 arguments, output through capsys: not a terminal, as in CI); the log test runs
 it as a subprocess whose stderr is a pipe, as a CI runner does.
 """
@@ -17,9 +17,9 @@ import sys
 import pytest
 
 from tests.conftest import cbox_in_process as cbox, ROOT, run_cbox
-from harness.cli import common, output
-from harness.suggest import closest
-from harness.workflows.converge import parse_spp_list
+from cornell_harness.cli import common, output
+from cornell_harness.suggest import closest
+from cornell_harness.workflows.converge import parse_spp_list
 
 
 def _converge(out, *extra: str) -> list[str]:
@@ -33,7 +33,7 @@ CELL_LINE = re.compile(r"converge furnace: ([12])/2 cells, seeded-noise seed ([0
 
 
 def test_converge_log_in_ci_has_a_line_per_cell_and_no_carriage_return(tmp_path, capsys):
-    proc = subprocess.run([sys.executable, "-m", "harness", *_converge(tmp_path)], capture_output=True, cwd=ROOT,
+    proc = subprocess.run([sys.executable, "-m", "cornell_harness", *_converge(tmp_path)], capture_output=True, cwd=ROOT,
                           env=dict(os.environ, PYTHONPATH=str(ROOT)), timeout=300)
     assert proc.returncode == 0, proc.stderr.decode()[-2000:]
     assert b"\r" not in proc.stdout and b"\r" not in proc.stderr
@@ -215,7 +215,7 @@ def test_spp_grammar_refuses_saying_why(text, why):
 
 
 def test_converge_help_states_the_spp_grammar():
-    from harness.cli.experiment import SPP_HELP
+    from cornell_harness.cli.experiment import SPP_HELP
 
     assert "powers of two" in SPP_HELP and "exactly" in SPP_HELP
     for example in re.findall(r"\d[\d,.]*(?:-\d+)?", SPP_HELP.replace("1,2,...,8", "")):
@@ -242,7 +242,7 @@ def test_scenes_json_has_paths_and_nested_objects(capsys):
 
 def test_completion_answers_for_cbox():
     env = dict(os.environ, _CBOX_COMPLETE="complete_bash", COMP_WORDS="cbox conv", COMP_CWORD="1")
-    proc = subprocess.run([sys.executable, "-c", "import sys; sys.argv[0] = 'cbox'; from harness.cli.app import "
+    proc = subprocess.run([sys.executable, "-c", "import sys; sys.argv[0] = 'cbox'; from cornell_harness.cli.app import "
                            "main; main()"], capture_output=True, text=True, cwd=ROOT, env=env, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert "converge" in proc.stdout.split()

@@ -11,8 +11,8 @@ import textwrap
 import pytest
 
 from tests.conftest import cbox_in_process as cbox
-from harness.adapters import registry
-from harness.scenes import export
+from cornell_harness.adapters import registry
+from cornell_harness.scenes import export
 from tests.adapters import test_commands as fakes
 from tests.adapters.test_commands import EXAMPLES, renderers_file, runs
 
@@ -92,8 +92,8 @@ GATE = textwrap.dedent("""\
 """)
 
 
-@pytest.mark.skipif(not _has("harness.scenes.export.mitsuba"), reason="the Mitsuba XML exporter "
-                    "(harness.scenes.export.mitsuba) is not here yet")
+@pytest.mark.skipif(not _has("cornell_harness.scenes.export.mitsuba"), reason="the Mitsuba XML exporter "
+                    "(cornell_harness.scenes.export.mitsuba) is not here yet")
 @pytest.mark.parametrize("scene, tile", [
     "furnace 8".split(),
     pytest.param("cornell-box", "16", marks=pytest.mark.slow),  # gate.toml's expectation for mitsuba
@@ -108,7 +108,7 @@ def test_mitsuba_cli_passes_the_gate_that_mitsuba_passes(tmp_path, capsys, scene
 
 
 @pytest.mark.slow  # ~18 s on 2 cores, most of it the cluster's start; entry_for(spec) is tested by default
-@pytest.mark.skipif(fakes._sandbox_format() is None, reason="no export format module yet (harness.scenes.export.*): "
+@pytest.mark.skipif(fakes._sandbox_format() is None, reason="no export format module yet (cornell_harness.scenes.export.*): "
                     "a Dask worker must export the scene for real")
 def test_converge_on_dask_workers_runs_the_declared_program_by_its_spec(tmp_path, capsys):
     """The workers get the renderer's spec alone (no --renderers there): each cell a run of the program per spp."""

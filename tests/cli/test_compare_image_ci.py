@@ -10,8 +10,8 @@ import pytest
 from PIL import Image
 
 from tests.conftest import cbox_in_process as cbox, run_cbox
-from harness.store.exr import write_exr
-from harness.evaluate.ciede2000 import srgb_eotf
+from cornell_harness.store.exr import write_exr
+from cornell_harness.evaluate.ciede2000 import srgb_eotf
 
 
 @pytest.fixture(scope="module")
@@ -150,8 +150,8 @@ def test_a_check_scores_what_it_names_and_the_cheap_metrics(render16, tmp_path, 
     """With thresholds, the named metrics and the cheap ones are scored (a ΔE00 statistic brings the others
     of its map); SSIM, PSNR, the noise yardsticks and the regions only when named; --all-metrics scores every
     one. Each value is the same either way."""
-    from harness.evaluate.metrics import DELTA_E_KEYS
-    from harness.evaluate.registry import CHEAP_METRICS
+    from cornell_harness.evaluate.metrics import DELTA_E_KEYS
+    from cornell_harness.evaluate.registry import CHEAP_METRICS
 
     code, out, _ = _compare(capsys, tmp_path, render16, "--fail", "delta_e2000_mean=0.1")
     lean = json.loads(out)
@@ -175,8 +175,8 @@ def test_a_check_scores_what_it_names_and_the_cheap_metrics(render16, tmp_path, 
 def test_a_check_against_a_reference_file_reads_its_noise_files_only_when_named(render16, tmp_path, capsys):
     """A reference folder's reference.exr: its variance and noise batch are read for a noise threshold (the
     yardsticks then as against the scene), not for a check that names none; the table shows the named metric."""
-    from harness.store.references import REFERENCE_FILE, load_reference
-    from harness.scenes.library import resolve_scene
+    from cornell_harness.store.references import REFERENCE_FILE, load_reference
+    from cornell_harness.scenes.library import resolve_scene
 
     reference = load_reference(resolve_scene("cornell-box")).folder / REFERENCE_FILE
     args = ("compare-image", str(render16), "--reference", str(reference), "--out", str(tmp_path / "o"))
@@ -195,7 +195,7 @@ def test_a_check_against_a_reference_file_reads_its_noise_files_only_when_named(
 def test_a_check_writes_the_error_map_only_when_asked(render16, tmp_path, capsys):
     """Without thresholds the error map is written (and --no-error-map leaves it out); a check writes it with
     --error-map only, which also brings the ΔE00 statistics of the map."""
-    from harness.evaluate.metrics import DELTA_E_KEYS
+    from cornell_harness.evaluate.metrics import DELTA_E_KEYS
 
     written = tmp_path / "o" / "m16.delta_e.png"
     code, out, _ = _compare(capsys, tmp_path, render16, "--no-error-map")

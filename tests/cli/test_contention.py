@@ -29,8 +29,8 @@ import time
 
 import pytest
 
-from harness.adapters.api import machine_cores
-from harness.adapters.registry import resolve
+from cornell_harness.adapters.api import machine_cores
+from cornell_harness.adapters.registry import resolve
 from tests.conftest import cbox_in_process as cbox
 
 #: How far the busy CPU-time ratio may stray from the quiet one (issue 30).

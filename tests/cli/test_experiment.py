@@ -8,7 +8,7 @@ import json
 import pandas as pd
 import pytest
 
-from harness.workflows import converge
+from cornell_harness.workflows import converge
 from tests.conftest import cbox_in_process as cbox
 from tests.user_renderers import Jittery, JitteryToo
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import cbox_in_process as cbox, run_cbox
-from harness.scenes.export import FORMATS
+from cornell_harness.scenes.export import FORMATS
 
 
 @pytest.mark.parametrize("fmt, main_file", [("mitsuba", "scene.xml"), ("pbrt-v4", "scene.pbrt")])

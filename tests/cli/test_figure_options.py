@@ -8,8 +8,8 @@ import re
 
 import pytest
 
-from harness.adapters.commands import RenderersFileError, read_series_labels
-from harness.adapters.settings import SettingsError, match_series_labels, parse_series_label, series_key
+from cornell_harness.adapters.commands import RenderersFileError, read_series_labels
+from cornell_harness.adapters.settings import SettingsError, match_series_labels, parse_series_label, series_key
 from tests.conftest import ROOT, run_cbox
 
 

@@ -1,6 +1,6 @@
 """Ctrl-C (SIGINT): one line saying what was kept, exit code 130, no traceback; progress in a pipe from the start.
 
-The runs are real ``python -m harness`` processes, stderr a pipe (as in CI), held at a known point by the test
+The runs are real ``python -m cornell_harness`` processes, stderr a pipe (as in CI), held at a known point by the test
 renderer (tests/user_renderers.py CountingNoise, $CBOX_TEST_RENDER_HOLD_AFTER) or, for start-up, by an import
 hook of the test's own; the signal is sent only once the process says it is there, so no verdict rests on timing.
 """
@@ -71,7 +71,7 @@ def test_interrupted_converge_says_what_it_kept_and_the_rerun_resumes(tmp_path):
     """Held in the second cell (after two renders: one cell of spp 1 and 2), SIGINT: that cell is kept, the
     message says so, exit 130; the rerun renders only the other seeds."""
     out, log = tmp_path / "exp", tmp_path / "renders.log"
-    proc = _start([sys.executable, "-m", "harness", *_converge(out)], _env(log, CBOX_TEST_RENDER_HOLD_AFTER="2"))
+    proc = _start([sys.executable, "-m", "cornell_harness", *_converge(out)], _env(log, CBOX_TEST_RENDER_HOLD_AFTER="2"))
     said = _lines_until(proc, f"1/{SEEDS} cells")
     code, rest = _interrupt(proc)
     assert code == 130, rest
@@ -82,7 +82,7 @@ def test_interrupted_converge_says_what_it_kept_and_the_rerun_resumes(tmp_path):
     assert kept == _rendered_seeds(log) == {0}, kept
 
     first = len(log.read_text().splitlines())
-    again = subprocess.run([sys.executable, "-m", "harness", *_converge(out)], cwd=ROOT, env=_env(log),
+    again = subprocess.run([sys.executable, "-m", "cornell_harness", *_converge(out)], cwd=ROOT, env=_env(log),
                            capture_output=True, text=True, timeout=PATIENCE_S * 2)
     assert again.returncode == 0, again.stderr
     second = {int(line.split()[0]) for line in log.read_text().splitlines()[first:]}
@@ -95,7 +95,7 @@ def test_first_progress_line_comes_before_the_first_cell_ends(tmp_path):
     is there while it does; a Ctrl-C then keeps nothing."""
     out, log = tmp_path / "exp", tmp_path / "renders.log"
     log.touch()  # the hold counts the renders logged: none yet
-    proc = _start([sys.executable, "-m", "harness", *_converge(out, seeds=2)],
+    proc = _start([sys.executable, "-m", "cornell_harness", *_converge(out, seeds=2)],
                   _env(log, CBOX_TEST_RENDER_HOLD_AFTER="0"))
     said = _lines_until(proc, "starting")
     assert said[-1] == "converge cornell-box: 0/2 cells, starting counting-noise seed 0", said
@@ -105,21 +105,21 @@ def test_first_progress_line_comes_before_the_first_cell_ends(tmp_path):
     assert log.read_text() == "" and not list((out / "cells").glob("*.parquet"))
 
 
-#: ``cbox ARGS`` whose start-up holds in the import of the first command module (harness.cli.listing), after
+#: ``cbox ARGS`` whose start-up holds in the import of the first command module (cornell_harness.cli.listing), after
 #: touching the file argv[1] (``marker``): the imports of app.py are under way, nothing of the command has run.
 _HELD_STARTUP = textwrap.dedent("""
     import importlib.abc, pathlib, sys, time
 
     class Hold(importlib.abc.MetaPathFinder):
         def find_spec(self, name, path, target=None):
-            if name == "harness.cli.listing":
+            if name == "cornell_harness.cli.listing":
                 pathlib.Path(marker).touch()
                 time.sleep(600)
             return None
 
     sys.meta_path.insert(0, Hold())
     marker, sys.argv = sys.argv[1], ["cbox", *sys.argv[2:]]
-    from harness.cli.app import main
+    from cornell_harness.cli.app import main
     main()
 """)
 
@@ -144,7 +144,7 @@ def test_interrupt_on_local_workers_closes_the_cluster(tmp_path):
     sends it (to the whole process group, the workers too) gives the message and exit 130, no traceback from
     any process, and no process of the group is left behind."""
     out, log = tmp_path / "exp", tmp_path / "renders.log"
-    proc = subprocess.Popen([sys.executable, "-m", "harness", *_converge(out), "--workers", "2"], cwd=ROOT,
+    proc = subprocess.Popen([sys.executable, "-m", "cornell_harness", *_converge(out), "--workers", "2"], cwd=ROOT,
                             env=_env(log, CBOX_TEST_RENDER_HOLD_AFTER="1"), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
     said = _lines_until(proc, "starting")

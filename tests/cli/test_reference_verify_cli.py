@@ -16,7 +16,7 @@ import pytest
 
 from tests.conftest import ROOT
 
-STORED = ROOT / "harness" / "references" / "cornell-box"
+STORED = ROOT / "src" / "cornell_harness" / "references" / "cornell-box"
 
 
 @pytest.fixture
@@ -33,7 +33,7 @@ def references(tmp_path):
 
 def _cbox(references, *args: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "CBOX_REFERENCES": str(references)}
-    return subprocess.run([sys.executable, "-m", "harness", *args], capture_output=True, text=True, timeout=600,
+    return subprocess.run([sys.executable, "-m", "cornell_harness", *args], capture_output=True, text=True, timeout=600,
                           cwd=ROOT, env=env)
 
 
@@ -80,7 +80,7 @@ def test_bad_options_are_refused_before_rendering(references):
 
 
 def test_help_explains_each_option():
-    proc = subprocess.run([sys.executable, "-m", "harness", "reference", "verify", "--help"], capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "cornell_harness", "reference", "verify", "--help"], capture_output=True,
                           text=True, timeout=120, cwd=ROOT, env={**os.environ, "COLUMNS": "200"})
     assert proc.returncode == 0
     for option in ("--scene", "--engine", "--spp", "--batches", "--workers", "--record", "--report", "--set"):

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.adapters.registry import resolve
-from harness.scenes.library import resolve_scene
-from harness.store.exr import read_exr
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.exr import read_exr
 from tests.conftest import run_cbox
 
 SMALL = "camera.resolution=16,12"

@@ -9,7 +9,7 @@ import re
 
 import pytest
 
-from harness.workflows import runner
+from cornell_harness.workflows import runner
 from tests.conftest import cbox_in_process as cbox
 from tests.user_renderers import Jittery, JitteryToo
 
@@ -93,7 +93,7 @@ def test_cpu_basis_is_recorded_for_the_report(tmp_path, capsys, log):
 def test_compare_table_shows_cpu_time_with_the_cpu_basis():
     """With CPU times in the rows (the capture of issue 30 records them), --time-basis cpu prints them beside
     wall time, each with its interval; a renderer that did not run shows NaN, not an interval."""
-    from harness.cli.run import compare_table
+    from cornell_harness.cli.run import compare_table
 
     nan = float("nan")
     rows = [{"renderer": "a", "status": "ok", "spp": 28, "time_s": 2.0, "time_s_low": 1.5, "time_s_high": 2.5,

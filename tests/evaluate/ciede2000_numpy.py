@@ -1,4 +1,4 @@
-"""The array-wise CIEDE2000 that :mod:`harness.evaluate.ciede2000` was sped up from, kept as its oracle: the
+"""The array-wise CIEDE2000 that :mod:`cornell_harness.evaluate.ciede2000` was sped up from, kept as its oracle: the
 formulas as colour-science writes them (``XYZ_to_Lab``, ``delta_E_CIE2000``: ``np.select``, ``np.hypot``,
 ``% 360``, four cosines, ``pow``), which the fast version rearranges."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.evaluate.ciede2000 import _WHITE, RGB_TO_XYZ, _spow
+from cornell_harness.evaluate.ciede2000 import _WHITE, RGB_TO_XYZ, _spow
 
 
 def xyz_to_lab(xyz, white=_WHITE) -> np.ndarray:

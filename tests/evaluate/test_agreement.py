@@ -1,4 +1,4 @@
-"""The agreement test's named-region z-tests (harness.evaluate.agreement): same family as the tiles and the image.
+"""The agreement test's named-region z-tests (cornell_harness.evaluate.agreement): same family as the tiles and the image.
 
 The tiled and whole-image tests are tested in tests/gate/test_gate.py; here,
 what regions add: a region's summed difference against its summed variance is
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from harness.evaluate import agreement
+from cornell_harness.evaluate import agreement
 
 REF = 0.5
 VAR = 1e-4  # per pixel, of the image and of the reference alike

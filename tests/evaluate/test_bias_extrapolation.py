@@ -1,4 +1,4 @@
-"""Bias extrapolation over seeds (harness.evaluate.bias_extrapolation): the fit recovers a known limit, the
+"""Bias extrapolation over seeds (cornell_harness.evaluate.bias_extrapolation): the fit recovers a known limit, the
 t-test's false-alarm rate on synthetic clean data is its level, and it has power on a synthetic bias."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from harness.evaluate import bias_extrapolation as bx
+from cornell_harness.evaluate import bias_extrapolation as bx
 
 EFFORTS = (62500, 250000)
 

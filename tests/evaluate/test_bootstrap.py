@@ -10,8 +10,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from harness.evaluate import bootstrap
-from harness.evaluate import convergence as cv
+from cornell_harness.evaluate import bootstrap
+from cornell_harness.evaluate import convergence as cv
 
 SIGMA2, C = 0.04, 0.01  # true MSE = SIGMA2 / spp, true time = C · spp
 SPPS = (1, 2, 4, 8, 16, 32, 64)
@@ -151,7 +151,7 @@ def test_compare_rows_equal_time_and_equal_quality():
 
 
 def test_with_intervals_for_printing():
-    from harness.evaluate.summary import with_intervals
+    from cornell_harness.evaluate.summary import with_intervals
 
     table = pd.DataFrame({"renderer": ["a", "b"], "efficiency": [10.0, 20.0], "efficiency_low": [5.0, math.nan],
                           "efficiency_high": [20.0, math.nan], "bias2_fraction": [0.145, 0.5],

@@ -1,4 +1,4 @@
-"""harness.evaluate.ciede2000 (numpy, no colour-science import) against colour-science, which it replaces in the
+"""cornell_harness.evaluate.ciede2000 (numpy, no colour-science import) against colour-science, which it replaces in the
 metrics, and against the array-wise original it was sped up from (tests/evaluate/ciede2000_numpy.py): the same
 numbers, edge cases included, and Sharma et al.'s published test pairs."""
 
@@ -9,9 +9,9 @@ import warnings
 import numpy as np
 import pytest
 
-from harness.evaluate import ciede2000 as de
-from harness.evaluate.pixels import zero_broken_pixels
-from harness.store.exr import read_exr
+from cornell_harness.evaluate import ciede2000 as de
+from cornell_harness.evaluate.pixels import zero_broken_pixels
+from cornell_harness.store.exr import read_exr
 from tests.evaluate import ciede2000_numpy as oracle
 
 with warnings.catch_warnings():
@@ -107,10 +107,10 @@ def test_as_the_original_on_images(rgb):
 
 def test_as_the_original_on_a_render():
     """A real 16-spp-like image: a noisy copy of the stored cornell-box reference, at its display exposure."""
-    from harness.evaluate.metrics import exposure_scale
+    from cornell_harness.evaluate.metrics import exposure_scale
     from pathlib import Path
 
-    ref = read_exr(Path(__file__).resolve().parents[2] / "harness/references/cornell-box/reference.exr").astype(float)
+    ref = read_exr(Path(__file__).resolve().parents[2] / "src/cornell_harness/references/cornell-box/reference.exr").astype(float)
     img = ref * np.random.default_rng(5).lognormal(0.0, 0.5, ref.shape)
     exposure = exposure_scale(ref)
     ours = de.delta_e2000_linear(img, ref, exposure)

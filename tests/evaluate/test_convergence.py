@@ -8,9 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from harness.evaluate import convergence as cv
-from harness.workflows.budgets import parse_duration
-from harness.workflows.converge import parse_spp_list
+from cornell_harness.evaluate import convergence as cv
+from cornell_harness.workflows.budgets import parse_duration
+from cornell_harness.workflows.converge import parse_spp_list
 
 
 def _runs(slope: float, seeds=4, noise=0.0, bias=0.0, rng=None) -> pd.DataFrame:

@@ -1,4 +1,4 @@
-"""HDR-FLIP as a metric (harness.evaluate.flip): its exposure range, its map and mean, its place in the registry."""
+"""HDR-FLIP as a metric (cornell_harness.evaluate.flip): its exposure range, its map and mean, its place in the registry."""
 
 from __future__ import annotations
 
@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from tests.conftest import CORNELL
-from harness.evaluate import flip, metrics
-from harness.evaluate.convergence import parse_target
-from harness.evaluate.registry import COLOUR_METRICS, IMAGE_METRICS, METRICS
-from harness.gate.config import GateConfigError, load_config
-from harness.store.exr import read_exr
+from cornell_harness.evaluate import flip, metrics
+from cornell_harness.evaluate.convergence import parse_target
+from cornell_harness.evaluate.registry import COLOUR_METRICS, IMAGE_METRICS, METRICS
+from cornell_harness.gate.config import GateConfigError, load_config
+from cornell_harness.store.exr import read_exr
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""harness.evaluate.hdr_flip, the harness's own HDR-FLIP: the authors' library's map on several kinds of image,
+"""cornell_harness.evaluate.hdr_flip, the harness's own HDR-FLIP: the authors' library's map on several kinds of image,
 and its cache of the reference's side (keyed by content: never an entry made for other pixels)."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from tests.conftest import CORNELL
-from harness.evaluate import flip, hdr_flip
-from harness.store.exr import read_exr
+from cornell_harness.evaluate import flip, hdr_flip
+from cornell_harness.store.exr import read_exr
 
 #: Per pixel, our map against flip_evaluator's: both compute in float32 in the same order; what differs is
 #: an ulp here and there (libm's expf/powf against LLVM's lowering), which the powers near 0 can magnify

@@ -1,4 +1,4 @@
-"""Tests for harness.evaluate.metrics: published CIEDE2000 data, analytic values, properties."""
+"""Tests for cornell_harness.evaluate.metrics: published CIEDE2000 data, analytic values, properties."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from harness.evaluate import metrics as m
+from cornell_harness.evaluate import metrics as m
 
 # Sharma, Wu & Dalal (2005), Table 1: (L1, a1, b1), (L2, a2, b2), ΔE00.
 SHARMA_2005 = [
@@ -409,7 +409,7 @@ def test_image_metrics_keys_computes_those_asked_for_with_the_same_values(broken
 
 
 def test_all_finite_sees_nan_inf_and_not_an_overflowing_sum():
-    from harness.evaluate.pixels import all_finite, finite_pixels
+    from cornell_harness.evaluate.pixels import all_finite, finite_pixels
 
     assert all_finite(np.ones((2, 2, 3)))
     assert all_finite(np.full((2, 2, 3), 1e308))  # the sum overflows; every value is finite

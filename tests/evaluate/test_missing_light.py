@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from harness.evaluate import missing_light as ml
-from harness.evaluate.regions import region_masks
-from harness.scenes.library import resolve_scene
+from cornell_harness.evaluate import missing_light as ml
+from cornell_harness.evaluate.regions import region_masks
+from cornell_harness.scenes.library import resolve_scene
 
 
 def test_missing_light_of_identical_seeds_has_only_the_references_error():
@@ -75,7 +75,7 @@ def test_study_masks_add_regions_without_changing_the_scene():
 
 
 def test_study_columns_score_only_the_regions_the_scene_lacks():
-    from harness.store.references import load_reference
+    from cornell_harness.store.references import load_reference
 
     sc = resolve_scene("cornell-box-caustics")
     ref = load_reference(sc)

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from harness.evaluate.agreement import sidak_level
-from harness.evaluate.reference_agreement import (FAMILY_ALPHA, WHOLE_IMAGE, reference_agreement, region_mean,
+from cornell_harness.evaluate.agreement import sidak_level
+from cornell_harness.evaluate.reference_agreement import (FAMILY_ALPHA, WHOLE_IMAGE, reference_agreement, region_mean,
                                                   z_scores)
 
 SHAPE = (32, 48, 3)

@@ -16,14 +16,14 @@ import pytest
 from PIL import Image
 
 from tests.conftest import CORNELL, ROOT
-from harness.evaluate import metrics
-from harness.evaluate import regions as R
-from harness.scenes.loader import load_scene
-from harness.scenes.model import Camera, Diffuse, Mesh, Region, Scene
-from harness.store.exr import read_exr, write_exr
-from harness.store.references import Reference
+from cornell_harness.evaluate import metrics
+from cornell_harness.evaluate import regions as R
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.scenes.model import Camera, Diffuse, Mesh, Region, Scene
+from cornell_harness.store.exr import read_exr, write_exr
+from cornell_harness.store.references import Reference
 
-CAUSTICS = ROOT / "harness" / "references" / "cornell-box-caustics"
+CAUSTICS = ROOT / "src" / "cornell_harness" / "references" / "cornell-box-caustics"
 
 
 def _with_regions(scene: Scene, **regions: Region) -> Scene:
@@ -265,7 +265,7 @@ def test_region_mean_z_uses_the_noise_it_is_given():
     z = R.region_metrics(image, ref, {"r": mask}, spp=256)["r"]["mean_z"]  # model: 1e-4 · 1024/256
     assert z == pytest.approx(mean_ref_diff / sd(5e-4))
     # the image-wide z is the same function over all pixels
-    from harness.evaluate import noise
+    from cornell_harness.evaluate import noise
 
     whole = R.region_metrics(image, ref, {"all": np.ones_like(mask)}, spp=256)["all"]["mean_z"]
     assert whole == pytest.approx(noise.mean_radiance_z(image, ref.image, ref.variance, 1024, 256))
@@ -305,9 +305,9 @@ def _small_scene_dir(tmp_path: Path, size: int = 64) -> Path:
 
 
 def test_runner_records_regions_and_flattens_them(tmp_path):
-    from harness.adapters.registry import resolve
-    from harness.store.references import load_reference
-    from harness.workflows import runner
+    from cornell_harness.adapters.registry import resolve
+    from cornell_harness.store.references import load_reference
+    from cornell_harness.workflows import runner
 
     sc = load_scene(_small_scene_dir(tmp_path))
     ref = load_reference(sc)
@@ -331,7 +331,7 @@ def test_runner_records_regions_and_flattens_them(tmp_path):
 
 
 def test_json_record_nests_regions_as_strict_json():
-    from harness.workflows.runner import RunRecord, json_record
+    from cornell_harness.workflows.runner import RunRecord, json_record
 
     rec = RunRecord("s", "r", "ok", 1, 0, metrics={"psnr": math.inf},
                     regions={"a.b": {"pixels": 3, "rel_mse": math.nan, "rmse": 0.5}})
@@ -347,7 +347,7 @@ def test_compare_json_report_and_tables_carry_regions(tmp_path, capsys):
     In this process (``_run_compare`` is the command's body) to stay fast; test_cli runs the real CLI.
     """
     import pandas as pd
-    from harness.cli.run import _run_compare
+    from cornell_harness.cli.run import _run_compare
 
     folder, out = _small_scene_dir(tmp_path), tmp_path / "out"
     assert _run_compare(str(folder), ["tests.user_renderers:FlatGrey"], 2, 0, out, True)[0] == 0
@@ -357,7 +357,7 @@ def test_compare_json_report_and_tables_carry_regions(tmp_path, capsys):
     assert set(rec["regions"]["floor"]) == set(R.REGION_METRICS) and rec["regions"]["floor"]["pixels"] > 20
     for table in (pd.read_parquet(out / "results.parquet"), pd.read_csv(out / "metrics.csv")):
         assert table["region.floor.rmse"].iloc[0] == pytest.approx(rec["regions"]["floor"]["rmse"])
-    from harness.store.experiments import load_results
+    from cornell_harness.store.experiments import load_results
 
     _, runs = load_results(out)
     assert "region.light.mean_z" in runs.columns
@@ -383,7 +383,7 @@ def test_compare_json_report_and_tables_carry_regions(tmp_path, capsys):
 def test_report_without_region_runs_still_shows_masks(tmp_path):
     """A scene with regions but runs without region columns: masks and legend, and a note instead of a table."""
     from tests import report_fixtures as rf
-    from reports.html import write_report
+    from cornell_harness.reports.html import write_report
 
     case = rf.make_case(names=("alpha-tracer",), spps=(4,), seeds=(0,), not_run=False, with_summary=False)
     path = write_report(tmp_path / "r.html", scene=case["scene"], reference=case["reference"], runs=case["runs"],

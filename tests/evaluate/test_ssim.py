@@ -1,4 +1,4 @@
-"""harness.evaluate.ssim (numpy) against skimage's structural_similarity, which it replaces in the metrics."""
+"""cornell_harness.evaluate.ssim (numpy) against skimage's structural_similarity, which it replaces in the metrics."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from skimage.metrics import structural_similarity
 
-from harness.evaluate.ssim import ssim
+from cornell_harness.evaluate.ssim import ssim
 
 
 @pytest.mark.parametrize("shape", [(64, 48, 3), (7, 9, 3), (256, 256, 3)])

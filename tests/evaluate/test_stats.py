@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from harness.evaluate import noise as stats
+from cornell_harness.evaluate import noise as stats
 
 
 def test_mean_radiance_z_is_standard_normal_under_the_noise_model():

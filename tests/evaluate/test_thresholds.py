@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from harness.evaluate.thresholds import Threshold, ThresholdError, broken, fraction_above, parse_threshold
+from cornell_harness.evaluate.thresholds import Threshold, ThresholdError, broken, fraction_above, parse_threshold
 
 
 def test_parse_and_direction():
@@ -48,7 +48,7 @@ def test_fraction_above():
 
 
 def test_a_check_computes_what_it_names_and_the_cheap_metrics():
-    from harness.evaluate.registry import CHEAP_METRICS, IMAGE_METRICS, check_metrics
+    from cornell_harness.evaluate.registry import CHEAP_METRICS, IMAGE_METRICS, check_metrics
 
     assert {"rmse", "rel_mse", "mean_radiance_rel_error", "nan_count"} <= set(CHEAP_METRICS) <= set(IMAGE_METRICS)
     for costly in ("ssim", "psnr", "delta_e2000_mean", "flip_mean", "rel_mse_trimmed", "noise_delta_e2000_mean"):

@@ -4,7 +4,7 @@ import math
 
 import pandas as pd
 
-from harness.evaluate.timing_quality import timing_quality
+from cornell_harness.evaluate.timing_quality import timing_quality
 
 
 def _rows(loads, cals, threads=2):

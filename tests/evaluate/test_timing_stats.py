@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from harness.evaluate.timing_stats import medians, median_interval, repeat_columns
+from cornell_harness.evaluate.timing_stats import medians, median_interval, repeat_columns
 
 #: Simulated experiments per coverage check: the binomial sd of a 95% coverage is then 0.0049, so a
 #: tolerance of 0.015 is 3 sd (a correct rule fails it about once in 370 seeds; this seed is fixed).

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from tests.conftest import ROOT, run_cbox
-from harness.evaluate import agreement
-from harness.gate.checks import evaluate
-from harness.gate.config import GateConfigError, load_config
-from harness.gate.run import run_gate
+from cornell_harness.evaluate import agreement
+from cornell_harness.gate.checks import evaluate
+from cornell_harness.gate.config import GateConfigError, load_config
+from cornell_harness.gate.run import run_gate
 
 EXPECT = """
 [[expect]]
@@ -138,11 +138,11 @@ def test_gate_passes_unbiased_and_fails_biased_with_outputs(tmp_path):
 
 
 def test_nan_is_never_tolerated(tmp_path):
-    from harness.store.references import load_reference
-    from harness.scenes.library import resolve_scene
-    from harness.adapters.registry import resolve
-    from harness.workflows.runner import RunRecord
-    from harness.evaluate import metrics
+    from cornell_harness.store.references import load_reference
+    from cornell_harness.scenes.library import resolve_scene
+    from cornell_harness.adapters.registry import resolve
+    from cornell_harness.workflows.runner import RunRecord
+    from cornell_harness.evaluate import metrics
 
     cfg = load_config(_config(tmp_path, EXPECT.format(renderer="x")))
     scene = resolve_scene("cornell-box")
@@ -240,11 +240,11 @@ def _checks(tmp_path, body: str) -> dict:
     (run_gate also scores every image, ΔE and SSIM included, which takes
     longer than these renderers' renders; the checks here need none of it.)
     """
-    from harness.adapters.registry import resolve
-    from harness.evaluate.regions import region_masks
-    from harness.scenes.library import resolve_scene
-    from harness.store.references import load_reference
-    from harness.workflows import runner
+    from cornell_harness.adapters.registry import resolve
+    from cornell_harness.evaluate.regions import region_masks
+    from cornell_harness.scenes.library import resolve_scene
+    from cornell_harness.store.references import load_reference
+    from cornell_harness.workflows import runner
 
     cfg = load_config(_config(tmp_path, body))
     out = {}
@@ -260,7 +260,7 @@ def _checks(tmp_path, body: str) -> dict:
 
 def test_alpha_is_split_over_the_three_statistical_tests(tmp_path):
     """The config's α is per expectation: agreement, variance and outliers each get 1 − (1 − α)^(1/3)."""
-    from harness.gate.checks import STATISTICAL_TESTS, statistical_alpha
+    from cornell_harness.gate.checks import STATISTICAL_TESTS, statistical_alpha
 
     assert STATISTICAL_TESTS == ("agreement", "variance", "outliers")
     share = statistical_alpha(0.01)
@@ -287,7 +287,7 @@ def test_variance_check_false_alarm_rate_is_at_most_alpha():
     times (mean 40); the assertion ≤ 60 fails with probability < 1e-3
     (Hoeffding is conservative: the real rate is far below α).
     """
-    from harness.evaluate.variance_check import variance_check
+    from cornell_harness.evaluate.variance_check import variance_check
 
     rng = np.random.default_rng(3)
     ref = np.full((32, 32, 3), 0.5)
@@ -354,11 +354,11 @@ def test_variance_check_names_a_bias_that_outweighs_the_noise(tmp_path):
 
 def test_variance_check_skipped_without_a_reported_variance():
     """A renderer that reports no variance is tested with the reference's noise model: nothing of its own to check."""
-    from harness.adapters.registry import resolve
-    from harness.evaluate import metrics
-    from harness.scenes.library import resolve_scene
-    from harness.store.references import load_reference
-    from harness.workflows.runner import RunRecord
+    from cornell_harness.adapters.registry import resolve
+    from cornell_harness.evaluate import metrics
+    from cornell_harness.scenes.library import resolve_scene
+    from cornell_harness.store.references import load_reference
+    from cornell_harness.workflows.runner import RunRecord
 
     cfg = load_config(ROOT / "gate.toml")
     exp = next(e for e in cfg.expectations if e.unbiased and e.scene == "cornell-box")
@@ -408,7 +408,7 @@ def test_outlier_check_passes_clean_renders(tmp_path):
 
 def test_outlier_test_threshold_and_where():
     """Synthetic: normal noise batch (threshold near the normal one), a hot pixel and a NaN variance are found."""
-    from harness.evaluate.outliers import outlier_test
+    from cornell_harness.evaluate.outliers import outlier_test
 
     rng = np.random.default_rng(5)
     ref = np.full((64, 64, 3), 0.5)

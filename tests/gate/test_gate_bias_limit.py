@@ -1,5 +1,5 @@
 """The gate's bias limit (issue 29): a consistent renderer's error extrapolated to infinite effort per seed,
-t-tested against 0 over seeds (harness.evaluate.bias_extrapolation); its config errors and its run through
+t-tested against 0 over seeds (cornell_harness.evaluate.bias_extrapolation); its config errors and its run through
 run_gate on a synthetic renderer with a known limit. The photon mappers' mutants are run by
 tests/gate/test_gate_power.py (slow)."""
 
@@ -9,8 +9,8 @@ import re
 
 import pytest
 
-from harness.gate.config import GateConfigError, load_config
-from harness.gate.run import run_gate
+from cornell_harness.gate.config import GateConfigError, load_config
+from cornell_harness.gate.run import run_gate
 from tests.gate.test_gate import _config
 
 SEEDED = "tests.user_renderers:SeededShrinkingBias"

@@ -14,8 +14,8 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from tests.conftest import ROOT, run_cbox
-from harness.adapters.registry import registered_names
-from harness.gate.config import GateConfigError, load_config
+from cornell_harness.adapters.registry import registered_names
+from cornell_harness.gate.config import GateConfigError, load_config
 
 #: The issue's example: every key misspelt; it used to pass a flat-grey renderer (ΔE 45) with exit 0. Its
 #: renderer is a grey one (seeded noise around 0.25) that logs each render, so a test can count renders.

@@ -11,9 +11,9 @@ import re
 import numpy as np
 import pytest
 
-from harness.gate.checks import evaluate
-from harness.gate.config import GateConfigError, load_config
-from harness.gate.run import run_gate
+from cornell_harness.gate.checks import evaluate
+from cornell_harness.gate.config import GateConfigError, load_config
+from cornell_harness.gate.run import run_gate
 from tests.gate.test_gate import _config
 
 
@@ -72,10 +72,10 @@ def test_consistency_config_forms(tmp_path):
 def _synthetic(bias_at, spps=(4, 8, 16, 32, 64), size=16):
     """A hand-built run on a 16² synthetic reference: the image at each spp is the reference plus ``bias_at(spp)``
     on the left half (region "left") and exact on the right half (region "right")."""
-    from harness.adapters.api import Checkpoint
-    from harness.evaluate import metrics
-    from harness.store.references import Reference
-    from harness.workflows.runner import RunRecord
+    from cornell_harness.adapters.api import Checkpoint
+    from cornell_harness.evaluate import metrics
+    from cornell_harness.store.references import Reference
+    from cornell_harness.workflows.runner import RunRecord
 
     rng = np.random.default_rng(7)
     ref_img = rng.uniform(0.2, 0.8, (size, size, 3))

@@ -2,10 +2,10 @@
 
 Both run the gate's own ``pathtracer`` expectations of ``gate.toml`` (their
 scenes, spp, seeds, tiles, α and baseline; the other renderers'
-expectations are left out) through :func:`harness.gate.run.run_gate`.
+expectations are left out) through :func:`cornell_harness.gate.run.run_gate`.
 
 - **Power**: each mutant of ``tests/mutants/`` (a realistic bug patched
-  into a copy of ``renderers/pathtracer.py``) must fail the gate at the CI
+  into a copy of ``src/cornell_harness/renderers/pathtracer.py``) must fail the gate at the CI
   budget, on an agreement test or a finite check (the baseline checks alone
   do not count: a baseline re-recorded from a buggy renderer would hide the
   bug). The gate fails as soon as one expectation fails, so the
@@ -34,7 +34,7 @@ import pytest
 from scipy.stats import binom, norm
 
 from tests import mutants
-from harness.gate.run import run_gate
+from cornell_harness.gate.run import run_gate
 
 pytest.importorskip("embreex")
 
@@ -87,19 +87,19 @@ def test_load_mutant_imports_a_renderer_from_a_real_file(work):
 
 
 def test_probes_mutants_patch_a_copy_of_ddgi_that_the_integrator_imports():
-    """A patch in renderers/ddgi.py (neither an integrator nor core) gets its own copy, with the toolkit's, and
-    probes.py's ``from renderers import ddgi`` is pointed at it; an import form the machinery cannot redirect
+    """A patch in src/cornell_harness/renderers/ddgi.py (neither an integrator nor core) gets its own copy, with the toolkit's, and
+    probes.py's ``from cornell_harness.renderers import ddgi`` is pointed at it; an import form the machinery cannot redirect
     fails loudly instead of leaving the copy on the unpatched module."""
     name = "chebyshev_inverted"
     texts = mutants.patched_sources(name)
     top, helper = texts[mutants.PROBES], texts[mutants.DDGI]
     assert mutants.module_name(name, mutants.DDGI) == f"cbox_mutant_{name}__ddgi"
-    assert f"import cbox_mutant_{name}__ddgi as ddgi\n" in top and "from renderers import ddgi" not in top
+    assert f"import cbox_mutant_{name}__ddgi as ddgi\n" in top and "from cornell_harness.renderers import ddgi" not in top
     assert "if r < mean:" in helper and f"from cbox_mutant_{name}__octahedral import " in helper
     assert f"from cbox_mutant_{name}__visible_points import " in top  # the toolkit copied too (but SHARED_CORE)
     assert mutants.imports_module(top, f"cbox_mutant_{name}__ddgi")
-    source = mutants.original_source("probes").replace("from renderers import ddgi\n",
-                                                       "from renderers import ddgi, core\n")
+    source = mutants.original_source("probes").replace("from cornell_harness.renderers import ddgi\n",
+                                                       "from cornell_harness.renderers import ddgi, core\n")
     with pytest.raises(AssertionError, match="does not redirect"):
         mutants.patched_sources(name, {mutants.PROBES: source})
 
@@ -267,7 +267,7 @@ def test_unmutated_path_tracer_region_means_within_noise_on_caustics(clean_run):
 
     Per region (caustic, glass-shadow, mirror, glass, walls), ``mean_z`` is the
     z-score of the region's mean difference from the reference given both
-    variances (harness.evaluate.regions). Two-sided, α = 1e-3 family-wise
+    variances (cornell_harness.evaluate.regions). Two-sided, α = 1e-3 family-wise
     over the regions (Šidák), so a correct path tracer fails this with
     probability 1e-3. Region means average 147 to 34406 pixels × 256
     samples, so the central limit theorem holds for them even where single
@@ -290,10 +290,10 @@ def test_a_caustic_five_percent_dark_fails_the_gate_on_its_region(cfg, clean_run
     4.6. Over fresh seeds the test has power 0.98 on this error (docs/gate-detection.md, Results); at this seed
     the verdict is reproducible.
     """
-    from harness.evaluate.regions import region_masks
-    from harness.gate.checks import evaluate
-    from harness.scenes.library import resolve_scene
-    from harness.store.references import load_reference
+    from cornell_harness.evaluate.regions import region_masks
+    from cornell_harness.gate.checks import evaluate
+    from cornell_harness.scenes.library import resolve_scene
+    from cornell_harness.store.references import load_reference
 
     outcome = next(o for o in clean_run if o.expectation.scene == "cornell-box-caustics")
     scene = resolve_scene("cornell-box-caustics")

@@ -4,23 +4,23 @@ Each :class:`Mutant` is a realistic bug in one of our renderers
 (:data:`INTEGRATORS`: the path tracer, the photon mapper, SPPM, ao, ambient,
 probes, the denoised path tracer ``pathtracer+oidn`` and whitted), written as exact
 source patches: an ``old`` snippet replaced by ``new`` in the renderer's
-module (the integrator, e.g. ``renderers/pathtracer.py``), in a module of the
-toolkit it is built on (``renderers/core/``) or in another module of
-``renderers/`` it imports (the probes' algorithm, ``renderers/ddgi.py``),
+module (the integrator, e.g. ``src/cornell_harness/renderers/pathtracer.py``), in a module of the
+toolkit it is built on (``src/cornell_harness/renderers/core/``) or in another module of
+``src/cornell_harness/renderers/`` it imports (the probes' algorithm, ``src/cornell_harness/renderers/ddgi.py``),
 wherever the line now lives. :func:`load_mutant` writes the patched sources
 to real files (so numba's ``cache=True`` has a locator) as uniquely named
 modules, imports them, and returns a
-:class:`harness.adapters.registry.RendererEntry` named after the renderer,
-which :func:`harness.gate.run.run_gate` takes as an override.
+:class:`cornell_harness.adapters.registry.RendererEntry` named after the renderer,
+which :func:`cornell_harness.gate.run.run_gate` takes as an override.
 
 A mutant is a set of modules: the integrator is ``cbox_mutant_<name>``; a
-mutant that patches any other module (``renderers/core/<stem>.py``, or
-``renderers/<stem>.py`` such as ``ddgi``) gets a copy
+mutant that patches any other module (``src/cornell_harness/renderers/core/<stem>.py``, or
+``src/cornell_harness/renderers/<stem>.py`` such as ``ddgi``) gets a copy
 ``cbox_mutant_<name>__<stem>`` of it and of each core module but the scalar
 helpers (:data:`SHARED_CORE`), patched or not, so no part of the renderer
 still sees the unpatched code and no shared module is compiled for the
-copies' types; their ``from renderers.core.<stem> import`` (and
-``from renderers import <stem>``) lines are pointed at the copies.
+copies' types; their ``from cornell_harness.renderers.core.<stem> import`` (and
+``from cornell_harness.renderers import <stem>``) lines are pointed at the copies.
 
 Every patch must apply exactly once: if a refactor moves or rewrites a
 snippet, :func:`patched_sources` raises instead of silently testing an

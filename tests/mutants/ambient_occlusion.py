@@ -1,5 +1,5 @@
-"""The ambient-occlusion family's mutants: Monte Carlo AO (renderers/ao.py, the occlusion rays it shares) and AO as
-ambient (renderers/ambient.py)."""
+"""The ambient-occlusion family's mutants: Monte Carlo AO (src/cornell_harness/renderers/ao.py, the occlusion rays it shares) and AO as
+ambient (src/cornell_harness/renderers/ambient.py)."""
 
 from __future__ import annotations
 

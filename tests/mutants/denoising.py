@@ -1,11 +1,11 @@
-"""The OIDN denoise stage's mutants (renderers/oidn.py), made of the denoised path tracer."""
+"""The OIDN denoise stage's mutants (src/cornell_harness/renderers/oidn.py), made of the denoised path tracer."""
 
 from __future__ import annotations
 
 from tests.mutants.model import OIDN, Mutant
 
 MUTANTS: tuple[Mutant, ...] = (
-    # -- denoised path tracing (pathtracer+oidn; renderers/oidn.py) ------------------------------------------
+    # -- denoised path tracing (pathtracer+oidn; src/cornell_harness/renderers/oidn.py) ------------------------------------------
     Mutant(
         "oidn_ldr",
         "the beauty filtered as LDR (hdr off: pyoidn.denoise's default), so radiance above 1 is clipped",

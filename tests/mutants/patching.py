@@ -11,23 +11,23 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from harness.adapters.registry import RendererEntry
-from harness.adapters.settings import resolve_settings
+from cornell_harness.adapters.registry import RendererEntry
+from cornell_harness.adapters.settings import resolve_settings
 from tests.mutants.catalogue import BY_NAME
-from tests.mutants.model import CORE, INTEGRATORS, PATHTRACER, ROOT, SOURCE, Mutant
+from tests.mutants.model import CORE, INTEGRATORS, PATHTRACER, ROOT, Mutant
 
 #: Core modules every mutant shares with the real renderer: scalar helpers, no types of their own.
 SHARED_CORE = ("sampling", "rng")
 
 
 def integrator(mutant: Mutant | str) -> str:
-    """The file of the renderer module a mutant is a copy of (``renderers/pathtracer.py``, ...)."""
+    """The file of the renderer module a mutant is a copy of (``src/cornell_harness/renderers/pathtracer.py``, ...)."""
     m = BY_NAME[mutant] if isinstance(mutant, str) else mutant
     return INTEGRATORS[m.renderer][0]
 
 
 def original_source(renderer: str = "pathtracer") -> str:
-    """The source of a renderer's integrator module (default ``renderers/pathtracer.py``)."""
+    """The source of a renderer's integrator module (default ``src/cornell_harness/renderers/pathtracer.py``)."""
     return (ROOT / INTEGRATORS[renderer][0]).read_text(encoding="utf-8")
 
 
@@ -37,7 +37,7 @@ INTEGRATOR_FILES = frozenset(f for f, _ in INTEGRATORS.values())
 
 def module_name(name: str, file: str = PATHTRACER) -> str:
     """The mutant's module for ``file``: ``cbox_mutant_<name>`` for its integrator, ``..__<stem>`` for a core
-    module or another module of ``renderers/`` (``renderers/ddgi.py``: ``cbox_mutant_<name>__ddgi``)."""
+    module or another module of ``src/cornell_harness/renderers/`` (``src/cornell_harness/renderers/ddgi.py``: ``cbox_mutant_<name>__ddgi``)."""
     return f"cbox_mutant_{name}" if file in INTEGRATOR_FILES else f"cbox_mutant_{name}__{Path(file).stem}"
 
 
@@ -51,7 +51,7 @@ def imports_module(text: str, module: str) -> bool:
 
 def _redirect(text: str, module: str, to: str) -> str:
     """``text`` with its imports of ``module`` pointed at ``to``: ``from <module> import ...`` and, for a module
-    imported whole from its package (``from renderers import ddgi``), ``import <to> as ddgi``."""
+    imported whole from its package (``from cornell_harness.renderers import ddgi``), ``import <to> as ddgi``."""
     text = re.sub(rf"^(\s*from ){re.escape(module)}( import )", rf"\g<1>{to}\g<2>", text, flags=re.M)
     package, _, stem = module.rpartition(".")
     text = re.sub(rf"^(\s*)from {re.escape(package)} import {stem}[ \t]*$", rf"\g<1>import {to} as {stem}", text,
@@ -160,7 +160,7 @@ def load_mutant(name: str, tmp_dir: str | Path) -> RendererEntry:
 
 # -- running the gate on a mutant ----------------------------------------------------
 
-GATE_TOML = SOURCE.parent.parent / "gate.toml"
+GATE_TOML = ROOT.parent / "gate.toml"
 
 
 def gate_config(renderer: str, path: str | Path = GATE_TOML, spectral: bool = False):
@@ -169,7 +169,7 @@ def gate_config(renderer: str, path: str | Path = GATE_TOML, spectral: bool = Fa
     mode, and a hero render costs ~45 s: the RGB mutants' gate runs stay as they were)."""
     import dataclasses
 
-    from harness.gate.config import load_config
+    from cornell_harness.gate.config import load_config
 
     cfg = load_config(path)
     keep = [e for e in cfg.expectations
@@ -203,7 +203,7 @@ class Verdict:
 
 
 def verdict(outcomes) -> Verdict:
-    """Summarise the :class:`harness.gate.checks.Outcome` list of one :func:`harness.gate.run.run_gate` call."""
+    """Summarise the :class:`cornell_harness.gate.checks.Outcome` list of one :func:`cornell_harness.gate.run.run_gate` call."""
     import math
 
     failing, checks, evidence, p_min, level, time_s = [], set(), [], math.inf, math.nan, 0.0
@@ -242,7 +242,7 @@ def verdict(outcomes) -> Verdict:
 
 def cost(exp) -> int:
     """Paths an expectation traces (pixels × spp): its render time, roughly."""
-    from harness.scenes.library import resolve_scene
+    from cornell_harness.scenes.library import resolve_scene
 
     cam = resolve_scene(exp.scene).camera
     return cam.width * cam.height * (exp.spp or 1)
@@ -252,12 +252,12 @@ def run_until_failure(cfg, overrides=None, seed_offset: int = 0) -> list:
     """The gate's expectations one by one, cheapest first, up to the first that fails.
 
     The gate fails as soon as one expectation fails, so this decides the same
-    verdict as :func:`harness.gate.run.run_gate` over all of them, often for the
+    verdict as :func:`cornell_harness.gate.run.run_gate` over all of them, often for the
     price of the small scenes alone. Returns the outcomes it ran.
     """
     import dataclasses
 
-    from harness.gate.run import run_gate
+    from cornell_harness.gate.run import run_gate
 
     outcomes = []
     for exp in sorted(cfg.expectations, key=cost):
@@ -271,7 +271,7 @@ _CHILD = """
 import dataclasses, json, sys
 sys.path.insert(0, sys.argv[1])
 from tests import mutants
-from harness.gate.run import run_gate
+from cornell_harness.gate.run import run_gate
 name, gate, work, until = sys.argv[2:6]
 renderer = mutants.BY_NAME[name].renderer
 cfg = mutants.gate_config(renderer, gate)
@@ -288,10 +288,10 @@ def run_isolated(name: str, work: str | Path, timeout_s: float, gate: str | Path
     import json
     import subprocess
 
-    cmd = [sys.executable, "-c", _CHILD, str(ROOT), name, str(gate), str(work),
+    cmd = [sys.executable, "-c", _CHILD, str(ROOT.parent), name, str(gate), str(work),
            "1" if until_failure else "0"]
     try:
-        out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, cwd=SOURCE.parent.parent)
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, cwd=ROOT.parent)
     except subprocess.TimeoutExpired:
         return None
     if out.returncode:

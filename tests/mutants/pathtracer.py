@@ -1,4 +1,4 @@
-"""The path tracer's mutants (renderers/pathtracer.py and the toolkit it is built on: direct light, roulette, camera,
+"""The path tracer's mutants (src/cornell_harness/renderers/pathtracer.py and the toolkit it is built on: direct light, roulette, camera,
 rays, lights, BSDFs)."""
 
 from __future__ import annotations

@@ -1,11 +1,11 @@
-"""The irradiance probes' mutants, in their algorithm (renderers/ddgi.py)."""
+"""The irradiance probes' mutants, in their algorithm (src/cornell_harness/renderers/ddgi.py)."""
 
 from __future__ import annotations
 
 from tests.mutants.model import DDGI, Mutant
 
 MUTANTS: tuple[Mutant, ...] = (
-    # -- DDGI irradiance probes (probes; the algorithm is renderers/ddgi.py) ----------------------------
+    # -- DDGI irradiance probes (probes; the algorithm is src/cornell_harness/renderers/ddgi.py) ----------------------------
     Mutant(
         "chebyshev_inverted",
         "Chebyshev visibility test written the wrong way round (r < μ): probes are darkened where they see "

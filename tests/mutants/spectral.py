@@ -1,4 +1,4 @@
-"""The hero-wavelength path tracer's mutants (renderers/hero_wavelength.py: the ``spectral = "hero"`` mode of the
+"""The hero-wavelength path tracer's mutants (src/cornell_harness/renderers/hero_wavelength.py: the ``spectral = "hero"`` mode of the
 path tracer). The gate's hero expectation (cornell-box-measured against Mitsuba's spectral reference) fails each
 (tests/gate/test_gate_power.py, slow), and tests/renderers/test_hero_wavelength.py::test_mutant_is_caught shows the
 spectral furnace failing each."""
@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from tests.mutants.model import Mutant
 
-HERO = "renderers/hero_wavelength.py"
+HERO = "cornell_harness/renderers/hero_wavelength.py"
 
 MUTANTS: tuple[Mutant, ...] = (
     Mutant(
@@ -23,8 +23,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "sampled uniformly, though they follow the visible-wavelength pdf",
         (("            p = pdf[j]\n",
           "            p = 1.0 / (LAMBDA_MAX - LAMBDA_MIN)  # uniform over the range\n", HERO),
-         ("from renderers.core.wavelengths import N_WAVELENGTHS,",
-          "from renderers.core.wavelengths import LAMBDA_MAX, LAMBDA_MIN, N_WAVELENGTHS,", HERO)),
+         ("from cornell_harness.renderers.core.wavelengths import N_WAVELENGTHS,",
+          "from cornell_harness.renderers.core.wavelengths import LAMBDA_MAX, LAMBDA_MIN, N_WAVELENGTHS,", HERO)),
     ),
     Mutant(
         "hero_emission_normalised_twice",
@@ -33,7 +33,7 @@ MUTANTS: tuple[Mutant, ...] = (
         (("le = np.array([on_grid(s) for s in rows_le])",
           "le = np.array([on_grid(s) / sensor_rgb_norm() for s in rows_le])", HERO),
          ("def spectral_tables(",
-          "def sensor_rgb_norm():\n    from harness.scenes.spectra import observer\n\n    return observer()[1][:, 1].sum()\n\n\n"
+          "def sensor_rgb_norm():\n    from cornell_harness.scenes.spectra import observer\n\n    return observer()[1][:, 1].sum()\n\n\n"
           "def spectral_tables(", HERO)),
     ),
 )

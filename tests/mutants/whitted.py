@@ -1,4 +1,4 @@
-"""The recursive ray tracer's mutants (renderers/whitted.py, and the toolkit's shadow-ray origin it uses).
+"""The recursive ray tracer's mutants (src/cornell_harness/renderers/whitted.py, and the toolkit's shadow-ray origin it uses).
 
 The gate has no whitted expectation (a biased approximation with no budget against the reference), so
 tests/renderers/test_whitted.py::test_mutant_is_caught catches each, and :data:`tests.mutants.catalogue.LOW_POWER`

@@ -1,8 +1,8 @@
-"""The ambient renderer (renderers/ambient.py): direct light + ρ·La·AO, with La from radiosity, an oracle, or none.
+"""The ambient renderer (src/cornell_harness/renderers/ambient.py): direct light + ρ·La·AO, with La from radiosity, an oracle, or none.
 
 Statistics. Direct light (``ambient = none``) is an unbiased estimate of the
 path tracer's image at max_depth 2 and of the analytic rectangle-light image:
-those comparisons are tiled z-tests (:func:`harness.evaluate.agreement.agreement_test`,
+those comparisons are tiled z-tests (:func:`cornell_harness.evaluate.agreement.agreement_test`,
 Šidák-corrected to a family-wise false-alarm rate of :data:`ALPHA` per test,
 using both renders' own variances; the analytic image has none). Everything
 else is exact: with the same seed the direct part of every sample is the same
@@ -22,20 +22,20 @@ import numpy as np
 import pytest
 
 from tests.conftest import run_cbox
-from harness.adapters.registry import RendererEntry, missing_features, resolve
-from harness.evaluate.agreement import agreement_test
-from harness.evaluate.reference_fit import least_squares_constant
-from harness.scenes.analytic import (FLOOR_RHO, LIGHT_A, LIGHT_B, LIGHT_LE, furnace_scene, rectangle_light_image,
+from cornell_harness.adapters.registry import RendererEntry, missing_features, resolve
+from cornell_harness.evaluate.agreement import agreement_test
+from cornell_harness.evaluate.reference_fit import least_squares_constant
+from cornell_harness.scenes.analytic import (FLOOR_RHO, LIGHT_A, LIGHT_B, LIGHT_LE, furnace_scene, rectangle_light_image,
                                      rectangle_light_scene)
-from harness.scenes.library import resolve_scene
-from harness.scenes.model import Camera, Diffuse, Mesh, Scene
-from harness.store.references import ReferenceError, load_reference
-from harness.workflows.render import render_checked
-from harness.workflows.runner import run_one
-from renderers.ambient import AOAmbient
-from renderers.core.ambient_radiance import interreflection_sum
-from renderers.core.sampler import SAMPLERS
-from renderers.pathtracer import PathTracer
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.model import Camera, Diffuse, Mesh, Scene
+from cornell_harness.store.references import ReferenceError, load_reference
+from cornell_harness.workflows.render import render_checked
+from cornell_harness.workflows.runner import run_one
+from cornell_harness.renderers.ambient import AOAmbient
+from cornell_harness.renderers.core.ambient_radiance import interreflection_sum
+from cornell_harness.renderers.core.sampler import SAMPLERS
+from cornell_harness.renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")
 
@@ -186,7 +186,7 @@ def test_interreflection_sum_and_divergence():
 
 def oracle(scene: Scene, spp: int, seed: int, threads: int = 2, checkpoints=()):
     """The oracle as the harness renders it: through the render path, which fits it (the renderer refuses)."""
-    entry = RendererEntry("ambient", "renderers.ambient:AOAmbient", AOAmbient(threads), None, {"ambient": "oracle"})
+    entry = RendererEntry("ambient", "cornell_harness.renderers.ambient:AOAmbient", AOAmbient(threads), None, {"ambient": "oracle"})
     return render_checked(entry, scene, spp, seed, checkpoints)
 
 

@@ -1,4 +1,4 @@
-"""Our ambient occlusion renderer (renderers/ao.py) against analytic answers, and the runner's refusals.
+"""Our ambient occlusion renderer (src/cornell_harness/renderers/ao.py) against analytic answers, and the runner's refusals.
 
 Statistics. Every sample's estimate is V ∈ {0, 1} (the AO weight over the
 pdf is 1 for both weightings), so a pixel's count of unoccluded samples is
@@ -8,7 +8,7 @@ test (twice the smaller tail), and each case's total count with a z-test
 (a sum of over 10^4 samples where it is random: the normal approximation is
 good to far below the level used), at a family-wise false-alarm rate :data:`ALPHA` = 1e-3 over
 every pixel and case of all cases together (Šidák,
-:func:`harness.evaluate.agreement.sidak_level`). The render's own variance
+:func:`cornell_harness.evaluate.agreement.sidak_level`). The render's own variance
 is checked to be the Bernoulli one, Ā(1 − Ā)/(n − 1) of its mean; it is not
 the test's variance because it is 0 wherever every sample agreed (the open
 plane, the strip beyond the maximum distance), where a z-test would divide
@@ -31,16 +31,16 @@ import pytest
 from scipy.stats import binom, norm
 
 from tests import mutants
-from harness.adapters.registry import RendererEntry, missing_features, resolve
-from harness.evaluate.agreement import sidak_level
-from harness.scenes.analytic_ao import ao_beside_walls, cosine_ao_beside_wall
-from harness.scenes.library import resolve_scene
-from harness.scenes.model import Camera, Diffuse, Mesh, Scene, Sphere
-from harness.scenes.quantities import AmbientOcclusion
-from harness.workflows.runner import RunRecord
-from renderers.ao import AORenderer
-from renderers.core.sampler import SAMPLERS
-from renderers.pathtracer import PathTracer
+from cornell_harness.adapters.registry import RendererEntry, missing_features, resolve
+from cornell_harness.evaluate.agreement import sidak_level
+from cornell_harness.scenes.analytic_ao import ao_beside_walls, cosine_ao_beside_wall
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.model import Camera, Diffuse, Mesh, Scene, Sphere
+from cornell_harness.scenes.quantities import AmbientOcclusion
+from cornell_harness.workflows.runner import RunRecord
+from cornell_harness.renderers.ao import AORenderer
+from cornell_harness.renderers.core.sampler import SAMPLERS
+from cornell_harness.renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")
 
@@ -266,7 +266,7 @@ def analytic_failures(renderer, sampler: str = "independent") -> list[str]:
 # -- the analytic answers themselves ----------------------------------------------------
 
 def test_analytic_ao_known_values():
-    """harness/scenes/analytic_ao.py: A = 1 in the open, 1/2 beside a wall and 1/4 in a corner without a limit
+    """src/cornell_harness/scenes/analytic_ao.py: A = 1 in the open, 1/2 beside a wall and 1/4 in a corner without a limit
     (whatever the distances, either weighting); its quadrature agrees with the one-wall closed form; and the
     uniform one-wall value is (1 + d/R)/2 (the wall hides the band of the hemisphere it spans, linear in d)."""
     for w in ("cosine", "uniform"):
@@ -367,7 +367,7 @@ def test_cornell_box_ao_borders_open_wall_and_range(cornell_ao):
     - The back wall (z = -1) for x ∈ [0.3, 0.45], y ∈ [-0.35, 0.35] has nothing within max_distance 0.5:
       0.55 to the green wall, 0.65 to floor and ceiling, ≥ 0.556 to the large box's nearest edge (x = -0.139,
       z = -0.659); every sample is unoccluded, so exactly 1, and its reported variance no more than the
-      half-sample one of renderers.ao.pooled_variance, (½/65)(64.5/65)/64 = 1.2e-4, times a stratification gain
+      half-sample one of cornell_harness.renderers.ao.pooled_variance, (½/65)(64.5/65)/64 = 1.2e-4, times a stratification gain
       below 1 (0 where the whole 5×5 window about it is exact).
     - Every value in [0, 1], grey. No statistics: each assertion is exact.
     """

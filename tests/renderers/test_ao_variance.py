@@ -1,4 +1,4 @@
-"""The AO renderer's reported variance (renderers.ao.pooled_variance): honest near 0 and 1, along edges, and per
+"""The AO renderer's reported variance (cornell_harness.renderers.ao.pooled_variance): honest near 0 and 1, along edges, and per
 AO band."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from renderers.ao import alike_pixels, pooled_variance, shifted, stabilised
+from cornell_harness.renderers.ao import alike_pixels, pooled_variance, shifted, stabilised
 
 
 def test_shifted_moves_the_image_and_masks_what_comes_from_outside():
@@ -134,9 +134,9 @@ def test_ao_z_spread_per_band_over_8_seeds():
     pooling, across edges, read 1.38 in that band. Measured (benchmarks/variance_honesty.py): 0.950-1.031,
     1.023 in [0.1, 0.2)."""
     from benchmarks.variance_honesty import BANDS, band_spreads, band_window
-    from harness.adapters.registry import resolve
-    from harness.scenes.library import resolve_scene
-    from harness.store.references import load_reference
+    from cornell_harness.adapters.registry import resolve
+    from cornell_harness.scenes.library import resolve_scene
+    from cornell_harness.store.references import load_reference
 
     scene = resolve_scene("cornell-box-ao")
     ref = load_reference(scene)

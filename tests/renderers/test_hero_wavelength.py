@@ -1,4 +1,4 @@
-"""The path tracer's ``spectral = "hero"`` mode (renderers/hero_wavelength.py) against closed forms, and its rules.
+"""The path tracer's ``spectral = "hero"`` mode (src/cornell_harness/renderers/hero_wavelength.py) against closed forms, and its rules.
 
 Monte Carlo tolerances are z-tests of the image mean, whose standard error
 comes from the spread of the pixels (every pixel of a furnace has the same
@@ -19,14 +19,14 @@ import pytest
 
 from tests import mutants
 from tests.renderers.test_pathtracer import z_crit
-from harness.adapters.registry import resolve
-from harness.adapters.settings import SettingsError
-from harness.scenes.analytic import (SPECTRAL_FURNACE_EMISSION, furnace_radiance, spectral_furnace_radiance,
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.adapters.settings import SettingsError
+from cornell_harness.scenes.analytic import (SPECTRAL_FURNACE_EMISSION, furnace_radiance, spectral_furnace_radiance,
                                      spectral_furnace_scene)
-from harness.scenes.library import resolve_scene
-from harness.scenes.model import Diffuse
-from harness.scenes.spectra import emission_rgb
-from renderers.pathtracer import PathTracer
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.model import Diffuse
+from cornell_harness.scenes.spectra import emission_rgb
+from cornell_harness.renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")
 
@@ -58,7 +58,7 @@ def check_spectral_furnace(renderer, max_depth: int = -1, spp: int = 64, seed: i
 @pytest.mark.parametrize("max_depth, spp, seed, sampler", FURNACE_CASES)
 def test_hero_matches_the_spectral_furnace(max_depth, spp, seed, sampler):
     """L(λ)/(1-ρ(λ)) (or the series cut at max_depth) per wavelength, projected as emission_rgb projects an
-    emitter (harness.scenes.analytic.spectral_furnace_radiance). α = 1e-3 over the 9 channel tests."""
+    emitter (cornell_harness.scenes.analytic.spectral_furnace_radiance). α = 1e-3 over the 9 channel tests."""
     check_spectral_furnace(PathTracer(threads=2), max_depth, spp, seed, sampler)
 
 
@@ -172,10 +172,10 @@ def test_hero_agrees_with_the_spectral_reference_and_rgb_does_not():
     path tracer on the scene's RGB projection does not (measured here: hero's smallest p 1.4e-4 against the
     per-test level 4.3e-6; RGB's 109 of 789 tests reject, worst z = 130 in blue on the red wall, tile mean
     +193%). Skipped where the scene and its reference are not stored (they come from the ``measured`` branch)."""
-    from harness.evaluate.agreement import agreement_test
-    from harness.evaluate.regions import region_masks
-    from harness.scenes.library import references_root
-    from harness.store.references import load_reference
+    from cornell_harness.evaluate.agreement import agreement_test
+    from cornell_harness.evaluate.regions import region_masks
+    from cornell_harness.scenes.library import references_root
+    from cornell_harness.store.references import load_reference
 
     if not (references_root() / MEASURED / "reference.exr").exists():
         pytest.skip(f"no stored {MEASURED} reference in this tree")

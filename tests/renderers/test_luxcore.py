@@ -1,7 +1,7 @@
 """The luxcore renderer and cbox-luxcore: the export's measured facts as renders that can fail, the variance
 from batches, and agreement with the stored (Mitsuba) reference of the Cornell box.
 
-Every render runs LuxCore in a child process (pyluxcore is never imported here: see renderers/luxcore.py).
+Every render runs LuxCore in a child process (pyluxcore is never imported here: see src/cornell_harness/renderers/luxcore.py).
 """
 
 from __future__ import annotations
@@ -15,15 +15,15 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from harness.evaluate.agreement import sidak_level
-from harness.evaluate.regions import region_masks
-from harness.scenes.export import export_scene
-from harness.scenes.loader import load_scene
-from harness.scenes.model import Camera
-from harness.store.exr import read_exr
-from harness.store.references import load_reference
-from renderers import luxcore as luxcore_module
-from renderers.luxcore import LuxCore
+from cornell_harness.evaluate.agreement import sidak_level
+from cornell_harness.evaluate.regions import region_masks
+from cornell_harness.scenes.export import export_scene
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.scenes.model import Camera
+from cornell_harness.store.exr import read_exr
+from cornell_harness.store.references import load_reference
+from cornell_harness.renderers import luxcore as luxcore_module
+from cornell_harness.renderers.luxcore import LuxCore
 from tests.conftest import CORNELL, ROOT
 
 if LuxCore().unavailable_reason():
@@ -147,7 +147,7 @@ def test_path_depth_is_mitsubas_max_depth(max_depth):
     """path.pathdepth.total = D is Mitsuba's max_depth = D: whole-image means agree within noise (Mitsuba's
     variance from 8 seeds)."""
     pytest.importorskip("mitsuba")
-    from renderers.mitsuba3 import Mitsuba3
+    from cornell_harness.renderers.mitsuba3 import Mitsuba3
 
     scene = load_scene(CORNELL).with_resolution(32, 32).with_max_depth(max_depth)
     lux = LuxCore().render(scene, 256, 5, settings={"batches": 16})
@@ -164,11 +164,11 @@ FURNACE_Z = 4.0
 
 def _furnace_z(scene_name: str, max_depth: int, res: int, spp: int, seed: int) -> tuple[float, float, float]:
     """(mean, standard error, z) of the whole image of a stored furnace at ``res``² against its closed form
-    (harness/scenes/analytic.py: Le Σ_{k<D} ρ^k; unbounded 5, and 11.25 seen from inside the glass); the
+    (src/cornell_harness/scenes/analytic.py: Le Σ_{k<D} ρ^k; unbounded 5, and 11.25 seen from inside the glass); the
     standard error from the variance of 16 independent batches (pixels are independent)."""
-    from harness.scenes.analytic import FURNACE_GLASS_IOR, furnace_radiance
+    from cornell_harness.scenes.analytic import FURNACE_GLASS_IOR, furnace_radiance
 
-    scene = load_scene(ROOT / "harness" / "references" / scene_name).with_resolution(res, res)
+    scene = load_scene(ROOT / "src" / "cornell_harness" / "references" / scene_name).with_resolution(res, res)
     scene = scene.with_max_depth(max_depth)
     exact = furnace_radiance(0.8, 1.0, max_depth) * (FURNACE_GLASS_IOR**2 if scene_name == "furnace-glass" else 1.0)
     res_ = LuxCore().render(scene, spp, seed, settings={"batches": 16})
@@ -254,7 +254,7 @@ def test_version_is_pyluxcores():
 
 def _cli(*args, cwd=None) -> subprocess.CompletedProcess:
     env = luxcore_module._child_env()
-    return subprocess.run([sys.executable, "-m", "renderers.luxcore_cli", *map(str, args)], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "cornell_harness.renderers.luxcore_cli", *map(str, args)], capture_output=True,
                           text=True, timeout=300, env=env, cwd=cwd)
 
 
@@ -268,7 +268,7 @@ def test_cli_writes_image_variance_and_batches(tmp_path):
     image, variance = read_exr(tmp_path / "x.exr"), read_exr(tmp_path / "v.exr")
     assert image.shape == variance.shape == (8, 12, 3) and (variance > 0).any()
     record = json.loads((tmp_path / "b" / "batches.json").read_text())
-    from harness.adapters.api import pass_seed
+    from cornell_harness.adapters.api import pass_seed
 
     assert [b["seed"] for b in record["batches"]] == [pass_seed(3, k) for k in range(4)]
     assert [b["spp"] for b in record["batches"]] == [2, 2, 2, 2] and record["threads"] == 1
@@ -299,5 +299,5 @@ def test_cli_errors_are_one_line_exit_2(tmp_path, args, words):
 
 def test_registered_as_an_entry_point():
     text = (ROOT / "pyproject.toml").read_text()
-    assert 'luxcore = "renderers.luxcore:LuxCore"' in text and 'cbox-luxcore = "renderers.luxcore_cli:main"' in text
+    assert 'luxcore = "cornell_harness.renderers.luxcore:LuxCore"' in text and 'cbox-luxcore = "cornell_harness.renderers.luxcore_cli:main"' in text
     assert '"pyluxcore==2.11.2"' in text

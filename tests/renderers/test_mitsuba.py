@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from tests.conftest import CORNELL
-from harness.evaluate import noise as stats
-from harness.store.references import load_reference
-from harness.scenes.export.mitsuba import bsdf_dict
-from harness.scenes.loader import load_scene
-from harness.scenes.transforms import unit_frame
-from renderers import mitsuba3
-from renderers.mitsuba3 import Mitsuba3
+from cornell_harness.evaluate import noise as stats
+from cornell_harness.store.references import load_reference
+from cornell_harness.scenes.export.mitsuba import bsdf_dict
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.scenes.transforms import unit_frame
+from cornell_harness.renderers import mitsuba3
+from cornell_harness.renderers.mitsuba3 import Mitsuba3
 
 mi = pytest.importorskip("mitsuba")
 
@@ -92,7 +92,7 @@ def test_same_seed_same_image_and_checkpoints():
 def test_low_spp_render_agrees_with_stored_reference():
     """Mean radiance of a 16-spp render is within noise of the 16384-spp reference.
 
-    The z-score uses the reference's variance image (see harness.evaluate.noise); the
+    The z-score uses the reference's variance image (see cornell_harness.evaluate.noise); the
     test is two-sided at alpha = 0.001. Mean radiance must also be within 1%.
     """
     scene = load_scene(CORNELL)
@@ -120,9 +120,9 @@ def test_caustics_scene_conversion():
 
     Shapes are found by the ids ``scene_dict`` gives them (``mesh_i``,
     ``sphere_i``); sphere geometry is mapped back from the unit frame
-    (:func:`harness.scenes.transforms.unit_frame`) to scene units.
+    (:func:`cornell_harness.scenes.transforms.unit_frame`) to scene units.
     """
-    from harness.scenes.materials import Dielectric, Diffuse, Mirror
+    from cornell_harness.scenes.materials import Dielectric, Diffuse, Mirror
 
     scene = load_scene(CAUSTICS)
     Mitsuba3().variant()
@@ -171,8 +171,8 @@ def test_mitsuba_specular_bsdfs_sample_as_ours(cos):
     """
     import math
 
-    from harness.scenes.materials import Dielectric, Mirror
-    from renderers.core.bsdf import dielectric_sample, fresnel_dielectric
+    from cornell_harness.scenes.materials import Dielectric, Mirror
+    from cornell_harness.renderers.core.bsdf import dielectric_sample, fresnel_dielectric
 
     Mitsuba3().variant()
     import drjit as dr

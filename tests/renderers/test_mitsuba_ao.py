@@ -1,9 +1,9 @@
-"""Ambient occlusion in the Mitsuba 3 adapter (renderers/mitsuba_ao.py) against analytic AO; the stored AO reference.
+"""Ambient occlusion in the Mitsuba 3 adapter (src/cornell_harness/renderers/mitsuba_ao.py) against analytic AO; the stored AO reference.
 
 The analytic scenes are a floor (y = 0, normal up) seen from straight above,
 beside vertical walls that reach past every point within the maximum
 distance R of what the camera sees, so they act as the infinite walls of
-:mod:`harness.scenes.analytic_ao`. A pixel's expected value is the analytic
+:mod:`cornell_harness.scenes.analytic_ao`. A pixel's expected value is the analytic
 AO averaged over its footprint on the floor (a sub-pixel grid, midpoint rule),
 not its centre's: AO changes across a pixel near a wall.
 
@@ -22,18 +22,18 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from harness.adapters.registry import missing_features
-from harness.evaluate import noise as stats
-from harness.evaluate.regions import first_hits, lattice_directions
-from harness.scenes.analytic_ao import ao_beside_walls, cosine_ao_beside_wall
-from harness.scenes.library import resolve_scene
-from harness.scenes.model import Camera, Diffuse, Mesh, Scene
-from harness.scenes.quantities import AmbientOcclusion
-from harness.store.references import load_reference
+from cornell_harness.adapters.registry import missing_features
+from cornell_harness.evaluate import noise as stats
+from cornell_harness.evaluate.regions import first_hits, lattice_directions
+from cornell_harness.scenes.analytic_ao import ao_beside_walls, cosine_ao_beside_wall
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.model import Camera, Diffuse, Mesh, Scene
+from cornell_harness.scenes.quantities import AmbientOcclusion
+from cornell_harness.store.references import load_reference
 
 mi = pytest.importorskip("mitsuba")
 
-from renderers.mitsuba3 import Mitsuba3  # noqa: E402
+from cornell_harness.renderers.mitsuba3 import Mitsuba3  # noqa: E402
 
 #: Each z-test's family-wise false-alarm rate (Bonferroni): a correct renderer fails it for at most 1 seed in 1000.
 ALPHA = 1e-3

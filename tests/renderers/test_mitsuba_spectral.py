@@ -3,8 +3,8 @@
 - An emitter of spectrum L seen directly gives emission_rgb(L) per pixel (Monte Carlo tolerance: the spectral
   variant samples wavelengths, so even an emitter's pixel is noisy).
 - One diffuse bounce: under the scene_light convention an RGB renderer's one-bounce image is exact
-  (harness.scenes.spectra), so the spectral and RGB variants agree on it, up to the CIE tables' difference.
-- Mitsuba's CIE table and normalisation against colour-science's, quantified (renderers.mitsuba3.CIE_TABLE_NOTE).
+  (cornell_harness.scenes.spectra), so the spectral and RGB variants agree on it, up to the CIE tables' difference.
+- Mitsuba's CIE table and normalisation against colour-science's, quantified (cornell_harness.renderers.mitsuba3.CIE_TABLE_NOTE).
 """
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from tests.conftest import MINIMAL_SCENE
-from harness.scenes.loader import load_scene
-from harness.scenes.spectra import emission_rgb, observer, xyz_to_linear_srgb
-from harness.scenes.spectral_scene import SPECTRAL_INFO, convention_used
-from renderers import mitsuba3
-from renderers.mitsuba3 import Mitsuba3
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.scenes.spectra import emission_rgb, observer, xyz_to_linear_srgb
+from cornell_harness.scenes.spectral_scene import SPECTRAL_INFO, convention_used
+from cornell_harness.renderers import mitsuba3
+from cornell_harness.renderers.mitsuba3 import Mitsuba3
 
 mi = pytest.importorskip("mitsuba")
 
@@ -100,7 +100,7 @@ def test_mitsubas_cie_tables_against_colour_sciences():
     """The numbers CIE_TABLE_NOTE gives: equal sums, per-wavelength differences up to 11% of x̄, the film's
     normalisation 0.1% off (which spectral_scale removes), and the light's RGB within 2e-4 after it."""
     Mitsuba3().variant("spectral")
-    from harness.scenes.export.mitsuba import SPECTRAL_RANGE_NM
+    from cornell_harness.scenes.export.mitsuba import SPECTRAL_RANGE_NM
 
     w, xyz = observer()
     # Mitsuba samples wavelengths over the observer's own range, colour-science's table's: 360-830 nm.
@@ -120,20 +120,20 @@ def test_mitsubas_cie_tables_against_colour_sciences():
 
 
 def load_scene_light() -> np.ndarray:
-    from harness.scenes.spectra import Spectrum
+    from cornell_harness.scenes.spectra import Spectrum
 
     return Spectrum((400.0, 500.0, 600.0, 700.0), (0.0, 8.0, 15.6, 18.4)).at(observer()[0])
 
 
 @pytest.mark.parametrize("max_depth", [-1, 3])
 def test_mitsuba_spectral_matches_the_spectral_furnace(max_depth):
-    """Issue 33's spectral furnace (harness.scenes.analytic.spectral_furnace_scene: a non-flat albedo spectrum under
+    """Issue 33's spectral furnace (cornell_harness.scenes.analytic.spectral_furnace_scene: a non-flat albedo spectrum under
     an emission spectrum, L/(1-ρ) per wavelength or the series cut at max_depth, projected as emission_rgb
     projects): Mitsuba's spectral variant's image mean is the closed form, |z| below the Šidák bound for α = 1e-3
     over the 6 channel tests (16², 256 spp, seed 7; measured |z| ≤ 2.0). Mitsuba's CIE table differs from
     colour-science's (CIE_TABLE_NOTE); at this test's resolution (a standard error of 0.2-0.4% per channel) the
     difference does not show."""
-    from harness.scenes.analytic import spectral_furnace_radiance, spectral_furnace_scene
+    from cornell_harness.scenes.analytic import spectral_furnace_radiance, spectral_furnace_scene
     from tests.renderers.test_hero_wavelength import mean_z
     from tests.renderers.test_pathtracer import z_crit
 

@@ -1,4 +1,4 @@
-"""Denoised rendering: the albedo and normal AOVs, the OIDN stage (renderers/oidn.py), its harness integration.
+"""Denoised rendering: the albedo and normal AOVs, the OIDN stage (src/cornell_harness/renderers/oidn.py), its harness integration.
 
 The AOVs have analytic values in the furnaces: every face has albedo 0.8, and
 in ``furnace-glass`` every camera ray goes through glass (and some off a mirror
@@ -20,14 +20,14 @@ import numpy as np
 import pytest
 
 from tests.conftest import run_cbox
-from harness.adapters.api import AOVS
-from harness.adapters.registry import estimator_of, resolve
-from harness.evaluate import metrics
-from harness.scenes.library import resolve_scene
-from harness.store.references import load_reference
-from renderers import oidn
-from renderers.mitsuba3 import Mitsuba3
-from renderers.pathtracer import PathTracer
+from cornell_harness.adapters.api import AOVS
+from cornell_harness.adapters.registry import estimator_of, resolve
+from cornell_harness.evaluate import metrics
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
+from cornell_harness.renderers import oidn
+from cornell_harness.renderers.mitsuba3 import Mitsuba3
+from cornell_harness.renderers.pathtracer import PathTracer
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
@@ -96,7 +96,7 @@ def test_denoiser_keeps_hdr_radiance():
 
 
 def test_denoiser_deterministic_across_runs_and_threads_and_leaves_its_inputs():
-    """What renderers/oidn.py's DETERMINISM records, measured: the same bits for 1 and 2 threads, twice."""
+    """What src/cornell_harness/renderers/oidn.py's DETERMINISM records, measured: the same bits for 1 and 2 threads, twice."""
     rng = np.random.default_rng(7)
     color = rng.gamma(1.0, 1.0, (48, 40, 3)).astype(np.float32)
     albedo = rng.random((48, 40, 3)).astype(np.float32)
@@ -152,7 +152,7 @@ def test_mitsuba_denoised_the_same_way(furnace):
 
 
 def test_denoised_renderer_unavailable_without_pyoidn_or_aovs(monkeypatch):
-    from renderers.sppm import SPPM
+    from cornell_harness.renderers.sppm import SPPM
 
     assert "gives no albedo and normal AOVs" in oidn.Denoised(SPPM()).unavailable_reason()
     monkeypatch.setitem(sys.modules, "pyoidn", None)  # import pyoidn now raises ImportError
@@ -182,8 +182,8 @@ def test_denoised_passes_its_gate_expectation():
     budgets are 1.2x the worst of seeds 0-4, and the render and the denoise are pure functions of the seed
     (measured: OIDN bit-identical across runs and threads), so a failure is a change, not chance. The denoiser
     mutants fail it (tests/gate/test_gate_power.py)."""
-    from harness.gate.config import load_config
-    from harness.gate.run import run_gate
+    from cornell_harness.gate.config import load_config
+    from cornell_harness.gate.run import run_gate
 
     cfg = load_config(Path(__file__).resolve().parents[2] / "gate.toml")
     cfg.expectations = [e for e in cfg.expectations if e.renderer == "pathtracer+oidn"]

@@ -15,12 +15,12 @@ import pytest
 from scipy.stats import norm
 
 from tests.conftest import CORNELL
-from harness.evaluate import metrics
-from harness.evaluate import noise as stats
-from harness.store.references import load_reference
-from harness.scenes.analytic import furnace_radiance, furnace_scene, rectangle_light_image, rectangle_light_scene
-from harness.scenes.loader import load_scene
-from renderers.pathtracer import PathTracer
+from cornell_harness.evaluate import metrics
+from cornell_harness.evaluate import noise as stats
+from cornell_harness.store.references import load_reference
+from cornell_harness.scenes.analytic import furnace_radiance, furnace_scene, rectangle_light_image, rectangle_light_scene
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")
 

@@ -1,7 +1,7 @@
 """The path tracer's images, pinned bit for bit, per sampler.
 
 The ``independent`` hashes were taken before the path tracer was restructured
-onto the shared toolkit (``renderers/core/``), and held through the move of
+onto the shared toolkit (``src/cornell_harness/renderers/core/``), and held through the move of
 ray queries to Embree's C API; the ``pmj02`` ones when that sampler (the
 default) came. Any refactoring of the toolkit or the integrator must keep
 them. A deliberate change of the estimator (a sampler's numbers, another
@@ -16,8 +16,8 @@ import hashlib
 import numpy as np
 import pytest
 
-from harness.scenes.library import resolve_scene
-from renderers.pathtracer import PathTracer
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")
 

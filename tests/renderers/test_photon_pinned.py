@@ -1,11 +1,11 @@
 """The photon mapper's and SPPM's images, pinned bit for bit, per sampler.
 
 The ``independent`` hashes were taken from the code before the photon
-family drew its numbers through :mod:`renderers.core.sampler` (raw
-``uniform(key, j, dim)`` calls in ``renderers/core/photons.py``,
-``renderers/core/visible_points.py`` and the final gather), so they show that
+family drew its numbers through :mod:`cornell_harness.renderers.core.sampler` (raw
+``uniform(key, j, dim)`` calls in ``src/cornell_harness/renderers/core/photons.py``,
+``src/cornell_harness/renderers/core/visible_points.py`` and the final gather), so they show that
 the move onto the sampler's streams, the one ``SampleLd``
-(:mod:`renderers.core.direct`) and the one hit prologue changed no number.
+(:mod:`cornell_harness.renderers.core.direct`) and the one hit prologue changed no number.
 Any refactoring of the toolkit or of these integrators must keep them. A
 deliberate change of the estimator (a sampler's numbers, another dimension
 layout) changes them: then re-pin, and say so in the commit. Re-pinned for
@@ -26,9 +26,9 @@ import hashlib
 import numpy as np
 import pytest
 
-from harness.scenes.library import resolve_scene
-from renderers.photonmap import PhotonMapper
-from renderers.sppm import SPPM
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.renderers.photonmap import PhotonMapper
+from cornell_harness.renderers.sppm import SPPM
 
 pytest.importorskip("embreex")
 

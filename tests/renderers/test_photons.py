@@ -15,29 +15,29 @@ import math
 import numpy as np
 import pytest
 
-from harness.adapters.seeds import pass_key
-from harness.evaluate.convergence import loglog_slope
+from cornell_harness.adapters.seeds import pass_key
+from cornell_harness.evaluate.convergence import loglog_slope
 import dataclasses
 
-from harness.scenes.analytic import (LIGHT_A, LIGHT_B, LIGHT_H, LIGHT_LE, MIRROR_LIGHT_H, furnace_radiance,
+from cornell_harness.scenes.analytic import (LIGHT_A, LIGHT_B, LIGHT_H, LIGHT_LE, MIRROR_LIGHT_H, furnace_radiance,
                                      furnace_scene, mirrored_light_image, mirrored_light_scene, polygon_irradiance,
                                      rectangle_light_scene)
-from harness.scenes.library import resolve_scene
-from harness.scenes.model import Camera
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.model import Camera
 
 pytest.importorskip("embreex")
 
-from renderers.core.geometry import SceneGeometry  # noqa: E402
-from renderers.core.photon_map import KERNELS, PhotonMap, kernel_weight  # noqa: E402
-from renderers.core.camera import camera_basis, camera_rays  # noqa: E402
-from renderers.core.photons import (STORE_ALL, STORE_CAUSTIC, STORE_INDIRECT, Photons, shoot,  # noqa: E402
+from cornell_harness.renderers.core.geometry import SceneGeometry  # noqa: E402
+from cornell_harness.renderers.core.photon_map import KERNELS, PhotonMap, kernel_weight  # noqa: E402
+from cornell_harness.renderers.core.camera import camera_basis, camera_rays  # noqa: E402
+from cornell_harness.renderers.core.photons import (STORE_ALL, STORE_CAUSTIC, STORE_INDIRECT, Photons, shoot,  # noqa: E402
                                     trace_photons)
-from renderers.core.rays import ray_buffer  # noqa: E402
-from renderers.core.roulette import Q_MAX  # noqa: E402
-from renderers.core.sampler import SAMPLERS, sequence_stream  # noqa: E402
-from renderers.core.visible_points import camera_visible_points, walk_to_diffuse  # noqa: E402
-from renderers.photonmap import PhotonMapper  # noqa: E402
-from renderers.sppm import SPPM  # noqa: E402
+from cornell_harness.renderers.core.rays import ray_buffer  # noqa: E402
+from cornell_harness.renderers.core.roulette import Q_MAX  # noqa: E402
+from cornell_harness.renderers.core.sampler import SAMPLERS, sequence_stream  # noqa: E402
+from cornell_harness.renderers.core.visible_points import camera_visible_points, walk_to_diffuse  # noqa: E402
+from cornell_harness.renderers.photonmap import PhotonMapper  # noqa: E402
+from cornell_harness.renderers.sppm import SPPM  # noqa: E402
 
 
 # -- kernels and photons ----------------------------------------------------------------

@@ -1,8 +1,8 @@
 """The images of ``probes``, ``ambient`` and ``ao`` (independent sampler), pinned bit for bit.
 
 Taken before these renderers drew their numbers through the sampler
-(:mod:`renderers.core.sampler`) and adopted the toolkit's one ``SampleLd``
-(:mod:`renderers.core.direct`), hit prologue and bundled kernel parameters
+(:mod:`cornell_harness.renderers.core.sampler`) and adopted the toolkit's one ``SampleLd``
+(:mod:`cornell_harness.renderers.core.direct`), hit prologue and bundled kernel parameters
 (issue 27). Any refactoring of the toolkit or these integrators must keep
 them. A deliberate change of the estimator (a sampler's numbers, another
 dimension layout, reordered arithmetic) changes them: then re-pin, and say
@@ -19,10 +19,10 @@ import hashlib
 import numpy as np
 import pytest
 
-from harness.scenes.library import resolve_scene
-from renderers.ambient import AOAmbient
-from renderers.ao import AORenderer
-from renderers.probes import IrradianceProbes
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.renderers.ambient import AOAmbient
+from cornell_harness.renderers.ao import AORenderer
+from cornell_harness.renderers.probes import IrradianceProbes
 
 pytest.importorskip("embreex")
 

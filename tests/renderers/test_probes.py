@@ -1,4 +1,4 @@
-"""Irradiance probes (renderers/ddgi.py, renderers/probes.py) against analytic answers.
+"""Irradiance probes (src/cornell_harness/renderers/ddgi.py, src/cornell_harness/renderers/probes.py) against analytic answers.
 
 Their toolkit parts (octahedral maps, spherical Fibonacci, random rotations)
 are tested in ``tests/renderers/core/test_octahedral.py``. What is exact and what is
@@ -13,7 +13,7 @@ the same computation (measured on this machine, 2 cores), and the tolerance is
 per check if the spread were normal; the seed-to-seed maxima seen were within
 3.5 of them), or, for the heavy-tailed image of a furnace, a quantile.
 
-The white furnace (``harness/references/furnace``: a closed cube, albedo 0.8, every
+The white furnace (``src/cornell_harness/references/furnace``: a closed cube, albedo 0.8, every
 face emitting 1, radiance 5 everywhere) has a closed form for every probe
 update: the probes hold the irradiance of *reflected* light (the camera pass
 adds emission and direct light itself), so after k updates that each replace
@@ -23,7 +23,7 @@ normalised by its own sum must leave it alone: the table
 :data:`FURNACE_SWITCHES` records what each switch does (test
 :func:`test_furnace_heuristic_switches_conserve_energy`).
 
-The light-leak scene ``harness/references/two-rooms`` has an analytic answer too: its
+The light-leak scene ``src/cornell_harness/references/two-rooms`` has an analytic answer too: its
 right-hand room receives no light at all (radiance exactly 0), so whatever the
 probes put there is leak (test :func:`test_two_rooms_visibility_stops_the_leak`).
 """
@@ -36,19 +36,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.adapters.api import SettingsError, pass_key
-from harness.adapters.settings import resolve_settings
-from harness.evaluate.regions import region_masks
-from harness.scenes.library import resolve_scene
-from harness.store.references import load_reference
-from renderers import ddgi
-from renderers.core.geometry import SceneGeometry
-from renderers.core.octahedral import texel_directions
-from renderers.core.rng import uniform
-from renderers.core.sampler import SAMPLERS
-from renderers.core.sampling import random_rotation, spherical_fibonacci
-from renderers.pathtracer import PathTracer
-from renderers.probes import (PROBE_STREAM, ROTATION_PATH, IrradianceProbes, grid_of, probes_per_unit, update_probes,
+from cornell_harness.adapters.api import SettingsError, pass_key
+from cornell_harness.adapters.settings import resolve_settings
+from cornell_harness.evaluate.regions import region_masks
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
+from cornell_harness.renderers import ddgi
+from cornell_harness.renderers.core.geometry import SceneGeometry
+from cornell_harness.renderers.core.octahedral import texel_directions
+from cornell_harness.renderers.core.rng import uniform
+from cornell_harness.renderers.core.sampler import SAMPLERS
+from cornell_harness.renderers.core.sampling import random_rotation, spherical_fibonacci
+from cornell_harness.renderers.pathtracer import PathTracer
+from cornell_harness.renderers.probes import (PROBE_STREAM, ROTATION_PATH, IrradianceProbes, grid_of, probes_per_unit, update_probes,
                               update_rotation, volume_of)
 
 pytest.importorskip("embreex")
@@ -519,7 +519,7 @@ def test_two_rooms_leak_with_the_default_settings(two_rooms):
 @pytest.mark.parametrize("sampler", SAMPLERS)
 def test_images_depend_on_the_seed_only(two_rooms, sampler):
     """Grid 4 (64 probes) at 512 rays per probe, cut into work units of probes differently on 1 and 2 threads
-    (:func:`renderers.probes.probes_per_unit`), 2 replacing and 2 blended updates, 4 spp: the volume after the
+    (:func:`cornell_harness.renderers.probes.probes_per_unit`), 2 replacing and 2 blended updates, 4 spp: the volume after the
     updates and the rendered image (and its variance) are bit-identical on 1 and 2 threads and from one render
     to the next with the same seed, and differ with another seed. With each sampler."""
     settings = {"grid": 4, "rays_per_probe": 512, "bounces": 2, "iterations": 2, "sampler": sampler}
@@ -596,8 +596,8 @@ def test_probes_pass_their_gate_expectation():
     """The unmutated renderer passes the project gate's ``probes`` expectation (its budgets and baseline): the
     budgets were set 1.2x over the worst of seeds 0-9 and the render is a pure function of its seed, so a failure
     here is a change of the renderer, not chance. The three probe mutants fail it (tests/gate/test_gate_power.py)."""
-    from harness.gate.config import load_config
-    from harness.gate.run import run_gate
+    from cornell_harness.gate.config import load_config
+    from cornell_harness.gate.run import run_gate
 
     cfg = load_config(Path(__file__).resolve().parents[2] / "gate.toml")
     cfg.expectations = [e for e in cfg.expectations if e.renderer == "probes"]

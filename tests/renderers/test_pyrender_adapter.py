@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from tests.conftest import CORNELL, ROOT
-from harness.adapters.api import RenderResult
-from harness.scenes.loader import load_scene
-from renderers.raster.lights import light_samples
-from renderers.raster.pyrender_adapter import Pyrender
+from cornell_harness.adapters.api import RenderResult
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.renderers.raster.lights import light_samples
+from cornell_harness.renderers.raster.pyrender_adapter import Pyrender
 
 
 def _run_python(code: str, env_updates: dict[str, str | None]) -> subprocess.CompletedProcess:
@@ -30,7 +30,7 @@ def _run_python(code: str, env_updates: dict[str, str | None]) -> subprocess.Com
 
 
 _REASON = """
-from renderers.raster.pyrender_adapter import Pyrender
+from cornell_harness.renderers.raster.pyrender_adapter import Pyrender
 r = Pyrender().unavailable_reason()
 assert r is None or (isinstance(r, str) and r and "\\n" not in r), repr(r)
 print("REASON:", r)
@@ -61,10 +61,10 @@ def renderer() -> Pyrender:
 @pytest.mark.skipif(not ctypes.util.find_library("OSMesa"), reason="no OSMesa library (apt-get install libosmesa6)")
 def test_osmesa_is_used_when_only_its_library_is_found(renderer):
     code = f"""
-import renderers.raster.platform as gl_platform
-from renderers.raster.pyrender_adapter import Pyrender
+import cornell_harness.renderers.raster.platform as gl_platform
+from cornell_harness.renderers.raster.pyrender_adapter import Pyrender
 gl_platform._libraries_present = lambda platform: platform == "osmesa"
-from harness.scenes.loader import load_scene
+from cornell_harness.scenes.loader import load_scene
 r = Pyrender()
 assert r.unavailable_reason() is None, r.unavailable_reason()
 assert gl_platform.availability()[0] == "osmesa"

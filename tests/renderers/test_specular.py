@@ -1,7 +1,7 @@
 """Our path tracer on mirrors and glass: furnaces with analytic answers, and determinism with spheres.
 
-The specular furnaces (:func:`harness.scenes.analytic.specular_furnace_scene`,
-:func:`~harness.scenes.analytic.specular_furnace_camera_in_glass`) are the
+The specular furnaces (:func:`cornell_harness.scenes.analytic.specular_furnace_scene`,
+:func:`~cornell_harness.scenes.analytic.specular_furnace_camera_in_glass`) are the
 white furnace with lossless glass (a sphere, and a cube that makes total
 internal reflection certain) and a mirror sphere in view. What each test
 catches:
@@ -36,15 +36,15 @@ import numpy as np
 import pytest
 
 from tests.conftest import ROOT
-from harness.scenes.analytic import (FURNACE_GLASS_IOR, furnace_radiance, specular_furnace_camera_in_glass,
+from cornell_harness.scenes.analytic import (FURNACE_GLASS_IOR, furnace_radiance, specular_furnace_camera_in_glass,
                                      specular_furnace_coverage, specular_furnace_scene)
-from harness.scenes.loader import load_scene
-from renderers.pathtracer import PathTracer
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.renderers.pathtracer import PathTracer
 from tests.renderers.test_pathtracer import tile_z, z_crit
 
 pytest.importorskip("embreex")
 
-CAUSTICS = ROOT / "harness" / "references" / "cornell-box-caustics" / "scene.toml"
+CAUSTICS = ROOT / "src" / "cornell_harness" / "references" / "cornell-box-caustics" / "scene.toml"
 #: Russian roulette off: with walls of albedo 0 every path ends at its first wall, so each path's value is exact.
 NO_ROULETTE = {"rr_depth": 1000}
 #: float32 image of values computed in float64 (a few products of order-1 weights): a few ulps of float32.

@@ -1,8 +1,8 @@
-"""Screen-space AO (renderers/ssao.py): what each variant reads where the answer is known, and its artefacts.
+"""Screen-space AO (src/cornell_harness/renderers/ssao.py): what each variant reads where the answer is known, and its artefacts.
 
 SSAO is scored against the AO reference, not tested for agreement; these
 tests pin what must hold anyway: an open plane, a floor beside a wall
-(harness/scenes/analytic_ao.py), determinism, and the known artefacts (screen
+(src/cornell_harness/scenes/analytic_ao.py), determinism, and the known artefacts (screen
 border, haloes) that the documentation shows.
 """
 
@@ -15,17 +15,17 @@ import numpy as np
 import pytest
 
 from tests.conftest import run_cbox
-from harness.adapters.registry import resolve
-from harness.adapters.settings import resolve_settings
-from harness.scenes.analytic_ao import cosine_ao_beside_wall
-from harness.scenes.library import resolve_scene
-from harness.scenes.model import Camera, Diffuse, Mesh, Scene
-from harness.scenes.quantities import AmbientOcclusion
-from harness.store.exr import read_exr
-from harness.workflows.render import render_checked
-from renderers.core.gbuffer import gbuffer, view_space
-from renderers.core.geometry import SceneGeometry
-from renderers.ssao import SSAO, hemisphere_kernel, sphere_kernel
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.adapters.settings import resolve_settings
+from cornell_harness.scenes.analytic_ao import cosine_ao_beside_wall
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.model import Camera, Diffuse, Mesh, Scene
+from cornell_harness.scenes.quantities import AmbientOcclusion
+from cornell_harness.store.exr import read_exr
+from cornell_harness.workflows.render import render_checked
+from cornell_harness.renderers.core.gbuffer import gbuffer, view_space
+from cornell_harness.renderers.core.geometry import SceneGeometry
+from cornell_harness.renderers.ssao import SSAO, hemisphere_kernel, sphere_kernel
 
 R = 0.5  # the scenes' AO max distance, as cornell-box-ao's
 
@@ -210,7 +210,7 @@ def test_haloes_at_depth_discontinuities_and_the_thickness_heuristic():
 
     - gtao, the plate 0.3 in front of the wall (within max_distance 0.5): darker than the ray-traced AO by
       more than 0.1; with thickness 0.05 the wall, 0.3 behind the plate, ignores it (A = 1: the
-      all-or-nothing heuristic overshoots, as the docstring of renderers/ssao.py says).
+      all-or-nothing heuristic overshoots, as the docstring of src/cornell_harness/renderers/ssao.py says).
     - crytek, the plate 0.8 in front (beyond max_distance: nothing occludes): its ball's points behind the
       plate count as occluded, so the ring reads darker than the wall alone; with thickness 0.1 it does
       not (it reads lighter: points inside the wall but hidden by the plate are no longer behind a surface).

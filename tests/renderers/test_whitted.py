@@ -1,4 +1,4 @@
-"""Whitted-style recursive ray tracing (renderers/whitted.py) against closed forms, the path tracer and its rules.
+"""Whitted-style recursive ray tracing (src/cornell_harness/renderers/whitted.py) against closed forms, the path tracer and its rules.
 
 Statistics. Direct light with ``ambient = none`` is an unbiased estimate of
 the analytic rectangle-light image and, at max_depth 3, of the path tracer's
@@ -21,15 +21,15 @@ from tests import mutants
 from tests.conftest import run_cbox
 from tests.renderers.test_ambient import rectangle_light_la
 from tests.renderers.test_pathtracer import z_crit
-from harness.evaluate.agreement import agreement_test
-from harness.evaluate.regions import region_masks
-from harness.scenes.analytic import FLOOR_RHO, rectangle_light_image, rectangle_light_scene
-from harness.scenes.library import resolve_scene
-from harness.scenes.loader import load_scene
-from harness.scenes.model import Scene
-from harness.store.references import load_reference
-from renderers.pathtracer import PathTracer
-from renderers.whitted import Whitted
+from cornell_harness.evaluate.agreement import agreement_test
+from cornell_harness.evaluate.regions import region_masks
+from cornell_harness.scenes.analytic import FLOOR_RHO, rectangle_light_image, rectangle_light_scene
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.scenes.model import Scene
+from cornell_harness.store.references import load_reference
+from cornell_harness.renderers.pathtracer import PathTracer
+from cornell_harness.renderers.whitted import Whitted
 
 pytest.importorskip("embreex")
 
@@ -184,7 +184,7 @@ def test_mirror_equals_the_path_tracer_without_diffuse_bounces():
 # -- transparent shadows --------------------------------------------------------------------------------
 
 def check_transmittance(module, tmp_path: Path) -> None:
-    """The shadow rules on single segments (``module``: renderers.whitted or a mutant's copy): straight up
+    """The shadow rules on single segments (``module``: cornell_harness.renderers.whitted or a mutant's copy): straight up
     through the sphere's centre, attenuate keeps (1 − R0)² (normal incidence at both interfaces), ignore 1,
     boolean blocks; beside the sphere all keep 1; through the (opaque) floor all give 0."""
     geom = module.SceneGeometry(umbra_scene(tmp_path))
@@ -202,7 +202,7 @@ def check_transmittance(module, tmp_path: Path) -> None:
 
 
 def test_transmittance_is_fresnel_at_normal_incidence(tmp_path):
-    from renderers import whitted
+    from cornell_harness.renderers import whitted
 
     check_transmittance(whitted, tmp_path)
 
@@ -301,7 +301,7 @@ def _fails(check, *args) -> bool:
     return False
 
 
-#: A copy of the whole toolkit compiles for it (it patches renderers/core/direct.py): ~27 s, so slow.
+#: A copy of the whole toolkit compiles for it (it patches src/cornell_harness/renderers/core/direct.py): ~27 s, so slow.
 SLOW = {"whitted_shadow_ray_not_offset"}
 
 

@@ -1,4 +1,4 @@
-"""The gate's CI outputs (reports/ci.py) on made-up outcomes: the Markdown summary's order and row width, and
+"""The gate's CI outputs (src/cornell_harness/reports/ci.py) on made-up outcomes: the Markdown summary's order and row width, and
 JUnit's result elements. No rendering: each outcome is the few fields the writers read."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import re
 import xml.etree.ElementTree as ET
 from types import SimpleNamespace
 
-from harness.gate.checks import Check
-from reports.ci import ROW_CHARS, junit_xml, markdown_summary
+from cornell_harness.gate.checks import Check
+from cornell_harness.reports.ci import ROW_CHARS, junit_xml, markdown_summary
 
 LONG = "cornell-box-caustics/pathtracer[sampler=\"independent\",max_depth=12]@1024spp"
 

@@ -1,14 +1,14 @@
-"""reports.compare_image's error-map file: a palette PNG whose decoded pixels are the viewer's colours."""
+"""cornell_harness.reports.compare_image's error-map file: a palette PNG whose decoded pixels are the viewer's colours."""
 
 from __future__ import annotations
 
 import numpy as np
 from PIL import Image
 
-from harness.evaluate.image_scores import ImageScore, InputImage, Target
-from harness.store.references import Reference
-from reports.compare_image import colormap_indices, delta_e_png, write_error_map
-from reports.images import DELTA_E_RANGE, MAP_COLORMAPS, apply_colormap
+from cornell_harness.evaluate.image_scores import ImageScore, InputImage, Target
+from cornell_harness.store.references import Reference
+from cornell_harness.reports.compare_image import colormap_indices, delta_e_png, write_error_map
+from cornell_harness.reports.images import DELTA_E_RANGE, MAP_COLORMAPS, apply_colormap
 
 
 def test_indices_follow_apply_colormap():

@@ -31,7 +31,7 @@ TOUCH_PX = 0.5
 
 @pytest.fixture(scope="module")
 def figures_dir(tmp_path_factory):
-    from reports import figures
+    from cornell_harness.reports import figures
 
     with pytest.MonkeyPatch.context() as mp:
         for name, params in SWEEP.items():
@@ -71,7 +71,7 @@ def test_every_figure_text_whole_apart_and_inside(browser, figures_dir):  # noqa
             pg.goto(path.as_uri(), wait_until="load")
             got = pg.evaluate_handle("document.documentElement").evaluate(_TEXT_BOXES)
             tags += sum(t["cls"] == "point-tag" for t in got["texts"])
-            # the image grid (reports.image_figure) has row labels, no legend of series: text checks only
+            # the image grid (cornell_harness.reports.image_figure) has row labels, no legend of series: text checks only
             problems += _problems(path.name, got, bars=path.name.startswith("bias"), names=path.name != "images.svg")
         assert not problems, "\n".join(problems)
         assert tags >= 10  # the tags that fit are drawn (the others are in the points' tooltips)

@@ -1,4 +1,4 @@
-"""The paper's image grid (reports.image_figure): cells, crops, colour bars, files; no rendering.
+"""The paper's image grid (cornell_harness.reports.image_figure): cells, crops, colour bars, files; no rendering.
 
 The images are the stored cornell-box-caustics reference box-filtered to 64², a noisy copy and a 10 % bright
 copy of it; the regions are the scene's own (caustic, glass-shadow, mirror, glass, walls).
@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from harness.evaluate import metrics
-from harness.evaluate.regions import region_masks
-from reports import image_figure as fig
-from reports import images as report_images
-from reports.images import DELTA_E_RANGE, apply_colormap, error_maps, to_uint8
-from reports.regions import region_color
+from cornell_harness.evaluate import metrics
+from cornell_harness.evaluate.regions import region_masks
+from cornell_harness.reports import image_figure as fig
+from cornell_harness.reports import images as report_images
+from cornell_harness.reports.images import DELTA_E_RANGE, apply_colormap, error_maps, to_uint8
+from cornell_harness.reports.regions import region_color
 from tests import report_fixtures as rf
 
 N = 64
@@ -30,8 +30,8 @@ LABELS = {"pt": "PT (independent)"}
 
 @pytest.fixture(scope="module")
 def case():
-    from harness.scenes.library import resolve_scene
-    from harness.store.references import load_reference
+    from cornell_harness.scenes.library import resolve_scene
+    from cornell_harness.store.references import load_reference
 
     full = resolve_scene("cornell-box-caustics")
     big = np.asarray(load_reference(full).image, dtype=np.float64)

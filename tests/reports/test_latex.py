@@ -1,4 +1,4 @@
-"""reports/latex.py: escaping, numbers with their 95% intervals, the booktabs tabular."""
+"""src/cornell_harness/reports/latex.py: escaping, numbers with their 95% intervals, the booktabs tabular."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from reports import latex
+from cornell_harness.reports import latex
 
 
 @pytest.mark.parametrize("text, tex", [

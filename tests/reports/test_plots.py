@@ -1,6 +1,6 @@
 """The charts' text on the SVG strings: never cut, every long label whole, no two estimated text boxes meeting.
 
-Each ``<text>`` of a chart is given the box that :mod:`reports.axes` estimates for it (its anchor, lines and a
+Each ``<text>`` of a chart is given the box that :mod:`cornell_harness.reports.axes` estimates for it (its anchor, lines and a
 rotation of -90°), the same estimate the charts place their text by; the browser checks the drawn boxes
 (tests/reports/test_figures_browser.py).
 """
@@ -12,9 +12,9 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from reports import plots
-from reports.axes import ASCENT, CHAR_WIDTH, DESCENT, LINE, overlaps, pieces, text_width, wrap
-from reports.figures import PRINT
+from cornell_harness.reports import plots
+from cornell_harness.reports.axes import ASCENT, CHAR_WIDTH, DESCENT, LINE, overlaps, pieces, text_width, wrap
+from cornell_harness.reports.figures import PRINT
 
 LONG = ['pathtracer[sampler="independent",rr_depth=3]', 'pathtracer[sampler="sobol",rr_depth=3]',
         'mitsuba[integrator="volpath",max_depth=8]', "ambient-occlusion", "mitsuba", "sppm"]

@@ -20,13 +20,13 @@ import pytest
 from PIL import Image
 
 from tests import report_fixtures as rf
-from harness.evaluate import metrics
-from reports import images as report_images
-from reports.charts import SINGLE_SPP_NOTE
-from reports.html import write_report
-from reports.images import DELTA_E_RANGE, apply_colormap, f16_base64, f16_decode, rel_mse_map
-from reports.tables import check_threshold, column_label, format_value, parse_time_to, value_note
-from reports.plotmath import format_tick, log_ticks, pareto_front
+from cornell_harness.evaluate import metrics
+from cornell_harness.reports import images as report_images
+from cornell_harness.reports.charts import SINGLE_SPP_NOTE
+from cornell_harness.reports.html import write_report
+from cornell_harness.reports.images import DELTA_E_RANGE, apply_colormap, f16_base64, f16_decode, rel_mse_map
+from cornell_harness.reports.tables import check_threshold, column_label, format_value, parse_time_to, value_note
+from cornell_harness.reports.plotmath import format_tick, log_ticks, pareto_front
 
 W = H = 32
 OK_NAMES = ("alpha-tracer", "beta-photons", "gamma-raster")
@@ -502,9 +502,9 @@ def test_bias_variance_bars(report, case):
 def test_region_bias_variance_table(tmp_path, case):
     """An experiment's summary on a scene with regions (cornell-box's four): a bias²/variance table per (renderer,
     region) in the bias/variance section, with the numbers of convergence.region_bias_variance."""
-    from harness.evaluate.convergence import bias_significant, region_bias_variance
-    from harness.evaluate.regions import region_masks
-    from harness.evaluate.summary import REGION_SPLIT, summary_table
+    from cornell_harness.evaluate.convergence import bias_significant, region_bias_variance
+    from cornell_harness.evaluate.regions import region_masks
+    from cornell_harness.evaluate.summary import REGION_SPLIT, summary_table
 
     ref, sc = case["reference"], case["scene"]
     images = {n: [case["raw"][n, s, 64] for s in (0, 1, 2)] for n in OK_NAMES}
@@ -672,7 +672,7 @@ def _viewbox(root) -> tuple[float, float]:
 
 
 def test_figures_are_written_and_linked(report):
-    from reports.figures import COLUMN_WIDTH_IN, PNG_DPI, _converter
+    from cornell_harness.reports.figures import COLUMN_WIDTH_IN, PNG_DPI, _converter
 
     folder, text = report["path"].parent / "figures", report["text"]
     for stem in FIGURE_STEMS:
@@ -697,7 +697,7 @@ def test_figures_are_written_and_linked(report):
 
 
 def test_standalone_svg_styles_itself_for_print(report, case):
-    from reports.figures import COLUMN_WIDTH_IN
+    from cornell_harness.reports.figures import COLUMN_WIDTH_IN
 
     root = _figure_root(report, "convergence-spp-rmse")
     assert root.tag == f"{SVG_NS}svg"
@@ -724,7 +724,7 @@ def test_standalone_svg_styles_itself_for_print(report, case):
 
 
 def test_figures_without_converter_are_svg_only_and_say_so_once(tmp_path, case, monkeypatch, capsys):
-    from reports import figures
+    from cornell_harness.reports import figures
 
     monkeypatch.setattr(figures, "_converter", lambda: (None, "cairosvg is not installed (test)"))
     monkeypatch.setattr(figures, "_said", set())
@@ -752,7 +752,7 @@ def test_summary_leads_with_the_decisive_columns(report):
 
 
 def test_negative_bias2_reads_approximately_zero(case):
-    from reports.html import render_html
+    from cornell_harness.reports.html import render_html
 
     assert format_value("bias2", -8.6e-06) == "≈ 0" and format_value("region.walls.bias2", -1e-9) == "≈ 0"
     assert format_value("bias2", 8.6e-06) == "8.600e-06" and format_value("variance", -1e-4) == "-1.000e-04"
@@ -776,10 +776,10 @@ def test_title_option_reaches_the_report(tmp_path, capsys, monkeypatch):
     and converge's experiment is stubbed: only the options' wiring is under test here."""
     import pandas as pd
 
-    import reports.experiment
-    from harness.cli.app import main
-    from harness.evaluate.summary import ExperimentResults
-    from harness.workflows import converge as converge_workflow
+    import cornell_harness.reports.experiment
+    from cornell_harness.cli.app import main
+    from cornell_harness.evaluate.summary import ExperimentResults
+    from cornell_harness.workflows import converge as converge_workflow
 
     titles = []
 
@@ -792,7 +792,7 @@ def test_title_option_reaches_the_report(tmp_path, capsys, monkeypatch):
             main(list(args))
         assert done.value.code == 0, capsys.readouterr().err
 
-    monkeypatch.setattr(reports.experiment, "write_experiment_report", record)
+    monkeypatch.setattr(cornell_harness.reports.experiment, "write_experiment_report", record)
     nothing = pd.DataFrame({"renderer": [], "status": [], "reason": []})
     monkeypatch.setattr(converge_workflow, "run_experiment", lambda *a, **k: nothing)
     monkeypatch.setattr(converge_workflow, "experiment_results",
@@ -845,8 +845,8 @@ def test_intervals_in_table_charts_and_summary_file(tmp_path, case):
     """A summary from summary_table: summary.parquet holds every figure's bounds; the table shows them beside the
     figure; the time charts draw 95% CI bands and time whiskers, labelled so; an unbiased renderer's bias share
     reads "not significant"."""
-    from harness.evaluate.convergence import bias_significant, target_column
-    from harness.evaluate.summary import summary_table
+    from cornell_harness.evaluate.convergence import bias_significant, target_column
+    from cornell_harness.evaluate.summary import summary_table
 
     runs = _timed(case["runs"], 1.0)
     images = {n: [case["raw"][n, s, 64] for s in (0, 1, 2)] for n in OK_NAMES}

@@ -14,8 +14,8 @@ import re
 import pandas as pd
 import pytest
 
-from harness.cli.app import main
-from reports import figures
+from cornell_harness.cli.app import main
+from cornell_harness.reports import figures
 
 
 def _run(*args: str) -> int:
@@ -152,7 +152,7 @@ def test_usage_errors_are_one_line(experiments, tmp_path, capsys, args, words):
 
 
 def test_names_and_file_prefixes_stay_distinct():
-    from reports.merge import distinct_names, file_prefixes
+    from cornell_harness.reports.merge import distinct_names, file_prefixes
 
     names = distinct_names([["pt", "pt[rr_depth=3]"], ["pt", "mitsuba"]], ["a", "b"])
     assert names == [{"pt": "pt (a)", "pt[rr_depth=3]": "pt[rr_depth=3]"}, {"pt": "pt (b)", "mitsuba": "mitsuba"}]

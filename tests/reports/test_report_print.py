@@ -1,9 +1,9 @@
 """The report printed on A4 in a real browser: the ~30-column summary split into tables of at most 8 columns
-(reports/print_tables.py), nothing wider than the page, a reasonable page count.
+(src/cornell_harness/reports/print_tables.py), nothing wider than the page, a reasonable page count.
 
 Uses the Chromium launcher of tests/reports/test_report_browser.py (skipped, with the reason, without Playwright
 or chromium). The report is the synthetic case of tests/report_fixtures.py with the summary
-:func:`harness.evaluate.summary.summary_table` makes of it (every figure with its bounds, four times to a target,
+:func:`cornell_harness.evaluate.summary.summary_table` makes of it (every figure with its bounds, four times to a target,
 the per-region split) and thresholds: about 30 columns on screen.
 """
 
@@ -13,8 +13,8 @@ import re
 
 import pytest
 
-from harness.evaluate.summary import summary_table
-from reports.print_tables import MAX_COLUMNS, column_chunks, print_tables
+from cornell_harness.evaluate.summary import summary_table
+from cornell_harness.reports.print_tables import MAX_COLUMNS, column_chunks, print_tables
 from tests import report_fixtures as rf
 from tests.reports.test_report_browser import PAGE_TIMEOUT_MS, browser  # noqa: F401 (the fixture)
 

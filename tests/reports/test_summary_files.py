@@ -1,6 +1,6 @@
-"""summary.csv (readable) and summary.tex (a booktabs table) from an experiment's summary (reports/summary_files.py).
+"""summary.csv (readable) and summary.tex (a booktabs table) from an experiment's summary (src/cornell_harness/reports/summary_files.py).
 
-The summary is :func:`harness.evaluate.summary.summary_table`'s on the synthetic runs of tests/report_fixtures.py:
+The summary is :func:`cornell_harness.evaluate.summary.summary_table`'s on the synthetic runs of tests/report_fixtures.py:
 every figure with its 95% bounds, four times to a target. summary.tex is parsed (balanced braces, cells per row,
 the best value per column in bold, escaped names) and, where ``pdflatex`` is installed, compiled.
 """
@@ -15,9 +15,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from harness.evaluate.summary import summary_table
-from reports.summary_columns import best_rows, decisive_columns, spec
-from reports.summary_files import readable_summary, write_summary_files
+from cornell_harness.evaluate.summary import summary_table
+from cornell_harness.reports.summary_columns import best_rows, decisive_columns, spec
+from cornell_harness.reports.summary_files import readable_summary, write_summary_files
 from tests import report_fixtures as rf
 
 NAMES = ("alpha-tracer", "beta-photons", "gamma-raster")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from reports.whitted import hacks_table, renderer_rows_order, whitted_section
+from cornell_harness.reports.whitted import hacks_table, renderer_rows_order, whitted_section
 
 NOISE = {"caustic": {"mean": 1.0, "mean_rel_se": 0.001}, "floor": {"mean": 0.1, "mean_rel_se": 0.001}}
 

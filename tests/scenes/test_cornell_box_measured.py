@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 from tests.conftest import ROOT
-from harness.evaluate.regions import region_masks
-from harness.scenes.library import resolve_scene
-from harness.scenes.model import Region
-from harness.scenes.spectra import CORNELL_PCG, SCENE_LIGHT, emission_rgb, reflectance_rgb
+from cornell_harness.evaluate.regions import region_masks
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.model import Region
+from cornell_harness.scenes.spectra import CORNELL_PCG, SCENE_LIGHT, emission_rgb, reflectance_rgb
 
-FOLDER = ROOT / "harness" / "references" / "cornell-box-measured"
+FOLDER = ROOT / "src" / "cornell_harness" / "references" / "cornell-box-measured"
 DATA = json.loads(CORNELL_PCG.read_text(encoding="utf-8"))
 
 
@@ -42,7 +42,7 @@ def test_the_stored_file_is_the_scripts_output():
 
 
 def test_red_is_on_the_left_seen_from_the_camera(scene):
-    """Camera rays (the renderers' pixel convention, harness.evaluate.regions) see the red wall in the left half of
+    """Camera rays (the renderers' pixel convention, cornell_harness.evaluate.regions) see the red wall in the left half of
     the image and the green wall in the right half, as the data's note_handedness says."""
     probe = dataclasses.replace(scene, regions={"red": Region("red", ("red-wall",)),
                                                 "green": Region("green", ("green-wall",))})
@@ -96,8 +96,8 @@ def test_materials_and_light_are_the_declared_projection_of_the_measured_spectra
 
 def test_the_rgb_convention_can_be_overridden(scene):
     """--set colour.rgb_convention=illuminant_E: a derived scene on the illuminant-E projection, its own hash."""
-    from harness.scenes.overrides import load_derived_scene
-    from harness.scenes.spectra import ILLUMINANT_E
+    from cornell_harness.scenes.overrides import load_derived_scene
+    from cornell_harness.scenes.spectra import ILLUMINANT_E
 
     e = load_derived_scene(scene.path, [f"colour.rgb_convention={ILLUMINANT_E}"])
     assert e.spectral.rgb_convention == ILLUMINANT_E and e.content_hash() != scene.content_hash()
@@ -110,7 +110,7 @@ def test_the_rgb_convention_can_be_overridden(scene):
 def test_the_stored_reference_is_spectral_and_shows_red_on_the_left(scene):
     """The stored reference: Mitsuba's spectral variant, this scene's hash; its left wall red, its right wall green;
     its light the emission_rgb of the light spectrum plus the little the light's own surface reflects (< 2%)."""
-    from harness.store.references import load_reference
+    from cornell_harness.store.references import load_reference
 
     ref = load_reference(scene)
     assert ref.provenance["variant"].endswith("_spectral") and ref.provenance["scene_hash"] == scene.content_hash()

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks import export_mapping, markdown_blocks
-from harness.scenes.export import FORMATS, mapping_table
+from cornell_harness.scenes.export import FORMATS, mapping_table
 
 PAGE = Path(__file__).resolve().parents[2] / "docs" / "export.md"
 

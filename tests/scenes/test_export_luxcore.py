@@ -1,4 +1,4 @@
-"""The LuxCore SDL export (harness/scenes/export/luxcore.py): what it writes, checked without rendering.
+"""The LuxCore SDL export (src/cornell_harness/scenes/export/luxcore.py): what it writes, checked without rendering.
 
 Rendering the export is tests/renderers/test_luxcore.py's.
 """
@@ -10,12 +10,12 @@ import math
 import numpy as np
 import pytest
 
-from harness.scenes.export import export_scene, mapping_table, refusal
-from harness.scenes.export import luxcore
-from harness.scenes.export.ply import read_ply, write_ply
-from harness.scenes.loader import load_scene
-from harness.scenes.model import SceneError, Sphere
-from harness.scenes.transforms import unit_frame
+from cornell_harness.scenes.export import export_scene, mapping_table, refusal
+from cornell_harness.scenes.export import luxcore
+from cornell_harness.scenes.export.ply import read_ply, write_ply
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.scenes.model import SceneError, Sphere
+from cornell_harness.scenes.transforms import unit_frame
 from tests.conftest import CORNELL, ROOT
 
 
@@ -60,7 +60,7 @@ def test_unbounded_paths_are_cut_where_the_light_lost_is_below_the_bound(scene_n
     """n = ⌈ln ε / ln ρ⌉ diffuse bounces, ρ the largest diffuse reflectance in any channel: ρⁿ <= ε < ρⁿ⁻¹
     (furnace 0.8 -> 52; cornell-box's white, 0.885809 in red -> 95; the furnace-glass mirror of
     reflectance 1 is specular and does not count)."""
-    scene = load_scene(ROOT / "harness" / "references" / scene_name)
+    scene = load_scene(ROOT / "src" / "cornell_harness" / "references" / scene_name)
     rho = max(max(m.reflectance) for m in scene.materials.values() if type(m).__name__ == "Diffuse")
     n = luxcore.diffuse_depth(scene)
     assert n == depth and rho**n <= luxcore.TRUNCATION < rho ** (n - 1)
@@ -164,7 +164,7 @@ def test_ply_with_normals_round_trips(tmp_path):
 
 
 def test_spheres_are_written_with_normals(tmp_path):
-    scene = load_scene(ROOT / "harness" / "references" / "cornell-box-caustics" / "scene.toml")
+    scene = load_scene(ROOT / "src" / "cornell_harness" / "references" / "cornell-box-caustics" / "scene.toml")
     cfg = export_scene(scene, "luxcore", tmp_path)
     p = _props(cfg.parent / "scene.scn")
     glass = [k for k, v in p.items() if v == '"glass"' and k.endswith(".type")]
@@ -175,7 +175,7 @@ def test_spheres_are_written_with_normals(tmp_path):
 
 
 def test_ambient_occlusion_is_refused():
-    scene = load_scene(ROOT / "harness" / "references" / "cornell-box-ao" / "scene.toml")
+    scene = load_scene(ROOT / "src" / "cornell_harness" / "references" / "cornell-box-ao" / "scene.toml")
     why = refusal(scene, "luxcore")
     assert isinstance(why, SceneError) and why.field == "quantity"
 

@@ -1,6 +1,6 @@
 """The Mitsuba 3 export renders bit for bit as the Mitsuba adapter does, from Python and from the ``mitsuba`` executable.
 
-Like with like: the adapter (``renderers/mitsuba3.py``) renders in passes (:func:`harness.adapters.api.spp_passes`:
+Like with like: the adapter (``src/cornell_harness/renderers/mitsuba3.py``) renders in passes (:func:`cornell_harness.adapters.api.spp_passes`:
 1, 1, 2, 4, ... samples), pass ``k`` calling ``mi.render(scene, spp=n, seed=pass_seed(seed, k))`` on the
 dictionary scene, and averages them in float64. The exported file's sampler has ``seed = $seed``, to which
 Mitsuba adds the seed ``mi.render`` is given (0 by default and from the executable). So
@@ -8,9 +8,9 @@ Mitsuba adds the seed ``mi.render`` is given (0 by default and from the executab
 - one pass (spp 1): the file loaded with ``seed = pass_seed(seed, 0)`` and rendered plainly (or run by the
   ``mitsuba`` executable with ``-D seed=...``) is the adapter's image;
 - several passes: the file loaded with seed 0 and rendered pass by pass with the adapter's pass seeds,
-  accumulated by the adapter's own :func:`renderers.mitsuba3.run_passes`, is the adapter's image.
+  accumulated by the adapter's own :func:`cornell_harness.renderers.mitsuba3.run_passes`, is the adapter's image.
 
-Both are asserted bit for bit (same variant, ``llvm_ad_rgb`` here: :func:`renderers.mitsuba3._select_variant`).
+Both are asserted bit for bit (same variant, ``llvm_ad_rgb`` here: :func:`cornell_harness.renderers.mitsuba3._select_variant`).
 """
 
 from __future__ import annotations
@@ -25,15 +25,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.adapters.api import pass_seed
-from harness.scenes.export import export_scene
-from harness.scenes.export import mitsuba as export_mitsuba
-from harness.scenes.export.ply import read_ply
-from harness.scenes.library import resolve_scene
-from harness.scenes.model import SceneError
-from harness.store.exr import read_exr
-from renderers import mitsuba3
-from renderers.mitsuba3 import Mitsuba3
+from cornell_harness.adapters.api import pass_seed
+from cornell_harness.scenes.export import export_scene
+from cornell_harness.scenes.export import mitsuba as export_mitsuba
+from cornell_harness.scenes.export.ply import read_ply
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.model import SceneError
+from cornell_harness.store.exr import read_exr
+from cornell_harness.renderers import mitsuba3
+from cornell_harness.renderers.mitsuba3 import Mitsuba3
 
 mi = pytest.importorskip("mitsuba")
 

@@ -44,11 +44,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import pytest
 
-from harness.scenes.export import export_scene, mapping_table
-from harness.scenes.export import pbrt_v4
-from harness.scenes.library import resolve_scene
-from harness.scenes.materials import Dielectric, Diffuse, Mirror
-from harness.scenes.model import Camera, SceneError
+from cornell_harness.scenes.export import export_scene, mapping_table
+from cornell_harness.scenes.export import pbrt_v4
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.materials import Dielectric, Diffuse, Mirror
+from cornell_harness.scenes.model import Camera, SceneError
 
 SPECTRUM = {"rgb", "spectrum", "blackbody"}
 SPECTRUM_TEXTURE = SPECTRUM | {"texture"}

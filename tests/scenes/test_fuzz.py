@@ -1,7 +1,7 @@
 """Fuzzing scene input: a mutated scene loads or raises SceneError, and the CLI says why in one line.
 
 Covered (issue 9), over mutated copies of the three stored scenes
-(``harness/references/{cornell-box,furnace,light-panel}/scene.toml``):
+(``src/cornell_harness/references/{cornell-box,furnace,light-panel}/scene.toml``):
 
 - **text mutations**, written to a file and read with ``load_scene``
   (:data:`TEXT_CASES` per scene and kind): byte flips, truncation, key
@@ -42,12 +42,12 @@ import numpy as np
 import pytest
 
 from tests.conftest import ROOT, run_cbox
-from harness.scenes.loader import load_scene, parse_scene
-from harness.scenes.model import MAX_COORDINATE, MAX_IMAGE_BYTES, MAX_RADIANCE, Scene, SceneError, image_memory_bytes
+from cornell_harness.scenes.loader import load_scene, parse_scene
+from cornell_harness.scenes.model import MAX_COORDINATE, MAX_IMAGE_BYTES, MAX_RADIANCE, Scene, SceneError, image_memory_bytes
 
 SEED = 9
 SCENE_NAMES = ("cornell-box", "furnace", "light-panel", "cornell-box-caustics", "furnace-glass")
-SCENES = {name: (ROOT / "harness" / "references" / name / "scene.toml").read_bytes() for name in SCENE_NAMES}
+SCENES = {name: (ROOT / "src" / "cornell_harness" / "references" / name / "scene.toml").read_bytes() for name in SCENE_NAMES}
 TEXT_CASES = 30
 DOC_CASES = 150
 #: A single load taking more CPU time than this is a hang (they take milliseconds). CPU time of this process,
@@ -261,7 +261,7 @@ def mutate_doc(rng, doc: dict) -> dict:
 def test_mutated_scene_document_parses_or_raises_scene_error(scene):
     rng = np.random.default_rng([SEED, SCENE_NAMES.index(scene), len(TEXT_MUTATIONS)])
     doc = tomllib.loads(SCENES[scene].decode())
-    path = ROOT / "harness" / "references" / scene / "scene.toml"
+    path = ROOT / "src" / "cornell_harness" / "references" / scene / "scene.toml"
     cases = [(f"{scene} document #{i}", lambda d=mutate_doc(rng, doc): parse_scene(d, path)) for i in range(DOC_CASES)]
     failures = _failures(cases)
     assert not failures, f"{len(failures)} of {DOC_CASES} cases:\n" + "\n".join(failures[:3])
@@ -270,7 +270,7 @@ def test_mutated_scene_document_parses_or_raises_scene_error(scene):
 def test_unmutated_scenes_load():
     """The mutations start from valid scenes (and the stored scenes have no unknown keys)."""
     for scene in SCENE_NAMES:
-        _check_loaded(load_scene(ROOT / "harness" / "references" / scene / "scene.toml"))
+        _check_loaded(load_scene(ROOT / "src" / "cornell_harness" / "references" / scene / "scene.toml"))
 
 
 #: A few failing inputs for the whole CLI path: (scene, mutation, case index).

@@ -1,4 +1,4 @@
-"""A scene's quantity and the AO definition it pins (harness/scenes/quantities.py), and the runner's refusal."""
+"""A scene's quantity and the AO definition it pins (src/cornell_harness/scenes/quantities.py), and the runner's refusal."""
 
 from __future__ import annotations
 
@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 
 from tests.conftest import MINIMAL_SCENE
-from harness.adapters.registry import missing_features
-from harness.evaluate import metrics, regions
-from harness.evaluate.registry import COLOUR_METRICS
-from harness.scenes.library import resolve_scene
-from harness.scenes.loader import load_scene
-from harness.scenes.model import SceneError
-from harness.store.references import Reference
-from harness.workflows.runner import score
+from cornell_harness.adapters.registry import missing_features
+from cornell_harness.evaluate import metrics, regions
+from cornell_harness.evaluate.registry import COLOUR_METRICS
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.scenes.model import SceneError
+from cornell_harness.store.references import Reference
+from cornell_harness.workflows.runner import score
 
 AO_TABLE = """
 [ambient_occlusion]

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from tests.conftest import CORNELL, MINIMAL_SCENE, run_cbox
-from harness.scenes.model import IMAGE_BUFFERS, MAX_IMAGE_BYTES, SceneError, image_memory_bytes, triangle_arrays
-from harness.scenes.loader import load_scene
+from cornell_harness.scenes.model import IMAGE_BUFFERS, MAX_IMAGE_BYTES, SceneError, image_memory_bytes, triangle_arrays
+from cornell_harness.scenes.loader import load_scene
 
 
 def test_minimal_scene_parses(write_scene):
@@ -236,8 +236,8 @@ def _sreplace(old: str, new: str, text: str = SPECULAR_SCENE) -> str:
 
 
 def test_specular_scene_parses(write_scene):
-    from harness.scenes.materials import Dielectric, Mirror
-    from harness.scenes.model import Sphere
+    from cornell_harness.scenes.materials import Dielectric, Mirror
+    from cornell_harness.scenes.model import Sphere
 
     s = load_scene(write_scene(SPECULAR_SCENE))
     assert s.materials["chrome"] == Mirror("chrome", (0.9, 0.8, 0.7))
@@ -356,7 +356,7 @@ box = { min = [-1, -1, -0.1], max = [0, 1, 0.1] }
 [regions.anything-high]
 box = { min = [-2, -2, 0.5], max = [2, 2, 2] }
 """
-    from harness.scenes.model import Region
+    from cornell_harness.scenes.model import Region
 
     s = load_scene(write_scene(text))
     assert s.regions == {

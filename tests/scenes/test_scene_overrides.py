@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 
 from tests.conftest import CORNELL, MINIMAL_SCENE, ROOT, run_cbox
-from harness.adapters.registry import resolve
-from harness.scenes.loader import load_scene
-from harness.scenes.model import SceneError
-from harness.scenes.overrides import format_value, load_derived_scene, parse_value
-from harness.store.exr import read_exr
-from harness.store.image_files import read_image_file
-from harness.store.references import (DERIVED_FOLDER, PROVENANCE_FILE, ReferenceError, build_seconds,
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.scenes.model import SceneError
+from cornell_harness.scenes.overrides import format_value, load_derived_scene, parse_value
+from cornell_harness.store.exr import read_exr
+from cornell_harness.store.image_files import read_image_file
+from cornell_harness.store.references import (DERIVED_FOLDER, PROVENANCE_FILE, ReferenceError, build_seconds,
                                       load_reference, reference_folder)
-from harness.workflows.reference_build import build_reference
+from cornell_harness.workflows.reference_build import build_reference
 
 
 @pytest.mark.parametrize("text, value", [
@@ -220,8 +220,8 @@ max = {{ delta_e2000_mean = 1e9 }}
 
 
 def test_gate_set_derives_every_scene_and_skips_the_baseline(write_scene, tmp_path):
-    from harness.gate.config import load_config
-    from harness.gate.run import run_gate
+    from cornell_harness.gate.config import load_config
+    from cornell_harness.gate.run import run_gate
 
     path = write_scene(MINIMAL_SCENE.replace("resolution = [8, 6]", "resolution = [16, 12]"))
     base = load_scene(path)

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from tests.conftest import MINIMAL_SCENE, ROOT
-from harness.scenes.loader import load_scene
-from harness.scenes.model import SceneError
-from harness.scenes.spectra import (CORNELL_PCG, ILLUMINANT_E, SCENE_LIGHT, Spectrum, emission_rgb, interpolate,
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.scenes.model import SceneError
+from cornell_harness.scenes.spectra import (CORNELL_PCG, ILLUMINANT_E, SCENE_LIGHT, Spectrum, emission_rgb, interpolate,
                                     observer, reflectance_rgb, xyz_to_linear_srgb)
 
 DATA = json.loads(CORNELL_PCG.read_text())
@@ -166,7 +166,7 @@ def test_spectral_content_enters_the_hash_only_when_present(write_scene):
 def test_every_stored_scene_keeps_its_stored_hash():
     """RGB scenes hash as before: each stored reference's scene_hash still matches its scene (all RGB but the
     spectral cornell-box-measured)."""
-    stored = sorted((ROOT / "harness" / "references").glob("*/provenance.json"))
+    stored = sorted((ROOT / "src" / "cornell_harness" / "references").glob("*/provenance.json"))
     assert len(stored) >= 5
     for provenance in stored:
         scene = load_scene(provenance.parent / "scene.toml")
@@ -175,7 +175,7 @@ def test_every_stored_scene_keeps_its_stored_hash():
 
 
 def test_an_rgb_scene_loads_without_colour_science():
-    code = ("import sys; from harness.scenes.library import resolve_scene; resolve_scene('cornell-box'); "
+    code = ("import sys; from cornell_harness.scenes.library import resolve_scene; resolve_scene('cornell-box'); "
             "print('colour' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert out.stdout.strip() == "False"

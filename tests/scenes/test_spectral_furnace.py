@@ -1,4 +1,4 @@
-"""The spectral furnace's closed form (harness.scenes.analytic): per wavelength the white furnace's series,
+"""The spectral furnace's closed form (cornell_harness.scenes.analytic): per wavelength the white furnace's series,
 projected to linear sRGB as the scene model projects an emitter.
 
 Independent of the renderers: the closed form is checked against colour-science's own integration of the
@@ -12,9 +12,9 @@ import colour
 import numpy as np
 import pytest
 
-from harness.scenes.analytic import (SPECTRAL_FURNACE_ALBEDO, SPECTRAL_FURNACE_EMISSION, furnace_radiance,
+from cornell_harness.scenes.analytic import (SPECTRAL_FURNACE_ALBEDO, SPECTRAL_FURNACE_EMISSION, furnace_radiance,
                                      spectral_furnace_radiance, spectral_furnace_scene)
-from harness.scenes.spectra import ILLUMINANT_E, SCENE_LIGHT, Spectrum, emission_rgb, reflectance_rgb
+from cornell_harness.scenes.spectra import ILLUMINANT_E, SCENE_LIGHT, Spectrum, emission_rgb, reflectance_rgb
 
 GRID = np.arange(360.0, 831.0)
 

@@ -1,4 +1,4 @@
-"""A scene file's length_scale (harness.scenes.units): file lengths to scene units, and its errors."""
+"""A scene file's length_scale (cornell_harness.scenes.units): file lengths to scene units, and its errors."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from tests.conftest import MINIMAL_SCENE, ROOT
-from harness.scenes.loader import load_scene
-from harness.scenes.model import SceneError
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.scenes.model import SceneError
 
 
 def _in_mm(text: str) -> str:
@@ -29,7 +29,7 @@ def test_length_scale_gives_scene_units(write_scene):
     np.testing.assert_allclose(mm.meshes[0].vertices, units.meshes[0].vertices, rtol=1e-15)
     assert mm.camera.position == units.camera.position and mm.name == units.name
     assert mm.content_hash() == units.content_hash()
-    ao = ROOT / "harness" / "references" / "cornell-box-ao" / "scene.toml"
+    ao = ROOT / "src" / "cornell_harness" / "references" / "cornell-box-ao" / "scene.toml"
     text = ao.read_text()
     assert "max_distance" in text
     scaled = load_scene(write_scene("length_scale = 0.5\n" + text, "ao.toml"))

@@ -17,11 +17,11 @@ import pytest
 
 from tests.conftest import CORNELL, ROOT, run_cbox
 from tests.user_renderers import MemoryHog
-from harness.scenes import analytic, transforms
-from harness.scenes.loader import load_scene
-from harness.store.references import load_reference
-from harness.stress import expectations, judge, suite, variants
-from harness.workflows import sandbox
+from cornell_harness.scenes import analytic, transforms
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.store.references import load_reference
+from cornell_harness.stress import expectations, judge, suite, variants
+from cornell_harness.workflows import sandbox
 
 pytest.importorskip("embreex")
 
@@ -273,14 +273,14 @@ def test_sandbox_returns_each_render_and_checks_its_shape():
 
 
 def test_unknown_renderer_is_a_usage_error():
-    from harness.adapters.registry import RendererError
+    from cornell_harness.adapters.registry import RendererError
 
     with pytest.raises(RendererError, match="unknown renderer"):
         suite.run_stress(["no-such-renderer"], ["albedo-0"])
 
 
 def test_report_from_a_table_alone(tmp_path):
-    from reports.stress import write_stress_report
+    from cornell_harness.reports.stress import write_stress_report
 
     rows = [dict.fromkeys(judge.COLUMNS) for _ in range(2)]
     rows[0].update(variant="albedo-0.5", renderer="x", status="pass", spp=4, resolution="16x16", time_s=1.0,
@@ -309,8 +309,8 @@ def test_unknown_variants_are_rejected_before_running(tmp_path):
 def test_the_reference_renderer_is_the_callers():
     """The suite names no renderer: the variant references are rendered by the one its caller gives (cbox
     stress: the CLI's REFERENCE_RENDERER), and without one the variant-reference rows say why not."""
-    from harness.adapters.registry import resolve
-    from harness.cli.common import REFERENCE_RENDERER
+    from cornell_harness.adapters.registry import resolve
+    from cornell_harness.cli.common import REFERENCE_RENDERER
 
     (grazing,) = [v for v in variants.VARIANTS if v.expected == "variant-reference"]
     assert REFERENCE_RENDERER not in grazing.expected_note

@@ -9,12 +9,12 @@ import math
 
 import pytest
 
-from harness.adapters.api import RenderResult
-from harness.adapters.registry import resolve
-from harness.scenes.library import resolve_scene
-from harness.workflows import compare as cmp
-from harness.workflows import runner
-from harness.workflows.timing import Timing
+from cornell_harness.adapters.api import RenderResult
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.workflows import compare as cmp
+from cornell_harness.workflows import runner
+from cornell_harness.workflows.timing import Timing
 from tests.user_renderers import Jittery, JitteryToo, Unrepeatable
 
 #: Jittery's clock: Clocked's (0.25 s + 1/16 s per spp) times 1, 1.25 and 0.8 by turns of two renders.
@@ -160,7 +160,7 @@ def test_an_unbiased_run_gets_the_gates_agreement_verdict():
     """judge_agreement gives an unbiased render the gate's agreement test (family-wise α = 0.01 at seed 0): the
     reference plus its own noise passes; the same 1% dark (Biased1Percent: ~30 sd on the whole image at 64 spp)
     fails; a renderer that declares another estimator gets no verdict."""
-    from harness.store.references import load_reference
+    from cornell_harness.store.references import load_reference
 
     scene = resolve_scene("cornell-box")
     ref = load_reference(scene)

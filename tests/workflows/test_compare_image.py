@@ -9,16 +9,16 @@ import pytest
 from PIL import Image
 
 from tests.conftest import CORNELL, run_cbox
-from harness.adapters.registry import resolve
-from harness.evaluate import flip
-from harness.evaluate.ciede2000 import srgb_eotf_inverse
-from harness.evaluate.registry import IMAGE_METRICS
-from harness.scenes.library import resolve_scene
-from harness.store.exr import ImageFileError, read_exr, write_exr
-from harness.store.image_files import ImageFile
-from harness.store.references import load_reference
-from harness.workflows import compare_image as ci
-from harness.workflows import runner
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.evaluate import flip
+from cornell_harness.evaluate.ciede2000 import srgb_eotf_inverse
+from cornell_harness.evaluate.registry import IMAGE_METRICS
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.exr import ImageFileError, read_exr, write_exr
+from cornell_harness.store.image_files import ImageFile
+from cornell_harness.store.references import load_reference
+from cornell_harness.workflows import compare_image as ci
+from cornell_harness.workflows import runner
 
 SPP, SEED = 2, 0  # the numbers must match, not be good: the cheapest render
 REFERENCE = CORNELL.parent / "reference.exr"

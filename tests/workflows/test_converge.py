@@ -10,11 +10,11 @@ import math
 import pandas as pd
 import pytest
 
-from harness.adapters.registry import resolve
-from harness.scenes.library import resolve_scene
-from harness.store.references import load_reference
-from harness.workflows import converge
-from harness.workflows import runner
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
+from cornell_harness.workflows import converge
+from cornell_harness.workflows import runner
 from tests.user_renderers import Jittery, JitteryToo
 
 RENDERERS = ["tests.user_renderers:Jittery", "tests.user_renderers:JitteryToo"]
@@ -155,7 +155,7 @@ def test_cpu_basis_summary_reads_cpu_time(tmp_path, cornell):
 def test_repeat_task_loads_its_renderer_as_a_worker_does(cornell):
     """On a worker a repeat gets no renderer object: it loads the cell's spec, renders the same render as the
     cell's first and sends back its timing and the image's digest (the image itself stays there)."""
-    from harness.workflows.cells import Cell
+    from cornell_harness.workflows.cells import Cell
 
     scene, _ = cornell
     (entry,) = resolve(["tests.user_renderers:Clocked"])

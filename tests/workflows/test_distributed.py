@@ -20,22 +20,22 @@ from tests.conftest import CORNELL, ROOT
 
 pytest.importorskip("distributed")
 
-from harness.adapters.registry import resolve  # noqa: E402
-from harness.evaluate.timing_quality import TIMING_COLUMNS  # noqa: E402
-from harness.scenes.library import resolve_scene  # noqa: E402
-from harness.store.experiments import RESULTS_FILE  # noqa: E402
-from harness.store.exr import read_exr  # noqa: E402
-from harness.store.references import load_reference  # noqa: E402
-from harness.workflows.converge import parse_spp_list, run_experiment  # noqa: E402
-from harness.workflows.executor import DEFAULT_RETRIES, Task, open_executor, task_key  # noqa: E402
-from harness.workflows.reference_build import build_reference  # noqa: E402
+from cornell_harness.adapters.registry import resolve  # noqa: E402
+from cornell_harness.evaluate.timing_quality import TIMING_COLUMNS  # noqa: E402
+from cornell_harness.scenes.library import resolve_scene  # noqa: E402
+from cornell_harness.store.experiments import RESULTS_FILE  # noqa: E402
+from cornell_harness.store.exr import read_exr  # noqa: E402
+from cornell_harness.store.references import load_reference  # noqa: E402
+from cornell_harness.workflows.converge import parse_spp_list, run_experiment  # noqa: E402
+from cornell_harness.workflows.executor import DEFAULT_RETRIES, Task, open_executor, task_key  # noqa: E402
+from cornell_harness.workflows.reference_build import build_reference  # noqa: E402
 
 DASK = Path(sys.executable).parent / "dask"
 #: Measured (times), or where the cell ran (its threads, how Mitsuba found LLVM there): the only columns
 #: allowed to differ between backends.
 RUN_COLUMNS = ["time_s", "efficiency", "info_setup_s", "info_threads", "info_variant_note", "info_cpu_time_of",
                *TIMING_COLUMNS,
-               # the timings behind time_s (harness.evaluate.timing_stats.repeat_columns)
+               # the timings behind time_s (cornell_harness.evaluate.timing_stats.repeat_columns)
                "time_samples_s", "time_s_low", "time_s_high", "cpu_time_samples_s", "cpu_time_s_low", "cpu_time_s_high"]
 #: Ours, built on Embree in the worker, and a user's renderer loaded there by module:Class (cheap: Mitsuba, whose
 #: import and JIT cost seconds per worker, renders the reference batches and a gate expectation below).
@@ -168,8 +168,8 @@ def assert_same_experiment(a: Path, b: Path) -> None:
 def test_converge_through_scheduler_equals_in_process(cluster, workdir, small_scene, in_process, capsys):
     """``cbox converge ... --scheduler tcp://127.0.0.1:PORT`` (the command, in this process): the in-process
     table and images; and a finished cell is never rendered again."""
-    from harness.cli import output
-    from harness.cli.app import main
+    from cornell_harness.cli import output
+    from cornell_harness.cli.app import main
 
     out = workdir / "scheduler"
     cluster.wait_for_workers(2)
@@ -222,8 +222,8 @@ def test_reference_batches_across_workers_equal_single_process_build(cluster, wo
 def test_reference_verify_across_workers_equals_in_process(cluster, small_scene):
     """``cbox reference verify --workers``: the engine's batches on two workers give the in-process verdict, bit
     for bit (render_batches folds them in seed order), for the same per-region table."""
-    from harness.store.references import load_reference
-    from harness.workflows.reference_verify import verify_reference
+    from cornell_harness.store.references import load_reference
+    from cornell_harness.workflows.reference_verify import verify_reference
 
     (mitsuba,) = resolve(["mitsuba"])
     ref = load_reference(small_scene)
@@ -319,9 +319,9 @@ def test_gate_on_cluster_gives_the_in_process_verdict(cluster, workdir, small_sc
     """``cbox gate --scheduler``: each expectation renders on a worker, is checked in the client, and every
     metric and check is the in-process gate's (without the time-limited child process, which would start
     an interpreter per expectation; test_gate shows the child gives the same run)."""
-    from harness.gate.config import load_config
-    from harness.gate.run import run_gate
-    from harness.workflows.runner import json_safe
+    from cornell_harness.gate.config import load_config
+    from cornell_harness.gate.run import run_gate
+    from cornell_harness.workflows.runner import json_safe
 
     path = workdir / "gate.toml"
     path.write_text(f'''alpha = 0.01
@@ -357,8 +357,8 @@ def test_options_are_checked_before_any_work(tmp_path, capsys, monkeypatch):
     scheduler: one line naming the option, exit 2, nothing written."""
     import dask
 
-    from harness.cli import output
-    from harness.cli.app import main
+    from cornell_harness.cli import output
+    from cornell_harness.cli.app import main
 
     monkeypatch.syspath_prepend(str(ROOT))
     base = ["converge", "--scene", "cornell-box", "-r", "tests.user_renderers:SeededNoise", "--spp", "1", "--seeds", "1",
@@ -381,7 +381,7 @@ def test_options_are_checked_before_any_work(tmp_path, capsys, monkeypatch):
 
 
 def test_worker_share_of_cores_and_a_writable_numba_cache(tmp_path):
-    from harness.workflows.worker_setup import numba_cache_dir, threads_per_worker
+    from cornell_harness.workflows.worker_setup import numba_cache_dir, threads_per_worker
 
     assert [threads_per_worker(2, n) for n in (1, 2, 3)] == [2, 1, 1]  # never oversubscribed, never 0
     assert threads_per_worker(64, 4) == 16
@@ -395,7 +395,7 @@ def test_worker_share_of_cores_and_a_writable_numba_cache(tmp_path):
 
 
 def test_progress_says_running_and_failed_cells(capsys):
-    from harness.cli.output import Progress
+    from cornell_harness.cli.output import Progress
 
     with Progress(4, "converge box", "cell", slots=2) as bar:
         bar.advance("pathtracer seed 0")
@@ -410,7 +410,7 @@ def test_progress_says_running_and_failed_cells(capsys):
 def test_results_table_rewrites_are_throttled_while_cells_finish(tmp_path, monkeypatch):
     """The cells are the record; the table is rewritten as they finish, throttled (thousands of quick cells
     must not rewrite a growing table after each), and always at the end, in the planned order."""
-    from harness.workflows import converge
+    from cornell_harness.workflows import converge
 
     monkeypatch.setattr(converge, "RESULTS_EVERY_S", 60.0)  # no slow machine lets a minute pass below
     table = converge._Table(tmp_path / RESULTS_FILE)

@@ -18,7 +18,7 @@ SEEDS = 6
 
 
 def _converge_cmd(out, seeds=SEEDS):
-    return [sys.executable, "-m", "harness", "converge", "--scene", "cornell-box", "--renderer",
+    return [sys.executable, "-m", "cornell_harness", "converge", "--scene", "cornell-box", "--renderer",
             "tests.user_renderers:CountingNoise", "--spp", "1,2", "--seeds", str(seeds), "--out", str(out)]
 
 
@@ -126,9 +126,9 @@ def test_time_budget_calibration_survives_a_stalled_render():
     """A 1-spp calibration render that reads longer than the 4-spp one (load stalled it): the per-sample cost
     falls back to t4 / 4 = 1/8 s, so a 2 s budget buys 16 spp (it once bought 2·10⁹: a render without end).
     Clocked's consistent clock still gives (2 - 0.25) / (1/16) = 28."""
-    from harness.adapters.registry import resolve
-    from harness.scenes.library import resolve_scene
-    from harness.workflows.compare import spp_for_time_budget
+    from cornell_harness.adapters.registry import resolve
+    from cornell_harness.scenes.library import resolve_scene
+    from cornell_harness.workflows.compare import spp_for_time_budget
 
     scene = resolve_scene("cornell-box").with_resolution(8, 8)
     stalled, clocked = resolve(["tests.user_renderers:Stalled", "tests.user_renderers:Clocked"])
@@ -168,10 +168,10 @@ def test_converge_region_target_must_name_a_region_of_the_scene(tmp_path):
 def _converge(out, log, spp, monkeypatch, command=None):
     """``cbox converge`` of CountingNoise on cornell-box, seed 0, in this process (the workflow the command
     runs, without a second interpreter's start-up): the results table."""
-    from harness.adapters.registry import resolve
-    from harness.scenes.library import resolve_scene
-    from harness.store.references import load_reference
-    from harness.workflows.converge import parse_spp_list, run_experiment
+    from cornell_harness.adapters.registry import resolve
+    from cornell_harness.scenes.library import resolve_scene
+    from cornell_harness.store.references import load_reference
+    from cornell_harness.workflows.converge import parse_spp_list, run_experiment
 
     monkeypatch.setenv("CBOX_TEST_RENDER_LOG", str(log))
     scene = resolve_scene("cornell-box")
@@ -217,7 +217,7 @@ def test_resume_keeps_the_first_date_and_lists_each_resume(tmp_path, monkeypatch
 def test_second_run_on_a_locked_folder_stops_naming_the_holder(tmp_path, monkeypatch):
     """flock conflicts between two opens of the file even in one process, so one process can play both runs;
     the CLI prints an ExperimentError as its one line with exit code 2, as for every user error."""
-    from harness.store.experiments import ExperimentError, experiment_lock
+    from cornell_harness.store.experiments import ExperimentError, experiment_lock
 
     out, log = tmp_path / "exp", tmp_path / "renders.log"
     with experiment_lock(out, "cbox converge --holder-marker"):

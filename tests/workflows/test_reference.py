@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from tests.conftest import CORNELL, MINIMAL_SCENE
-from harness.adapters.registry import resolve
-from harness.store.references import REFERENCE_SEED_BASE, ReferenceError, load_reference
-from harness.workflows.reference_build import build_reference
-from harness.scenes.loader import load_scene
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.store.references import REFERENCE_SEED_BASE, ReferenceError, load_reference
+from cornell_harness.workflows.reference_build import build_reference
+from cornell_harness.scenes.loader import load_scene
 from tests.user_renderers import SeededNoise
 
 

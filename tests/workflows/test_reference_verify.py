@@ -12,14 +12,14 @@ import json
 import numpy as np
 import pytest
 
-from harness.adapters.registry import resolve
-from harness.scenes.library import resolve_scene
-from harness.scenes.loader import load_scene
-from harness.store.references import REFERENCE_SEED_BASE, VERIFIED_KEY, load_reference, record_verdict, verdict_line
-from harness.workflows.reference_build import build_reference
-from harness.evaluate.reference_agreement import reference_agreement
-from harness.evaluate.regions import region_masks
-from harness.workflows.reference_verify import VERIFY_SEED_BASE, VerifyError, render_engine, verify_reference
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.store.references import REFERENCE_SEED_BASE, VERIFIED_KEY, load_reference, record_verdict, verdict_line
+from cornell_harness.workflows.reference_build import build_reference
+from cornell_harness.evaluate.reference_agreement import reference_agreement
+from cornell_harness.evaluate.regions import region_masks
+from cornell_harness.workflows.reference_verify import VERIFY_SEED_BASE, VerifyError, render_engine, verify_reference
 from tests.conftest import CORNELL
 
 

@@ -1,13 +1,13 @@
-"""The results' rgb_convention column: which colours a run rendered (harness.scenes.spectral_scene.convention_used)."""
+"""The results' rgb_convention column: which colours a run rendered (cornell_harness.scenes.spectral_scene.convention_used)."""
 
 from __future__ import annotations
 
 from tests.conftest import CORNELL
-from harness.adapters.registry import resolve
-from harness.scenes.library import resolve_scene
-from harness.scenes.loader import load_scene
-from harness.scenes.spectral_scene import SPECTRAL_INFO, convention_used
-from harness.workflows.runner import RunRecord
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.scenes.spectral_scene import SPECTRAL_INFO, convention_used
+from cornell_harness.workflows.runner import RunRecord
 
 
 def test_convention_used():

@@ -1,4 +1,4 @@
-"""What a timed render records beside its wall time (harness/workflows/timing.py): the machine's load, the
+"""What a timed render records beside its wall time (src/cornell_harness/workflows/timing.py): the machine's load, the
 calibration kernel, the CPU time of a call."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import time
 
 import pytest
 
-from harness.adapters.api import Stopwatch
-from harness.workflows import timing
+from cornell_harness.adapters.api import Stopwatch
+from cornell_harness.workflows import timing
 
 BURN = "while 1: pass"
 

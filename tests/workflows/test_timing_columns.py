@@ -1,4 +1,4 @@
-"""The timing columns (harness.evaluate.timing_quality.TIMING_COLUMNS) in every results row: RunRecord.row(),
+"""The timing columns (cornell_harness.evaluate.timing_quality.TIMING_COLUMNS) in every results row: RunRecord.row(),
 ``compare --json`` and a converge's results.parquet; a renderer that gives no CPU time gets its call's."""
 
 from __future__ import annotations
@@ -7,10 +7,10 @@ import json
 
 import pandas as pd
 
-from harness.adapters.registry import resolve
-from harness.evaluate.timing_quality import TIMING_COLUMNS
-from harness.scenes.library import resolve_scene
-from harness.workflows import runner
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.evaluate.timing_quality import TIMING_COLUMNS
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.workflows import runner
 from tests.conftest import cbox_in_process as cbox
 
 

@@ -19,12 +19,12 @@ import pytest
 
 pytest.importorskip("distributed")
 
-from harness.adapters.registry import resolve  # noqa: E402
-from harness.scenes.library import resolve_scene  # noqa: E402
-from harness.store.experiments import RESULTS_FILE  # noqa: E402
-from harness.store.references import load_reference  # noqa: E402
-from harness.workflows.converge import run_experiment  # noqa: E402
-from harness.workflows.executor import open_executor  # noqa: E402
+from cornell_harness.adapters.registry import resolve  # noqa: E402
+from cornell_harness.scenes.library import resolve_scene  # noqa: E402
+from cornell_harness.store.experiments import RESULTS_FILE  # noqa: E402
+from cornell_harness.store.references import load_reference  # noqa: E402
+from cornell_harness.workflows.converge import run_experiment  # noqa: E402
+from cornell_harness.workflows.executor import open_executor  # noqa: E402
 
 #: The worker's first cell may take this much more CPU than this process's (a cold compile of one kernel
 #: costs more: the path tracer's film kernels alone were 0.3 s), and this factor for noise.

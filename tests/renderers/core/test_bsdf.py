@@ -16,14 +16,14 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from harness.scenes.loader import load_scene
-from renderers.core.bsdf import (DIELECTRIC, LAMBERT, MIRROR, bsdf_eval, bsdf_pdf, bsdf_sample, dielectric_sample,
+from cornell_harness.scenes.loader import load_scene
+from cornell_harness.renderers.core.bsdf import (DIELECTRIC, LAMBERT, MIRROR, bsdf_eval, bsdf_pdf, bsdf_sample, dielectric_sample,
                                  fresnel_dielectric, is_delta, material_tables, reflect, two_sided)
-from renderers.core.geometry import OFFSET_REL, sphere_hit
+from cornell_harness.renderers.core.geometry import OFFSET_REL, sphere_hit
 
 from tests.conftest import ROOT
 
-CAUSTICS = ROOT / "harness" / "references" / "cornell-box-caustics" / "scene.toml"
+CAUSTICS = ROOT / "src" / "cornell_harness" / "references" / "cornell-box-caustics" / "scene.toml"
 ETAS = (1.5, 1 / 1.5)
 ANGLES_DEG = (0.0, 5.0, 20.0, 35.0, 40.0, 45.0, 56.31, 60.0, 75.0, 85.0, 89.5)
 #: float64 rounding of the closed forms (a few ulps of numbers of order 1, through acos/asin/tan).

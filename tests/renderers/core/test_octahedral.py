@@ -1,6 +1,6 @@
 """The toolkit's parts for probe GI, against closed forms: octahedral maps, spherical Fibonacci, random rotations.
 
-:mod:`renderers.core.octahedral` and the point sets of :mod:`renderers.core.sampling`
+:mod:`cornell_harness.renderers.core.octahedral` and the point sets of :mod:`cornell_harness.renderers.core.sampling`
 are deterministic: each check is exact to float64 rounding or within a
 quadrature error that was measured (each tolerance says how). The probes that
 use them are tested in ``tests/renderers/test_probes.py``.
@@ -13,9 +13,9 @@ import math
 import numpy as np
 import pytest
 
-from renderers.core.octahedral import bilinear_texels, octahedral_direction, octahedral_uv, texel_directions, \
+from cornell_harness.renderers.core.octahedral import bilinear_texels, octahedral_direction, octahedral_uv, texel_directions, \
     with_borders
-from renderers.core.sampling import random_rotation, spherical_fibonacci
+from cornell_harness.renderers.core.sampling import random_rotation, spherical_fibonacci
 
 
 def unit(v: np.ndarray) -> np.ndarray:

@@ -4,8 +4,8 @@ import numba
 import numpy as np
 from scipy.stats import chisquare, kstest
 
-from harness.adapters.seeds import pass_key
-from renderers.core.rng import uniform
+from cornell_harness.adapters.seeds import pass_key
+from cornell_harness.renderers.core.rng import uniform
 
 
 @numba.njit
@@ -43,7 +43,7 @@ def test_pure_function_of_its_inputs():
 
 def test_kernel_caches_follow_every_renderer_source(tmp_path):
     """An edit of any renderer module drops numba's cached kernels (inlined toolkit code is not tracked by numba)."""
-    from renderers.core.sampling import drop_stale_kernel_caches
+    from cornell_harness.renderers.core.sampling import drop_stale_kernel_caches
 
     (tmp_path / "core").mkdir()
     (tmp_path / "core" / "lights.py").write_text("x = 1\n")

@@ -3,7 +3,7 @@ thread independence, and a variance that is honest for a low-discrepancy mean.
 
 The generators themselves (Sobol' matrices, Owen scrambling, padding) are tested in
 ``tests/renderers/core/test_sobol.py``; here they are reached the way a kernel reaches them, through
-:class:`renderers.core.sampler.Stream` (path j of a pass: pixel j mod P, sample
+:class:`cornell_harness.renderers.core.sampler.Stream` (path j of a pass: pixel j mod P, sample
 first_sample + j div P, batch sample mod K).
 """
 
@@ -13,16 +13,16 @@ import numba
 import numpy as np
 import pytest
 
-from harness.adapters.seeds import pass_key
-from harness.scenes.analytic import furnace_radiance, furnace_scene
-from harness.scenes.library import resolve_scene
-from renderers.core import film as film_module
-from renderers.core.film import Film
-from renderers.core.rng import uniform
-from renderers.core.photons import EMIT_DIR_U, EMIT_U, BOUNCE_U, bounce_dim
-from renderers.core.sampler import (BATCHES, CAMERA_U, PMJ02, SOBOL, Stream, independent, path_point, sample_1d,
+from cornell_harness.adapters.seeds import pass_key
+from cornell_harness.scenes.analytic import furnace_radiance, furnace_scene
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.renderers.core import film as film_module
+from cornell_harness.renderers.core.film import Film
+from cornell_harness.renderers.core.rng import uniform
+from cornell_harness.renderers.core.photons import EMIT_DIR_U, EMIT_U, BOUNCE_U, bounce_dim
+from cornell_harness.renderers.core.sampler import (BATCHES, CAMERA_U, PMJ02, SOBOL, Stream, independent, path_point, sample_1d,
                                     sample_2d, sequence_stream, vertex_dim)
-from renderers.pathtracer import PathTracer
+from cornell_harness.renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from harness.adapters.seeds import pass_seed, spp_passes
+from cornell_harness.adapters.seeds import pass_seed, spp_passes
 
 
 @pytest.mark.parametrize("spp, cap, checkpoints", [(1, 8, ()), (10, 4, ()), (300, 128, (1, 2, 4, 100)), (64, 1, ())])
@@ -28,7 +28,7 @@ def test_pass_seeds_distinct_and_stable():
 
 def test_one_seed_derivation_for_every_renderer():
     """Mitsuba's 32-bit pass seed is the low word of our 64-bit pass key: one derivation, two widths."""
-    from harness.adapters.seeds import pass_key
+    from cornell_harness.adapters.seeds import pass_key
 
     for s, k in [(0, 0), (5, 3), (123456, 77)]:
         assert pass_seed(s, k) == int(pass_key(s, k)) & 0xFFFFFFFF

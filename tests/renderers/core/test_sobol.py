@@ -6,7 +6,7 @@ import numba
 import numpy as np
 from scipy.stats import kstest, qmc
 
-from renderers.core.sobol import (
+from cornell_harness.renderers.core.sobol import (
     SOBOL_DIMS,
     SOBOL_MATRICES,
     hash_seed,

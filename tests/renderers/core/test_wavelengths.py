@@ -1,4 +1,4 @@
-"""Wavelength sampling of the hero-wavelength path tracer (renderers/core/wavelengths.py): the pdf, its inverse
+"""Wavelength sampling of the hero-wavelength path tracer (src/cornell_harness/renderers/core/wavelengths.py): the pdf, its inverse
 cdf, the rotation of the secondary wavelengths, and the scale of the estimate (exact, not statistical)."""
 
 from __future__ import annotations
@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import quad
 
-from harness.scenes.spectra import Spectrum, emission_rgb, observer
-from renderers.core.wavelengths import (LAMBDA_MAX, LAMBDA_MIN, N_BINS, bin_of, hero_wavelengths, on_grid,
+from cornell_harness.scenes.spectra import Spectrum, emission_rgb, observer
+from cornell_harness.renderers.core.wavelengths import (LAMBDA_MAX, LAMBDA_MIN, N_BINS, bin_of, hero_wavelengths, on_grid,
                                         rotated, sample_visible, sensor_rgb, visible_pdf)
 
 

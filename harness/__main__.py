@@ -1,5 +1,0 @@
-"""``python -m harness`` is ``cbox``."""
-
-from harness.cli.app import main
-
-main()

@@ -1,0 +1,421 @@
+"""Command-line renderers declared as data: a renderers file (TOML) and the adapter that runs each entry.
+
+A renderer written in any language is gated like ours once a renderers file says how to run it::
+
+    [renderer.mitsuba-cli]
+    command = ["mitsuba", "{scene}", "-o", "{out}", "-D", "spp={spp}", "-D", "seed={seed}"]
+    scene_format = "mitsuba"            # cornell_harness.scenes.export.FORMATS: the scene is exported to it per render
+    models = ["triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light", "pinhole_camera",
+              "box_filter"]             # the features it models (cornell_harness.scenes.model.FEATURES)
+    quantity = "radiance"               # optional; cornell_harness.scenes.quantities.QUANTITIES (default radiance)
+    estimator = "unbiased"              # optional; cornell_harness.adapters.api.ESTIMATORS (default unbiased)
+    variance = "{out}.var.exr"          # optional: a second EXR the program writes, the variance of its mean
+    time = 'render took ([0-9.]+) s'    # optional: "wall" (default) or a regex whose one group is seconds
+
+The file may also name how series show in legends and tables (``--series-label`` gives the same)::
+
+    [series_labels]
+    'pathtracer[sampler="independent"]' = "PT (independent)"
+
+``command`` is a list of arguments, run without a shell; each argument has
+its placeholders replaced: ``{scene}`` (the exported scene's main file),
+``{out}`` (the EXR the program must write), ``{spp}``, ``{seed}``,
+``{width}``, ``{height}`` (the scene's resolution) and ``{threads}``
+(:func:`cornell_harness.adapters.api.default_threads`, ``$CBOX_THREADS``); ``{{`` is
+a literal brace. ``variance`` is a path with the same placeholders; a
+relative path is taken in the run's folder. The program runs in a fresh
+temporary folder (its working directory) that holds the exported scene
+(``scene/``) and its outputs, removed afterwards.
+
+The executable, ``command[0]``: a bare name is looked for first in the
+folder of the Python running cbox (a virtual environment's ``bin``, where
+console scripts such as ``mitsuba`` are, even when the environment is not
+activated: ``.venv/bin/cbox`` run with the system's ``PATH``), then on
+``PATH``; a name with a ``/`` is a path, relative to the renderers file's
+folder. A renderer whose executable or scene format is missing is
+unavailable, with the reason.
+
+The file is strict, as a scene file and a gate config are: an unknown key,
+a misspelt placeholder, an unknown format, feature, quantity or estimator, or
+a time regex without exactly one group is a :class:`RenderersFileError`
+(one line naming the file and the field, exit 2), raised when the file is
+read, before anything runs.
+
+A render (:class:`CommandRenderer`) exports the scene once, then runs the
+program once per spp asked for: every progress checkpoint is a run of its
+own at that spp and the same seed. A non-zero exit, a missing or unreadable
+image, or one of the wrong size is a :class:`CommandFailed` quoting the tail
+of the program's stderr: a failed run in the results, with the reason. A
+run's ``time_s`` is its wall time (or what ``time`` reads), its
+``cpu_time_s`` the program's CPU time, all its threads and its own children,
+start-up included (the CPU time of the waited-for child, :func:`os.times`). The
+time limit and memory bound are the sandbox's (:mod:`cornell_harness.workflows.sandbox`):
+the program runs in the sandbox worker's process group and is killed with it.
+
+A declared renderer is known to the registry (:mod:`cornell_harness.adapters.registry`)
+by its name, and travels to other processes (the sandbox, Dask workers) as
+the self-contained spec ``/abs/path/renderers.toml#NAME`` (:func:`spec_of`),
+which the registry resolves without any option or environment variable. On a
+Dask cluster of other machines (``--scheduler``) the renderers file and the
+program must be at the same paths there.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import string
+import subprocess
+import sys
+import tempfile
+import time
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from cornell_harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, SettingsError, Stopwatch, default_threads
+from cornell_harness.scenes.model import FEATURES, Scene
+from cornell_harness.scenes.quantities import DEFAULT_QUANTITY, QUANTITIES
+from cornell_harness.suggest import did_you_mean
+
+#: The placeholders a command argument (and ``variance``) may hold.
+PLACEHOLDERS = ("scene", "out", "spp", "seed", "width", "height", "threads")
+#: The keys of a ``[renderer.NAME]`` table; the first three are required.
+KEYS = ("command", "scene_format", "models", "quantity", "estimator", "variance", "time")
+REQUIRED = KEYS[:3]
+#: What separates a renderers file from a renderer's name in a spec (:func:`spec_of`).
+SPEC_SEPARATOR = "#"
+#: A renderer's name: what results carry and ``-r`` takes; none of the characters a spec gives meaning to.
+NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
+#: Lines of the program's stderr a failure quotes, and their characters at most.
+TAIL_LINES, TAIL_CHARS = 6, 600
+
+
+class RenderersFileError(RuntimeError):
+    """A renderers file is wrong; ``str()`` is one line naming the file and the field (a user error, exit 2).
+
+    Not a ValueError: a command that turns ValueErrors into errors of one of its options must not blame
+    that option for a renderers file (``$CBOX_RENDERERS``' too) that is read inside it."""
+
+    def __init__(self, file: Path | str, field: str, message: str):
+        self.file, self.field, self.message = str(file), field, message
+        super().__init__(f"{file}: {field}: {message}")
+
+
+class CommandFailed(RuntimeError):
+    """The program failed (exit code, no image, wrong size); ``str()`` quotes the tail of its stderr."""
+
+
+@dataclass(frozen=True)
+class Declaration:
+    """One ``[renderer.NAME]`` of a renderers file, checked."""
+
+    name: str
+    file: Path  # absolute
+    command: tuple[str, ...]
+    scene_format: str
+    models: frozenset[str]
+    quantity: str = DEFAULT_QUANTITY
+    estimator: str = ESTIMATORS[0]
+    variance: str | None = None
+    time: str = "wall"
+
+    @property
+    def spec(self) -> str:
+        return spec_of(self.file, self.name)
+
+
+def spec_of(file: Path | str, name: str) -> str:
+    """The spec that names renderer ``name`` of ``file`` in any process: ``/abs/path/renderers.toml#NAME``."""
+    return f"{Path(file).resolve()}{SPEC_SEPARATOR}{name}"
+
+
+def is_spec(text: str) -> bool:
+    """Whether ``text`` is a spec of :func:`spec_of` (a ``.toml`` path, ``#``, a name)."""
+    path, sep, name = text.rpartition(SPEC_SEPARATOR)
+    return bool(sep) and path.endswith(".toml") and bool(NAME.fullmatch(name))
+
+
+# ----------------------------------------------------------------------------------------
+# The file
+# ----------------------------------------------------------------------------------------
+
+
+def read_file(path: Path | str) -> dict[str, Declaration]:
+    """Every renderer a renderers file declares, by name, checked; RenderersFileError for anything wrong."""
+    path = Path(path).resolve()
+    try:
+        doc = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise RenderersFileError(path, "(file)", "no such file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise RenderersFileError(path, "(file)", f"cannot read: {getattr(e, 'strerror', None) or e}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise RenderersFileError(path, "(file)", f"not valid TOML: {e}") from None
+    for key in doc:
+        if key not in ("renderer", "series_labels"):
+            raise RenderersFileError(path, key, "unknown key; a renderers file holds [renderer.NAME] tables and "
+                                     "a [series_labels] table only" + did_you_mean(key, ["renderer", "series_labels"]))
+    _series_labels(path, doc)
+    tables = doc.get("renderer", {} if "series_labels" in doc else None)
+    if not isinstance(tables, dict) or (not tables and "series_labels" not in doc):
+        raise RenderersFileError(path, "renderer", "declares no renderer; add a [renderer.NAME] table")
+    return {name: _declaration(path, name, t) for name, t in tables.items()}
+
+
+def read_series_labels(path: Path | str) -> dict[str, str]:
+    """A renderers file's ``[series_labels]``: ``'pathtracer[sampler="independent"]' = "PT (independent)"``,
+    series spec → the text legends and tables show for it (``--series-label`` gives the same)."""
+    path = Path(path).resolve()
+    read_file(path)  # the file's other errors first, as every reader of it reports them
+    return _series_labels(path, tomllib.loads(path.read_text()))
+
+
+def _series_labels(path: Path, doc: dict) -> dict[str, str]:
+    from cornell_harness.adapters.settings import split_spec
+
+    table = doc.get("series_labels", {})
+    if not isinstance(table, dict):
+        raise RenderersFileError(path, "series_labels", "expected a table of 'SPEC' = \"text\"")
+    for spec, shown in table.items():
+        where = f"series_labels.{spec}"
+        if not isinstance(shown, str) or not shown.strip():
+            raise RenderersFileError(path, where, "expected a non-empty string, the text shown for the series")
+        try:
+            split_spec(spec)
+        except SettingsError as e:
+            raise RenderersFileError(path, where, str(e)) from None
+    return dict(table)
+
+
+def _declaration(path: Path, name: str, t) -> Declaration:
+    where = f"renderer.{name}"
+
+    def bad(field: str, message: str) -> RenderersFileError:
+        return RenderersFileError(path, f"{where}.{field}" if field else where, message)
+
+    if not NAME.fullmatch(name):
+        raise bad("", f"{name!r} is not a renderer name: letters, digits and _ . + - only, starting with a "
+                      "letter or digit")
+    if not isinstance(t, dict):
+        raise bad("", "expected a table, [renderer.NAME] with command, scene_format and models")
+    for key in t:
+        if key not in KEYS:
+            raise bad(key, f"unknown key{did_you_mean(key, KEYS)}; keys: {', '.join(KEYS)}")
+    for key in REQUIRED:
+        if key not in t:
+            raise bad(key, "missing (required: " + ", ".join(REQUIRED) + ")")
+    command = t["command"]
+    if not isinstance(command, list) or not command or not all(isinstance(a, str) for a in command):
+        raise bad("command", "expected a non-empty list of strings, the program and its arguments")
+    if not command[0].strip():
+        raise bad("command", "the program (the first argument) is empty")
+    for i, arg in enumerate(command):
+        _check_placeholders(arg, lambda message, i=i: bad(f"command[{i}]", message))
+    from cornell_harness.scenes.export import FORMATS, format_module  # imported when a file is read, not with the registry
+
+    fmt = t["scene_format"]
+    if fmt not in FORMATS:
+        raise bad("scene_format", f"{fmt!r} is not an export format{did_you_mean(fmt, FORMATS)}; formats: "
+                                  f"{', '.join(FORMATS)}")
+    models = t["models"]
+    if not isinstance(models, list) or not all(isinstance(m, str) for m in models):
+        raise bad("models", "expected a list of scene features (see `cbox features`)")
+    for m in models:
+        if m not in FEATURES:
+            raise bad("models", f"{m!r} is not a scene feature{did_you_mean(m, FEATURES)}; features: "
+                                f"{', '.join(FEATURES)}")
+    try:  # a format that cannot be written here makes the renderer unavailable, not the file wrong
+        expressible = format_module(fmt).FEATURES
+    except ImportError:
+        expressible = FEATURES
+    if beyond := sorted(set(models) - set(expressible)):
+        raise bad("models", f"the scene format {fmt!r} cannot express {', '.join(beyond)}")
+    quantity = t.get("quantity", DEFAULT_QUANTITY)
+    if quantity not in QUANTITIES:
+        raise bad("quantity", f"{quantity!r} is not one of {', '.join(QUANTITIES)}{did_you_mean(quantity, QUANTITIES)}")
+    estimator = t.get("estimator", ESTIMATORS[0])
+    if estimator not in ESTIMATORS:
+        raise bad("estimator", f"{estimator!r} is not one of {', '.join(ESTIMATORS)}"
+                               f"{did_you_mean(estimator, ESTIMATORS)}")
+    variance = t.get("variance")
+    if variance is not None:
+        if not isinstance(variance, str) or not variance.strip():
+            raise bad("variance", "expected a path (of the EXR the program writes), e.g. \"{out}.var.exr\"")
+        _check_placeholders(variance, lambda message: bad("variance", message))
+    timing = t.get("time", "wall")
+    if not isinstance(timing, str):
+        raise bad("time", "expected \"wall\" or a regex with one group that reads seconds from stdout")
+    if timing != "wall":
+        try:
+            groups = re.compile(timing).groups
+        except re.error as e:
+            raise bad("time", f"not a regex: {e}") from None
+        if groups != 1:
+            raise bad("time", f"the regex has {groups} groups; give exactly one, the seconds")
+    return Declaration(name, path, tuple(command), fmt, frozenset(models), quantity, estimator, variance, timing)
+
+
+def _check_placeholders(text: str, bad) -> None:
+    """Every ``{...}`` in ``text`` is a known placeholder without format spec or conversion."""
+    try:
+        fields = [(f, spec, conv) for _, f, spec, conv in string.Formatter().parse(text) if f is not None]
+    except ValueError as e:  # an unmatched brace
+        raise bad(f"{text!r}: {e} (a literal brace is written {{{{ or }}}})") from None
+    for f, spec, conv in fields:
+        if f not in PLACEHOLDERS:
+            raise bad(f"unknown placeholder {{{f}}}" + did_you_mean(f, PLACEHOLDERS, " (did you mean {{{}}}?)")
+                      + "; placeholders: " + ", ".join(f"{{{p}}}" for p in PLACEHOLDERS))
+        if spec or conv:
+            raise bad(f"placeholder {{{f}}} takes no format or conversion")
+
+
+def load(spec: str) -> "CommandRenderer":
+    """The renderer a spec of :func:`spec_of` names (its file read and checked again, in this process)."""
+    file, _, name = spec.rpartition(SPEC_SEPARATOR)
+    declared = read_file(file)
+    if name not in declared:
+        raise RenderersFileError(file, f"renderer.{name}", "not declared" + did_you_mean(name, declared)
+                                 + f"; declared: {', '.join(declared)}")
+    return CommandRenderer(declared[name])
+
+
+# ----------------------------------------------------------------------------------------
+# The adapter
+# ----------------------------------------------------------------------------------------
+
+
+def find_program(program: str, file: Path) -> str | None:
+    """The executable ``program`` names: a path (relative to the renderers file's folder), or a bare name in
+    the running Python's folder, then on ``PATH``; None when there is none."""
+    if os.sep in program or (os.altsep and os.altsep in program):
+        path = Path(program).expanduser()
+        path = path if path.is_absolute() else file.parent / path
+        return str(path) if path.is_file() and os.access(path, os.X_OK) else None
+    here = Path(sys.executable).parent
+    return shutil.which(program, path=str(here)) or shutil.which(program)
+
+
+class CommandRenderer:
+    """A declared program as a :class:`~cornell_harness.adapters.api.Renderer`: export, run, read back."""
+
+    def __init__(self, declaration: Declaration):
+        self.declaration = d = declaration
+        self.name = d.name
+        self.features = d.models
+        self.quantities = (d.quantity,)
+        self.estimator = d.estimator
+
+    def program(self) -> str | None:
+        return find_program(self.declaration.command[0], self.declaration.file)
+
+    def unavailable_reason(self) -> str | None:
+        d = self.declaration
+        if self.program() is None:
+            where = "" if os.sep in d.command[0] else f" in {Path(sys.executable).parent} or on PATH"
+            return f"program {d.command[0]!r} not found{where} ({d.file}, renderer.{d.name}.command)"
+        from cornell_harness.scenes.export import format_module
+
+        try:
+            format_module(d.scene_format)
+        except ImportError as e:
+            return f"scene format {d.scene_format!r} cannot be written here: {e}"
+        return None
+
+    def version(self) -> str:
+        """The program's path and its file's modification time: what changes when the program is rebuilt."""
+        program = self.program()
+        if program is None:
+            return "not found"
+        stamp = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(os.stat(program).st_mtime))
+        return f"{program} (modified {stamp} UTC), {self.declaration.spec}"
+
+    def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = ()) -> RenderResult:
+        """The scene exported once, then one run of the program per spp (each checkpoint its own run)."""
+        from cornell_harness.scenes.export import export_scene
+
+        d = self.declaration
+        program = self.program()
+        if program is None:
+            raise CommandFailed(self.unavailable_reason())
+        with tempfile.TemporaryDirectory(prefix=f"cbox-{d.name}-") as tmp:
+            folder = Path(tmp)
+            main = export_scene(scene, d.scene_format, folder / "scene")
+            shots = []
+            for c in sorted(set(checkpoints) - {spp}):
+                image, _, t, cpu = self._run(program, folder, main, scene, c, seed)
+                shots.append(Checkpoint(c, image, t, cpu_time_s=cpu))
+            image, variance, t, cpu = self._run(program, folder, main, scene, spp, seed)
+        return RenderResult(image, t, spp, seed, shots, {"program": program, "scene_format": d.scene_format},
+                            variance, cpu_time_s=cpu)
+
+    def _run(self, program: str, folder: Path, main: Path, scene: Scene, spp: int, seed: int):
+        """One run at ``spp``: (image, variance or None, seconds, CPU seconds of the program's whole run, its
+        start-up included: the CPU time of the children this process waited for, :class:`Stopwatch`)."""
+        d = self.declaration
+        cam = scene.camera
+        out = folder / f"out-{spp}spp.exr"
+        values = {"scene": str(main), "out": str(out), "spp": spp, "seed": seed, "width": cam.width,
+                  "height": cam.height, "threads": default_threads()}
+        argv = [program, *(arg.format(**values) for arg in d.command[1:])]
+        variance = None if d.variance is None else folder / d.variance.format(**values)
+        for stale in (out, variance):
+            if stale is not None and stale.exists():
+                stale.unlink()
+        stdout, stderr = folder / f"stdout-{spp}.txt", folder / f"stderr-{spp}.txt"
+        with open(stdout, "wb") as o, open(stderr, "wb") as e:
+            clock = Stopwatch()
+            # The program stays in this process's group: the sandbox kills the group at its bounds.
+            code = subprocess.call(argv, cwd=folder, stdin=subprocess.DEVNULL, stdout=o, stderr=e)
+            wall, cpu = clock.read()
+
+        def failed(what: str) -> CommandFailed:
+            return CommandFailed(f"{d.name} at {spp} spp: {what}; stderr: {_tail(stderr)}")
+
+        if code != 0:
+            raise failed(f"exited with code {code}" if code > 0 else f"killed by signal {-code}")
+        expected = (cam.height, cam.width, 3)
+        image = _read(out, expected, failed, "image")
+        var = None if variance is None else _read(variance, expected, failed, "variance image")
+        return image, var, wall if d.time == "wall" else _seconds(d.time, stdout, failed), cpu
+
+
+def _read(path: Path, expected: tuple[int, int, int], failed, what: str):
+    from cornell_harness.store.exr import ImageFileError, read_exr
+
+    if not path.exists():
+        raise failed(f"exited 0 but wrote no {what} at {path.name}")
+    try:
+        image = read_exr(path)
+    except ImageFileError as e:
+        raise failed(f"its {what} cannot be read: {e}") from None
+    if image.shape != expected:
+        raise failed(f"its {what} is {image.shape[1]}x{image.shape[0]}, expected {expected[1]}x{expected[0]} "
+                     "(the scene's resolution)")
+    return image
+
+
+def _seconds(pattern: str, stdout: Path, failed) -> float:
+    """The seconds the last match of ``pattern`` in the program's stdout reads."""
+    matches = re.findall(pattern, stdout.read_text(errors="replace"))
+    if not matches:
+        raise failed(f"its stdout has no match of the time regex {pattern!r}")
+    try:
+        seconds = float(matches[-1])
+    except ValueError:
+        seconds = math.nan
+    if not math.isfinite(seconds) or seconds < 0:
+        raise failed(f"the time regex read {matches[-1]!r}, not a number of seconds")
+    return seconds
+
+
+def _tail(path: Path) -> str:
+    """The last lines of a program's stderr as one line, or ``(empty)``."""
+    lines = [ln.strip() for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+    text = " | ".join(lines[-TAIL_LINES:])
+    if len(text) > TAIL_CHARS:
+        text = "…" + text[-(TAIL_CHARS - 1):]
+    return text or "(empty)"

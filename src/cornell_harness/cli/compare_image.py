@@ -1,0 +1,272 @@
+"""``cbox compare-image``: score image files made outside the harness against a reference (idiff/FLIP style)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from cornell_harness.cli.choices import choice_callback
+from cornell_harness.cli.common import app, command_line, out_folder_option
+from cornell_harness.cli.output import info
+from cornell_harness.cli.run import TABLE_METRICS
+from cornell_harness.scenes.library import resolve_scene
+# Heavy modules (the metrics, pandas, the report) are imported inside the command: `cbox --help` must answer
+# in a second.
+
+
+def _transfers() -> tuple[str, ...]:
+    from cornell_harness.workflows.compare_image import INPUT_TRANSFERS
+
+    return tuple(INPUT_TRANSFERS)
+
+
+@app.command("compare-image")
+def compare_image(
+    images: List[Path] = typer.Argument(..., help="Images to score: OpenEXR or any file OpenImageIO reads. "
+                                                  "Floating-point pixels are taken as linear sRGB radiance; "
+                                                  "integer ones (PNG, JPEG, 8/16-bit TIFF) need --input-transfer.",
+                                        show_default=False),
+    reference: Optional[Path] = typer.Option(None, "--reference", help="Reference image file. Noise yardsticks "
+                                             "need its variance: only when it is a reference folder's "
+                                             "reference.exr with variance.exr, noise.exr and provenance.json "
+                                             "beside it. Scored as radiance (for another quantity use --scene)."),
+    scene: Optional[str] = typer.Option(None, "--scene", "-s", help="Score against this scene's stored reference "
+                                        "(name, .toml file or folder), with its variance and named regions."),
+    spp: Optional[int] = typer.Option(None, "--spp", min=1, help="Samples per pixel of the images, for the noise "
+                                      "yardsticks, where an image has no cbox:spp header (cbox render writes "
+                                      "one); one that contradicts its header is refused. Without either the "
+                                      "yardsticks are skipped."),
+    input_transfer: Optional[str] = typer.Option(
+        None, "--input-transfer", metavar="srgb|linear", callback=choice_callback("--input-transfer", _transfers),
+        help="How to linearise display-referred (integer) images: srgb (the sRGB EOTF, IEC 61966-2-1) or linear "
+             "(values as stored, scaled to [0, 1]), in any case (sRGB). Without it they are refused. "
+             "Floating-point images are unaffected."),
+    exposure: Optional[float] = typer.Option(
+        None, "--exposure", metavar="STOPS", help="The exposure display-referred images were made at: their "
+        "linear values (after --input-transfer) are radiance × 2^STOPS, so they are divided by 2^STOPS. Applies "
+        "to integer images only (a tonemapped PNG or JPEG), the --reference file too if it is one."),
+    fail_at: Optional[List[str]] = typer.Option(
+        None, "--fail", metavar="METRIC=V", help="Exit 1 when an image's METRIC is worse than V: above it, or "
+        "below it for a metric where higher is better (psnr, ssim), or in magnitude above it for a signed one "
+        "(mean_radiance_rel_error). Any per-image metric (the keys of --json's metrics and noise: rmse, "
+        "rel_mse, psnr, ssim, delta_e2000_mean, delta_e2000_p95, flip_mean, ...), or region.REGION.METRIC with "
+        "--scene. Repeatable; each broken threshold is printed with its value."),
+    warn_at: Optional[List[str]] = typer.Option(
+        None, "--warn", metavar="METRIC=V", help="As --fail, but a broken threshold prints a warning line and the "
+        "exit code stays 0. Repeatable."),
+    fail_percent: Optional[float] = typer.Option(
+        None, "--fail-percent", metavar="P", min=0.0, max=100.0, help="Exit 1 when more than P percent of the "
+        "pixels have a per-pixel error above --pixel-threshold; the per-pixel error is CIEDE2000 (ΔE00) at the "
+        "reference's display exposure, the error map's (idiff's -failpercent, on ΔE00 rather than channel "
+        "difference)."),
+    pixel_threshold: Optional[float] = typer.Option(
+        None, "--pixel-threshold", metavar="T", min=0.0, help="The per-pixel ΔE00 --fail-percent counts pixels "
+        "above (2.3 is a just-noticeable difference)."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object per image on stdout: metrics, "
+                                                       "noise, regions, HDR-FLIP parameters, and with thresholds "
+                                                       "its verdict."),
+    out: Path = out_folder_option(Path("out/compare-image"), "Folder for each image's ΔE error map "
+                                                             "(LABEL.delta_e.png, see --error-map) and, with "
+                                                             "--report, report.html."),
+    report: bool = typer.Option(False, "--report", help="Also write OUT/report.html: the table and the image "
+                                                        "viewer with its error maps."),
+    with_flip: bool = typer.Option(False, "--flip", help="Also score HDR-FLIP (flip_mean): about 1 s per 256² "
+                                   "image (8 exposures), more than every other metric together, so it is left "
+                                   "out unless asked for here, by a --fail/--warn on flip_mean, or by --report."),
+    all_metrics: bool = typer.Option(False, "--all-metrics", help="With --fail, --warn or --fail-percent, score "
+                                     "every metric, as without them. By default such a check scores what its "
+                                     "thresholds name and the cheap metrics (rmse, mse, rel_mse, the mean "
+                                     "radiance and its error, the NaN/Inf/negative counts), so that it costs "
+                                     "about what idiff's does: the ΔE00 map, SSIM, PSNR, the noise yardsticks "
+                                     "and the regions only when a threshold (or --error-map) needs them. "
+                                     "--report scores every metric too."),
+    error_map: Optional[bool] = typer.Option(
+        None, "--error-map/--no-error-map", help="Write each image's ΔE00 error map, OUT/LABEL.delta_e.png "
+        "(viridis on 0..10, the report's). Default: written, except by a check (--fail, --warn, "
+        "--fail-percent), which writes it only when asked, as idiff writes its difference image with -o.",
+        show_default=False),
+) -> None:
+    """Score image files against a reference with every image metric, as `cbox compare` scores a render.
+
+    Prints a table (or --json), writes a ΔE error map per image. Exit code 0
+    when every image was scored and no --fail threshold is broken (a broken
+    --warn prints a warning line), 1 when one is (each printed on stderr with
+    its value), 2 for bad input (display-referred image without
+    --input-transfer, a size other than the reference's, an unknown metric,
+    ...), found before anything is scored. With thresholds it is a check:
+    it scores what they name and the cheap metrics (--all-metrics: every
+    one) and writes no error map unless --error-map asks for it.
+    """
+    if (reference is None) == (scene is None):
+        raise typer.BadParameter("give --reference REF or --scene NAME (one of them)", param_hint="--reference")
+    if (fail_percent is None) != (pixel_threshold is None):
+        raise typer.BadParameter("give --fail-percent P and --pixel-threshold T together",
+                                 param_hint="--fail-percent" if pixel_threshold is None else "--pixel-threshold")
+    thresholds = _thresholds(fail_at, warn_at)
+    check = bool(thresholds) or fail_percent is not None
+    write_map = error_map if error_map is not None else not check
+    keys = _scored_keys(thresholds, fail_percent is not None or write_map, with_flip,
+                        all_metrics or report or not check)
+    from cornell_harness.workflows import compare_image as workflow
+
+    target = (workflow.load_scene_target(resolve_scene(scene)) if scene is not None
+              else workflow.load_file_target(reference, input_transfer, exposure,
+                                             noise=keys is None or any(k.startswith(workflow.NOISE_PREFIX)
+                                                                       for k in keys)))
+    _check_regions(thresholds, target)
+    sources = workflow.load_images(images, target, input_transfer, spp, exposure)
+    if exposure is not None and all(s.clipped is None for s in (*sources, target)):
+        raise typer.BadParameter("applies to display-referred (integer) images only, and every image given is "
+                                 "floating-point (radiance already)", param_hint="--exposure")
+    from cornell_harness.evaluate import thresholds as th
+    from cornell_harness.reports.compare_image import ERROR_MAP_SUFFIX, write_compare_image_report, write_error_map
+
+    scores, verdicts = [], []
+    _warn_clipped(target.path, target.clipped)
+    for source in sources:
+        _warn_clipped(source.path, source.clipped)
+        result = workflow.score(source, target, with_flip=with_flip or report
+                                or any(t.metric == "flip_mean" for t in thresholds), keys=keys)
+        de = result.delta_e_map  # computed once: the ΔE00 statistics, the error map and --fail-percent's count
+        written = write_error_map(out, result, target, de) if write_map else None
+        scores.append(result)
+        verdict = _verdict(result, thresholds, de, fail_percent, pixel_threshold, th)
+        verdicts.append(verdict)
+        if as_json:
+            record = {**result.record(target), "error_map": None if written is None else str(written)}
+            if verdict is not None:
+                record["verdict"] = verdict
+            typer.echo(json.dumps(record, allow_nan=False))
+        if result.noise_note:
+            info(f"{source.path}: noise yardsticks skipped: {result.noise_note}")
+    if not as_json:
+        _print_table(scores, [t.metric for t in thresholds])
+    if write_map:
+        info(f"error maps: {out}/*{ERROR_MAP_SUFFIX}")
+    if report:
+        info(f"report: {write_compare_image_report(out / 'report.html', target, scores, command_line())}")
+    if any(v is not None and v["status"] == "fail" for v in verdicts):
+        raise typer.Exit(1)
+
+
+#: The fraction of a display-referred image's pixels clipped above which a warning is printed (0.1%).
+CLIPPED_WARNING = 1e-3
+
+
+def warn(message: str) -> None:
+    """``cbox: warning: MESSAGE`` on stderr; not dropped by --quiet (a result a CI log must show)."""
+    typer.echo(f"cbox: warning: {message}", err=True)
+
+
+def _thresholds(fail_at, warn_at) -> list:
+    from cornell_harness.evaluate.thresholds import ThresholdError, parse_threshold
+
+    out = []
+    for level, given in (("fail", fail_at), ("warn", warn_at)):
+        for text in given or ():
+            try:
+                out.append(parse_threshold(text, level))
+            except ThresholdError as e:
+                raise typer.BadParameter(str(e), param_hint=f"--{level}") from None
+    return out
+
+
+def _scored_keys(thresholds, de_map: bool, with_flip: bool, every: bool) -> frozenset[str] | None:
+    """The metrics a check scores (:func:`cornell_harness.evaluate.registry.check_metrics`: what its thresholds name and
+    the cheap ones; the ΔE00 statistics too where the map is made anyway, ``de_map``: for --fail-percent or the
+    error map), or None for every metric (``every``: not a check, --all-metrics, --report)."""
+    if every:
+        return None
+    from cornell_harness.evaluate.metrics import DELTA_E_KEYS
+    from cornell_harness.evaluate.registry import check_metrics
+
+    return check_metrics([t.metric for t in thresholds] + list(DELTA_E_KEYS if de_map else ())
+                         + (["flip_mean"] if with_flip else []))
+
+
+def _check_regions(thresholds, target) -> None:
+    """A region threshold needs a scene that names the region: refused otherwise, before anything is scored."""
+    from cornell_harness.evaluate.registry import region_metric
+    from cornell_harness.suggest import did_you_mean
+
+    for t in thresholds:
+        parts = region_metric(t.metric)
+        if parts is None:
+            continue
+        regions = target.scene.regions if target.scene is not None else {}
+        if parts[0] not in regions:
+            where = f"scene {target.scene.name!r}" if target.scene is not None else "a --reference file"
+            raise typer.BadParameter(f"{t.metric}: {where} has no region {parts[0]!r}"
+                                     f"{did_you_mean(parts[0], regions)}", param_hint=f"--{t.level}")
+
+
+def _warn_clipped(path: Path, clipped: float | None) -> None:
+    """The warning line of a display-referred file with more than :data:`CLIPPED_WARNING` of its pixels clipped."""
+    if clipped is not None and clipped > CLIPPED_WARNING:
+        warn(f"{path}: {100 * clipped:.3g}% of the pixels are clipped (a channel at 0 or at the maximum code "
+             "value): their errors are the encoding's, not the renderer's")
+
+
+def _verdict(result, thresholds, de, fail_percent, pixel_threshold, th) -> dict | None:
+    """Check one score against the thresholds; print each broken one; the verdict for --json (None without
+    thresholds)."""
+    if not thresholds and fail_percent is None:
+        return None
+    label, row = result.source.label, result.row()
+    checks = [{"metric": t.metric, "level": t.level, "limit": t.value, "value": row.get(t.metric),
+               "broken": t.exceeded(row.get(t.metric))} for t in thresholds]
+    for t in th.broken(thresholds, row):
+        line = t.line(label, row.get(t.metric))
+        typer.echo(f"cbox: fail: {line}" if t.level == "fail" else f"cbox: warning: {line}", err=True)
+    if fail_percent is not None:
+        percent = 100 * th.fraction_above(de, pixel_threshold)
+        checks.append({"metric": "percent_pixels_delta_e2000_above", "level": "fail", "limit": fail_percent,
+                       "pixel_threshold": pixel_threshold, "value": percent, "broken": percent > fail_percent})
+        if percent > fail_percent:
+            typer.echo(f"cbox: fail: {th.percent_line(label, percent, fail_percent, pixel_threshold)}", err=True)
+    status = ("fail" if any(c["broken"] and c["level"] == "fail" for c in checks)
+              else "warn" if any(c["broken"] for c in checks) else "pass")
+    from cornell_harness.store.atomic import json_safe
+
+    return json_safe({"status": status, "checks": checks})
+
+
+def _print_table(scores, named: list[str]) -> None:
+    """The metrics `cbox compare` prints, and those the thresholds name, one row per image (those scored); then
+    each image's regions, if any.
+
+    Laid out as pandas' ``to_string`` lays a frame out, without pandas (its import is ~0.5 s of this
+    command's time, issue 31)."""
+    shown = dict.fromkeys([*TABLE_METRICS, *(m for m in named if "." not in m)])
+    columns = ["image", "spp", *(c for c in shown if any(c in s.row() for s in scores))]
+    rows = [[s.source.label, s.source.spp, *(s.row().get(c) for c in columns[2:])] for s in scores]
+    typer.echo(_format_table(columns, rows))
+    for s in scores:
+        if s.regions:
+            names = list(dict.fromkeys(k for values in s.regions.values() for k in values))
+            typer.echo(f"\n{s.source.label} per region:\n" + _format_table(
+                ["", *names], [[region, *(values.get(k) for k in names)] for region, values in s.regions.items()],
+                left_first=True))
+
+
+def _cell(value) -> str:
+    if value is None:
+        return "<NA>"
+    if isinstance(value, float):
+        return "NaN" if value != value else f"{value:.6f}"
+    return str(value)
+
+
+def _format_table(columns: list[str], rows: list[list], left_first: bool = False) -> str:
+    """Right-aligned columns two spaces apart (the first left-aligned when it is an index of names)."""
+    cells = [[_cell(v) for v in row] for row in rows]
+    widths = [max(len(c), *(len(r[i]) for r in cells)) for i, c in enumerate(columns)]
+
+    def line(values):
+        return "  ".join(v.ljust(w) if (i == 0 and left_first) else v.rjust(w)
+                         for i, (v, w) in enumerate(zip(values, widths))).rstrip()
+
+    return "\n".join([line(columns), *(line(r) for r in cells)])

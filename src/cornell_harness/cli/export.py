@@ -1,0 +1,40 @@
+"""``cbox export``: a scene written for another renderer, in its own format (:mod:`cornell_harness.scenes.export`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from cornell_harness.cli.choices import choice_callback
+from cornell_harness.cli.common import SceneOpt, SetOpt, app, out_folder_option
+from cornell_harness.scenes.export import FORMATS
+from cornell_harness.scenes.library import resolve_scene
+
+FORMAT_HELP = ("Format to write: mitsuba (scene.xml and meshes/*.ply, Mitsuba 3 XML: `mitsuba DIR/scene.xml -o "
+               "out.exr -D spp=64 -D seed=3`), luxcore (LuxCore SDL: scene.scn and scene.cfg) or pbrt-v4 "
+               "(scene.pbrt: `pbrt DIR/scene.pbrt --spp 64 --seed 3`). How each maps our scene model: "
+               "docs/export.md.")
+
+
+@app.command("export")
+def export(
+    scene: str = SceneOpt,
+    fmt: str = typer.Option(..., "--format", "-f", help=FORMAT_HELP, show_default=False, metavar="|".join(FORMATS),
+                            callback=choice_callback("--format", lambda: FORMATS,
+                                                     "unknown export format {value!r}{hint}; formats: {listed}")),
+    out: Path = out_folder_option(Path("out/export"), "Folder to write the scene into (created if missing); "
+                                                      "files of an earlier export there are replaced."),
+    overrides: Optional[List[str]] = SetOpt,
+) -> None:
+    """Write the scene, with its meshes, in another renderer's format.
+
+    Prints the path of the main file, the one a renderer is given. A scene
+    the format cannot express (a feature it lacks, or a quantity other than
+    radiance, such as cornell-box-ao's ambient occlusion) is refused before
+    anything is written: one line naming the scene file and field, exit 2.
+    """
+    from cornell_harness.scenes.export import export_scene
+
+    typer.echo(export_scene(resolve_scene(scene, overrides), fmt, out))

@@ -1,0 +1,144 @@
+"""``cbox scenes``, ``cbox renderers``, ``cbox features``: what is here, and what can run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from cornell_harness.adapters.api import attribute
+from cornell_harness.adapters.registry import quantities_of, resolve
+from cornell_harness.adapters.settings import declared, describe
+from cornell_harness.cli.common import RendererFilesOpt, app, print_json
+from cornell_harness.scenes.library import references_root, resolve_scene, scene_names
+from cornell_harness.scenes.model import FEATURES, SceneError
+from cornell_harness.store.references import VERIFIED_KEY, ReferenceError, load_reference, verdict_line
+
+
+JsonOpt = typer.Option(False, "--json", help="Print a JSON array of objects on stdout instead of the text.")
+
+
+@app.command()
+def scenes(as_json: bool = JsonOpt) -> None:
+    """List the stored scenes: file, size, what is computed, features, named regions, reference and its verdicts
+    (`cbox reference verify`)."""
+    listing = [_scene_entry(name) for name in scene_names()]
+    if as_json:
+        print_json(listing)
+        return
+    w = max((len(s["name"]) for s in listing), default=0)
+    for s in listing:
+        if s["error"]:
+            typer.echo(f"{s['name']:{w}s} INVALID: {s['error']}")
+            typer.echo(f"{'':{w}s} file: {s['path']}")
+            continue
+        ao = s["ambient_occlusion"]
+        # max_depth means nothing to an AO image; its definition does.
+        what = (f"max_depth={s['max_depth']}" if ao is None else
+                f"ambient_occlusion ({ao['weighting']}, max_distance={ao['max_distance']:g}, {ao['normal']} normal, "
+                f"miss={ao['miss_value']:g})")
+        ref = s["reference"]
+        status = f"reference {ref['spp']} spp" if ref else f"no usable reference ({s['reference_problem']})"
+        typer.echo(f"{s['name']:{w}s} {s['width']}x{s['height']}  {what}  {status}")
+        typer.echo(f"{'':{w}s} features: {', '.join(s['features'])}")
+        if s["regions"]:
+            typer.echo(f"{'':{w}s} regions: {', '.join(s['regions'])}")
+        if ref:
+            typer.echo(f"{'':{w}s} reference: {ref['verdict']}")
+        typer.echo(f"{'':{w}s} file: {s['path']}")
+
+
+def _scene_entry(name: str) -> dict:
+    """What ``cbox scenes`` says of one stored scene, as plain data (its text and its JSON)."""
+    entry: dict = {"name": name, "path": _shown(references_root() / name / "scene.toml"), "error": None}
+    try:
+        scene = resolve_scene(name)
+    except SceneError as e:
+        return {**entry, "error": str(e)}
+    try:
+        ref = load_reference(scene)
+        reference, problem = {"spp": ref.spp, "renderer_version": ref.provenance.get("renderer_version"),
+                              "verdict": verdict_line(ref.provenance), "verified": _verdicts(ref.provenance)}, None
+    except ReferenceError as e:
+        reference, problem = None, str(e).split(";")[0].split(": ", 1)[-1]
+    ao = scene.ambient_occlusion
+    return {**entry, "path": _shown(scene.path), "width": scene.camera.width, "height": scene.camera.height,
+            "max_depth": scene.max_depth,
+            "ambient_occlusion": None if ao is None else {"weighting": ao.weighting, "max_distance": ao.max_distance,
+                                                          "normal": ao.normal, "miss_value": ao.miss_value},
+            "features": sorted(scene.features), "regions": list(scene.regions),
+            "reference": reference, "reference_problem": problem}
+
+
+def _verdicts(provenance: dict) -> dict:
+    """Each engine's recorded verdict in brief (``cbox reference verify``): passed, max |z|, regions, spp."""
+    verified = provenance.get(VERIFIED_KEY)
+    return {engine: {k: r.get(k) for k in ("passed", "max_abs_z", "chi2", "dof", "chi2_p", "spp", "date")}
+            | {"regions": len(r.get("regions", {}))}
+            for engine, r in (verified.items() if isinstance(verified, dict) else ())}
+
+
+def _shown(path: Path) -> str:
+    """A path as a user would type it here: relative to the working folder when under it."""
+    path = Path(path).resolve()
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
+
+
+@app.command()
+def renderers(
+    renderer_files: Optional[List[Path]] = RendererFilesOpt,
+    settings: bool = typer.Option(False, "--settings", help="Also list each renderer's settings: name, default, "
+                                                            "allowed values and what it does."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON array of objects on stdout instead of the "
+                                                       "text, settings always included."),
+) -> None:
+    """List the registered renderers (and those --renderers and $CBOX_RENDERERS declare), whether each can run
+    here, and why not."""
+    entries = resolve(None)
+    listing = [_renderer_entry(entry) for entry in entries]
+    if as_json:
+        print_json(listing)
+        return
+    w = max([12, *(len(r["name"]) for r in listing)])  # the names' column
+    for entry, r in zip(entries, listing):
+        if r["available"]:
+            typer.echo(f"{r['name']:{w}s} available    {r['version']}")
+        else:
+            typer.echo(f"{r['name']:{w}s} unavailable  {r['reason']}")
+        if r["loaded"]:
+            typer.echo(f"{'':{w}s} models: {', '.join(r['models'])}")
+            typer.echo(f"{'':{w}s} computes: {', '.join(r['computes'])}")
+            for a in r["approximations"]:
+                typer.echo(f"{'':{w}s} approximates: {a}")
+            if settings:
+                for line in describe(declared(entry.renderer)) or ["(no settings)"]:
+                    typer.echo(f"{'':{w}s} setting: {line}")
+
+
+def _renderer_entry(entry) -> dict:
+    """What ``cbox renderers`` says of one registered renderer, as plain data (its text and its JSON)."""
+    r = entry.renderer
+    out: dict = {"name": entry.name, "available": entry.available, "version": None,
+                 "reason": None if entry.available else entry.reason, "loaded": r is not None}
+    if entry.available:
+        try:
+            out["version"] = r.version()
+        except Exception as e:  # a version probe must not break the listing
+            out["version"] = f"version unknown ({type(e).__name__})"
+    if r is not None:
+        out.update(models=sorted(r.features), computes=list(quantities_of(r)),
+                   approximations=list(attribute(r, "approximations")),
+                   settings=[{"name": s.name, "type": s.kind.__name__, "default": s.default, "allowed": s.allowed(),
+                              "doc": s.doc} for s in declared(r)])
+    return out
+
+
+@app.command()
+def features() -> None:
+    """List the scene features a scene can declare and a renderer can model."""
+    for name, meaning in FEATURES.items():
+        typer.echo(f"{name:16s} {meaning}")

@@ -1,0 +1,126 @@
+"""``cbox reference build``, ``show`` and ``verify``: the stored references."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from cornell_harness.adapters.registry import RendererError, resolve
+from cornell_harness.cli.common import (REFERENCE_RENDERER, DashboardOpt, SceneOpt, SchedulerOpt, SetOpt, WorkersOpt,
+                                check_output_folder, executor_for, reference_app)
+from cornell_harness.cli.output import Progress
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.references import load_reference
+# Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
+# a misspelt config, or `cbox --help`, must answer in a second.
+
+
+@reference_app.command("build")
+def reference_build(
+    scene: str = SceneOpt,
+    overrides: Optional[List[str]] = SetOpt,
+    spp: int = typer.Option(16384, "--spp", min=2, help="Total samples per pixel of the reference."),
+    batches: int = typer.Option(128, "--batches", min=2, help="Independent batches; their spread gives the variance image."),
+    workers: Optional[int] = WorkersOpt,
+    scheduler: Optional[str] = SchedulerOpt,
+    dashboard: Optional[str] = DashboardOpt,
+) -> None:
+    """Render the scene's reference with Mitsuba and store image, variance and provenance beside the scene.
+
+    With --set, the derived scene's reference goes to derived/<content hash>/ beside the scene; the
+    scene's own reference is left as it is. With --workers or --scheduler the batches render on a Dask
+    cluster and are combined here in batch order: the same reference as a build in this process.
+    """
+    sc = resolve_scene(scene, overrides)
+    if spp % batches:
+        raise typer.BadParameter(f"--spp ({spp}) must be a multiple of --batches ({batches})")
+    from cornell_harness.workflows.reference_build import build_reference
+
+    (entry,) = resolve([REFERENCE_RENDERER])
+    if not entry.available:
+        raise RendererError(f"renderer {entry.name!r} builds references but is unavailable: {entry.reason}")
+    with executor_for(workers, scheduler, dashboard) as executor, \
+            Progress(batches + 1, f"reference {sc.name}", "batch", slots=executor.slots) as bar:  # +1: the noise image
+        bar.start(f"{spp // batches} spp per batch")
+        ref = build_reference(sc, spp, batches, entry, executor=executor,
+                              progress=lambda done, total, label: bar.advance(label))
+    typer.echo(f"wrote {ref.folder} ({spp} spp in {ref.provenance['wall_time_s']:.0f} s, {ref.provenance['renderer_version']})")
+
+
+@reference_app.command("show")
+def reference_show(scene: str = SceneOpt, overrides: Optional[List[str]] = SetOpt) -> None:
+    """Print the provenance of a scene's stored reference (refused if the scene changed)."""
+    ref = load_reference(resolve_scene(scene, overrides))
+    typer.echo(json.dumps(ref.provenance, indent=1))
+
+
+@reference_app.command("verify")
+def reference_verify(
+    scene: str = SceneOpt,
+    overrides: Optional[List[str]] = SetOpt,
+    engine: str = typer.Option("luxcore", "--engine", "-e", metavar="RENDERER", help=(
+        "The second engine: any registered renderer (see `cbox renderers`), with settings as NAME\\[k=v,...]. "
+        "An independent, unbiased one (luxcore) tests the reference; mitsuba, the reference's own engine at other "
+        "seeds, tests only the noise model.")),
+    spp: int = typer.Option(1024, "--spp", min=1, help=(
+        "Total samples per pixel of the engine's render, split over --batches. More spp resolve smaller "
+        "differences: a region's z grows as √spp for a fixed bias.")),
+    batches: int = typer.Option(16, "--batches", min=1, help=(
+        "Independent renders whose spread gives the engine's variance of its mean (as the reference's does); "
+        "--spp must be a multiple. 1: one render, with the variance the engine itself reports.")),
+    workers: Optional[int] = WorkersOpt,
+    scheduler: Optional[str] = SchedulerOpt,
+    dashboard: Optional[str] = DashboardOpt,
+    record: bool = typer.Option(True, "--record/--no-record", help=(
+        "Write the verdict into the reference's provenance.json under verified.<engine> (default), or only "
+        "print it.")),
+    report: Optional[Path] = typer.Option(None, "--report", metavar="DIR", help=(
+        "Also write DIR/reference-verify-<scene>.html: the two engines' images, the per-pixel |z| map and the "
+        "per-region table.")),
+) -> None:
+    """Render the scene with a second engine and compare it with the stored reference, region by region.
+
+    Per region (the scene's named regions and the whole image) and channel: the two means, their difference
+    and z from both variances (a region mean's variance is the sum of its pixels' variances / n²); χ² over
+    the regions; the spread of the per-pixel z. Exits 1 when any region-channel p is below the Šidák-corrected
+    level at family-wise false-alarm rate 0.01 (the engines disagree beyond noise), 0 otherwise. `cbox scenes`
+    shows the recorded verdicts; docs/references.md has the stored references' verdicts and what they found.
+    """
+    if spp % batches:
+        raise typer.BadParameter(f"--spp ({spp}) must be a multiple of --batches ({batches})")
+    if report is not None:
+        check_output_folder(report, "--report")
+    sc = resolve_scene(scene, overrides)
+    ref = load_reference(sc)  # refused (with the build command) before anything renders
+    (entry,) = resolve([engine])
+    if not entry.available:
+        raise RendererError(f"engine {entry.name!r} is unavailable: {entry.reason}")
+    from cornell_harness.store.references import record_verdict
+    from cornell_harness.workflows.reference_verify import verify_reference
+
+    with executor_for(workers, scheduler, dashboard) as executor, \
+            Progress(batches, f"verify {sc.name} with {entry.name}", "batch", slots=executor.slots) as bar:
+        bar.start(f"{spp // batches} spp per batch")
+        result = verify_reference(sc, ref, entry, spp, batches, executor=executor,
+                                  progress=lambda done, total, label: bar.advance(label))
+    a = result.agreement
+    typer.echo(f"{sc.name}: reference {ref.provenance.get('renderer_version')} at {ref.spp} spp against "
+               f"{result.record['engine']} {result.record['engine_version']} at {spp} spp "
+               f"({result.record['wall_time_s']:.0f} s)")
+    for line in a.table():
+        typer.echo("  " + line)
+    typer.echo(f"per-pixel z: sd {a.pixel_z_sd:.3f}, robust spread {a.pixel_z_spread:.3f}, "
+               f"{a.pixel_z_tail:.2%} beyond |z| 3 (0.27% for normal z; reported, not judged)")
+    typer.echo(a.message())
+    if record:
+        record_verdict(ref.folder, result.record)
+        typer.echo(f"recorded in {ref.folder / 'provenance.json'} under verified.{result.record['engine']}")
+    if report is not None:
+        from cornell_harness.reports.reference_verify import write_verify_page
+
+        path = write_verify_page(report, sc, ref, result)
+        typer.echo(f"wrote {path}")
+    raise typer.Exit(0 if a.passed else 1)

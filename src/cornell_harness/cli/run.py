@@ -1,0 +1,329 @@
+"""``cbox render``, ``cbox compare`` (equal spp, equal time, equal quality) and ``cbox demo``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from cornell_harness.adapters.registry import RendererError, missing_features, resolve
+from cornell_harness.adapters.settings import canonical
+from cornell_harness.cli.common import (RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt, TitleOpt, app,
+                                check_output_file, command_line, out_folder_option)
+from cornell_harness.cli.figures import CropOpt, SeriesLabelOpt, keep_report_options, parse_crops, series_labels_for
+from cornell_harness.cli.output import Progress, info
+from cornell_harness.cli.timing import TimeBasisOpt, time_repeats_option, warn_contention
+from cornell_harness.scenes.library import resolve_scene
+from cornell_harness.store.exr import write_exr
+from cornell_harness.store.image_files import SPP_ATTRIBUTE
+from cornell_harness.store.references import load_reference
+# Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
+# a misspelt config, or `cbox --help`, must answer in a second.
+
+#: The metrics of the table `cbox compare` (and `cbox compare-image`) prints, those a row has.
+TABLE_METRICS = ("delta_e2000_mean", "noise_delta_e2000_mean", "flip_mean", "ssim", "rel_mse",
+                 "mean_radiance_rel_error", "nan_count")
+
+
+@app.command()
+def render(
+    scene: str = SceneOpt,
+    overrides: Optional[List[str]] = SetOpt,
+    renderer: str = typer.Option(..., "--renderer", "-r", help="Registered renderer name or package.module:ClassName, "
+                                                             "with settings as NAME\\[setting=value,...]."),
+    renderer_files: Optional[List[Path]] = RendererFilesOpt,
+    spp: int = SppOpt,
+    seed: int = SeedOpt,
+    out: Path = typer.Option(..., "--out", "-o", help="Output OpenEXR file (float32 linear sRGB); its name must "
+                                                      "end in .exr (other formats are refused, not converted)."),
+    variance_out: Optional[Path] = typer.Option(None, "--variance-out", help="Also write the per-pixel variance of "
+                                                "the image (of the mean, float32 EXR, per channel) where the renderer "
+                                                "gives one; one line says so where it does not, and no file is written."),
+) -> None:
+    """Render one scene with one renderer and write the HDR image (and, with --variance-out, its variance)."""
+    check_output_file(out)  # before any rendering: .exr, not a folder, writable
+    if variance_out is not None:
+        check_output_file(variance_out, "--variance-out")
+        if Path(variance_out).resolve() == Path(out).resolve():
+            raise typer.BadParameter(f"{variance_out}: is the --out file too; give the variance a name of its own",
+                                     param_hint="--variance-out")
+    sc = resolve_scene(scene, overrides)
+    (entry,) = resolve([renderer])
+    if not entry.available:
+        raise RendererError(f"renderer {entry.name!r} is unavailable: {entry.reason}")
+    if missing := missing_features(entry.renderer, sc):
+        raise RendererError(f"renderer {entry.name!r} does not model {', '.join(missing)}, which {sc.name} uses")
+    from cornell_harness.workflows.render import render_checked
+
+    result = render_checked(entry, sc, spp, seed)
+    meta = {"cbox:renderer": entry.name, "cbox:settings": canonical(entry.settings), SPP_ATTRIBUTE: str(spp),
+            "cbox:seed": str(seed), "cbox:scene_hash": sc.content_hash()}
+    write_exr(out, result.image, meta)
+    info(f"wrote {out} ({sc.camera.width}x{sc.camera.height}, {spp} spp, {result.time_s:.2f} s)")
+    if variance_out is None:
+        return
+    if result.variance is None:
+        # Not info(): asked for a file that is not there, the user must hear why, even with --quiet.
+        typer.echo(f"cbox: no variance written: renderer {entry.name!r} reports no variance of its image "
+                   f"at {spp} spp, so {variance_out} was not written", err=True)
+        return
+    write_exr(variance_out, result.variance, {**meta, "cbox:quantity": "variance of the mean"})
+    info(f"wrote {variance_out} (per-pixel variance of the image's mean)")
+
+
+def write_compare_outputs(out: Path, sc, ref, records, command: str, sections=(), title=None,
+                          time_basis: str = "wall", time_repeats: int = 1) -> Path:
+    """Store a comparison as an experiment folder (results, images, CSV/JSON) and build its report."""
+    from cornell_harness.workflows.compare import store_comparison
+    from cornell_harness.workflows.converge import experiment_results
+    from cornell_harness.reports.experiment import write_experiment_report
+
+    store_comparison(out, sc, records, command, time_basis, time_repeats)
+    results = experiment_results(out, sc, ref, summary_dir=out)
+    return write_experiment_report(out, sc, ref, results=results, sections=sections, title=title)
+
+
+def default_time_repeats(time_budget, target_error) -> int:
+    """``--time-repeats`` when not given: 3 for an equal-time or equal-quality comparison (the time is the
+    result), 1 for a plain one at --spp (issue 30)."""
+    return 3 if time_budget or target_error else 1
+
+
+def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool,
+                 time_budget: Optional[str] = None, target_error: Optional[str] = None, max_spp: int = 4096,
+                 sections=(), overrides: Optional[List[str]] = None, title: Optional[str] = None,
+                 time_repeats: Optional[int] = None, time_basis: str = "wall", series_label: Optional[List[str]] = None,
+                 crop: Optional[List[str]] = None) -> tuple[int, list, object, object]:
+    """Compare renderers on one scene, write its folder and report; (exit code, run records, scene, reference).
+
+    With ``time_budget`` each renderer's spp comes from calibration renders, ``time_repeats`` rounds of them
+    interleaved over the renderers; every final render is then timed ``time_repeats`` times in all, in rounds
+    interleaved over the renderers too (:func:`cornell_harness.workflows.compare.retime`)."""
+    from cornell_harness.evaluate.convergence import parse_target
+    from cornell_harness.workflows import compare as cmp
+    from cornell_harness.workflows import runner
+    from cornell_harness.workflows.budgets import parse_duration
+
+    try:
+        budget = parse_duration(time_budget) if time_budget else None
+        target = parse_target(target_error) if target_error else None
+    except ValueError as e:
+        raise typer.BadParameter(str(e)) from None
+    repeats = time_repeats or default_time_repeats(budget, target)
+    sc = resolve_scene(scene, overrides)
+    ref = load_reference(sc)
+    entries = resolve(renderer)
+    keep_report_options(out, series_labels_for(series_label, [e.name for e in entries]),
+                        parse_crops(crop, sc.camera.width, sc.camera.height))
+    runnable = [e.available and not missing_features(e.renderer, sc) for e in entries]
+    mode = f"{budget:g} s each" if budget else f"to {target[0]}<={target[1]:g}" if target else f"{spp} spp"
+    calibrations = 2 * repeats * sum(runnable) if budget else 0
+    bar = Progress(calibrations + len(entries) + (repeats - 1) * sum(runnable), f"{sc.name} @ {mode}", "render")
+    if budget:
+        bar.start("the time budget's calibration renders")
+    choices = iter(cmp.calibrate_time_budget([e for e, ok in zip(entries, runnable) if ok], sc, budget, seed,
+                                             repeats, time_basis, on_render=bar.advance) if budget else ())
+    records = []
+    for entry, ok in zip(entries, runnable):
+        bar.start(entry.name)
+        if budget and ok:
+            choice = next(choices)
+            if isinstance(choice, Exception):
+                rec = runner.RunRecord.new(sc, entry, 1, seed)
+                rec.status, rec.reason = "failed", f"time budget calibration: {type(choice).__name__}: {choice}"
+            else:
+                rec = runner.run_one(entry, sc, choice.spp, seed, ref)
+                choice.record_in(rec.info, budget)
+        elif target and ok:
+            rec = cmp.render_to_target(entry, sc, ref, target[0], target[1], seed, max_spp)
+        else:
+            rec = runner.run_one(entry, sc, spp, seed, ref)
+        cmp.judge_agreement(rec, sc, ref)
+        records.append(rec)
+        bar.advance(f"{rec.renderer} {rec.status}")
+        if as_json and repeats == 1:  # as it finishes; with repeats, once they are all in
+            bar.write(json.dumps(runner.json_record(rec), allow_nan=False))
+    cmp.retime(entries, records, sc, repeats, on_render=bar.advance)
+    if as_json and repeats > 1:
+        for rec in records:
+            bar.write(json.dumps(runner.json_record(rec), allow_nan=False))
+    bar.close()
+    warn_contention(runner.rows_frame(records))
+    report = write_compare_outputs(out, sc, ref, records, command_line(), sections=sections, title=title,
+                                   time_basis=time_basis, time_repeats=repeats)
+    if not as_json:
+        typer.echo(compare_table([r.row() for r in records], time_basis))
+        for r in records:
+            if r.status != "ok":
+                typer.echo(f"{r.renderer}: {r.status}: {r.reason}")
+    info(f"report: {report}")
+    return (1 if any(r.status == "failed" for r in records) else 0), records, sc, ref
+
+
+def compare_table(rows: list[dict], time_basis: str = "wall") -> str:
+    """The table ``cbox compare`` prints: per renderer its status, spp, time and scores; an spp chosen for a
+    time budget and a time taken more than once show their 95% intervals, ``412 [380, 440]``, with a line
+    saying what they are. With the cpu ``time_basis``, CPU time (``cpu_time_s``) beside wall time."""
+    import pandas as pd
+
+    frame = pd.DataFrame(rows)
+    times = ("time_s", "cpu_time_s") if time_basis == "cpu" else ("time_s",)
+    cols = [c for c in ("renderer", "status", "spp", *times, *TABLE_METRICS, "agreement", "info_target_reached")
+            if c in frame]
+    shown = frame[cols].copy()
+    notes = []
+    if "info_spp_low" in frame and frame["info_spp_low"].notna().any():
+        shown["spp"] = [_with_interval(s, lo, hi, "{:.0f}") for s, lo, hi in
+                        zip(frame["spp"], frame["info_spp_low"], frame["info_spp_high"])]
+        notes.append("spp [95% interval of what the time budget buys, from its calibration rounds]")
+    for col in times:
+        if col in frame and f"{col}_low" in frame and frame[f"{col}_low"].notna().any():
+            shown[col] = [_with_interval(t, lo, hi, "{:.3g}") for t, lo, hi in
+                          zip(frame[col], frame[f"{col}_low"], frame[f"{col}_high"])]
+            notes.append(f"{col}: median of {int(frame['time_repeats'].max())} timings [95% interval]")
+    return shown.to_string(index=False) + "".join(f"\n{n}" for n in notes)
+
+
+def _with_interval(value, low, high, fmt: str) -> str:
+    """``412 [380, 440]``; the value alone where there is no interval (one timing, a run that did not run)."""
+    import math
+
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "NaN"
+    if low is None or high is None or math.isnan(float(low)) or math.isnan(float(high)):
+        return fmt.format(value)
+    return f"{fmt.format(value)} [{fmt.format(low)}, {fmt.format(high)}]"
+
+
+@app.command()
+def compare(
+    scene: str = SceneOpt,
+    overrides: Optional[List[str]] = SetOpt,
+    renderer: Optional[List[str]] = RenderersOpt,
+    renderer_files: Optional[List[Path]] = RendererFilesOpt,
+    spp: int = SppOpt,
+    seed: int = SeedOpt,
+    out: Path = out_folder_option(Path("out"), "Folder for report.html, metrics.csv, metrics.json, "
+                                                               "results.parquet and the images."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON record per run on stdout."),
+    time_budget: Optional[str] = typer.Option(
+        None, "--time-budget", help="Equal-time mode: every renderer gets this time (e.g. 10s, 2m; wall seconds, "
+                                    "CPU seconds with --time-basis cpu); its spp is chosen from two short "
+                                    "calibration renders (1 and 4 spp), --time-repeats rounds of them "
+                                    "interleaved over the renderers, and reported with a 95% interval "
+                                    "(info_spp_low/high). Overrides --spp."),
+    target_error: Optional[str] = typer.Option(
+        None, "--target-error", help="Equal-quality mode: METRIC=VALUE (e.g. delta_e2000_mean=1, rel_mse=1e-3; "
+                                     "a bare number means ΔE mean). Each renderer renders at 1, 2, 4, ... spp "
+                                     "until the metric is at most VALUE and reports the time it needed (that "
+                                     "render timed --time-repeats times)."),
+    max_spp: int = typer.Option(4096, "--max-spp", min=1, help="Upper spp limit of --target-error."),
+    time_repeats: Optional[int] = time_repeats_option("default 3 with --time-budget or --target-error, else 1"),
+    time_basis: str = TimeBasisOpt,
+    title: Optional[str] = TitleOpt,
+    series_label: Optional[List[str]] = SeriesLabelOpt,
+    crop: Optional[List[str]] = CropOpt,
+) -> None:
+    """Render with each renderer, score against the scene's reference, write a report.
+
+    Exit code 1 if a renderer failed; renderers that are unavailable or do not
+    model the scene are listed as such and are not failures.
+    """
+    if time_budget and target_error:
+        raise typer.BadParameter("give --time-budget or --target-error, not both")
+    raise typer.Exit(_run_compare(scene, renderer, spp, seed, out, as_json, time_budget, target_error, max_spp,
+                                  overrides=overrides, title=title, time_repeats=time_repeats,
+                                  time_basis=time_basis, series_label=series_label, crop=crop)[0])
+
+
+#: The scenes of ``cbox demo``: a convergence run on the first, whose report leads; each other one is a
+#: comparison at the highest spp, a section of that report (in full in a subfolder).
+DEMO_SCENES = ("cornell-box", "cornell-box-caustics")
+
+
+def demo_checkpoints(spp: int) -> list[int]:
+    """1, 4, 16, ... up to ``spp`` (and ``spp`` itself): powers of 4 give a slope from a few points, and a
+    renderer that is not progressive renders 1.33x its top spp in all instead of 2x with powers of 2."""
+    out = [1]
+    while out[-1] * 4 <= spp:
+        out.append(out[-1] * 4)
+    return out if out[-1] == spp else out + [spp]
+
+
+#: The Whitted variants ``cbox demo`` adds to its caustics comparison, for the section "Recursive ray tracing and
+#: its hacks" (src/cornell_harness/reports/whitted.py): each shadow rule for glass, and no ambient term.
+DEMO_WHITTED = ("transparent_shadows=boolean", "transparent_shadows=attenuate", "transparent_shadows=ignore",
+                "ambient=none")
+
+
+#: The headline of docs/spectral.md (issue 33, ``benchmarks/spectral.py``), which ``cbox demo`` ends with: the
+#: demo renders the RGB box, and this is how far RGB rendering is from the measured, spectral one. A test keeps it
+#: equal to the figures in docs/spectral.md.
+SPECTRAL_HEADLINE = ("the real Cornell box rendered in RGB (cornell-box-measured, docs/spectral.md): mean ΔE00 8.69 "
+                     "per pixel against the spectral reference with mi.cornell_box()'s reflectances, 0.78 with "
+                     "reflectances white-balanced to its light; noise floor 0.82")
+
+
+def demo_caustics_renderers(renderer: Optional[List[str]]) -> List[str]:
+    """The caustics comparison's renderers: the demo's (all when none are named; the plain ``whitted`` then
+    gives way to its variants) and the :data:`DEMO_WHITTED` variants."""
+    from cornell_harness.adapters.registry import declared_commands, registered_names
+
+    names = list(renderer) if renderer else [n for n in [*registered_names(), *declared_commands()] if n != "whitted"]
+    return names + [f"whitted[{s}]" for s in DEMO_WHITTED if f"whitted[{s}]" not in names]
+
+
+@app.command()
+def demo(
+    out: Path = out_folder_option(Path("out"), "Folder for report.html, results.parquet and summary.parquet, "
+                                               ".csv, .tex (the caustics comparison in a subfolder named after "
+                                               "its scene)."),
+    spp: int = typer.Option(64, "--spp", min=1, help="Highest spp: cornell-box converges at 1, 4, 16, ... up to "
+                                                   "it, and cornell-box-caustics is compared at it."),
+    seeds: int = typer.Option(2, "--seeds", min=1, help="Seeds of the convergence run (bias and variance need 2)."),
+    renderer: Optional[List[str]] = RenderersOpt,
+    renderer_files: Optional[List[Path]] = RendererFilesOpt,
+) -> None:
+    """What the tool is for, in about three minutes on 2 cores once scripts/setup.sh has compiled the kernels
+    (about four with cold caches; it prints its time): every available
+    renderer converging on cornell-box (error against spp and time, speed/accuracy, bias and variance) and compared on
+    cornell-box-caustics (mirror and glass) → out/report.html, the caustics as a section of it, with the
+    Whitted variants against the others per region in "Recursive ray tracing and its hacks"."""
+    import time
+
+    from cornell_harness.cli.experiment import print_summary, run_convergence
+    from cornell_harness.evaluate.missing_light import study_columns, study_masks
+    from cornell_harness.evaluate.regions import region_noise
+    from cornell_harness.reports.scenes import scene_section
+    from cornell_harness.reports.whitted import TITLE, whitted_section
+
+    started = time.perf_counter()
+    sections, code = [], 0
+    for name in DEMO_SCENES[1:]:
+        sub_code, records, sc, ref = _run_compare(name, demo_caustics_renderers(renderer), spp, 0, out / name, False)
+        code = max(code, sub_code)
+        images = {r.renderer: r.image for r in records if r.status == "ok" and r.image is not None}
+        sections.append((name, sc.name, scene_section(sc, ref.image, [r.row() for r in records], images,
+                                                      f"{name}/report.html")))
+        # The Whitted variants against the others, also in the study's regions the scene does not declare.
+        masks = study_masks(sc)
+        rows = [{**r.row(), **(study_columns(sc, r.image, ref, r.spp, masks) if r.image is not None else {})}
+                for r in records]
+        noise = region_noise(ref.image, ref.variance, masks)
+        sections.append((f"{name}-whitted", TITLE, whitted_section(rows, noise, sc.name)))
+    sc = resolve_scene(DEMO_SCENES[0])
+    runs, report = run_convergence(out, sc, load_reference(sc), resolve(renderer), demo_checkpoints(spp), seeds,
+                                   sections=sections)
+    print_summary(out, runs)
+    info(f"report: {report}")
+    info(SPECTRAL_HEADLINE)
+    info(f"demo: {_minutes(time.perf_counter() - started)} in all")
+    raise typer.Exit(max(code, 1 if (runs["status"] == "failed").any() else 0))
+
+
+def _minutes(seconds: float) -> str:
+    """``M:SS`` (wall time, as a user reads a clock)."""
+    whole = int(round(seconds))
+    return f"{whole // 60}:{whole % 60:02d}"

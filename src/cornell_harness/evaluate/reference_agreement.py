@@ -1,0 +1,237 @@
+"""Do two engines agree on a scene? The stored reference against an independent render, region by region.
+
+A reference made by one engine cannot show that engine's own mistakes (its
+dielectric, its emitters, our conversion of the scene into it). ``cbox
+reference verify`` renders the scene with a second engine
+(:mod:`cornell_harness.workflows.reference_verify`) and this module judges the two
+images, each with its per-pixel variance of the mean:
+
+- **Per region and channel** (the scene's named regions,
+  :func:`cornell_harness.evaluate.regions.region_masks`, and always the whole image,
+  :data:`WHOLE_IMAGE`): the mean of each image over the region's pixels,
+  their difference, and z = difference / √(V_ref + V_other), where a region
+  mean's variance is V = Σ var / n² over its n pixels (pixels are
+  independent). Each z is a two-sided test; p = 2 Φ(−|z|).
+- **Verdict**: the engines disagree when any region-channel p is below the
+  Šidák-corrected level ``1 − (1 − α)^(1/m)`` for the m tests
+  (:func:`cornell_harness.evaluate.agreement.sidak_level`) at the family-wise
+  false-alarm rate α = :data:`FAMILY_ALPHA` = 0.01: two engines that agree
+  are called disagreeing at most once in a hundred verifications. The three
+  channels of a region come from the same paths and the whole image overlaps
+  every region, so the tests are correlated; Šidák's bound still holds, since
+  for jointly normal z with any correlation P(all |z_i| ≤ c_i) ≥ Π P(|z_i| ≤
+  c_i) (Šidák 1967, J. Am. Stat. Assoc. 62, 626-633): correlation makes the
+  test conservative, never liberal.
+- **χ²** = Σ z² over the same tests, with m degrees of freedom and its
+  upper-tail p-value: one number for "is the whole set of differences larger
+  than noise", which sees many small disagreements no single test does. Its
+  p-value is exact only for independent tests; with the correlations above it
+  is for reading, not the verdict.
+- **Per-pixel z spread**: z per pixel and channel from the two per-pixel
+  variances, its standard deviation, its robust spread ŝ = median|z| / Φ⁻¹(3/4)
+  (:mod:`cornell_harness.evaluate.variance_check`'s) and the fraction |z| > 3
+  (0.27% for standard normal z). Near 1, 1 and 0.27% when both variances are
+  right; reported, not judged: a variance estimated from a few batches makes z
+  a Student-type ratio with heavier tails, and skewed pixels (caustics) widen
+  it without any bias (see :mod:`cornell_harness.evaluate.variance_check`).
+
+A pixel-channel with no variance on either side and no difference (black
+background, a dark room) is 0/0 and says nothing: z = 0; a difference with no
+variance is |z| = ∞ and fails; a NaN fails (p = 0), never a silent pass, as in
+:mod:`cornell_harness.evaluate.agreement`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+from scipy.stats import chi2 as chi2_dist
+from scipy.stats import norm
+
+from cornell_harness.evaluate.agreement import CHANNELS, sidak_level
+from cornell_harness.evaluate.variance_check import Q3
+
+#: Family-wise false-alarm rate of a verification: two agreeing engines fail it at most this often.
+FAMILY_ALPHA = 0.01
+#: Name of the region that is the whole image, tested beside the scene's own regions.
+WHOLE_IMAGE = "whole image"
+#: |z| beyond which a pixel counts in the reported tail fraction (0.27% for a standard normal).
+PIXEL_Z_TAIL = 3.0
+
+
+@dataclass
+class RegionAgreement:
+    """One region's comparison: per channel (R, G, B) means, difference, z and p."""
+
+    name: str
+    pixels: int
+    mean_reference: np.ndarray  # (3,)
+    mean_other: np.ndarray  # (3,)
+    z: np.ndarray  # (3,) (other − reference) / √(V_ref + V_other)
+    p: np.ndarray  # (3,) two-sided
+    pixel_z_sd: float  # standard deviation of the per-pixel z inside the region (nan if none usable)
+
+    @property
+    def difference(self) -> np.ndarray:
+        return self.mean_other - self.mean_reference
+
+    @property
+    def relative_difference(self) -> np.ndarray:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.mean_reference != 0, self.difference / np.abs(self.mean_reference),
+                            np.where(self.difference == 0, 0.0, np.inf))
+
+    @property
+    def max_abs_z(self) -> float:
+        return float(np.nanmax(np.abs(self.z))) if np.isfinite(self.z).all() else math.inf
+
+
+@dataclass
+class ReferenceAgreement:
+    """Outcome of :func:`reference_agreement`: the regions' tests, χ², the per-pixel z spread and the verdict."""
+
+    regions: list[RegionAgreement]
+    alpha: float
+    tests: int
+    level: float  # per-test level after Šidák
+    chi2: float
+    dof: int
+    chi2_p: float
+    pixel_z_sd: float  # over the whole image's usable pixel-channels
+    pixel_z_spread: float  # robust: median|z| / Φ⁻¹(3/4)
+    pixel_z_tail: float  # fraction of usable pixel-channels with |z| > PIXEL_Z_TAIL
+    pixel_count: int  # usable pixel-channels
+
+    @property
+    def failures(self) -> list[tuple[str, str, float, float]]:
+        """(region, channel, z, p) of every test below the level, worst first."""
+        out = [(r.name, CHANNELS[c], float(r.z[c]), float(r.p[c]))
+               for r in self.regions for c in range(3) if r.p[c] < self.level]
+        return sorted(out, key=lambda f: (f[3], -abs(f[2]) if math.isfinite(f[2]) else -math.inf))
+
+    @property
+    def passed(self) -> bool:
+        return not self.failures
+
+    @property
+    def p_min(self) -> float:
+        return float(min((float(r.p.min()) for r in self.regions), default=1.0))
+
+    @property
+    def max_abs_z(self) -> float:
+        return max((r.max_abs_z for r in self.regions), default=0.0)
+
+    def message(self) -> str:
+        head = (f"{len(self.regions)} region{'s' if len(self.regions) != 1 else ''} × 3 channels = {self.tests} tests at family-wise α = {self.alpha:g} "
+                f"(Šidák per-test level {self.level:.3g}); max |z| {self.max_abs_z:.2f}, "
+                f"χ² {self.chi2:.1f} on {self.dof} dof (p {self.chi2_p:.3g})")
+        if self.passed:
+            return f"the engines agree: smallest p = {self.p_min:.3g} ≥ {self.level:.3g}; {head}"
+        worst = "; ".join(f"{name} {ch}: z = {z:.2f}, p = {p:.2g}" for name, ch, z, p in self.failures[:3])
+        return f"the engines DISAGREE in {len(self.failures)} of {self.tests} tests ({worst}); {head}"
+
+    def table(self) -> list[str]:
+        """The per-region table as text lines (one row per region; R G B in each cell)."""
+        rows = [("region", "pixels", "reference mean (R G B)", "difference % (R G B)", "z (R G B)", "min p",
+                 "pixel z sd")]
+        for r in self.regions:
+            rows.append((r.name, str(r.pixels), " ".join(f"{m:.4g}" for m in r.mean_reference),
+                         " ".join(f"{100 * d:+.3f}" for d in r.relative_difference),
+                         " ".join(f"{z:+.2f}" for z in r.z), f"{float(r.p.min()):.3g}"
+                         + (" *" if (r.p < self.level).any() else ""),
+                         "-" if math.isnan(r.pixel_z_sd) else f"{r.pixel_z_sd:.3f}"))
+        widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+        return ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
+
+    def summary(self) -> dict:
+        """Plain, JSON-safe data of the verdict (what a reference's provenance records)."""
+        def num(x: float, digits: int = 4) -> float | None:
+            return float(f"{x:.{digits}g}") if math.isfinite(x) else None
+        return {
+            "passed": self.passed, "alpha": self.alpha, "tests": self.tests, "level": num(self.level),
+            "max_abs_z": num(self.max_abs_z), "p_min": num(self.p_min), "chi2": num(self.chi2), "dof": self.dof,
+            "chi2_p": num(self.chi2_p),
+            "pixel_z": {"sd": num(self.pixel_z_sd), "robust_spread": num(self.pixel_z_spread),
+                        f"fraction_beyond_{PIXEL_Z_TAIL:g}": num(self.pixel_z_tail), "count": self.pixel_count},
+            "regions": {r.name: {"pixels": r.pixels, "mean_reference": [num(m, 6) for m in r.mean_reference],
+                                 "mean_other": [num(m, 6) for m in r.mean_other],
+                                 "z": [num(z, 3) for z in r.z], "p": [num(p, 3) for p in r.p]}
+                        for r in self.regions},
+        }
+
+
+def region_mean(image: np.ndarray, variance: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per channel: the mean of ``image`` over ``mask``'s n pixels and that mean's variance Σ var / n²."""
+    x, v = np.asarray(image, np.float64)[mask], np.asarray(variance, np.float64)[mask]
+    n = x.shape[0]
+    return x.mean(axis=0), v.sum(axis=0) / n**2
+
+
+def z_scores(diff: np.ndarray, var: np.ndarray) -> np.ndarray:
+    """diff/√var; 0 where both are 0 (no information), ±inf where only the variance is 0, NaN kept."""
+    diff, var = np.asarray(diff, np.float64), np.asarray(var, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = diff / np.sqrt(var)
+    return np.where((var == 0) & (diff == 0), 0.0, z)
+
+
+def two_sided_p(z: np.ndarray) -> np.ndarray:
+    """2 Φ(−|z|); a NaN z gives p = 0 (a test that cannot be evaluated rejects)."""
+    return np.nan_to_num(2.0 * norm.sf(np.abs(z)), nan=0.0)
+
+
+def pixel_z_stats(z: np.ndarray, usable: np.ndarray) -> tuple[float, float, float, int]:
+    """(sd, robust spread median|z|/Φ⁻¹(3/4), fraction |z| > PIXEL_Z_TAIL, count) of the usable z.
+
+    The sd is over the finite z only (an infinite one would make it meaningless; it counts in the tail)."""
+    zs = np.asarray(z, np.float64)[usable]
+    if zs.size == 0:
+        return math.nan, math.nan, 0.0, 0
+    absz = np.where(np.isnan(zs), np.inf, np.abs(zs))
+    finite = zs[np.isfinite(zs)]
+    sd = float(np.sqrt(np.mean(finite**2))) if finite.size else math.nan  # about the known centre 0
+    return sd, float(np.median(absz)) / Q3, float(np.mean(absz > PIXEL_Z_TAIL)), int(zs.size)
+
+
+def reference_agreement(reference: np.ndarray, reference_variance: np.ndarray, other: np.ndarray,
+                        other_variance: np.ndarray, masks: Mapping[str, np.ndarray],
+                        alpha: float = FAMILY_ALPHA) -> ReferenceAgreement:
+    """Compare ``other`` (a second engine's image, with its variance of the mean) with the reference.
+
+    ``masks`` are the scene's named regions (name -> (H, W) bool); the whole
+    image is tested too, as :data:`WHOLE_IMAGE`. Regions without pixels are
+    left out. See the module docstring for the statistics.
+    """
+    ref, other = np.asarray(reference, np.float64), np.asarray(other, np.float64)
+    if ref.shape != other.shape:
+        raise ValueError(f"the two images differ in shape: reference {ref.shape}, other {other.shape}")
+    var_ref, var_other = np.asarray(reference_variance, np.float64), np.asarray(other_variance, np.float64)
+    pixel_diff, pixel_var = other - ref, var_ref + var_other
+    z_pix = z_scores(pixel_diff, pixel_var)
+    usable = ~((pixel_var == 0) & (pixel_diff == 0))
+    regions = []
+    whole = np.ones(ref.shape[:2], dtype=bool)
+    if WHOLE_IMAGE in masks:
+        raise ValueError(f"a region may not be named {WHOLE_IMAGE!r}: that name is the whole image's")
+    for name, mask in [(WHOLE_IMAGE, whole), *masks.items()]:
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != ref.shape[:2]:
+            raise ValueError(f"region {name!r}: mask shape {mask.shape} does not match image shape {ref.shape[:2]}")
+        n = int(np.count_nonzero(mask))
+        if n == 0:
+            continue
+        m_ref, v_ref = region_mean(ref, var_ref, mask)
+        m_other, v_other = region_mean(other, var_other, mask)
+        z = z_scores(m_other - m_ref, v_ref + v_other)
+        sd = pixel_z_stats(z_pix[mask], usable[mask])[0]
+        regions.append(RegionAgreement(name, n, m_ref, m_other, z, two_sided_p(z), sd))
+    tests = 3 * len(regions)
+    zs = np.concatenate([r.z for r in regions]) if regions else np.zeros(0)
+    chi2 = float(np.sum(np.where(np.isnan(zs), np.inf, zs) ** 2))  # a NaN test counts as infinitely far
+    chi2_p = float(chi2_dist.sf(chi2, tests)) if tests else 1.0
+    sd, spread, tail, count = pixel_z_stats(z_pix, usable)
+    return ReferenceAgreement(regions, alpha, tests, sidak_level(alpha, tests), chi2, tests, chi2_p, sd, spread,
+                              tail, count)

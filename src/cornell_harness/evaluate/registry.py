@@ -1,0 +1,138 @@
+"""The metric registry: every column a run can carry, with its label, definition and direction.
+
+One table for the whole harness. The gate reads the direction (a budget or a
+baseline on a metric where higher is better is a floor, not a ceiling) and
+refuses names that are not here; the report takes its labels, tooltips and
+chart axes from it; the CLI prints its table columns from it. A metric that
+:func:`cornell_harness.evaluate.metrics.image_metrics` or
+:func:`cornell_harness.evaluate.noise.noise_yardsticks` computes must be listed here.
+
+Region metrics (:mod:`cornell_harness.evaluate.regions`) are named here too, by their
+column form ``region.<region>.<metric>`` (:func:`region_metric`): the gate
+validates them without importing the mask code, which pulls in SciPy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable
+
+
+@dataclass(frozen=True)
+class Metric:
+    """``better`` is "low", "high" or None (a signed or descriptive figure); ``guide_slope`` is
+    the log-log slope against spp an unbiased renderer shows (None: not a convergence metric)."""
+
+    key: str
+    label: str
+    definition: str
+    better: str | None = None
+    axis_label: str | None = None
+    guide_slope: float | None = None
+    per_image: bool = False  # computed from one image against the reference (a gate may budget it)
+    colour: bool = False  # radiance images only (a colour difference, HDR-FLIP); an AO image is one scalar
+    cheap: bool = False  # a per-image metric of a few passes over the pixels: a check computes it unasked
+
+
+def _m(key, label, definition, better=None, axis=None, slope=None, per_image=True, colour=False,
+       cheap=False) -> Metric:
+    return Metric(key, label, definition, better, axis, slope, per_image, colour, cheap)
+
+
+_TABLE = (
+    _m("renderer", "renderer", "renderer name, with settings that differ from its defaults", per_image=False),
+    _m("status", "status", "ok, skipped, unavailable or failed", per_image=False),
+    _m("version", "version", "renderer version", per_image=False),
+    _m("estimator", "estimator", "what the renderer's image estimates: unbiased, consistent (biased, error → 0 "
+       "as the budget grows) or biased (does not converge to the reference)", per_image=False),
+    _m("spp", "spp", "samples per pixel of the row (the highest reached)", per_image=False),
+    _m("seeds", "seeds", "number of seeds (independent runs) the medians are over", per_image=False),
+    _m("time_s", "time (s)", "wall time to reach this spp (median over seeds)", "low", per_image=False),
+    _m("rmse", "RMSE", "root-mean-square error on linear radiance", "low", "RMSE (linear radiance)", -0.5,
+       cheap=True),
+    _m("mse", "MSE", "mean squared error on linear radiance", "low", "MSE", -1.0, cheap=True),
+    _m("rel_mse", "relMSE", "mean of (img−ref)²/(ref²+0.01) on linear radiance", "low", "relMSE", -1.0,
+       cheap=True),
+    _m("rel_mse_trimmed", "relMSE trim.", "relMSE without the worst pixels (fireflies)", "low",
+       "relMSE (trimmed)", -1.0),
+    _m("psnr", "PSNR (dB)", "PSNR of the display-encoded images", "high"),
+    _m("ssim", "SSIM", "mean SSIM of the display-encoded images", "high"),
+    _m("delta_e2000_mean", "ΔE mean", "mean CIEDE2000", "low", "mean ΔE₀₀", -0.5, colour=True),
+    _m("delta_e2000_p95", "ΔE p95", "95th percentile of CIEDE2000", "low", "ΔE₀₀ 95th percentile", -0.5,
+       colour=True),
+    _m("delta_e2000_max", "ΔE max", "maximum CIEDE2000", "low", colour=True),
+    _m("delta_e2000_frac_gt_2_3", "ΔE > 2.3", "fraction of pixels above the just-noticeable difference", "low",
+       colour=True),
+    # Radiance only: HDR-FLIP re-exposes the image over a range of stops from the reference; an AO image
+    # is a fraction shown as it is (exposure 1), which those exposures would brighten.
+    _m("flip_mean", "FLIP mean", "mean HDR-FLIP on linear radiance (Andersson et al. 2021): how visible the "
+       "difference is when flipping between the images, worst over exposures from the reference's brightest "
+       "to its median pixel; 0 none, 1 the largest", "low", "mean HDR-FLIP", colour=True),
+    _m("mean_radiance_r", "mean R", "mean radiance of the red channel (broken pixels skipped)", cheap=True),
+    _m("mean_radiance_g", "mean G", "mean radiance of the green channel (broken pixels skipped)", cheap=True),
+    _m("mean_radiance_b", "mean B", "mean radiance of the blue channel (broken pixels skipped)", cheap=True),
+    _m("mean_radiance_rel_error", "mean rad. err", "relative error of the image's mean radiance", cheap=True),
+    _m("nan_count", "NaN px", "pixels with a NaN channel", "low", cheap=True),
+    _m("inf_count", "Inf px", "pixels with an infinite channel", "low", cheap=True),
+    _m("negative_count", "neg px", "pixels with a negative channel", "low", cheap=True),
+    _m("noise_rmse", "RMSE (noise)", "expected RMSE from sampling noise alone at this spp"),
+    _m("noise_delta_e2000_mean", "ΔE mean (noise)", "ΔE mean of a simulated noise-only image at this spp",
+       colour=True),
+    _m("noise_mean_radiance_z", "mean rad. z",
+       "z-score of the mean-radiance difference given the noise; |z| > 3 points at bias"),
+    _m("efficiency", "efficiency", "1/(MSE·time) at the highest spp: higher is better; unchanged by more time "
+       "for an unbiased renderer", "high", per_image=False),
+    _m("slope_rmse_spp", "slope RMSE/spp", "log-log slope of RMSE against spp, mean over seeds ± 95% CI; "
+       "−0.5 for an unbiased renderer, towards 0 once bias dominates", per_image=False),
+    _m("slope_rmse_time", "slope RMSE/time", "log-log slope of RMSE against wall time, mean over seeds ± 95% CI",
+       per_image=False),
+    _m("bias2", "bias²", "squared bias, mean over pixels and channels (from several seeds' images)", "low",
+       per_image=False),
+    _m("variance", "variance", "between-seed variance, mean over pixels and channels", "low", per_image=False),
+    _m("bias2_fraction", "bias share", "bias² / (bias² + variance)", per_image=False),
+)
+
+#: Every known column, by key.
+METRICS: dict[str, Metric] = {m.key: m for m in _TABLE}
+#: Colour differences (CIEDE2000) and HDR-FLIP: computed for radiance images only; an ambient-occlusion image
+#: has one value per pixel, so its rows leave them out (RMSE, relMSE, SSIM, PSNR and the means stay).
+COLOUR_METRICS = frozenset(k for k, m in METRICS.items() if m.colour)
+#: Metrics where larger is better; every other scored metric is an error (smaller is better).
+HIGHER_IS_BETTER = frozenset(k for k, m in METRICS.items() if m.better == "high")
+#: Metrics of one image against the reference: what a gate budget or baseline may name.
+IMAGE_METRICS = tuple(k for k, m in METRICS.items() if m.per_image)
+#: Per-image metrics a check computes unasked (``cbox compare-image`` with thresholds, :func:`check_metrics`): a
+#: pass or two over the pixels each, together under a tenth of one ΔE00 map's cost.
+CHEAP_METRICS = tuple(k for k, m in METRICS.items() if m.cheap)
+#: Metrics the convergence and speed/accuracy charts offer, the default first.
+PLOT_METRICS = ("rmse", "delta_e2000_mean", "rel_mse", "rel_mse_trimmed", "mse", "delta_e2000_p95")
+assert all(METRICS[k].guide_slope is not None for k in PLOT_METRICS)
+
+#: The metrics of each named region, in table order (computed by :func:`cornell_harness.evaluate.regions.region_metrics`).
+REGION_METRICS = ("pixels", "mean_radiance_rel_error", "mean_z", "rmse", "rel_mse", "delta_e2000_mean")
+#: Region metrics a gate budget, a consistency check or a time-to-target may name: ``pixels`` is a count,
+#: not an error.
+REGION_CHECK_METRICS = tuple(m for m in REGION_METRICS if m != "pixels")
+#: In a flat row (the results table), region metrics are columns ``region.<name>.<metric>``.
+REGION_PREFIX = "region."
+
+
+def region_metric(key: str) -> tuple[str, str] | None:
+    """``"region.caustic.rel_mse"`` → ("caustic", "rel_mse"); None for a key without the prefix.
+
+    The metric is after the last dot (metric keys have none, region names
+    may). The parts are not checked against anything: "" or an unknown
+    metric come back as they are, for the caller to refuse in its own words.
+    """
+    if not key.startswith(REGION_PREFIX):
+        return None
+    region, _, metric = key[len(REGION_PREFIX):].rpartition(".")
+    return region, metric
+
+
+def check_metrics(named: Iterable[str]) -> frozenset[str]:
+    """What a check that names ``named`` (its thresholds' keys: metrics, or ``region.<region>.<metric>``)
+    computes: those and :data:`CHEAP_METRICS`, and not the costly rest (the ΔE00 map, SSIM, PSNR's display
+    encoding, HDR-FLIP, the noise yardsticks, the regions), which costs several times what idiff's whole
+    comparison does (issue 31)."""
+    return frozenset(CHEAP_METRICS).union(named)

@@ -1,0 +1,470 @@
+"""The CI quality gate: expectations per (scene, renderer, budget), checked with stated error rates.
+
+A gate config (TOML) lists expectations::
+
+    alpha = 0.01                      # family-wise false-alarm rate per expectation (its statistical tests)
+    baseline = "gate-baseline.json"   # optional, relative to this file; once named it must exist
+                                      # (cbox gate --update-baseline creates it)
+    regression_margin = 0.05          # relative; a metric worse than baseline by more fails
+    regression_metrics = ["delta_e2000_mean", "rel_mse_trimmed", "ssim"]
+    time_limit = "30m"                # default per expectation: a render past it is killed and fails
+
+    [[expect]]
+    scene = "cornell-box"             # stored name or path
+    renderer = "pathtracer"           # registered name or package.module:Class
+    spp = 256                         # budget: spp, or time = "10s" (spp is then calibrated)
+    seed = 0                          # fixed: the same commit gives the same verdict
+    unbiased = true                   # agreement, variance and outlier tests against the reference (below)
+    tile = 16
+    slope = [-0.55, -0.45]            # optional: RMSE-vs-spp slope over checkpoints spp/64 .. spp
+    max = { delta_e2000_mean = 3.0 }  # optional budgets on any harness metric ...
+    min = { ssim = 0.7 }
+    abs_max = { mean_radiance_rel_error = 0.3, "region.caustic.mean_radiance_rel_error" = 0.05 }  # ... or region's
+    consistency = { metric = "mse", slope = [-0.9, -0.4] }  # optional, for a consistent renderer (below)
+    bias_limit = { efforts = [62500, 250000], setting = ["global_photons"], rate = 1 }  # optional (below)
+    settings = { rr_depth = 3 }       # optional: the renderer's settings (`cbox renderers --settings`)
+    time_limit = "10m"                # optional: kill the render after this long (default: time_limit above)
+    finite_only = true                # only to allow an expectation with no accuracy check (see below)
+
+The config is strict: an unknown key at any level, or an unknown metric in a
+budget or in ``regression_metrics``, is a config error (exit 2) with a
+did-you-mean, before anything renders; a misspelt key must never turn a
+gate green. An expectation must check accuracy (``unbiased``, a budget, a
+slope or ``consistency``) unless it says ``finite_only = true``.
+
+A budget may name a region's metric as a quoted key,
+``"region.<region>.<metric>"`` with ``<metric>`` one of
+:data:`cornell_harness.evaluate.registry.REGION_CHECK_METRICS`; the metric
+part is checked here, the region against the scene's ``[regions.*]`` when
+the gate resolves the scene (:mod:`cornell_harness.gate.run`), before anything
+renders. Baseline regression checks stay image-wide.
+
+``unbiased = true`` runs three statistical tests against the reference:
+``agreement`` (tiled z-tests, :mod:`cornell_harness.evaluate.agreement`),
+``variance`` (the variance the renderer reports must match the spread of
+its residuals, :mod:`cornell_harness.evaluate.variance_check`; skipped, a JUnit
+``<skipped/>`` and not a failure, when it reports none, since the other two then use the reference
+renderer's noise model) and ``outliers`` (one z-test per pixel,
+:mod:`cornell_harness.evaluate.outliers`). ``alpha`` is the family-wise
+false-alarm rate per expectation: the three share it by Šidák's
+correction, each at level 1 − (1 − alpha)^(1/3) (0.00334 for
+alpha = 0.01), so a correct renderer fails any of them with probability at
+most ``alpha``. The three assume an unbiased estimator: ``unbiased = true``
+for a renderer that declares ``estimator = "consistent"`` or ``"biased"``
+(:func:`cornell_harness.adapters.registry.estimator_of`) is a config error.
+
+``consistency`` is what a consistent renderer (photon mapping, SPPM: biased,
+with an error that goes to 0 as its budget grows) is checked with instead:
+its error must fall with its budget. One of two forms::
+
+    consistency = { metric = "mse", slope = [-0.9, -0.4], from_spp = 16 }
+    consistency = { metric = "region.caustic.rel_mse", max_ratio = 0.6,
+                    smaller = { spp = 16, global_photons = 50000 } }
+
+- ``slope = [lo, hi]``: the log-log least-squares slope of ``metric``
+  against spp over the render's own checkpoints, from ``from_spp``
+  (default spp // 16, at least 1) doubling up to spp, must lie in the band:
+  for a progressive renderer that returns every checkpoint from one render
+  (SPPM, where spp counts iterations).
+- ``max_ratio = r`` with ``smaller = { spp = N, <setting> = value, ... }``:
+  a second render of the same renderer and seed at a smaller budget (its
+  spp and/or settings replaced; settings are validated like ``settings``)
+  must have an error at least 1/r times the full render's:
+  metric(full) ≤ r · metric(smaller). For photon mapping, whose error at
+  fixed photon counts does not fall with spp, the budget is its photon
+  counts.
+
+``metric`` (default ``mse``) is an image metric where lower is better
+(:data:`CONSISTENCY_METRICS`) or a region's, ``region.<region>.<metric>``;
+a signed one (``mean_radiance_rel_error``, ``mean_z``) is taken by
+magnitude. The band or ratio is the renderer's to choose from its
+convergence rate, widened for one seed's noise: e.g. SPPM with radius
+reduction α = 2/3 has an asymptotic MSE rate of iterations^(-2/3)
+(Knaus & Zwicker 2011, "Progressive photon mapping: a probabilistic
+approach"; Kaplanyan & Dachsbacher 2013, "Adaptive progressive photon
+mapping"), so its MSE slope settles near -2/3 once the checkpoints are
+past the start, where bias and variance still trade.
+
+``bias_limit`` tests a consistent renderer's error in the limit of infinite
+effort against 0, across seeds (:mod:`cornell_harness.evaluate.bias_extrapolation`)::
+
+    bias_limit = { efforts = [62500, 250000], setting = ["global_photons", "caustic_photons"],
+                   rate = 1, seeds = 8, spp = 16,
+                   metrics = ["mean_radiance_rel_error", "region.caustic.mean_radiance_rel_error"] }
+
+Each of ``seeds`` seeds (k·seed .. k·seed + k − 1, so the seed sets of
+different ``seed``s are disjoint) is rendered at every effort: with
+``setting``, the named settings set to each effort in turn at ``spp``
+(default 16); without it, the efforts are spps, checkpoints of one render
+(SPPM's iterations). Per seed, each metric's error is fitted as
+b∞ + c·(E/E₀)^(−rate) (Richardson extrapolation with the estimator's known
+rate) and the seeds' b∞ are t-tested against 0 at the expectation's ``alpha``,
+Šidák-split over ``metrics``: one check ``bias_limit.<metric>`` each. The
+metrics are signed mean errors: ``mean_radiance_rel_error``, image-wide or a
+region's (default: image-wide only). ``tolerance = { <metric> = x }`` allows
+a limit up to ±x (default 0): the check then fails only a limit whose
+t-interval lies wholly beyond it, for where the efforts a gate affords have
+not reached the asymptotic rate (measure the clean renderer's limit first).
+
+Every expectation also checks that the image has no NaN and no Inf pixel.
+Baseline checks compare runs at the seed the baseline was recorded with
+only (a metric's spread between seeds can exceed any useful margin); an
+expectation the baseline cannot be compared with (another seed, no record
+of it, scenes derived with ``--set``) has one skipped ``baseline`` check
+that says why.
+Each check becomes one JUnit test case; the Markdown summary and the HTML
+report say which expectation failed, by how much, and where in the image.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from cornell_harness.evaluate.registry import HIGHER_IS_BETTER, IMAGE_METRICS, REGION_CHECK_METRICS, region_metric
+from cornell_harness.suggest import closest
+from cornell_harness.workflows.budgets import parse_duration
+
+DEFAULT_REGRESSION_METRICS = ("delta_e2000_mean", "rel_mse_trimmed", "ssim")
+#: Default wall-time limit of one expectation's render: generous, it only has to stop a hang.
+DEFAULT_TIME_LIMIT_S = 1800.0
+TOP_KEYS = ("alpha", "baseline", "regression_margin", "regression_metrics", "time_limit", "expect")
+EXPECT_KEYS = ("name", "scene", "renderer", "spp", "time", "seed", "unbiased", "tile", "slope", "max", "min",
+               "abs_max", "settings", "time_limit", "finite_only", "consistency", "bias_limit")
+CONSISTENCY_KEYS = ("metric", "slope", "from_spp", "max_ratio", "smaller")
+BIAS_LIMIT_KEYS = ("efforts", "setting", "rate", "seeds", "spp", "metrics", "tolerance")
+#: The signed error a bias limit extrapolates, image-wide or as a region's ``region.<region>.<metric>``.
+BIAS_LIMIT_METRIC = "mean_radiance_rel_error"
+#: Image metrics a consistency check may follow: errors, which fall towards 0 (not PSNR or SSIM).
+CONSISTENCY_METRICS = tuple(m for m in IMAGE_METRICS if m not in HIGHER_IS_BETTER)
+
+
+class GateConfigError(ValueError):
+    """Bad gate config; ``str()`` names the file and the field."""
+
+    def __init__(self, file, field: str, message: str):
+        super().__init__(f"{file}: {field}: {message}")
+
+
+@dataclass
+class Consistency:
+    """A consistent renderer's error must fall with its budget: a slope band, or a ratio to a smaller budget."""
+
+    metric: str = "mse"
+    slope: tuple[float, float] | None = None
+    from_spp: int | None = None  # first checkpoint of the slope; None: spp // 16, at least 1
+    max_ratio: float | None = None
+    smaller_spp: int | None = None  # the smaller render's spp; None: the expectation's
+    smaller_settings: dict = field(default_factory=dict)  # replace the expectation's (validated at resolve)
+
+    def first_spp(self, spp: int) -> int:
+        """The slope's first checkpoint for a render of ``spp``."""
+        return self.from_spp if self.from_spp is not None else max(1, spp // 16)
+
+
+@dataclass
+class BiasLimit:
+    """Renders at several efforts over seeds, each seed's error extrapolated to infinite effort and t-tested."""
+
+    efforts: tuple[int, ...]
+    setting: tuple[str, ...] = ()  # settings set to each effort; () : the efforts are spp checkpoints
+    rate: float = 1.0
+    seeds: int = 8
+    spp: int = 16  # with ``setting``: the spp of every render
+    metrics: tuple[str, ...] = (BIAS_LIMIT_METRIC,)
+    tolerance: dict = field(default_factory=dict)  # metric -> |limit| allowed (default 0)
+
+    def seed_list(self, seed: int) -> list[int]:
+        """The seeds of an expectation at ``seed``: k·seed .. k·seed + k − 1 (disjoint sets for distinct seeds)."""
+        return [self.seeds * seed + j for j in range(self.seeds)]
+
+
+@dataclass
+class Expectation:
+    name: str
+    scene: str
+    renderer: str
+    spp: int | None = None
+    time_s: float | None = None
+    seed: int = 0
+    unbiased: bool = False
+    tile: int = 16
+    slope: tuple[float, float] | None = None
+    max: dict = field(default_factory=dict)
+    min: dict = field(default_factory=dict)
+    abs_max: dict = field(default_factory=dict)
+    settings: dict = field(default_factory=dict)  # the renderer's settings (validated when the gate resolves it)
+    time_limit_s: float = DEFAULT_TIME_LIMIT_S
+    consistency: Consistency | None = None
+    bias_limit: BiasLimit | None = None
+
+    def region_metrics(self) -> list[tuple[str, str]]:
+        """(field, ``region.<region>.<metric>``) of every region metric it names: the gate checks the regions."""
+        out = [(f"{kind}.{key}", key) for kind in ("max", "min", "abs_max") for key in getattr(self, kind)
+               if region_metric(key)]
+        if self.consistency and region_metric(self.consistency.metric):
+            out.append(("consistency.metric", self.consistency.metric))
+        if self.bias_limit:
+            out += [("bias_limit.metrics", m) for m in self.bias_limit.metrics if region_metric(m)]
+        return out
+
+
+@dataclass
+class GateConfig:
+    path: Path
+    alpha: float
+    expectations: list[Expectation]
+    baseline: Path | None = None
+    regression_margin: float = 0.05
+    regression_metrics: tuple[str, ...] = DEFAULT_REGRESSION_METRICS
+
+
+def _check_keys(path: Path, table: dict, allowed, where: str, what: str = "key") -> None:
+    """Refuse any key not in ``allowed``, naming it and the closest allowed one."""
+    for key in table:
+        if key not in allowed:
+            hint = closest(key, allowed)
+            raise GateConfigError(path, f"{where}{key}", f"unknown {what}"
+                                  + (f" (did you mean {hint!r}?)" if hint else f"; known: {', '.join(allowed)}"))
+
+
+def _check_metrics(path: Path, names, allowed, where: str) -> None:
+    """Refuse a metric name that is neither in ``allowed`` nor a region metric ``region.<region>.<metric>``."""
+    for key in names:
+        parts = region_metric(key)
+        if parts is None:
+            _check_keys(path, {key: None}, allowed, where, "metric")
+            continue
+        region, metric = parts
+        if not region or metric not in REGION_CHECK_METRICS:
+            hint = closest(metric, REGION_CHECK_METRICS) if region else None
+            raise GateConfigError(path, f"{where}{key}", "unknown region metric: expected region.<region>.<metric> "
+                                  "with <metric> one of " + ", ".join(REGION_CHECK_METRICS)
+                                  + (f" (did you mean 'region.{region}.{hint}'?)" if hint else ""))
+
+
+def _band(path: Path, value, field: str) -> tuple[float, float]:
+    if not (isinstance(value, list) and len(value) == 2
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in value)
+            and value[0] < value[1]):
+        raise GateConfigError(path, field, "expected [low, high] with low < high")
+    return float(value[0]), float(value[1])
+
+
+def _duration(path: Path, table: dict, key: str, where: str, default: float | None) -> float | None:
+    if key not in table:
+        return default
+    try:
+        return parse_duration(str(table[key]))
+    except ValueError as e:
+        raise GateConfigError(path, f"{where}{key}", str(e)) from None
+
+
+def _number(path: Path, table: dict, key: str, where: str, default, kind=(int, float)):
+    v = table.get(key, default)
+    if isinstance(v, bool) or not isinstance(v, kind) or (isinstance(v, float) and not math.isfinite(v)):
+        raise GateConfigError(path, f"{where}{key}", f"expected a finite number, got {v!r}")
+    return v
+
+
+def load_config(path: str | Path) -> GateConfig:
+    """Parse and validate a gate config; GateConfigError names the file and field of any problem."""
+    path = Path(path)
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise GateConfigError(path, "(file)", "no such file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise GateConfigError(path, "(syntax)", f"invalid TOML: {e}") from None
+    except (UnicodeDecodeError, RecursionError) as e:
+        raise GateConfigError(path, "(file)", f"not a TOML text file ({type(e).__name__})") from None
+    except OSError as e:
+        raise GateConfigError(path, "(file)", e.strerror or str(e)) from None
+    _check_keys(path, doc, TOP_KEYS, "")
+    alpha = float(_number(path, doc, "alpha", "", 0.01))
+    if not 0 < alpha < 1:
+        raise GateConfigError(path, "alpha", f"must be in (0, 1), got {alpha}")
+    margin = float(_number(path, doc, "regression_margin", "", 0.05))
+    if margin < 0:
+        raise GateConfigError(path, "regression_margin", "must be >= 0")
+    reg = doc.get("regression_metrics", list(DEFAULT_REGRESSION_METRICS))
+    if not isinstance(reg, list) or not all(isinstance(m, str) for m in reg):
+        raise GateConfigError(path, "regression_metrics", "expected a list of metric names")
+    _check_keys(path, dict.fromkeys(reg), IMAGE_METRICS, "regression_metrics: ", "metric")
+    time_limit = _duration(path, doc, "time_limit", "", DEFAULT_TIME_LIMIT_S)
+    baseline = doc.get("baseline")
+    if baseline is not None and not isinstance(baseline, str):
+        raise GateConfigError(path, "baseline", "expected a file name")
+    raw = doc.get("expect")
+    if not isinstance(raw, list) or not raw:
+        raise GateConfigError(path, "expect", "a gate needs at least one [[expect]] table")
+    exps = [_parse_expectation(path, i, t, time_limit) for i, t in enumerate(raw)]
+    names = [e.name for e in exps]
+    for i, name in enumerate(names):
+        if name in names[:i]:
+            raise GateConfigError(path, f"expect[{i}].name", f"two expectations are named {name!r}; give one a name")
+    return GateConfig(path, alpha, exps, path.parent / baseline if baseline else None, margin, tuple(reg))
+
+
+def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expectation:
+    w = f"expect[{i}]."
+    if not isinstance(t, dict):
+        raise GateConfigError(path, f"expect[{i}]", "expected a table ([[expect]])")
+    _check_keys(path, t, EXPECT_KEYS, w)
+    for key in ("scene", "renderer"):
+        if not isinstance(t.get(key), str):
+            raise GateConfigError(path, f"{w}{key}", "missing or not a string")
+    if ("spp" in t) == ("time" in t):
+        raise GateConfigError(path, f"{w}spp", "give exactly one budget: spp = N or time = \"10s\"")
+    spp = None
+    time_s = _duration(path, t, "time", w, None)
+    if "spp" in t:
+        spp = _number(path, t, "spp", w, None, int)
+        if spp < 1:
+            raise GateConfigError(path, f"{w}spp", "must be >= 1")
+    slope = t.get("slope")
+    if slope is not None:
+        slope = _band(path, slope, f"{w}slope")
+    budgets = {}
+    for key in ("max", "min", "abs_max"):
+        b = t.get(key, {})
+        if not isinstance(b, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                              for v in b.values()):
+            raise GateConfigError(path, f"{w}{key}", "expected a table of metric = number")
+        _check_metrics(path, b, IMAGE_METRICS, f"{w}{key}.")
+        budgets[key] = {k: float(v) for k, v in b.items()}
+    unbiased = t.get("unbiased", False)
+    if not isinstance(unbiased, bool):
+        raise GateConfigError(path, f"{w}unbiased", "expected true or false")
+    settings = t.get("settings", {})
+    if not isinstance(settings, dict):
+        raise GateConfigError(path, f"{w}settings", "expected a table of setting = value")
+    finite_only = t.get("finite_only", False)
+    if not isinstance(finite_only, bool):
+        raise GateConfigError(path, f"{w}finite_only", "expected true or false")
+    consistency = _consistency(path, t, w, spp)
+    bias_limit = _bias_limit(path, t, w)
+    if not (unbiased or slope or any(budgets.values()) or consistency or bias_limit or finite_only):
+        raise GateConfigError(path, f"expect[{i}]", "no accuracy check: give unbiased = true, a budget (max, min, "
+                              "abs_max), a slope or a consistency check; or finite_only = true to check only for "
+                              "NaN and Inf")
+    tile = _number(path, t, "tile", w, 16, int)
+    if tile < 1:
+        raise GateConfigError(path, f"{w}tile", "must be >= 1")
+    budget = f"{spp}spp" if spp else f"{time_s:g}s"
+    shown = f"[{','.join(f'{k}={v}' for k, v in sorted(settings.items()))}]" if settings else ""
+    name = t.get("name") or f"{t['scene']}/{t['renderer']}{shown}@{budget}"
+    return Expectation(name, t["scene"], t["renderer"], spp, time_s, _number(path, t, "seed", w, 0, int), unbiased,
+                       tile, slope, budgets["max"], budgets["min"], budgets["abs_max"], settings,
+                       _duration(path, t, "time_limit", w, time_limit), consistency, bias_limit)
+
+
+def _bias_limit(path: Path, t: dict, w: str) -> BiasLimit | None:
+    """The ``bias_limit`` table of an expectation (None without one); see the module docstring."""
+    if "bias_limit" not in t:
+        return None
+    b, where = t["bias_limit"], f"{w}bias_limit."
+    if not isinstance(b, dict):
+        raise GateConfigError(path, f"{w}bias_limit", "expected a table, e.g. { efforts = [8, 32], rate = 0.333 }")
+    _check_keys(path, b, BIAS_LIMIT_KEYS, where)
+    efforts = b.get("efforts")
+    if not (isinstance(efforts, list) and len(efforts) >= 2
+            and all(isinstance(e, int) and not isinstance(e, bool) and e >= 1 for e in efforts)
+            and efforts == sorted(set(efforts))):
+        raise GateConfigError(path, f"{where}efforts", "expected two or more increasing integers >= 1 (photon "
+                              "counts with setting, else spp checkpoints)")
+    setting = b.get("setting", [])
+    if isinstance(setting, str):
+        setting = [setting]
+    if not (isinstance(setting, list) and all(isinstance(s, str) for s in setting)):
+        raise GateConfigError(path, f"{where}setting", "expected a setting name or a list of them")
+    rate = float(_number(path, b, "rate", where, 1.0))
+    if not 0 < rate <= 4:
+        raise GateConfigError(path, f"{where}rate", f"must be in (0, 4], got {rate:g}")
+    seeds = _number(path, b, "seeds", where, 8, int)
+    if seeds < 3:
+        raise GateConfigError(path, f"{where}seeds", "must be >= 3: the t-test needs a spread over seeds")
+    spp = _number(path, b, "spp", where, 16, int)
+    if spp < 1:
+        raise GateConfigError(path, f"{where}spp", "must be >= 1")
+    if "spp" in b and not setting:
+        raise GateConfigError(path, f"{where}spp", "goes with setting; without it the efforts are the spps")
+    metrics = b.get("metrics", [BIAS_LIMIT_METRIC])
+    if not (isinstance(metrics, list) and metrics and all(isinstance(m, str) for m in metrics)):
+        raise GateConfigError(path, f"{where}metrics", "expected a list of metric names")
+    for m in metrics:
+        parts = region_metric(m)
+        if (m if parts is None else parts[1]) != BIAS_LIMIT_METRIC or (parts is not None and not parts[0]):
+            raise GateConfigError(path, f"{where}metrics", f"{m!r}: a bias limit extrapolates a signed mean "
+                                  f"error: {BIAS_LIMIT_METRIC!r} or 'region.<region>.{BIAS_LIMIT_METRIC}'")
+    if len(set(metrics)) != len(metrics):
+        raise GateConfigError(path, f"{where}metrics", "a metric is named twice")
+    tolerance = b.get("tolerance", {})
+    if not isinstance(tolerance, dict):
+        raise GateConfigError(path, f"{where}tolerance", "expected a table of metric = allowed |limit|")
+    _check_keys(path, tolerance, metrics, f"{where}tolerance.", "metric (not in metrics)")
+    for key in tolerance:
+        v = _number(path, tolerance, key, f"{where}tolerance.", None)
+        if v < 0:
+            raise GateConfigError(path, f"{where}tolerance.{key}", "must be >= 0")
+    return BiasLimit(tuple(efforts), tuple(setting), rate, seeds, spp, tuple(metrics),
+                     {k: float(v) for k, v in tolerance.items()})
+
+
+def _consistency(path: Path, t: dict, w: str, spp: int | None) -> Consistency | None:
+    """The ``consistency`` table of an expectation (None without one); see the module docstring."""
+    if "consistency" not in t:
+        return None
+    c, where = t["consistency"], f"{w}consistency."
+    if not isinstance(c, dict):
+        raise GateConfigError(path, f"{w}consistency", 'expected a table, e.g. { metric = "mse", '
+                              "slope = [-0.9, -0.4] }")
+    _check_keys(path, c, CONSISTENCY_KEYS, where)
+    metric = c.get("metric", "mse")
+    if not isinstance(metric, str):
+        raise GateConfigError(path, f"{where}metric", "expected a metric name")
+    if metric in HIGHER_IS_BETTER:
+        raise GateConfigError(path, f"{where}metric", f"{metric!r} is higher-is-better; a consistency check "
+                              "follows an error that falls towards 0 (e.g. mse, rel_mse)")
+    _check_metrics(path, [metric], CONSISTENCY_METRICS, f"{where}metric: ")
+    if ("slope" in c) == ("max_ratio" in c):
+        raise GateConfigError(path, f"{w}consistency", "give exactly one of slope = [low, high] (over the "
+                              "render's checkpoints) or max_ratio = r with smaller = { spp = N, ... }")
+    out = Consistency(metric)
+    if "slope" in c:
+        out.slope = _band(path, c["slope"], f"{where}slope")
+        if "smaller" in c:
+            raise GateConfigError(path, f"{where}smaller", "goes with max_ratio, not with slope")
+        if "from_spp" in c:
+            out.from_spp = _number(path, c, "from_spp", where, None, int)
+            if out.from_spp < 1 or (spp is not None and out.from_spp >= spp):
+                raise GateConfigError(path, f"{where}from_spp", f"must be >= 1 and below spp ({spp}): the slope "
+                                      "needs two checkpoints")
+        return out
+    if "from_spp" in c:
+        raise GateConfigError(path, f"{where}from_spp", "goes with slope, not with max_ratio")
+    out.max_ratio = float(_number(path, c, "max_ratio", where, None))
+    if not 0 < out.max_ratio <= 1:
+        raise GateConfigError(path, f"{where}max_ratio", f"must be in (0, 1], got {out.max_ratio:g}")
+    out.smaller_spp, out.smaller_settings = _smaller(path, c, where, spp)
+    return out
+
+
+def _smaller(path: Path, c: dict, where: str, spp: int | None) -> tuple[int | None, dict]:
+    """``smaller = { spp = N, <setting> = value, ... }``: its spp (None: the expectation's) and its settings."""
+    small = c.get("smaller")
+    if not isinstance(small, dict):
+        raise GateConfigError(path, f"{where}smaller", "max_ratio needs smaller = { spp = N, <setting> = value, "
+                              "... }: the budget the full render's error is compared with")
+    small_spp = None
+    if "spp" in small:
+        small_spp = _number(path, small, "spp", f"{where}smaller.", None, int)
+        if small_spp < 1 or (spp is not None and small_spp > spp):
+            raise GateConfigError(path, f"{where}smaller.spp", f"must be >= 1 and at most spp ({spp})")
+    settings = {k: v for k, v in small.items() if k != "spp"}
+    if not settings and (small_spp is None or small_spp == spp):
+        raise GateConfigError(path, f"{where}smaller", "must lower the budget: a smaller spp and/or settings "
+                              "(e.g. fewer photons)")
+    return small_spp, settings

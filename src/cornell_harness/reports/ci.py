@@ -1,0 +1,122 @@
+"""The gate's CI outputs: JUnit XML for a CI's test-report view, and a Markdown step summary.
+
+Both are written for every run, a config error included, so a CI's test
+view always has something to show. In JUnit a check that ran and failed is a
+``<failure>``; a crash, or a config error that stopped the gate before it
+rendered, is an ``<error>`` (with the renderer's traceback as its body); a check
+that was not made (a renderer that reports no variance has none to check) is
+``<skipped/>``, never a pass. Times are honest: each expectation's render is
+timed once, on a test case of its own (``render``); its checks take no time.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from typing import TYPE_CHECKING, Sequence
+
+if TYPE_CHECKING:  # only for annotations: writing a config error's JUnit must not load SciPy
+    from cornell_harness.gate.checks import Check, Outcome
+
+
+def junit_xml(outcomes: Sequence[Outcome], suite: str = "cbox gate", config_error: str | None = None) -> str:
+    """JUnit XML: per expectation a ``render`` case with its time, then one case per check."""
+    root = ET.Element("testsuites")
+    ts = ET.SubElement(root, "testsuite", name=suite)
+    tests = failures = errors = skipped = 0
+    total = 0.0
+    if config_error is not None:
+        case = ET.SubElement(ts, "testcase", classname="config", name="config", time="0")
+        ET.SubElement(case, "error", message=config_error).text = config_error
+        tests, errors = 1, 1
+    for o in outcomes:
+        t = float(o.record.time_s or 0.0)
+        total += t
+        render = ET.SubElement(ts, "testcase", classname=o.expectation.name, name="render", time=f"{t:.3f}")
+        ET.SubElement(render, "system-out").text = f"{o.record.renderer}: {o.record.status}, {o.record.spp} spp"
+        tests += 1
+        for c in o.checks:
+            case = ET.SubElement(ts, "testcase", classname=o.expectation.name, name=c.name, time="0")
+            tests += 1
+            if c.skipped:
+                skipped += 1
+                ET.SubElement(case, "skipped", message=c.message)
+            elif c.passed:
+                ET.SubElement(case, "system-out").text = c.message
+            elif c.error:
+                errors += 1
+                ET.SubElement(case, "error", message=c.message).text = \
+                    c.message + (f"\n\n{c.traceback.rstrip()}" if c.traceback else "")
+            else:
+                failures += 1
+                ET.SubElement(case, "failure", message=c.message).text = c.message
+    ts.set("tests", str(tests))
+    ts.set("failures", str(failures))
+    ts.set("errors", str(errors))
+    ts.set("skipped", str(skipped))
+    ts.set("time", f"{total:.3f}")
+    return ET.tostring(root, encoding="unicode", xml_declaration=True)
+
+
+#: The widest a Markdown table row may be: wider rows wrap into unreadable columns in a step summary.
+ROW_CHARS = 120
+NAME_CHARS = 44  # an expectation name longer than this is cut in the table, given in full below it
+MIN_DETAIL_CHARS = 20  # a row's detail is never cut shorter (so a row may pass ROW_CHARS by a few)
+_HEAD = ["| expectation | check | result | detail |", "|---|---|---|---|"]
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def _cut(text: str, room: int, middle: bool = False) -> str:
+    """``text`` in at most ``room`` characters: its end (or, ``middle``, its middle) replaced by "…"."""
+    if len(text) <= room:
+        return text
+    if middle:  # a sweep's expectation name differs in its settings and its spp, at both ends
+        head = (room - 1) // 2
+        return text[:head] + "…" + text[len(text) - (room - 1 - head):]
+    return text[:room - 1].rstrip("\\ ") + "…"
+
+
+def _row(name: str, c: Check) -> tuple[str, bool]:
+    """A table row of at most about :data:`ROW_CHARS` (the name and detail cut to fit) and whether it was cut."""
+    cell = _cut(_cell(name), NAME_CHARS, middle=True)
+    head = f"| {cell} | {_cell(c.name)} | {'**' + c.word + '**' if not c.passed else c.word} | "
+    detail = _cell(c.message)
+    shown = _cut(detail, max(MIN_DETAIL_CHARS, ROW_CHARS - len(head) - 2))
+    return f"{head}{shown} |", shown != detail or cell != _cell(name)
+
+
+def _table(rows: list[tuple[str, Check]]) -> list[str]:
+    """The table of ``rows``, then in full every message the table cut and every traceback."""
+    lines, notes = list(_HEAD), []
+    for name, c in rows:
+        row, cut = _row(name, c)
+        lines.append(row)
+        if cut or c.traceback:
+            notes.append(f"- `{name}` **{c.name}**: {c.message}")
+        if c.traceback:
+            notes += ["", "  ```", *(f"  {line}" for line in c.traceback.rstrip().splitlines()), "  ```"]
+    return lines + ([""] + notes if notes else [])
+
+
+def markdown_summary(outcomes: Sequence[Outcome], alpha: float, config_error: str | None = None) -> str:
+    """A Markdown verdict for a CI step summary: the failed checks first, in a table with each message in full
+    below it; every other check folded in ``<details>``. Table rows are at most :data:`ROW_CHARS` characters."""
+    if config_error is not None:
+        return f"## cbox gate: ❌ **config error**\n\n`{config_error}`\n\nNothing was rendered.\n"
+    rows = [(o.expectation.name, c) for o in outcomes for c in o.checks]
+    failed = [(n, c) for n, c in rows if not c.passed]
+    skipped = [(n, c) for n, c in rows if c.skipped]
+    rest = skipped + [(n, c) for n, c in rows if c.passed and not c.skipped]
+    verdict = "✅ **gate passed**" if not failed else f"❌ **gate failed**: {len(failed)} check(s)"
+    lines = [f"## cbox gate: {verdict}", "",
+             f"{len(rows)} checks of {len(outcomes)} expectation(s): {len(failed)} failed, "
+             f"{len(rows) - len(failed) - len(skipped)} passed, {len(skipped)} skipped. Agreement tests at "
+             f"family-wise α = {alpha:g} (Šidák over tiles, named regions, the whole image and channels).", ""]
+    if failed:
+        lines += ["### Failed", "", *_table(failed), ""]
+    if rest:
+        lines += [f"<details><summary>{len(rest) - len(skipped)} passed, {len(skipped)} skipped</summary>", "",
+                  *_table(rest), "", "</details>"]
+    return "\n".join(lines) + "\n"

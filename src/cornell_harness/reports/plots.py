@@ -1,0 +1,461 @@
+"""Small, dependency-free SVG charts for the HTML report.
+
+Every chart is a string of inline SVG, drawn here from numbers so the report
+needs no plotting library and no script to show them. Classes (``series``,
+``band``, ``guide``, ``frontier``, ``bar``...) carry the meaning, so the report's
+stylesheet themes them and tests can find them; colours of series are
+presentation attributes. A :class:`Layout` says how big a chart is and where
+its legend goes: :data:`PAGE` for the report, styled by the page; one with a
+``style`` of its own makes a standalone SVG (:mod:`cornell_harness.reports.figures`).
+
+- :func:`line_plot_svg`: log-log error curves, one line per renderer with a
+  band across seeds (the report's: 95% confidence intervals), horizontal
+  whiskers where x is uncertain too (time) and an optional slope guide (convergence plots);
+- :func:`scatter_svg`: log-log speed/accuracy points, with 95% CI whiskers where given, and the Pareto frontier;
+- :func:`bars_svg`: grouped bars on a log axis (bias² and variance);
+- the frame they are drawn in (layout, axes, legend) and the estimate of text boxes are :mod:`cornell_harness.reports.axes`';
+  the numbers behind them (ticks, domains, the Pareto front) are :mod:`cornell_harness.reports.plotmath`'s.
+
+No text is cut and no two texts meet, by those estimates: legends and names wrap (the chart growing to hold
+them), names that do not wrap stand vertical, notes take rows, and a point's tag goes to the first free side
+of it or is left to its tooltip. A series', point's or group's ``label`` is the text shown for it;
+``data-renderer`` and the tooltips keep its ``name``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from html import escape
+from typing import Sequence
+
+from cornell_harness.reports.axes import PAGE as PAGE, PALETTE as PALETTE, Axes as _Axes, Layout as Layout
+from cornell_harness.reports.axes import ASCENT, CHAR_WIDTH as CHAR, DESCENT, LINE, Box, overlaps, text_box, text_lines, text_width, widest_piece, wrap
+from cornell_harness.reports.axes import color_for as color_for, num as _f
+from cornell_harness.reports.plotmath import log_domain, pareto_front
+
+#: The slope guide starts this factor above the highest first point.
+GUIDE_OFFSET = 1.5
+
+
+# --------------------------------------------------------------------------
+# Charts
+# --------------------------------------------------------------------------
+
+
+@dataclass
+class Series:
+    """One renderer's curve: median ``y`` at each ``x``, optional per-point band [lo, hi] and x whiskers
+    [xlo, xhi] (a time's interval)."""
+
+    name: str
+    color: str
+    x: list[float]
+    y: list[float]
+    lo: list[float] | None = None
+    hi: list[float] | None = None
+    labels: list[str] | None = None  # tooltip of each point
+    xlo: list[float] | None = None
+    xhi: list[float] | None = None
+    label: str = ""  # shown in the legend instead of ``name`` (``data-renderer`` and tooltips keep the name)
+
+
+def shown(item: "Series | Point | BarGroup") -> str:
+    """The text a legend or a bar's tick label shows for an item: its display ``label``, else its ``name``."""
+    return item.label or item.name
+
+
+def _usable(*vals: float) -> bool:
+    return all(v is not None and math.isfinite(v) and v > 0 for v in vals)
+
+
+def _guide_anchor(series: Sequence[Series]) -> tuple[float, float] | None:
+    """Where the slope guide starts: a little above the first point of the series that starts highest
+    (preferring real curves of two or more points), so it runs beside the data, not on it."""
+    firsts = []
+    for s in series:
+        pts = [(x, y) for x, y in zip(s.x, s.y) if _usable(x, y)]
+        if pts:
+            firsts.append((len(pts) >= 2, pts[0][1], pts[0][0]))
+    if not firsts:
+        return None
+    _, y_first, x_first = max(firsts)
+    return x_first, y_first * GUIDE_OFFSET
+
+
+def _whisker(ax: "_Axes", name: str, color: str, x: float, y: float, lo: float | None, hi: float | None,
+             clip: str, axis: str = "x") -> None:
+    """An interval [lo, hi] through (x, y) along ``axis``, with end caps; nothing where it is unknown or flat."""
+    if not (_usable(x, y) and lo is not None and hi is not None and _usable(lo, hi) and hi > lo):
+        return
+    if axis == "x":
+        a, b, c = ax.x(lo), ax.x(hi), ax.y(y)
+        d = f"M {_f(a)} {_f(c)} L {_f(b)} {_f(c)} M {_f(a)} {_f(c - 3)} L {_f(a)} {_f(c + 3)} " \
+            f"M {_f(b)} {_f(c - 3)} L {_f(b)} {_f(c + 3)}"
+    else:
+        a, b, c = ax.y(lo), ax.y(hi), ax.x(x)
+        d = f"M {_f(c)} {_f(a)} L {_f(c)} {_f(b)} M {_f(c - 3)} {_f(a)} L {_f(c + 3)} {_f(a)} " \
+            f"M {_f(c - 3)} {_f(b)} L {_f(c + 3)} {_f(b)}"
+    ax.parts.append(f'<path class="whisker" data-renderer="{escape(name)}" data-axis="{axis}" d="{d}" '
+                    f'stroke="{color}" stroke-opacity="0.7" stroke-width="1.2" fill="none" {clip}/>')
+
+
+def _draw_band(ax: "_Axes", s: Series, clip: str) -> None:
+    """The series' band over seeds (the report's: a 95% CI), where it has one that is not flat."""
+    if s.lo is None or s.hi is None:
+        return
+    pts = [(x, lo, hi) for x, lo, hi in zip(s.x, s.lo, s.hi) if _usable(x, lo, hi)]
+    if len(pts) >= 2 and any(hi > lo for _, lo, hi in pts):
+        upper = " L ".join(f"{_f(ax.x(x))} {_f(ax.y(hi))}" for x, _, hi in pts)
+        lower = " L ".join(f"{_f(ax.x(x))} {_f(ax.y(lo))}" for x, lo, _ in reversed(pts))
+        ax.parts.append(
+            f'<path class="band" data-renderer="{escape(s.name)}" d="M {upper} L {lower} Z" '
+            f'fill="{s.color}" fill-opacity="0.18" stroke="none" {clip}/>'
+        )
+
+
+def line_plot_svg(
+    series: Sequence[Series],
+    *,
+    uid: str,
+    xlabel: str,
+    ylabel: str,
+    guide_slope: float | None = -0.5,
+    guide_label: str = "slope −½ (∝ 1/√N)",
+    xbase2: bool = False,
+    extra_attrs: str = "",
+    layout: Layout = PAGE,
+    band_label: str = "min–max over seeds",
+    whisker_label: str = "95% CI of the time",
+) -> str:
+    """Log-log lines (one ``<path class="series">`` per series), bands, x whiskers and a slope guide.
+
+    The axes span the points and the bands; whiskers are clipped to them (an interval of 2 seeds can be wide).
+    """
+    xs = [v for s in series for v in s.x]
+    ys = [v for s in series for v in (*s.y, *(s.lo or ()), *(s.hi or ()))]
+    anchor = _guide_anchor(series) if guide_slope is not None else None
+    if anchor is not None:
+        ys.append(anchor[1])
+    xdom, ydom = log_domain(xs), log_domain(ys)
+    if xdom is None or ydom is None:
+        return f'<p class="note">No positive values to plot for {escape(ylabel)}.</p>'
+    entries = [("line", s.color, shown(s)) for s in series]
+    if any(s.lo is not None for s in series):
+        entries.append(("band", "#9aa1ad", band_label))
+    if any(s.xlo is not None for s in series):
+        entries.append(("whisker", "#9aa1ad", whisker_label))
+    if anchor is not None:
+        entries.append(("dash", "#c8ccd4", guide_label))
+    ax = _Axes(xdom, ydom, layout, entries)
+    ax.frame(uid, xlabel, ylabel, xbase2=xbase2)
+    clip = f'clip-path="url(#{uid}-clip)"'
+    for s in series:
+        _draw_band(ax, s, clip)
+        if s.xlo is not None and s.xhi is not None:
+            for x, y, lo, hi in zip(s.x, s.y, s.xlo, s.xhi):
+                _whisker(ax, s.name, s.color, x, y, lo, hi, clip)
+    if anchor is not None:
+        x_first, y_first = anchor
+        lx0, lx1 = xdom
+        ly0 = math.log10(y_first) + guide_slope * (lx0 - math.log10(x_first))
+        ly1 = ly0 + guide_slope * (lx1 - lx0)
+        ax.parts.append(
+            f'<path class="guide" data-slope="{guide_slope:g}" '
+            f'd="M {_f(ax.x(10**lx0))} {_f(ax.y(10**ly0))} L {_f(ax.x(10**lx1))} {_f(ax.y(10**ly1))}" '
+            f'fill="none" stroke="#888" stroke-width="1.6" stroke-dasharray="6 4" {clip}>'
+            f"<title>{escape(guide_label)}</title></path>"
+        )
+    for s in series:
+        pts = [(x, y, (s.labels or [None] * len(s.x))[i]) for i, (x, y) in enumerate(zip(s.x, s.y)) if _usable(x, y)]
+        if not pts:
+            continue
+        d = " L ".join(f"{_f(ax.x(x))} {_f(ax.y(y))}" for x, y, _ in pts)
+        ax.parts.append(
+            f'<path class="series" data-renderer="{escape(s.name)}" d="M {d}" fill="none" '
+            f'stroke="{s.color}" stroke-width="2.2" stroke-linejoin="round" {clip}/>'
+        )
+        for x, y, label in pts:
+            tip = f"<title>{escape(label)}</title>" if label else ""
+            ax.parts.append(
+                f'<circle class="point" data-renderer="{escape(s.name)}" cx="{_f(ax.x(x))}" cy="{_f(ax.y(y))}" '
+                f'r="3.2" fill="{s.color}">{tip}</circle>'
+            )
+    ax.legend()
+    return ax.svg(uid, "line-plot", f"{ylabel} against {xlabel}", extra_attrs)
+
+
+@dataclass
+class Point:
+    name: str  # renderer
+    color: str
+    x: float
+    y: float
+    tip: str = ""  # tooltip
+    tag: str = ""  # short text drawn beside the point (e.g. its spp)
+    xlo: float | None = None  # 95% CI whiskers, where known
+    xhi: float | None = None
+    ylo: float | None = None
+    yhi: float | None = None
+    label: str = ""  # the renderer's text in the legend instead of ``name`` (``data-renderer`` keeps the name)
+
+
+def scatter_svg(
+    points: Sequence[Point],
+    *,
+    uid: str,
+    xlabel: str,
+    ylabel: str,
+    extra_attrs: str = "",
+    layout: Layout = PAGE,
+) -> str:
+    """Log-log scatter with the Pareto frontier (lower x and lower y are better) drawn and marked, and each
+    point's 95% CI whiskers where it has them (clipped to the axes, which span the points). Each point's
+    ``tag`` goes where it meets no other tag and no point (:func:`place_tags`), or is left to the tooltip."""
+    pts = [p for p in points if _usable(p.x, p.y)]
+    xdom, ydom = log_domain([p.x for p in pts]), log_domain([p.y for p in pts])
+    if not pts or xdom is None or ydom is None:
+        return f'<p class="note">No positive values to plot for {escape(ylabel)}.</p>'
+    names = list(dict.fromkeys(p.name for p in pts))
+    colors = {p.name: p.color for p in pts}
+    texts = {p.name: shown(p) for p in reversed(pts)}  # the first point's, where they disagree
+    whiskers = [("whisker", "#9aa1ad", "95% CI")] if any(p.xlo is not None or p.ylo is not None for p in pts) else []
+    ax = _Axes(xdom, ydom, layout,
+               [("dot", colors[n], texts[n]) for n in names] + [("ring", "#ffd166", "Pareto frontier")] + whiskers)
+    ax.frame(uid, xlabel, ylabel)
+    clip = f'clip-path="url(#{uid}-clip)"'
+    front = pareto_front([p.x for p in pts], [p.y for p in pts])
+    if front:
+        d = " L ".join(f"{_f(ax.x(pts[i].x))} {_f(ax.y(pts[i].y))}" for i in front)
+        ax.parts.append(f'<path class="frontier" d="M {d}" fill="none" stroke="#e0a800" stroke-width="7" '
+                        f'stroke-opacity="0.35" stroke-linecap="round" stroke-linejoin="round" {clip}/>')
+    on_front = set(front)
+    # Lines joining each renderer's own points, faint, so its trade-off curve reads.
+    by_name: dict[str, list[Point]] = {}
+    for p in pts:
+        by_name.setdefault(p.name, []).append(p)
+    for name, ps in by_name.items():
+        if len(ps) >= 2:
+            ps = sorted(ps, key=lambda p: p.x)
+            d = " L ".join(f"{_f(ax.x(p.x))} {_f(ax.y(p.y))}" for p in ps)
+            ax.parts.append(
+                f'<path class="trail" data-renderer="{escape(name)}" d="M {d}" fill="none" '
+                f'stroke="{ps[0].color}" stroke-opacity="0.45" stroke-width="1.2" {clip}/>'
+            )
+    for p in pts:
+        _whisker(ax, p.name, p.color, p.x, p.y, p.xlo, p.xhi, clip)
+        _whisker(ax, p.name, p.color, p.x, p.y, p.ylo, p.yhi, clip, axis="y")
+    radius = [5 if i in on_front else 3.6 for i in range(len(pts))]
+    for i, p in enumerate(pts):
+        cls = "point on-front" if i in on_front else "point"
+        tip = f"<title>{escape(p.tip)}{' — on the Pareto frontier' if i in on_front else ''}</title>"
+        ax.parts.append(
+            f'<circle class="{cls}" data-renderer="{escape(p.name)}" cx="{_f(ax.x(p.x))}" cy="{_f(ax.y(p.y))}" '
+            f'r="{radius[i]}" fill="{p.color}">{tip}</circle>'
+        )
+    centres = [(ax.x(p.x), ax.y(p.y)) for p in pts]
+    area = (ax.left, ax.top, ax.left + ax.pw, ax.top + ax.ph)
+    for (x, y, anchor), p in zip(place_tags(centres, radius, [p.tag for p in pts], area, layout.font), pts):
+        if anchor:
+            ax.parts.append(f'<text class="point-tag" data-renderer="{escape(p.name)}" x="{_f(x)}" y="{_f(y)}" '
+                            f'text-anchor="{anchor}">{escape(p.tag)}</text>')
+    ax.legend()
+    return ax.svg(uid, "scatter-plot", f"{ylabel} against {xlabel}", extra_attrs)
+
+
+def place_tags(centres: Sequence[tuple[float, float]], radius: Sequence[float], tags: Sequence[str],
+               area: Box, font: float) -> list[tuple[float, float, str]]:
+    """Where each point's tag goes: (x, y, text-anchor) of its baseline, the first of right-up, right-down,
+    left-up, left-down, above and below whose estimated box (:func:`cornell_harness.reports.axes.text_box`) lies in ``area``
+    and meets no tag placed before it and no point; ``(0, 0, "")`` for an empty tag, one with no room (its
+    point's tooltip still says it) or one that a point under this one already shows."""
+    dots = [(cx - r, cy - r, cx + r, cy + r) for (cx, cy), r in zip(centres, radius)]
+    placed: list[Box] = []
+    told: list[tuple[float, float, str]] = []  # the points whose tags are placed, and their tags
+    out = []
+    # baselines beside a point: the box just above or just below its centre, 1 apart more than a tag's gap
+    up, down = -0.1 * font - 1 - DESCENT * font, 0.1 * font + 1 + ASCENT * font
+    for (cx, cy), r, tag in zip(centres, radius, tags):
+        spot = (0.0, 0.0, "")
+        said = any(t == tag and abs(x - cx) <= r and abs(y - cy) <= r for x, y, t in told)
+        if tag and not said:  # a tag that a point on this one already has would only say it twice
+            d = r + 2.5
+            for x, y, anchor in ((cx + d, cy + up, "start"), (cx + d, cy + down, "start"),
+                                 (cx - d, cy + up, "end"), (cx - d, cy + down, "end"),
+                                 (cx, cy - r - 2 - DESCENT * font, "middle"),
+                                 (cx, cy + r + 2 + ASCENT * font, "middle")):
+                box = text_box(x, y, tag, font, anchor)
+                inside = area[0] + 1 <= box[0] and box[2] <= area[2] - 1 and area[1] + 1 <= box[1] \
+                    and box[3] <= area[3] - 1
+                if inside and not any(overlaps(box, b, gap=1) for b in placed + dots):
+                    placed.append(box)
+                    told.append((cx, cy, tag))
+                    spot = (x, y, anchor)
+                    break
+        out.append(spot)
+    return out
+
+
+@dataclass
+class BarGroup:
+    name: str
+    values: list[float]  # one per bar kind
+    note: str = ""  # text above the group
+    lo: list[float] | None = None  # each bar's 95% CI, drawn as an error bar where known
+    hi: list[float] | None = None
+    label: str = ""  # shown under the group instead of ``name`` (``data-renderer`` and tooltips keep the name)
+
+
+def bars_svg(
+    groups: Sequence[BarGroup],
+    kinds: Sequence[tuple[str, str]],
+    *,
+    uid: str,
+    ylabel: str,
+    extra_attrs: str = "",
+    layout: Layout = PAGE,
+) -> str:
+    """Grouped bars on a log y axis; ``kinds`` = (label, colour) of each bar in a group.
+
+    A value that is not positive (a bias² estimate below zero: no measurable
+    bias; see :func:`cornell_harness.reports.tables.format_value`) or not finite gets no bar but a small "≈ 0" or "n/a" mark.
+    A group's ``lo`` / ``hi`` draw error bars (``class="whisker"``), from the axis where the low end is not
+    positive. Each group's name is under it in full (:func:`bar_names`), its note above the plot, in as many
+    rows as keep neighbouring notes apart (:func:`note_rows`); the chart grows to hold both.
+    """
+    vals = [v for g in groups for v in (*g.values, *(g.hi or ()))]
+    ydom = log_domain(vals, pad=0.1)
+    if ydom is None or not groups:
+        return '<p class="note">No positive values to plot.</p>'
+    ydom = (ydom[0] - 0.15 * (ydom[1] - ydom[0]), ydom[1])  # room below the smallest bar
+    bars = any(g.hi is not None for g in groups)
+    ax = _Axes((0.0, 1.0), ydom, layout,
+               [("rect", color, label) for label, color in kinds] + ([("whisker", "#555", "95% CI")] if bars else []))
+    font, step = layout.font, LINE * layout.font
+    n, k = len(groups), len(kinds)
+    slot = ax.pw / n
+    centres = [ax.left + slot * (gi + 0.5) for gi in range(n)]
+    names, vertical, name_depth = bar_names([shown(g) for g in groups], slot, font)
+    name_depth = max(0.0, name_depth - layout.bottom)  # the bottom margin has room for an axis label
+    notes, note_height = note_rows([g.note for g in groups], centres, (ax.left, ax.left + ax.pw), font)
+    ax.top += note_height
+    ax.height += note_height + name_depth
+    ax.bottom += name_depth
+    ax.frame(uid, "", ylabel, xticks=False)
+    bw = min(34.0, 0.75 * slot / k)
+    base = ax.top + ax.ph
+    for gi, g in enumerate(groups):
+        cx = centres[gi]
+        x0 = cx - bw * k / 2
+        missing = 0
+        for bi, ((label, color), v) in enumerate(zip(kinds, g.values)):
+            bx = x0 + bi * bw
+            if v is not None and math.isfinite(v) and v > 0:
+                top = ax.y(v)
+                ax.parts.append(
+                    f'<rect class="bar" data-renderer="{escape(g.name)}" data-kind="{escape(label)}" '
+                    f'x="{_f(bx + 1)}" y="{_f(top)}" width="{_f(bw - 2)}" height="{_f(base - top)}" fill="{color}">'
+                    f"<title>{escape(g.name)}: {escape(label)} = {v:.3e}</title></rect>"
+                )
+            hi = g.hi[bi] if g.hi is not None else None
+            if not (v is not None and math.isfinite(v) and v > 0 or hi is not None and math.isfinite(hi) and hi > 0):
+                # no bar and no error bar from the axis: say why
+                mark = "n/a" if v is None or not math.isfinite(v) else ("0" if v == 0 else "≈ 0")
+                # marks of neighbouring bars wider than a bar go one above the other
+                lift = missing * step if missing and text_width(mark, font) > bw - 2 else 0
+                missing += 1
+                ax.parts.append(
+                    f'<text class="bar-missing" x="{_f(bx + bw / 2)}" y="{_f(base - 6 - lift)}" '
+                    f'text-anchor="middle">{mark}<title>{escape(g.name)}: {escape(label)} = {escape(str(v))}</title>'
+                    "</text>"
+                )
+            if hi is not None and math.isfinite(hi) and hi > 0:
+                lo = g.lo[bi] if g.lo is not None else None
+                y_lo = ax.y(lo) if lo is not None and math.isfinite(lo) and lo > 0 else base
+                y_hi, mx = ax.y(hi), bx + bw / 2
+                ax.parts.append(
+                    f'<path class="whisker" data-renderer="{escape(g.name)}" data-kind="{escape(label)}" '
+                    f'd="M {_f(mx)} {_f(y_lo)} L {_f(mx)} {_f(y_hi)} M {_f(mx - 3)} {_f(y_hi)} L {_f(mx + 3)} '
+                    f'{_f(y_hi)}" stroke="#555" stroke-width="1.2" fill="none"/>')
+        if notes[gi] is not None:
+            nx, ny, lines = notes[gi]
+            ax.parts.append(f'<text class="bar-note" data-renderer="{escape(g.name)}" x="{_f(nx)}" '
+                            f'y="{_f(layout.top + ny)}" text-anchor="middle">{text_lines(lines, nx, font)}</text>')
+        lines = names[gi]
+        if vertical:  # read bottom to top, ending under the group; lines side by side, centred on it
+            first = cx + 0.35 * font - (len(lines) - 1) * step / 2
+            ax.parts.append(
+                f'<text class="tick x" data-renderer="{escape(g.name)}" x="0" y="0" text-anchor="end" '
+                f'transform="translate({_f(first)} {_f(base + 8)}) rotate(-90)"><title>{escape(g.name)}</title>'
+                f"{text_lines(lines, 0, font)}</text>")
+        else:
+            ax.parts.append(
+                f'<text class="tick x" data-renderer="{escape(g.name)}" x="{_f(cx)}" y="{_f(base + 18)}" '
+                f'text-anchor="middle"><title>{escape(g.name)}</title>{text_lines(lines, cx, font)}</text>')
+    ax.legend()
+    return ax.svg(uid, "bar-plot", ylabel, extra_attrs)
+
+
+#: At most this many lines of a group's name under its bars before the names turn vertical.
+NAME_LINES = 3
+
+
+def bar_names(names: Sequence[str], slot: float, font: float) -> tuple[list[list[str]], bool, float]:
+    """Each group's name in lines, whether they stand vertical, and how far below the plot they reach.
+
+    Horizontal where every name wraps (at its break characters, not within a word) into at most
+    :data:`NAME_LINES` lines of its ``slot``'s width; otherwise vertical, each in as few lines side by side as
+    the slot holds, as short as that allows. Never cut."""
+    step, room = LINE * font, slot - 0.6 * font
+    if all(widest_piece(t, font) <= room and len(wrap(t, room, font)) <= NAME_LINES for t in names):
+        lines = [wrap(t, room, font) for t in names]
+        return lines, False, 18 + (max(map(len, lines)) - 1) * step + DESCENT * font + 6
+    most = max(1, int((slot - 0.3 * font - (ASCENT + DESCENT) * font) / step) + 1)  # lines across a slot
+    lines = []
+    for t in names:
+        width = widest_piece(t, font)
+        while len(wrap(t, width, font)) > most:
+            width += CHAR * font
+        lines.append(wrap(t, width, font))
+    longest = max(text_width(line, font) for ls in lines for line in ls)
+    return lines, True, 8 + longest + 6
+
+
+def note_rows(notes: Sequence[str], centres: Sequence[float], span: tuple[float, float], font: float
+              ) -> tuple[list[tuple[float, float, list[str]] | None], float]:
+    """Each group's note as (x, baseline below the chart's top margin, lines), and the height they take above
+    the plot. Notes take the first row where they meet no other note (first fit), so neighbouring notes never
+    run together; each on one line, or, where that takes less height, those too wide for their share of the
+    width on two."""
+    step, gap = LINE * font, 0.8 * font
+    slot = (span[1] - span[0]) / max(1, len(notes))
+    best = None
+    for split in (False, True):
+        rows: list[list[tuple[float, float]]] = []  # per row, the x extents of its notes
+        heights: list[int] = []  # per row, its lines
+        spots: list[tuple[float, int, list[str]] | None] = []
+        for note, cx in zip(notes, centres):
+            if not note:
+                spots.append(None)
+                continue
+            lines = [note]
+            if split and text_width(note, font) > slot - gap and " " in note:
+                cut = min((i for i, ch in enumerate(note) if ch == " "), key=lambda i: abs(2 * i - len(note)))
+                lines = [note[:cut + 1], note[cut + 1:]]
+            w = max(text_width(line, font) for line in lines)
+            x = min(max(cx, span[0] + w / 2 + 2), span[1] - w / 2 - 2)  # inside the plot's width
+            extent = (x - w / 2, x + w / 2)
+            r = next((r for r, row in enumerate(rows)
+                      if all(extent[0] >= b + gap or extent[1] + gap <= a for a, b in row)), len(rows))
+            if r == len(rows):
+                rows.append([])
+                heights.append(0)
+            rows[r].append(extent)
+            heights[r] = max(heights[r], len(lines))
+            spots.append((x, r, lines))
+        if best is None or sum(heights) < best[0]:
+            best = (sum(heights), heights, spots)
+    total, heights, spots = best
+    tops = [sum(heights[:r]) * step for r in range(len(heights))]
+    out = [None if s is None else (s[0], tops[s[1]] + ASCENT * font + 2, s[2]) for s in spots]
+    return out, (total * step + 6 if total else 0.0)

@@ -1,0 +1,90 @@
+"""Scene export: a scene written in another renderer's own format, with its meshes, for ``cbox export``
+and the command-line renderers (:mod:`cornell_harness.adapters.commands`).
+
+One module per format (``mitsuba``, ``luxcore``, ``pbrt_v4``), each with the same interface:
+
+- ``NAME``: the format's name, as ``cbox export --format`` and a renderer file's ``scene_format`` give it;
+- ``FEATURES``: the scene features (:data:`cornell_harness.scenes.model.FEATURES`) the format can express;
+- ``MAPPING``: the rows of the format's mapping table, ``(aspect, ours, theirs)``: camera, fov axis,
+  handedness, emitter side, two-sidedness, filter, depth, IOR (:func:`mapping_table` prints it; the
+  format's page in ``docs/export.md`` shows it);
+- ``write(scene, folder) -> Path``: writes the scene into ``folder`` (which exists and is empty) and
+  returns the main file a renderer is given (``scene.xml``, ``scene.cfg``, ``scene.pbrt``).
+- optionally ``refusal(scene) -> SceneError | None``: why the format cannot express a scene whose
+  features it has (e.g. luxcore and ``render.max_depth = 1``).
+
+A scene the format cannot express (a feature it lacks, a quantity other than radiance) is refused
+before anything is written, with one :class:`~cornell_harness.scenes.model.SceneError` naming the scene file
+and the field (``features``, ``quantity``): the CLI's one line and exit 2.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from types import ModuleType
+
+from cornell_harness.scenes.model import SceneError, Scene
+
+#: Every export format, by name, and the module that writes it (imported when used).
+FORMATS: dict[str, str] = {
+    "mitsuba": "cornell_harness.scenes.export.mitsuba",
+    "luxcore": "cornell_harness.scenes.export.luxcore",
+    "pbrt-v4": "cornell_harness.scenes.export.pbrt_v4",
+}
+
+
+def format_module(name: str) -> ModuleType:
+    """The module that writes format ``name``; KeyError-free: an unknown name is a SceneError-free ValueError."""
+    if name not in FORMATS:
+        raise ValueError(f"unknown export format {name!r}; formats: {', '.join(FORMATS)}")
+    return importlib.import_module(FORMATS[name])
+
+
+def refusal(scene: Scene, name: str) -> SceneError | None:
+    """Why format ``name`` cannot express ``scene`` (a SceneError naming file and field), or None."""
+    module = format_module(name)
+    if scene.quantity != "radiance":
+        return SceneError(scene.path, "quantity", f"{scene.quantity} cannot be exported to {name}: "
+                                                  "the format renders radiance only")
+    if missing := sorted(scene.features - set(module.FEATURES)):
+        return SceneError(scene.path, "features", f"{name} cannot express {', '.join(missing)}")
+    if hasattr(module, "refusal"):
+        return module.refusal(scene)
+    return None
+
+
+def export_scene(scene: Scene, name: str, out: Path | str) -> Path:
+    """Write ``scene`` in format ``name`` into the folder ``out``; return the main file's path.
+
+    Refused (SceneError) before anything is written when the format cannot express the scene. The files
+    are written into a temporary folder beside ``out`` and moved into place, so an interrupted export
+    leaves no half-written scene; files already in ``out`` that the export writes are replaced.
+    """
+    if (why := refusal(scene, name)) is not None:
+        raise why
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".export-", dir=out))
+    try:
+        main = format_module(name).write(scene, tmp)
+        for item in sorted(tmp.rglob("*")):
+            target = out / item.relative_to(tmp)
+            if item.is_dir():
+                target.mkdir(exist_ok=True)
+            else:
+                os.replace(item, target)
+        return out / main.relative_to(tmp)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def mapping_table(name: str) -> str:
+    """Format ``name``'s mapping table as Markdown: how each aspect of our scene model is written."""
+    rows = format_module(name).MAPPING
+    lines = ["| aspect | cornell-harness | " + name + " |", "| --- | --- | --- |"]
+    lines += [f"| {a} | {ours} | {theirs} |" for a, ours, theirs in rows]
+    return "\n".join(lines)

@@ -1,0 +1,221 @@
+"""The reference store: trusted images of each scene, with their variance.
+
+``src/cornell_harness/references/<scene>/`` holds
+
+- ``scene.toml``: the scene;
+- ``reference.exr``: the reference, the mean of ``batches`` independent
+  Mitsuba renders of ``batch_spp`` samples each (float32 linear sRGB);
+- ``variance.exr``: per-pixel, per-channel variance *of that mean*, i.e. the
+  unbiased sample variance of the batch images divided by ``batches``;
+- ``noise.exr``: one more batch, independent of the reference (seed
+  ``noise_seed``), kept as a sample of the renderer's real noise: its channel
+  correlations and tails make the noise yardsticks of :mod:`cornell_harness.evaluate.noise`
+  match real renders where a Gaussian model would not;
+- ``provenance.json``: renderer, version, variant, spp, seeds, wall time, the
+  scene's content hash, date, command line; and, under ``verified.<engine>``,
+  the verdict of each ``cbox reference verify`` (:func:`record_verdict`,
+  :mod:`cornell_harness.workflows.reference_verify`), which a rebuild drops.
+
+A scene derived by ``--set`` (:mod:`cornell_harness.scenes.overrides`) keeps its
+reference in ``derived/<content hash>/`` of its file's folder
+(:func:`reference_folder`), with the same files but ``scene.toml``: its
+base's reference is never touched. A missing or stale reference is refused
+with the command that builds it and about how long that takes, scaled from
+the wall time a build recorded in provenance (:func:`build_seconds`).
+
+References are built by :mod:`cornell_harness.workflows.reference_build`, with seeds from
+:data:`REFERENCE_SEED_BASE` up, a range no user
+run uses by default, so a test render never shares samples with its reference.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import statistics
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cornell_harness.store.atomic import write_json_atomic
+from cornell_harness.store.exr import ImageFileError, read_exr
+from cornell_harness.scenes.library import references_root
+from cornell_harness.scenes.model import Scene
+from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
+
+REFERENCE_SEED_BASE = 1_000_000_000
+REFERENCE_FILE, VARIANCE_FILE, NOISE_FILE = "reference.exr", "variance.exr", "noise.exr"
+PROVENANCE_FILE = "provenance.json"
+#: The folder, beside a scene file, of the references of scenes derived from it by ``--set``.
+DERIVED_FOLDER = "derived"
+#: The spp ``cbox reference build`` is suggested with when no earlier build says better.
+DEFAULT_SPP = 16384
+#: Where a reference's provenance keeps the verdicts of ``cbox reference verify``, one per engine.
+VERIFIED_KEY = "verified"
+
+
+class ReferenceError(RuntimeError):
+    """A reference is missing, stale or inconsistent. ``str()`` says how to fix it."""
+
+
+@dataclass
+class Reference:
+    image: np.ndarray  # (H, W, 3) float32
+    variance: np.ndarray  # variance of the mean, (H, W, 3) float32
+    noise: np.ndarray  # one independent batch of noise_spp samples, (H, W, 3) float32
+    provenance: dict
+    folder: Path
+    quantity: str = DEFAULT_QUANTITY  # the scene's: what the images mean (cornell_harness.scenes.quantities)
+
+    @property
+    def spp(self) -> int:
+        return int(self.provenance["spp"])
+
+    @property
+    def noise_spp(self) -> int:
+        return int(self.provenance["noise_spp"])
+
+
+def reference_folder(scene: Scene) -> Path:
+    """Where the reference of ``scene`` is kept: its file's folder or, for a scene derived by ``--set``,
+    ``derived/<content hash>/`` in it; keyed by content, so the same overrides in any order or spelling
+    share one reference, and one made for an older version of the file is never mistaken for current."""
+    folder = scene.path.parent
+    if scene.overrides:
+        folder = folder / DERIVED_FOLDER / scene.content_hash().removeprefix("sha256:")[:16]
+    return folder
+
+
+def rebuild_command(scene: Scene, spp: int = DEFAULT_SPP, batches: int | None = None) -> str:
+    """The ``cbox reference build`` command for ``scene`` (its stored name where it has one, and its ``--set``)."""
+    stored = references_root() / scene.path.parent.name / "scene.toml"
+    named = scene.path.exists() and stored.exists() and stored.samefile(scene.path)
+    args = ["cbox", "reference", "build", "--scene", scene.path.parent.name if named else str(scene.path.parent)]
+    for override in scene.overrides:
+        args += ["--set", override]
+    args += ["--spp", str(spp)] + (["--batches", str(batches)] if batches else [])
+    return " ".join(map(shlex.quote, args))
+
+
+def build_seconds(prov: dict, width: int, height: int, spp: int) -> float | None:
+    """Seconds a build of ``width`` x ``height`` pixels at ``spp`` takes, scaled by pixels × samples from the
+    wall time, resolution and spp in a reference's provenance ``prov``; None when it lacks them."""
+    try:
+        w0, h0 = prov["resolution"]
+        return float(prov["wall_time_s"]) * width * height * spp / (int(w0) * int(h0) * int(prov["spp"]))
+    except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        return None
+
+
+def _about(seconds: float) -> str:
+    if seconds < 10:
+        return f"{seconds:.1g} s" if seconds < 1 else f"{seconds:.0f} s"
+    if seconds < 600:
+        return f"{round(seconds, -1 if seconds >= 100 else 0):.0f} s"
+    return f"{seconds / 60:.0f} min" if seconds < 7200 else f"{seconds / 3600:.1f} h"
+
+
+def _provenance_at(folder: Path) -> dict | None:
+    try:
+        prov = json.loads((folder / PROVENANCE_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    return prov if isinstance(prov, dict) else None
+
+
+def _median_cost() -> float | None:
+    """The stored references' median build cost, in seconds per pixel-sample; None when none says."""
+    stored = (_provenance_at(f.parent) for f in references_root().glob(f"*/{PROVENANCE_FILE}"))
+    costs = [c for p in stored if p and (c := build_seconds(p, 1, 1, 1)) is not None]
+    return statistics.median(costs) if costs else None
+
+
+def _build_hint(scene: Scene, folder: Path) -> str:
+    """The command that builds ``scene``'s reference into ``folder``, and about how long it takes.
+
+    The yardstick is the build this one replaces (its spp and batches are
+    kept), else, for a derived scene, its base's reference, else the median
+    cost of the stored references.
+    """
+    cam = scene.camera
+    own = _provenance_at(folder)
+    prov = own or (_provenance_at(scene.path.parent) if scene.overrides else None)
+    if prov is None:
+        if (cost := _median_cost()) is None:
+            return rebuild_command(scene)
+        return (f"{rebuild_command(scene)} (about {_about(cost * cam.width * cam.height * DEFAULT_SPP)}, from the "
+                f"stored references' median cost of {cost * 1e6:.2g} µs per pixel-sample; the scene's may differ)")
+    spp, batches = int(prov.get("spp", DEFAULT_SPP)), prov.get("batches")
+    command = rebuild_command(scene, spp, batches if isinstance(batches, int) else None)
+    if (seconds := build_seconds(prov, cam.width, cam.height, spp)) is None:
+        return command
+    source = "the last build" if own else f"the reference of {prov.get('scene') or scene.path.parent.name}"
+    w0, h0 = prov["resolution"]
+    machine = ", ".join(str(prov.get("machine", "")).split(", ")[:2])  # "x86_64, 2 CPUs"
+    notes = f"; scaled to {cam.width}x{cam.height}" if [w0, h0] != [cam.width, cam.height] else ""
+    if prov.get("max_depth", scene.max_depth) != scene.max_depth:
+        notes += (f"; max_depth {scene.max_depth} instead of {prov['max_depth']} changes the cost per sample, "
+                  "so this is only an estimate")
+    return (f"{command} (about {_about(seconds)}: {source} took {float(prov['wall_time_s']):.0f} s at {w0}x{h0}, "
+            f"{spp} spp{f' on {machine}' if machine else ''}{notes})")
+
+
+def load_reference(scene: Scene, folder: Path | None = None) -> Reference:
+    """The stored reference of ``scene`` (in :func:`reference_folder`); refuse one built from different content."""
+    folder = Path(folder) if folder else reference_folder(scene)
+    prov_path = folder / PROVENANCE_FILE
+    if not prov_path.exists():
+        derived = (f"; the stored reference of {scene.path.parent.name} is for the scene without --set"
+                   if scene.overrides else "")
+        raise ReferenceError(f"{prov_path}: no reference for scene {scene.name!r}{derived}; build it with: "
+                             f"{_build_hint(scene, folder)}")
+    try:
+        prov = json.loads(prov_path.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise ReferenceError(f"{prov_path}: unreadable ({e}); rebuild with: {_build_hint(scene, folder)}") from None
+    if prov.get("scene_hash") != scene.content_hash():
+        raise ReferenceError(
+            f"{prov_path}: reference was built for scene hash {prov.get('scene_hash')}, but {scene.name} "
+            f"({scene.path}) now hashes to {scene.content_hash()}; rebuild it with: {_build_hint(scene, folder)}"
+        )
+    try:
+        image, variance, noise = (read_exr(folder / f) for f in (REFERENCE_FILE, VARIANCE_FILE, NOISE_FILE))
+    except ImageFileError as e:
+        raise ReferenceError(f"{e}; rebuild with: {_build_hint(scene, folder)}") from None
+    shape = (scene.camera.height, scene.camera.width, 3)
+    if not image.shape == variance.shape == noise.shape == shape:
+        raise ReferenceError(
+            f"{folder}: reference images are {image.shape[1]}x{image.shape[0]}, scene is {shape[1]}x{shape[0]}; "
+            f"rebuild with: {_build_hint(scene, folder)}"
+        )
+    return Reference(image, variance, noise, prov, folder, scene.quantity)
+
+
+def record_verdict(folder: Path, record: dict) -> dict:
+    """Store ``record`` as ``verified.<engine>`` in ``folder``'s provenance.json (atomically); the new provenance.
+
+    The rest of the provenance is kept as it is, read from the file just before writing."""
+    path = Path(folder) / PROVENANCE_FILE
+    prov = json.loads(path.read_text())
+    verified = prov.get(VERIFIED_KEY)
+    verified = dict(verified) if isinstance(verified, dict) else {}
+    verified[record["engine"]] = record
+    prov[VERIFIED_KEY] = verified
+    write_json_atomic(path, prov)
+    return prov
+
+
+def verdict_line(provenance: dict) -> str:
+    """One line of a reference's verdicts: ``verified by luxcore: max |z| 1.9 (7 regions)``, or ``not verified``."""
+    verified = provenance.get(VERIFIED_KEY)
+    if not isinstance(verified, dict) or not verified:
+        return "not verified"
+    parts = []
+    for engine, r in verified.items():
+        z = r.get("max_abs_z")
+        z_text = "inf" if z is None else f"{z:.1f}" if z < 100 else f"{z:.0f}"
+        word = "verified by" if r.get("passed") else "DISAGREES with"
+        n = len(r.get("regions", {}))
+        parts.append(f"{word} {engine}: max |z| {z_text} ({n} region{'s' if n != 1 else ''}, {r.get('spp')} spp)")
+    return "; ".join(parts)

@@ -1,0 +1,229 @@
+"""Equal-time and equal-quality comparisons: the spp a time budget buys, the time a target error costs, and
+the repeated timing of their renders (``--time-repeats``), interleaved over the renderers."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+import pandas as pd
+
+from cornell_harness.adapters.api import attribute
+from cornell_harness.adapters.registry import RendererEntry
+from cornell_harness.evaluate import timing_stats
+from cornell_harness.scenes.model import Scene
+from cornell_harness.store.atomic import atomic_path, json_safe, write_json_atomic
+from cornell_harness.store.experiments import (CONFIG_FILE, RESULTS_FILE, ExperimentError, cell_name, experiment_lock,
+                                       write_parquet_atomic)
+from cornell_harness.store.exr import write_exr
+from cornell_harness.store.references import Reference
+from cornell_harness.workflows import runner
+
+
+def spp_for_calibration(t1: float, t4: float, budget_s: float) -> float:
+    """The spp (not yet whole) that should take ``budget_s`` seconds, from a 1-spp and a 4-spp render's times.
+
+    Per-render overhead (scene set-up) and per-sample cost are separated by
+    the two timings. Where the 1-spp render reads as long as the 4-spp one
+    (stalled by a busy machine: load only adds time), the difference says nothing
+    about the per-sample cost (floored at 1e-9 s it gives ~10⁹ spp, a
+    render without end); t4 / 4 is then used, an upper bound on
+    the per-sample cost (the overhead is ≥ 0): fewer samples than the budget
+    buys, never more.
+    """
+    per_spp = (t4 - t1) / 3.0 if t4 > t1 else t4 / 4.0
+    per_spp = max(per_spp, 1e-9)  # a renderer that reports no time at all
+    overhead = max(t4 - 4.0 * per_spp, 0.0)  # (4·t1 - t4) / 3 when t4 > t1; 0 in the fallback
+    return max(1.0, (budget_s - overhead) / per_spp)
+
+
+@dataclass
+class BudgetChoice:
+    """The spp a time budget buys one renderer, from K rounds of calibration renders.
+
+    ``spp`` is :func:`spp_for_calibration` of the median 1-spp and median
+    4-spp times; ``spp_low`` / ``spp_high`` is the 95% interval
+    (:func:`cornell_harness.evaluate.timing_stats.median_interval`) of what each
+    round's own pair of renders would buy, the spread of the per-sample
+    cost (and overhead) carried to spp, widened to hold ``spp``; None with
+    one round. ``basis`` is the clock the budget was spent in (wall or cpu).
+    """
+
+    spp: int
+    spp_low: int | None
+    spp_high: int | None
+    samples: list[float]  # per round, the spp its two renders buy
+    basis: str
+
+    def record_in(self, info: dict, budget_s: float) -> None:
+        """The choice as a run's ``info`` (columns ``info_time_budget_s``, ``info_spp_low``, ...)."""
+        info.update(time_budget_s=budget_s, time_budget_basis=self.basis, spp_low=self.spp_low,
+                    spp_high=self.spp_high, time_budget_spp_samples=[round(s, 2) for s in self.samples])
+
+
+def budget_choice(t1s: Sequence[float], t4s: Sequence[float], budget_s: float, basis: str = "wall") -> BudgetChoice:
+    """The spp ``budget_s`` buys, from K rounds' 1-spp and 4-spp timings (:class:`BudgetChoice`)."""
+    spp = int(spp_for_calibration(float(np.median(t1s)), float(np.median(t4s)), budget_s))
+    samples = [spp_for_calibration(a, b, budget_s) for a, b in zip(t1s, t4s)]
+    _, low, high = timing_stats.median_interval(samples)
+    if math.isnan(low):
+        return BudgetChoice(spp, None, None, samples, basis)
+    return BudgetChoice(spp, max(1, math.floor(min(low, spp))), math.ceil(max(high, spp)), samples, basis)
+
+
+def calibrate_time_budget(entries: Sequence[RendererEntry], scene: Scene, budget_s: float, seed: int,
+                          repeats: int = 1, basis: str = "wall",
+                          on_render: Callable[[str], None] | None = None) -> list[BudgetChoice | Exception]:
+    """Per entry, the spp ``budget_s`` buys (or the exception its calibration raised): two short timed renders
+    (1 and 4 spp) each, ``repeats`` rounds of them interleaved over the renderers (A1 A4 B1 B4, A1 A4 B1 B4,
+    ...), so that a change of load during calibration hits every renderer alike.
+
+    ``basis`` "cpu" spends the budget in process CPU seconds (:func:`cornell_harness.workflows.runner.cpu_time`: the
+    render proper's, or the whole call's for a renderer that measures none). The calibration renders are not
+    counted in the budget; the final render's own time is what is reported. ``on_render(label)`` follows each
+    calibration render (progress).
+    """
+    timings: list[list[tuple[float, float]] | Exception] = [[] for _ in entries]
+    for round_ in range(repeats):
+        for i, entry in enumerate(entries):
+            if isinstance(timings[i], Exception):
+                continue
+            try:
+                for spp in (1, 4):
+                    result, timing = runner.render_timed(entry, scene, spp, seed)
+                    timings[i].append((float(result.time_s), runner.cpu_time(result, timing)))
+                    if on_render:
+                        on_render(f"{entry.name} calibration {spp} spp, round {round_ + 1}/{repeats}")
+            except Exception as e:  # recorded as the renderer's failure by the caller; the others go on
+                timings[i] = e
+    out: list[BudgetChoice | Exception] = []
+    for t in timings:
+        if isinstance(t, Exception):
+            out.append(t)
+            continue
+        seconds = [c if basis == "cpu" else w for w, c in t]
+        out.append(budget_choice(seconds[0::2], seconds[1::2], budget_s, basis))
+    return out
+
+
+def spp_for_time_budget(entry: RendererEntry, scene: Scene, budget_s: float, seed: int) -> int:
+    """The spp that should take ``budget_s`` seconds, from one round of calibration (:func:`calibrate_time_budget`)."""
+    (choice,) = calibrate_time_budget([entry], scene, budget_s, seed)
+    if isinstance(choice, Exception):
+        raise choice
+    return choice.spp
+
+
+def retime(entries: Sequence[RendererEntry], records: Sequence[runner.RunRecord], scene: Scene, repeats: int,
+           on_render: Callable[[str], None] | None = None) -> None:
+    """Time each record's render ``repeats`` times in all (its first render counts as the first), in rounds
+    interleaved over the renderers (A B A B ...): ``time_s`` becomes the median, ``time_samples`` the timings.
+
+    ``entries[i]`` rendered ``records[i]``. A repeat renders the same renderer, scene, spp and seed, so a
+    renderer deterministic per seed gives the same image bit for bit; the first render's image and scores
+    are kept, and a repeat whose image differs is counted in ``info["repeat_images_differ"]`` (a
+    renderer that is not repeatable, said, not refused). A repeat that raises ends that record's repeats
+    (``info["time_repeat_error"]``); its timings so far stand.
+    """
+    timed = [(e, r) for e, r in zip(entries, records) if r.status == "ok" and r.time_s is not None]
+    for _, r in timed:
+        r.time_samples = [(float(r.time_s), r.cpu_time_s)]
+    for round_ in range(1, repeats):
+        for entry, rec in timed:
+            if "time_repeat_error" in rec.info:
+                continue
+            try:
+                result, timing = runner.render_timed(entry, scene, rec.spp, rec.seed)
+            except Exception as e:  # the first render's record stands
+                rec.info["time_repeat_error"] = f"{type(e).__name__}: {e}"
+                continue
+            rec.time_samples.append((float(result.time_s), runner.cpu_time(result, timing)))
+            if rec.image is not None and not np.array_equal(result.image, rec.image, equal_nan=True):
+                rec.info["repeat_images_differ"] = rec.info.get("repeat_images_differ", 0) + 1
+            if on_render:
+                on_render(f"{entry.name} repeat {round_ + 1}/{repeats}")
+    for _, rec in timed:
+        wall, cpu = timing_stats.medians([w for w, _ in rec.time_samples], [c for _, c in rec.time_samples])
+        rec.time_s = wall
+        if cpu is not None:
+            rec.cpu_time_s = cpu
+
+
+def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, metric: str, target: float,
+                     seed: int, max_spp: int) -> runner.RunRecord:
+    """Renders at 1, 2, 4, ... spp until ``metric`` ≤ ``target`` (or ``max_spp``); the record says which.
+
+    The reported time is that of the render that reached the target (a
+    renderer that resumed its last render would need at most that). A
+    deterministic renderer stops early once two doublings of spp leave its error unchanged.
+    """
+    spp, previous, stalls = 1, None, 0
+    deterministic = attribute(entry.renderer, "deterministic")
+    while True:
+        rec = runner.run_one(entry, scene, spp, seed, reference)
+        if rec.status != "ok":
+            return rec
+        value = rec.metrics.get(metric)
+        if value is None:
+            raise ExperimentError(f"--target-error: unknown metric {metric!r}")
+        rec.info["target"] = f"{metric}<={target:g}"
+        rec.info["target_reached"] = bool(value <= target)
+        # A deterministic renderer whose error stopped changing for two doublings will not reach it
+        # with more samples (1e-6: GL rasterisers are repeatable only to float rounding).
+        same = deterministic and previous is not None and abs(value - previous) <= 1e-6 * abs(previous)
+        stalls = stalls + 1 if same else 0
+        if value <= target or spp >= max_spp or stalls >= 2:
+            return rec
+        spp, previous = min(2 * spp, max_spp), value
+
+
+#: Family-wise false-alarm rate of the agreement test :func:`judge_agreement` gives a run (its ``agreement``
+#: column): a correct renderer reads "fail" in 1% of runs.
+AGREEMENT_ALPHA = 0.01
+
+
+def judge_agreement(rec: runner.RunRecord, scene: Scene, reference: Reference) -> None:
+    """An ok run of an unbiased renderer gets the gate's agreement test against the reference
+    (:func:`cornell_harness.evaluate.agreement.render_agreement`: tiles of 16, the scene's regions, family-wise
+    :data:`AGREEMENT_ALPHA`) as ``rec.agreement`` ("pass" or "fail") and ``rec.agreement_p_min``; other runs are
+    left as they are. Here, not in :func:`runner.run_one`: the gate runs its own test at its own level, and
+    SciPy's statistics stay out of every command that renders."""
+    from cornell_harness.evaluate import agreement  # imports scipy.stats (~1 s)
+    from cornell_harness.evaluate import regions as named_regions
+
+    if rec.status != "ok" or rec.estimator != "unbiased" or rec.image is None:
+        return
+    agr = agreement.render_agreement(rec.image, rec.variance, rec.spp, reference.image, reference.variance,
+                                     reference.spp, alpha=AGREEMENT_ALPHA, regions=named_regions.region_masks(scene))
+    rec.agreement, rec.agreement_p_min = ("pass" if agr.passed else "fail"), agr.p_min
+
+
+def store_comparison(out: Path, scene: Scene, records: Sequence[runner.RunRecord], command: str,
+                     time_basis: str = "wall", time_repeats: int = 1) -> None:
+    """A comparison as an experiment folder: images, results table, CSV and JSON (a report can then be built).
+
+    ``time_basis`` (recorded in experiment.json) is the clock its time-derived figures read, so that
+    ``cbox report`` redraws them alike; ``time_repeats`` the K each final render was timed."""
+    with experiment_lock(out, command):
+        _store(out, scene, records, command, {"time_basis": time_basis, "time_repeats": time_repeats})
+
+
+def _store(out: Path, scene: Scene, records: Sequence[runner.RunRecord], command: str, timing: dict) -> None:
+    for r in records:
+        if r.image is not None:
+            write_exr(out / "images" / f"{cell_name(r.renderer, r.seed)}.exr", r.image)
+    rows = [r.row() for r in records]
+    frame = pd.DataFrame(rows)
+    write_json_atomic(out / CONFIG_FILE, {
+        "kind": "compare", "scene": str(scene.path), "scene_name": scene.name, "scene_hash": scene.content_hash(),
+        "renderers": [r.renderer for r in records], "spp": sorted({r.spp for r in records}),
+        "seeds": sorted({r.seed for r in records}), "command": command, **timing,
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")})
+    write_parquet_atomic(frame, out / RESULTS_FILE)
+    with atomic_path(out / "metrics.csv") as tmp:
+        frame.to_csv(tmp, index=False)
+    write_json_atomic(out / "metrics.json", [json_safe(r) for r in rows])

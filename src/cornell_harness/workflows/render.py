@@ -1,0 +1,100 @@
+"""The one render path: the only call of a renderer's ``render``, and the checks of what it returned.
+
+Kept light (no SciPy, no pandas) because the sandbox's child process imports it too:
+a time-limited render must not spend its budget loading SciPy.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from cornell_harness.adapters.api import Checkpoint, ReferenceFit, RenderResult, attribute
+from cornell_harness.adapters.registry import RendererEntry
+from cornell_harness.adapters.settings import declared, resolve_settings
+from cornell_harness.evaluate.reference_fit import fitted_image
+from cornell_harness.scenes.model import Scene
+from cornell_harness.store.references import load_reference
+
+
+class RenderError(ValueError):
+    """A renderer returned something the harness cannot use (wrong shape, wrong spp), or a sandboxed render
+    failed; ``traceback`` is then the child process's own (the parent's would show only this raise)."""
+
+    def __init__(self, message: str, traceback: str = ""):
+        super().__init__(message)
+        self.traceback = traceback
+
+
+class RenderTimeout(RuntimeError):
+    """A sandboxed render was killed at its time limit; ``time_s`` is how long it ran."""
+
+    def __init__(self, message: str, time_s: float):
+        super().__init__(message)
+        self.time_s = time_s
+
+
+def render_checked(entry: RendererEntry, scene: Scene, spp: int, seed: int,
+                   checkpoints: Sequence[int] = ()) -> RenderResult:
+    """``entry``'s render with its settings, its image, variance and checkpoints checked; may raise.
+
+    A renderer that declares settings gets every one of them, validated, typed and with its default filled in
+    (whatever ``entry`` was built with); one that declares none keeps the plain signature. This is the only
+    place settings are resolved for a render: renderers never validate them again.
+    """
+    kwargs = {}
+    if checkpoints:
+        kwargs["checkpoints"] = list(checkpoints)
+    if declared(entry.renderer):
+        kwargs["settings"] = resolve_settings(entry.renderer, entry.settings)
+    fit = attribute(entry.renderer, "reference_fit")
+    if fit is not None and kwargs.get("settings", {}).get(fit.setting) == fit.value:
+        result = _fitted_render(entry.renderer, fit, scene, spp, seed, kwargs)
+    else:
+        result = entry.renderer.render(scene, spp, seed, **kwargs)
+    expected = (scene.camera.height, scene.camera.width, 3)
+    result.image = _checked_image(result.image, expected, "an image")
+    if result.variance is not None:
+        result.variance = _checked_image(result.variance, expected, "a variance image")
+    for c in result.checkpoints:
+        c.image = _checked_image(c.image, expected, f"a checkpoint image at {c.spp} spp")
+    return result
+
+
+#: What a fitted render records under ``info["oracle"]``.
+ORACLE_NOTE = ("fitted to the stored reference: the least-squares constant per channel, an oracle no renderer "
+               "could compute from the scene (two renders)")
+
+
+def _fitted_render(renderer, fit: ReferenceFit, scene: Scene, spp: int, seed: int, kwargs: dict) -> RenderResult:
+    """The oracle ``fit`` declares (:class:`cornell_harness.adapters.api.ReferenceFit`): two renders with the same seed,
+    D and D + B, and D + c·B with c fitted to the stored reference (per checkpoint too); no variance image (the
+    renders' samples are correlated and their covariance is not kept)."""
+    reference = load_reference(scene).image  # no reference: refused before anything renders
+    settings = kwargs["settings"]
+    direct, unit = (renderer.render(scene, spp, seed, **{**kwargs, "settings": {**settings, **changed}})
+                    for changed in (fit.without, fit.unit))
+    image, c = fitted_image(direct.image, unit.image, reference)
+    shots = [Checkpoint(a.spp, fitted_image(a.image, b.image, reference)[0], a.time_s + b.time_s,
+                        cpu_time_s=_sum(a.cpu_time_s, b.cpu_time_s))
+             for a, b in zip(direct.checkpoints, unit.checkpoints)]
+    info = {**direct.info, fit.setting: fit.value, fit.record: [float(x) for x in c], "oracle": ORACLE_NOTE}
+    if "rays" in direct.info and "rays" in unit.info:
+        info["rays"] = direct.info["rays"] + unit.info["rays"]
+    if "setup_s" in direct.info and "setup_s" in unit.info:
+        info["setup_s"] = direct.info["setup_s"] + unit.info["setup_s"]
+    return RenderResult(image, direct.time_s + unit.time_s, direct.spp, direct.seed, shots, info, None,
+                        cpu_time_s=_sum(direct.cpu_time_s, unit.cpu_time_s))
+
+
+def _sum(a: float | None, b: float | None) -> float | None:
+    """The CPU time of two renders, None when either did not measure it."""
+    return None if a is None or b is None else a + b
+
+
+def _checked_image(image, expected: tuple[int, int, int], what: str) -> np.ndarray:
+    image = np.asarray(image, dtype=np.float32)
+    if image.shape != expected:
+        raise RenderError(f"returned {what} of shape {image.shape}, expected {expected}")
+    return image
