@@ -12,7 +12,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from cornell_harness.reports import plots
+from cornell_harness.reports import bars, plots
 from cornell_harness.reports.axes import ASCENT, CHAR_WIDTH, DESCENT, LINE, overlaps, pieces, text_width, wrap
 from cornell_harness.reports.figures import PRINT
 
@@ -123,10 +123,10 @@ def test_series_label_is_shown_and_name_kept_for_the_page():
     legend = [t["text"] for t in _check_layout(svg) if t["cls"] == "legend-label"]
     assert legend[:2] == ["PT (independent)", LONG[1]]
     assert 'data-renderer="pathtracer[sampler=&quot;independent&quot;,rr_depth=3]"' in svg
-    groups = [plots.BarGroup(n, [1e-3, 2e-3], label="PT" if i == 0 else "") for i, n in enumerate(LONG[:2])]
-    bars = plots.bars_svg(groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")), uid="b", ylabel="m")
-    names = [t["text"] for t in _check_layout(bars) if t["cls"] == "tick x"]
-    assert names == ["PT", LONG[1]] and f"<title>{LONG[0].replace(chr(34), '&quot;')}</title>" in bars
+    groups = [bars.BarGroup(n, [1e-3, 2e-3], label="PT" if i == 0 else "") for i, n in enumerate(LONG[:2])]
+    bar_svg = bars.bars_svg(groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")), uid="b", ylabel="m")
+    names = [t["text"] for t in _check_layout(bar_svg) if t["cls"] == "tick x"]
+    assert names == ["PT", LONG[1]] and f"<title>{LONG[0].replace(chr(34), '&quot;')}</title>" in bar_svg
     points = [plots.Point(n, "#000", 1.0 + i, 2.0 + i, tip="tooltip", label="S" if i == 0 else "")
               for i, n in enumerate(LONG[:2])]
     scatter = plots.scatter_svg(points, uid="s", xlabel="t", ylabel="e")
@@ -174,9 +174,9 @@ def test_place_tags_tries_each_side_then_drops():
 @pytest.mark.parametrize("names", [LONG, ["alpha", "beta", "gamma", "delta", "epsilon"],
                                    ["ambient-occlusion", "mitsuba", "pathtracer", "sppm", "bdpt", "photon-mapper"]])
 def test_bar_names_and_notes_whole_and_apart(layout, names):
-    groups = [plots.BarGroup(n, [1e-3 * (i + 1) if i % 3 else -1e-5, 2e-3], "bias not significant" if i % 2 else
+    groups = [bars.BarGroup(n, [1e-3 * (i + 1) if i % 3 else -1e-5, 2e-3], "bias not significant" if i % 2 else
                              f"bias {10 * i} %", [5e-4, 1e-3], [2e-3, 3e-3]) for i, n in enumerate(names)]
-    svg = plots.bars_svg(groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")), uid="b", ylabel="m",
+    svg = bars.bars_svg(groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")), uid="b", ylabel="m",
                          layout=layout)
     texts = _check_layout(svg)
     assert [t["text"] for t in texts if t["cls"] == "tick x"] == names
@@ -191,18 +191,18 @@ def test_bar_names_and_notes_whole_and_apart(layout, names):
 
 def test_bar_names_turn_vertical_only_when_they_do_not_wrap():
     slot, font = 60.0, 10.0
-    lines, vertical, _ = plots.bar_names(["alpha", "beta-gamma"], slot, font)
+    lines, vertical, _ = bars.bar_names(["alpha", "beta-gamma"], slot, font)
     assert not vertical and lines == [["alpha"], ["beta-", "gamma"]]
-    lines, vertical, depth = plots.bar_names(LONG[:2], slot, font)
+    lines, vertical, depth = bars.bar_names(LONG[:2], slot, font)
     assert vertical and ["".join(ls) for ls in lines] == LONG[:2]
     assert depth >= max(text_width(line, font) for ls in lines for line in ls)
 
 
 def test_notes_take_rows_only_when_they_would_meet():
     font = 10.0
-    notes, height = plots.note_rows(["bias 1 %", "bias 2 %"], [50, 150], (0, 200), font)
+    notes, height = bars.note_rows(["bias 1 %", "bias 2 %"], [50, 150], (0, 200), font)
     assert notes[0][1] == notes[1][1] and height == pytest.approx(LINE * font + 6)  # one row
-    notes, height = plots.note_rows(["bias not significant"] * 3, [30, 60, 90], (0, 120), font)
+    notes, height = bars.note_rows(["bias not significant"] * 3, [30, 60, 90], (0, 120), font)
     assert len({n[1] for n in notes}) == 3 or any(len(n[2]) == 2 for n in notes)
     xs = [(n[0] - max(text_width(line, font) for line in n[2]) / 2, n[0] + max(text_width(line, font)
                                                                               for line in n[2]) / 2) for n in notes]

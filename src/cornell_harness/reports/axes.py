@@ -160,7 +160,7 @@ class Axes:
     Text is never cut: the left margin holds the widest y tick label, a legend at the right is as wide as its
     longest label needs (the figure growing), wrapped where a label is longer still; a legend below wraps and
     takes as many columns as keep it shortest. A chart may grow ``top`` and ``height`` before :meth:`frame`
-    for text of its own above or below the plot (:func:`cornell_harness.reports.plots.bars_svg`).
+    for text of its own above or below the plot (:func:`cornell_harness.reports.bars.bars_svg`).
     """
 
     xdom: tuple[float, float]

@@ -31,7 +31,7 @@ from markupsafe import Markup
 
 from cornell_harness.evaluate import bootstrap, registry
 from cornell_harness.evaluate.convergence import bias_significant
-from cornell_harness.reports import plots
+from cornell_harness.reports import bars, plots
 from cornell_harness.reports.tables import column_or_nan, is_finite, numeric_column, ok_runs
 
 SINGLE_SPP_NOTE = "single spp: run `cbox converge` for convergence plots"
@@ -228,9 +228,9 @@ def bias_variance_chart(summary, names, colors, prefix: str = "", labels=None) -
         note = ("bias not significant" if significant is False else
                 f"bias {100 * float(frac):.0f} %" if is_finite(frac) else "")
         bounds = [[float(r.get(f"{k}_{end}", math.nan)) for k in ("bias2", "variance")] for end in ("low", "high")]
-        groups.append(plots.BarGroup(name, [b2, var], note, *bounds, label=(labels or {}).get(name, name)))
+        groups.append(bars.BarGroup(name, [b2, var], note, *bounds, label=(labels or {}).get(name, name)))
     if not groups:
         return None
     return Figure(_prefixed(prefix, "bias-variance"), partial(
-        plots.bars_svg, groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")),
+        bars.bars_svg, groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")),
         uid=_prefixed(prefix, "bias-variance"), ylabel="mean over pixels and channels"))
