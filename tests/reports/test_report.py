@@ -25,7 +25,7 @@ from cornell_harness.reports import images as report_images
 from cornell_harness.reports.charts import SINGLE_SPP_NOTE
 from cornell_harness.reports.html import write_report
 from cornell_harness.reports.images import DELTA_E_RANGE, apply_colormap, f16_base64, f16_decode, rel_mse_map
-from cornell_harness.reports.tables import check_threshold, column_label, format_value, parse_time_to, value_note
+from cornell_harness.reports.numbers import check_threshold, column_label, format_value, parse_time_to, value_note
 from cornell_harness.reports.plotmath import format_tick, log_ticks, pareto_front
 
 W = H = 32

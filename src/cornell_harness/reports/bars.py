@@ -41,7 +41,7 @@ def bars_svg(
     """Grouped bars on a log y axis; ``kinds`` = (label, colour) of each bar in a group.
 
     A value that is not positive (a bias² estimate below zero: no measurable
-    bias; see :func:`cornell_harness.reports.tables.format_value`) or not finite gets no bar but a small "≈ 0" or "n/a" mark.
+    bias; see :func:`cornell_harness.reports.numbers.format_value`) or not finite gets no bar but a small "≈ 0" or "n/a" mark.
     A group's ``lo`` / ``hi`` draw error bars (``class="whisker"``), from the axis where the low end is not
     positive. Each group's name is under it in full (:func:`bar_names`), its note above the plot, in as many
     rows as keep neighbouring notes apart (:func:`note_rows`); the chart grows to hold both.

@@ -32,7 +32,8 @@ from markupsafe import Markup
 from cornell_harness.evaluate import bootstrap, registry
 from cornell_harness.evaluate.convergence import bias_significant
 from cornell_harness.reports import bars, plots
-from cornell_harness.reports.tables import column_or_nan, is_finite, numeric_column, ok_runs
+from cornell_harness.reports.numbers import is_finite
+from cornell_harness.reports.tables import column_or_nan, numeric_column, ok_runs
 
 SINGLE_SPP_NOTE = "single spp: run `cbox converge` for convergence plots"
 #: What the convergence plots' bands are.

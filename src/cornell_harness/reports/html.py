@@ -48,8 +48,8 @@ from cornell_harness.reports.print_tables import print_tables
 from cornell_harness.reports.regions import bias_variance_table, region_section
 from cornell_harness.reports.summary_files import write_summary_files
 from cornell_harness.reports.timing import timing_badge
-from cornell_harness.reports.tables import (OPERATOR_SIGNS, column_label, column_or_nan, ok_runs, renderer_info, renderer_order,
-                            summary_rows)
+from cornell_harness.reports.numbers import OPERATOR_SIGNS, column_label
+from cornell_harness.reports.tables import column_or_nan, ok_runs, renderer_info, renderer_order, summary_rows
 from cornell_harness.reports.viewer import image_viewer, viewer_legends
 
 #: Swatch colour of renderers that did not run.

@@ -32,7 +32,8 @@ from cornell_harness.evaluate import metrics
 from cornell_harness.evaluate.regions import REGION_METRICS, nested_regions, region_masks
 from cornell_harness.evaluate.summary import REGION_SPLIT, REGION_SPLIT_BOUNDS, region_split
 from cornell_harness.reports.images import png_data_uri, to_uint8
-from cornell_harness.reports.tables import at_max_spp, bias_share_note, column_label, format_value, interval_note, value_note
+from cornell_harness.reports.numbers import bias_share_note, column_label, format_value, interval_note, value_note
+from cornell_harness.reports.tables import at_max_spp
 
 #: Okabe-Ito colours without black (the report is dark) and grey (the overlay's background).
 REGION_COLORS = ("#E69F00", "#56B4E9", "#009E73", "#F0E442", "#0072B2", "#D55E00", "#CC79A7")

@@ -20,8 +20,8 @@ import pandas as pd
 from cornell_harness.evaluate import metrics
 from cornell_harness.evaluate.regions import REGION_PREFIX, nested_regions
 from cornell_harness.reports.images import png_data_uri, to_uint8
-from cornell_harness.reports.tables import (at_max_spp, bias_share_note, column_label, format_value, interval_note, is_finite,
-                            renderer_info, renderer_order)
+from cornell_harness.reports.numbers import bias_share_note, column_label, format_value, interval_note, is_finite
+from cornell_harness.reports.tables import at_max_spp, renderer_info, renderer_order
 
 #: Columns of a convergence experiment's summary that a section's table adds where the experiment has them.
 SECTION_SUMMARY_COLUMNS = ("slope_rmse_spp", "efficiency", "bias2_fraction")

@@ -28,7 +28,7 @@ import pandas as pd
 from markupsafe import Markup
 
 from cornell_harness.store.atomic import write_text_atomic
-from cornell_harness.reports.tables import is_missing
+from cornell_harness.reports.numbers import is_missing
 
 #: Badge class (from report.css) of each row status.
 _BADGE = {"pass": "ok", "fail": "failed", "error": "failed", "skipped": "skipped"}

@@ -25,7 +25,7 @@ from typing import Any, Sequence
 
 from cornell_harness.evaluate import registry
 from cornell_harness.reports.latex import escape
-from cornell_harness.reports.tables import parse_time_to
+from cornell_harness.reports.numbers import parse_time_to
 
 
 @dataclass(frozen=True)
