@@ -25,8 +25,8 @@ from tests.conftest import run_cbox
 from cornell_harness.adapters.registry import RendererEntry, missing_features, resolve
 from cornell_harness.evaluate.agreement import agreement_test
 from cornell_harness.evaluate.reference_fit import least_squares_constant
-from cornell_harness.scenes.analytic import (FLOOR_RHO, LIGHT_A, LIGHT_B, LIGHT_LE, furnace_scene, rectangle_light_image,
-                                     rectangle_light_scene)
+from cornell_harness.scenes.analytic import furnace_scene
+from cornell_harness.scenes.polygon_light import FLOOR_RHO, LIGHT_A, LIGHT_B, LIGHT_LE, rectangle_light_image, rectangle_light_scene
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.model import Camera, Diffuse, Mesh, Scene
 from cornell_harness.store.references import ReferenceError, load_reference

@@ -21,8 +21,7 @@ from tests import mutants
 from tests.renderers.test_pathtracer import z_crit
 from cornell_harness.adapters.registry import resolve
 from cornell_harness.adapters.settings import SettingsError
-from cornell_harness.scenes.analytic import (SPECTRAL_FURNACE_EMISSION, furnace_radiance, spectral_furnace_radiance,
-                                     spectral_furnace_scene)
+from cornell_harness.scenes.analytic import SPECTRAL_FURNACE_EMISSION, furnace_radiance, spectral_furnace_radiance, spectral_furnace_scene
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.model import Diffuse
 from cornell_harness.scenes.spectra import emission_rgb

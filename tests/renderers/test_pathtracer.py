@@ -18,7 +18,8 @@ from tests.conftest import CORNELL
 from cornell_harness.evaluate import metrics
 from cornell_harness.evaluate import noise as stats
 from cornell_harness.store.references import load_reference
-from cornell_harness.scenes.analytic import furnace_radiance, furnace_scene, rectangle_light_image, rectangle_light_scene
+from cornell_harness.scenes.analytic import furnace_radiance, furnace_scene
+from cornell_harness.scenes.polygon_light import rectangle_light_image, rectangle_light_scene
 from cornell_harness.scenes.loader import load_scene
 from cornell_harness.renderers.pathtracer import PathTracer
 

@@ -19,9 +19,8 @@ from cornell_harness.adapters.seeds import pass_key
 from cornell_harness.evaluate.convergence import loglog_slope
 import dataclasses
 
-from cornell_harness.scenes.analytic import (LIGHT_A, LIGHT_B, LIGHT_H, LIGHT_LE, MIRROR_LIGHT_H, furnace_radiance,
-                                     furnace_scene, mirrored_light_image, mirrored_light_scene, polygon_irradiance,
-                                     rectangle_light_scene)
+from cornell_harness.scenes.analytic import furnace_radiance, furnace_scene
+from cornell_harness.scenes.polygon_light import LIGHT_A, LIGHT_B, LIGHT_H, LIGHT_LE, MIRROR_LIGHT_H, mirrored_light_image, mirrored_light_scene, polygon_irradiance, rectangle_light_scene
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.model import Camera
 

@@ -36,8 +36,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import ROOT
-from cornell_harness.scenes.analytic import (FURNACE_GLASS_IOR, furnace_radiance, specular_furnace_camera_in_glass,
-                                     specular_furnace_coverage, specular_furnace_scene)
+from cornell_harness.scenes.analytic import FURNACE_GLASS_IOR, furnace_radiance, specular_furnace_camera_in_glass, specular_furnace_coverage, specular_furnace_scene
 from cornell_harness.scenes.loader import load_scene
 from cornell_harness.renderers.pathtracer import PathTracer
 from tests.renderers.test_pathtracer import tile_z, z_crit

@@ -23,7 +23,7 @@ from tests.renderers.test_ambient import rectangle_light_la
 from tests.renderers.test_pathtracer import z_crit
 from cornell_harness.evaluate.agreement import agreement_test
 from cornell_harness.evaluate.regions import region_masks
-from cornell_harness.scenes.analytic import FLOOR_RHO, rectangle_light_image, rectangle_light_scene
+from cornell_harness.scenes.polygon_light import FLOOR_RHO, rectangle_light_image, rectangle_light_scene
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.loader import load_scene
 from cornell_harness.scenes.model import Scene

@@ -12,8 +12,7 @@ import colour
 import numpy as np
 import pytest
 
-from cornell_harness.scenes.analytic import (SPECTRAL_FURNACE_ALBEDO, SPECTRAL_FURNACE_EMISSION, furnace_radiance,
-                                     spectral_furnace_radiance, spectral_furnace_scene)
+from cornell_harness.scenes.analytic import SPECTRAL_FURNACE_ALBEDO, SPECTRAL_FURNACE_EMISSION, furnace_radiance, spectral_furnace_radiance, spectral_furnace_scene
 from cornell_harness.scenes.spectra import ILLUMINANT_E, SCENE_LIGHT, Spectrum, emission_rgb, reflectance_rgb
 
 GRID = np.arange(360.0, 831.0)
