@@ -7,9 +7,9 @@ of its heap above the trim threshold. numpy's temporaries of a 256² image
 are 0.5-1.5 MB each, so scoring one allocates and frees dozens of them, and
 every one comes back from the kernel as fresh pages that it must zero and
 map again. In ``cbox compare-image``'s warm call that was 12-15 ms of 30
-(BENCHMARKS.md, issue 31), and whether a process paid it depended on what it
+(BENCHMARKS.md, compare-image), and whether a process paid it depended on what it
 had freed before. Our renderers' wavefront buffers (a few MB per work unit)
-paid the same: 7-10% of the path tracer's time per path (issue 34). Every
+paid the same: 7-10% of the path tracer's time per path (BENCHMARKS.md). Every
 ``cbox`` command sets the thresholds at its start (:func:`cornell_harness.cli.app.main`):
 the program's choice, never a library's, which a user may import into a
 process of their own. Raising both thresholds (``mallopt``, as the environment

@@ -1,4 +1,4 @@
-"""The CLI's options and remarks about time (issue 30): ``--time-repeats``, ``--time-basis``, and the one
+"""The CLI's options and remarks about time: ``--time-repeats``, ``--time-basis``, and the one
 warning line when the times were taken on a busy machine. How time is measured: docs/timing.md."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """What an approximation gets wrong per region: the bias of the region's mean radiance, the share of the
-reference's light it misses, each with its standard error; and the study's extra regions (issue 32).
+reference's light it misses, each with its standard error; and the study's extra regions (docs/whitted.md).
 
 The figures are read off the harness's own per-region metrics (results rows' ``region.<name>.<metric>``
 columns, :func:`cornell_harness.evaluate.regions.region_metrics`) and the reference's noise inside each region

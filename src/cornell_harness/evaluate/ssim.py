@@ -5,7 +5,7 @@ the pixels whose window lies inside the image (skimage crops the 3-pixel border,
 mode never counts), each channel's mean SSIM averaged.
 
 In plain numpy: skimage's module imports ``scipy.ndimage`` (~0.4 s), a third of what ``cbox compare-image``
-may cost (issue 31). tests/evaluate/test_ssim.py compares the two to rounding.
+may cost. tests/evaluate/test_ssim.py compares the two to rounding.
 """
 
 from __future__ import annotations

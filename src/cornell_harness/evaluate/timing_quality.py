@@ -35,7 +35,7 @@ TIMING_COLUMNS = ("cpu_time_s", "setup_s", "threads", "load_before", "load_after
 #: Runnable threads beyond the cores that count as contention: less is a passing process (a shell, a log
 #: rotation) caught by the load's few samples, not a competitor for the render's cores.
 LOAD_MARGIN = 0.5
-#: A calibration kernel this many times slower than the run's fastest says the machine was busy (issue 30: 20%).
+#: A calibration kernel this many times slower than the run's fastest says the machine was busy (docs/timing.md).
 SLOWDOWN_LIMIT = 1.2
 
 

@@ -1,5 +1,5 @@
 """Repeated timings of one render: their median and its 95% confidence interval, and the results columns
-that carry them (``--time-repeats K``, issue 30).
+that carry them (``--time-repeats K``; docs/timing.md).
 
 The rule (:func:`median_interval`): the reported time is the **sample median** of the K timings (robust to
 one stalled repeat); its interval is a **Student-t interval on log time**,

@@ -72,7 +72,7 @@ def write_error_map(folder: Path, score: ImageScore, target: Target, de: np.ndar
                                                                       target.reference.quantity), full=True)
     with atomic_path(path) as tmp:
         # A palette PNG of the colour map's 256 entries: the pixels delta_e_png gives, a third of the bytes to
-        # deflate (3 ms instead of 9 per 256², issue 31), at the fastest zlib level (optimize=True made the
+        # deflate (3 ms instead of 9 per 256²), at the fastest zlib level (optimize=True made the
         # map's write a tenth of the command's time).
         image = Image.fromarray(colormap_indices(de, *DELTA_E_RANGE))
         image.putpalette(TABLES[MAP_COLORMAPS["de"]].astype(np.uint8).tobytes())
@@ -91,7 +91,7 @@ def colormap_indices(values, vmin: float, vmax: float) -> np.ndarray:
 def write_compare_image_report(path: Path, target: Target, scores: Sequence[ImageScore], command: str) -> Path:
     """The HTML report of the scored images against ``target`` at ``path``; returns the path."""
     # Here, not at the top: the report's modules import pandas and SciPy's stats (seconds), which
-    # `cbox compare-image` without --report does not pay (issue 31: its cost within 3× idiff's).
+    # `cbox compare-image` without --report does not pay (its cost is held within 3× idiff's: BENCHMARKS.md).
     import pandas as pd
 
     from cornell_harness.store.provenance import provenance

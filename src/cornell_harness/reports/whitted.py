@@ -1,4 +1,4 @@
-"""The report section "Recursive ray tracing and its hacks" (issue 32): what the Whitted variants, and the other
+"""The report section "Recursive ray tracing and its hacks" (docs/whitted.md): what the Whitted variants, and the other
 approximations beside them, miss of the reference's light in each region of a scene.
 
 One row per renderer (the Whitted variants first), one column per region; a cell is the share of the

@@ -6,7 +6,7 @@
   and the path tracer's tests use it.
 - **Spectral furnace** (:func:`spectral_furnace_scene`, :func:`spectral_furnace_radiance`):
   the white furnace with a non-flat albedo spectrum ρ(λ) and an emission
-  spectrum L(λ) (issue 33's validation of spectral renderers): per
+  spectrum L(λ) (the closed form spectral renderers are checked against): per
   wavelength Le/(1-ρ), projected to linear sRGB as the scene model projects
   an emitter. Its RGB projection is an ordinary scene, whose RGB answer
   differs from the spectral one: the error of rendering it in RGB.

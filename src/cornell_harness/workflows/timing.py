@@ -1,6 +1,6 @@
 """What a timed render records beside its wall time: the machine's load, a calibration kernel, the CPU time.
 
-Issue 30: one wall-clock sample per cell cannot tell a slow renderer from a
+One wall-clock sample per cell cannot tell a slow renderer from a
 busy machine. :func:`measure` runs a render between two readings of the
 machine and returns :class:`Timing`, which becomes the results columns of
 :data:`cornell_harness.evaluate.timing_quality.TIMING_COLUMNS` (the verdict on them
@@ -22,7 +22,7 @@ lives there):
   machine its time changes only when something else holds the core; a
   pure-Python loop (no memory traffic, no library threads) loses time in
   proportion to the share of a core it loses. Measured on the 2-core
-  development machine (a virtual machine, issue 30): quiet, median 21.6 ms,
+  development machine (a virtual machine; docs/timing.md): quiet, median 21.6 ms,
   but one kernel in ten takes 1.5x that (a neighbour's burst, a stolen
   tick); beside two CPU burners, median 28-47 ms. (Shorter kernels, 1-4 ms,
   whose median over repeats was tried, mostly run between two preemptions
