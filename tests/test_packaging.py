@@ -43,7 +43,10 @@ def venv(tmp_path_factory, wheel) -> Path:
     py = root / "bin" / "python"
     purelib = _run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"]).stdout.strip()
     (Path(purelib) / "cbox_test_deps.pth").write_text("\n".join(site.getsitepackages()) + "\n")
-    proc = _run([str(py), "-m", "pip", "install", "--no-deps", "-q", str(wheel)])
+    # Without PYTHONPATH: a checkout's src/ on it holds the build's egg-info, which pip takes for an installed
+    # cornell-harness and so skips the wheel.
+    proc = _run([str(py), "-m", "pip", "install", "--no-deps", "-q", str(wheel)],
+                env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
     assert proc.returncode == 0, proc.stderr
     return root
 
