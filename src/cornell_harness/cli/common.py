@@ -94,9 +94,10 @@ SetOpt = typer.Option(None, "--set", metavar="KEY=VALUE", help=(
     "camera.resolution=64,64 (a comma list is an array). The result is a derived scene, named after its "
     "overrides, with its own content hash and its own reference (cbox reference build ... --set ...)."))
 HomeOpt = typer.Option(None, "--home", metavar="DIR", help=(
-    "The user store: where references built for the stored scenes (and for --set) and recorded verdicts are "
-    "kept, the package's stored references staying read-only. Default: $CBOX_HOME, else the platform's user "
-    "data folder (cbox --version shows it)."))
+    "The user store: where what is built or recorded for the stored scenes is kept (references of their --set "
+    "variants, verdicts of cbox reference verify), the package's own files staying read-only; a scene file of "
+    "yours keeps these beside it. Default: $CBOX_HOME, else the platform's user data folder (cbox --version "
+    "shows it)."))
 
 # Where a command's independent units of work run (cornell_harness.workflows.executor): here by default.
 WorkersOpt = typer.Option(None, "--workers", min=1, metavar="N",

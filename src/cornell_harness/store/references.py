@@ -72,7 +72,7 @@ USER_REFERENCES = "references"
 VERDICTS_FILE = "verdicts.json"
 #: The spp ``cbox reference build`` is suggested with when no earlier build says better.
 DEFAULT_SPP = 16384
-#: Where a reference's provenance keeps the verdicts of ``cbox reference verify``, one per engine.
+#: Where a reference's provenance keeps the verdicts of ``cbox reference verify`` it ships with, one per engine.
 VERIFIED_KEY = "verified"
 
 
