@@ -50,6 +50,24 @@ emitter = { radiance = [10, 10, 10] }
 """
 
 
+@pytest.fixture(scope="session", autouse=True)
+def session_user_store(tmp_path_factory):
+    """The user store (``$CBOX_HOME``) of module fixtures, which set up before :func:`user_store`: a temporary
+    folder, never the user's own, whatever a test builds or records."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("CBOX_HOME", str(tmp_path_factory.mktemp("cbox-home-session")))
+        yield
+
+
+@pytest.fixture(autouse=True)
+def user_store(tmp_path_factory, monkeypatch) -> Path:
+    """Each test's own empty user store (``$CBOX_HOME``, inherited by the commands it runs): what it builds or
+    records never reaches the user's store or another test's."""
+    home = tmp_path_factory.mktemp("cbox-home")
+    monkeypatch.setenv("CBOX_HOME", str(home))
+    return home
+
+
 @pytest.fixture
 def write_scene(tmp_path):
     """Write a scene text to tmp_path/scene.toml and return its path."""

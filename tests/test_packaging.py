@@ -10,6 +10,8 @@ import comes from the wheel. Commands run from an empty folder.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import site
 import subprocess
@@ -43,7 +45,10 @@ def venv(tmp_path_factory, wheel) -> Path:
     py = root / "bin" / "python"
     purelib = _run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"]).stdout.strip()
     (Path(purelib) / "cbox_test_deps.pth").write_text("\n".join(site.getsitepackages()) + "\n")
-    proc = _run([str(py), "-m", "pip", "install", "--no-deps", "-q", str(wheel)])
+    # Without PYTHONPATH: a checkout's src/ on it holds the build's egg-info, which pip takes for an installed
+    # cornell-harness and so skips the wheel.
+    proc = _run([str(py), "-m", "pip", "install", "--no-deps", "-q", str(wheel)],
+                env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
     assert proc.returncode == 0, proc.stderr
     return root
 
@@ -88,3 +93,47 @@ def test_installed_wheel_runs_the_demo_to_a_report(venv, tmp_path):
                 timeout=1800)
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "out" / "report.html").exists()
+
+
+def _tree(folder: Path) -> dict[str, tuple[str, int, int]]:
+    """Every file under ``folder``: content digest, size and mtime."""
+    return {p.relative_to(folder).as_posix(): (hashlib.sha256(p.read_bytes()).hexdigest(), p.stat().st_size,
+                                               p.stat().st_mtime_ns)
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_installed_wheel_builds_and_records_into_the_user_store_never_into_the_package(venv, tmp_path):
+    """``reference build --set`` and ``reference verify`` from the wheel, its package made read-only: what they
+    make lands in the user store ($CBOX_HOME). Root writes through a read-only mode, so the test also checks
+    that no file of the installed package was added, removed or changed (content and mtime)."""
+    cbox, env, home = venv / "bin" / "cbox", _clean_env(tmp_path), tmp_path / "home"
+    env["CBOX_HOME"] = str(home)
+    where = _run([str(venv / "bin" / "python"), "-c", "import cornell_harness; print(cornell_harness.__file__)"],
+                 cwd=tmp_path, env=env)
+    package = Path(where.stdout.strip()).parent
+    assert package.is_relative_to(venv), where.stdout + where.stderr
+    assert (package / "references" / "cornell-box" / "provenance.json").exists()
+    before = _tree(package)
+    assert _run(["chmod", "-R", "a-w", str(package)]).returncode == 0
+    try:
+        build = _run([str(cbox), "reference", "build", "--scene", "cornell-box", "--set", "camera.resolution=16,16",
+                      "--spp", "4", "--batches", "2"], cwd=tmp_path, env=env)
+        verify = _run([str(cbox), "reference", "verify", "--scene", "cornell-box", "--engine", "mitsuba", "--spp", "4",
+                       "--batches", "2"], cwd=tmp_path, env=env)
+        listing = _run([str(cbox), "scenes"], cwd=tmp_path, env=env)
+        version = _run([str(cbox), "--version"], cwd=tmp_path, env=env)
+    finally:
+        _run(["chmod", "-R", "u+w", str(package)])
+    assert build.returncode == 0, build.stderr
+    mine = home / "references" / "cornell-box"
+    (derived,) = (mine / "derived").iterdir()
+    assert f"wrote {derived} " in build.stdout
+    assert sorted(p.name for p in derived.iterdir()) == ["noise.exr", "provenance.json", "reference.exr",
+                                                         "variance.exr"]
+    assert verify.returncode in (0, 1) and "the engines" in verify.stdout, verify.stderr  # a verdict, either way
+    assert f"recorded in {mine / 'verdicts.json'} under mitsuba" in verify.stdout
+    assert "mitsuba" in json.loads((mine / "verdicts.json").read_text())
+    assert listing.stdout.startswith(f"user store: {home} (from $CBOX_HOME)\n"), listing.stdout
+    assert "recorded (user store): " in listing.stdout and "mitsuba" in listing.stdout
+    assert version.stdout.splitlines()[1] == f"user store: {home} (from $CBOX_HOME)", version.stdout
+    assert _tree(package) == before

@@ -222,11 +222,12 @@ def test_converge_help_states_the_spp_grammar():
         parse_spp_list(example.rstrip(".,"))  # every example the help gives is accepted
 
 
-def test_version_is_one_line(capsys):
+def test_version_is_one_line_then_the_user_store(capsys, user_store):
     code, out, err = cbox(capsys, "--version")
     assert code == 0 and err == ""
-    (line,) = out.splitlines()
+    line, home = out.splitlines()
     assert re.fullmatch(r"cbox \d+\.\d+\S* \(Python 3\.\d+\.\d+, Mitsuba \S+, NumPy \S+, .*\)", line), line
+    assert home == f"user store: {user_store} (from $CBOX_HOME)"
 
 
 def test_scenes_json_has_paths_and_nested_objects(capsys):

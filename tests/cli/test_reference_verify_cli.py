@@ -1,80 +1,86 @@
 """``cbox reference verify``: the table, the exit code, the recorded verdict, ``cbox scenes`` and the report page.
 
-The stored cornell-box is copied into a temporary references folder (``CBOX_REFERENCES``), so the recorded
-verdict never touches the repository's provenance.
+The verdict is recorded in the test's own user store (``$CBOX_HOME``, tests/conftest.py's ``user_store``),
+never in the package's stored reference, whose files each test checks are unchanged.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 
-import pytest
-
+from cornell_harness.store.references import VERDICTS_FILE, verdict_line
 from tests.conftest import ROOT
 
 STORED = ROOT / "src" / "cornell_harness" / "references" / "cornell-box"
 
 
-@pytest.fixture
-def references(tmp_path):
-    """A copy of the stored cornell-box without the verdicts its provenance carries: each test starts unverified."""
-    root = tmp_path / "refs"
-    shutil.copytree(STORED, root / "cornell-box")
-    path = root / "cornell-box" / "provenance.json"
-    prov = json.loads(path.read_text())
-    prov.pop("verified", None)
-    path.write_text(json.dumps(prov, indent=1) + "\n")
-    return root
+def _package_files() -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in STORED.iterdir()}
 
 
-def _cbox(references, *args: str) -> subprocess.CompletedProcess:
-    env = {**os.environ, "CBOX_REFERENCES": str(references)}
+def _cbox(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "cornell_harness", *args], capture_output=True, text=True, timeout=600,
-                          cwd=ROOT, env=env)
+                          cwd=ROOT, env=dict(os.environ))
 
 
-def test_mitsuba_at_other_seeds_agrees_and_the_verdict_is_recorded_and_listed(references, tmp_path):
-    stored = (STORED / "provenance.json").read_bytes()
-    assert "not verified" in _cbox(references, "scenes").stdout
-    proc = _cbox(references, "reference", "verify", "--scene", "cornell-box", "--engine", "mitsuba", "--spp", "64",
+def test_mitsuba_at_other_seeds_agrees_and_the_verdict_is_recorded_and_listed(user_store, tmp_path):
+    stored = _package_files()
+    before = _cbox("scenes")
+    assert f"user store: {user_store} (from $CBOX_HOME)" == before.stdout.splitlines()[0]
+    assert "recorded (user store)" not in before.stdout
+    proc = _cbox("reference", "verify", "--scene", "cornell-box", "--engine", "mitsuba", "--spp", "64",
                  "--batches", "4", "--report", str(tmp_path / "rep"))
     assert proc.returncode == 0, proc.stderr + proc.stdout
     for region in ("whole image", "walls", "boxes", "floor", "light", "back-edge"):
         assert f"\n  {region} " in proc.stdout, region
     assert "the engines agree" in proc.stdout and "χ²" in proc.stdout and "per-pixel z: sd" in proc.stdout
-    prov = json.loads((references / "cornell-box" / "provenance.json").read_text())
-    rec = prov["verified"]["mitsuba"]
+    recorded = user_store / "references" / "cornell-box" / VERDICTS_FILE
+    assert f"recorded in {recorded} under mitsuba" in proc.stdout
+    rec = json.loads(recorded.read_text())["mitsuba"]
     assert rec["passed"] and rec["spp"] == 64 and rec["batches"] == 4 and len(rec["regions"]) == 6
     assert rec["command"].endswith("--report " + str(tmp_path / "rep"))
-    assert (STORED / "provenance.json").read_bytes() == stored  # the repository's reference untouched
+    assert rec["reference_digest"].startswith("sha256:")
+    assert _package_files() == stored  # the package's reference untouched
     page = (tmp_path / "rep" / "reference-verify-cornell-box.html").read_text()
     assert page.count("<img ") == 3 and "back-edge" in page and "agree" in page
-    listing = _cbox(references, "scenes")
+    listing = _cbox("scenes")
     assert listing.returncode == 0, listing.stderr
-    assert f"reference: verified by mitsuba: max |z| {rec['max_abs_z']:.1f} (6 regions, 64 spp)" in listing.stdout
-    entry = json.loads(_cbox(references, "scenes", "--json").stdout)[0]
-    assert entry["reference"]["verified"]["mitsuba"]["passed"] is True
+    line = f"recorded (user store): verified by mitsuba: max |z| {rec['max_abs_z']:.1f} (6 regions, 64 spp)"
+    assert line in listing.stdout
+    # The stored verdicts are shown as before, on their own line.
+    shipped = json.loads(stored["provenance.json"])["verified"]
+    assert f"reference: {verdict_line(shipped)}" in listing.stdout and "luxcore" in shipped
+    entry = json.loads(_cbox("scenes", "--json").stdout)[0]
+    assert entry["user_folder"] == str(user_store / "references" / "cornell-box")
+    assert entry["reference"]["recorded"]["mitsuba"]["passed"] is True
+    assert set(entry["reference"]["verified"]) == set(shipped) and not entry["reference"]["in_user_store"]
 
 
-def test_a_one_percent_darker_engine_exits_1_and_no_record_leaves_the_provenance(references):
-    before = (references / "cornell-box" / "provenance.json").read_bytes()
-    proc = _cbox(references, "reference", "verify", "--scene", "cornell-box", "--engine",
-                 "tests.user_renderers:Biased1Percent", "--spp", "64", "--batches", "1", "--no-record")
+def test_a_one_percent_darker_engine_exits_1_and_no_record_writes_nothing(user_store, tmp_path):
+    stored = _package_files()
+    other = tmp_path / "other-home"
+    proc = _cbox("reference", "verify", "--scene", "cornell-box", "--engine", "tests.user_renderers:Biased1Percent",
+                 "--spp", "64", "--batches", "1", "--no-record", "--home", str(other))
     assert proc.returncode == 1, proc.stderr + proc.stdout
     assert "the engines DISAGREE" in proc.stdout and " * " in proc.stdout  # a failing row is starred
-    assert (references / "cornell-box" / "provenance.json").read_bytes() == before
-    assert "reference: not verified" in _cbox(references, "scenes").stdout
+    assert _package_files() == stored and not other.exists() and not any(user_store.iterdir())
+    recorded = _cbox("reference", "verify", "--scene", "cornell-box", "--engine",
+                     "tests.user_renderers:Biased1Percent", "--spp", "64", "--batches", "1", "--home", str(other))
+    assert recorded.returncode == 1 and (other / "references" / "cornell-box" / VERDICTS_FILE).exists()
+    assert _package_files() == stored and not any(user_store.iterdir())  # --home, not $CBOX_HOME
+    listing = _cbox("scenes", "--home", str(other))
+    assert "recorded (user store): DISAGREES with biased-1pct" in listing.stdout, listing.stdout
+    assert "recorded (user store)" not in _cbox("scenes").stdout
 
 
-def test_bad_options_are_refused_before_rendering(references):
-    proc = _cbox(references, "reference", "verify", "--scene", "cornell-box", "--engine", "mitsuba", "--spp", "10",
+def test_bad_options_are_refused_before_rendering():
+    proc = _cbox("reference", "verify", "--scene", "cornell-box", "--engine", "mitsuba", "--spp", "10",
                  "--batches", "4")
     assert proc.returncode == 2 and "multiple of --batches" in proc.stderr
-    proc = _cbox(references, "reference", "verify", "--scene", "cornell-box", "--engine",
+    proc = _cbox("reference", "verify", "--scene", "cornell-box", "--engine",
                  "tests.user_renderers:SeededNoise", "--spp", "4", "--batches", "1")
     assert proc.returncode != 0 and "reports no variance" in proc.stderr and "Traceback" not in proc.stderr
 
@@ -83,6 +89,6 @@ def test_help_explains_each_option():
     proc = subprocess.run([sys.executable, "-m", "cornell_harness", "reference", "verify", "--help"], capture_output=True,
                           text=True, timeout=120, cwd=ROOT, env={**os.environ, "COLUMNS": "200"})
     assert proc.returncode == 0
-    for option in ("--scene", "--engine", "--spp", "--batches", "--workers", "--record", "--report", "--set"):
+    for option in ("--scene", "--engine", "--spp", "--batches", "--workers", "--record", "--report", "--set", "--home"):
         assert option in proc.stdout, option
     assert "Šidák" in proc.stdout and "Exits 1" in proc.stdout

@@ -15,7 +15,8 @@ import pytest
 from cornell_harness.adapters.registry import resolve
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.loader import load_scene
-from cornell_harness.store.references import REFERENCE_SEED_BASE, VERIFIED_KEY, load_reference, record_verdict, verdict_line
+from cornell_harness.store.references import (PROVENANCE_FILE, REFERENCE_SEED_BASE, VERDICTS_FILE, load_reference,
+                                              record_verdict, recorded_verdicts, verdict_line)
 from cornell_harness.workflows.reference_build import build_reference
 from cornell_harness.evaluate.reference_agreement import reference_agreement
 from cornell_harness.evaluate.regions import region_masks
@@ -37,13 +38,17 @@ def test_an_independent_render_of_the_same_scene_passes_and_the_verdict_keeps_th
     assert v.agreement.passed, v.agreement.message()
     assert v.record["seeds"] == [VERIFY_SEED_BASE, VERIFY_SEED_BASE + 3]  # none of the reference's seeds
     assert VERIFY_SEED_BASE > REFERENCE_SEED_BASE + ref.provenance["batches"]
-    prov = record_verdict(ref.folder, v.record)
+    provenance = (tmp_path / PROVENANCE_FILE).read_bytes()
+    # A scene file of the user's own: the verdict goes beside its reference, whose files are not touched.
+    assert record_verdict(ref.folder, v.record) == tmp_path / VERDICTS_FILE
+    assert (tmp_path / PROVENANCE_FILE).read_bytes() == provenance
     again = load_reference(scene)  # still valid: same scene hash, same images
     np.testing.assert_array_equal(again.image, ref.image)
-    assert again.provenance == prov and json.loads((tmp_path / "provenance.json").read_text()) == prov
-    rec = prov[VERIFIED_KEY]["seeded-noise"]
+    recorded = recorded_verdicts(ref.folder)
+    rec = recorded["seeded-noise"]
     assert rec["passed"] and rec["spp"] == 64 and rec["engine"] == "seeded-noise" and "command" in rec
-    assert verdict_line(prov) == f"verified by seeded-noise: max |z| {rec['max_abs_z']:.1f} (1 region, 64 spp)"
+    assert json.loads((tmp_path / VERDICTS_FILE).read_text()) == recorded
+    assert verdict_line(recorded) == f"verified by seeded-noise: max |z| {rec['max_abs_z']:.1f} (1 region, 64 spp)"
     assert verdict_line({}) == "not verified"
 
 
@@ -53,9 +58,21 @@ def test_a_second_engine_adds_its_verdict_beside_the_first(write_scene):
     ref = build_reference(scene, spp=8, batches=2, entry=engine)
     v = verify_reference(scene, ref, engine, spp=8, batches=2)
     record_verdict(ref.folder, {**v.record, "engine": "first"})
-    prov = record_verdict(ref.folder, {**v.record, "engine": "second", "passed": False})
-    assert list(prov[VERIFIED_KEY]) == ["first", "second"]
-    assert "verified by first" in verdict_line(prov) and "DISAGREES with second" in verdict_line(prov)
+    record_verdict(ref.folder, {**v.record, "engine": "second", "passed": False})
+    recorded = recorded_verdicts(ref.folder)
+    assert list(recorded) == ["first", "second"]
+    assert "verified by first" in verdict_line(recorded) and "DISAGREES with second" in verdict_line(recorded)
+
+
+def test_a_rebuilt_reference_shows_no_verdict_recorded_on_its_old_images(write_scene):
+    scene = load_scene(write_scene())
+    engine = _entry("tests.user_renderers:SeededNoise")
+    ref = build_reference(scene, spp=8, batches=2, entry=engine)
+    record_verdict(ref.folder, verify_reference(scene, ref, engine, spp=8, batches=2).record)
+    assert list(recorded_verdicts(ref.folder)) == ["seeded-noise"]
+    build_reference(scene, spp=8, batches=4, entry=engine)  # other seeds, other images
+    assert recorded_verdicts(ref.folder) == {}
+    assert "seeded-noise" in json.loads((ref.folder / VERDICTS_FILE).read_text())  # kept, but not shown
 
 
 def test_one_batch_takes_the_engines_own_variance_and_is_refused_without_one(write_scene):

@@ -93,6 +93,11 @@ SetOpt = typer.Option(None, "--set", metavar="KEY=VALUE", help=(
     "Override a value of the scene file (repeatable), by its TOML path: --set render.max_depth=3 --set "
     "camera.resolution=64,64 (a comma list is an array). The result is a derived scene, named after its "
     "overrides, with its own content hash and its own reference (cbox reference build ... --set ...)."))
+HomeOpt = typer.Option(None, "--home", metavar="DIR", help=(
+    "The user store: where what is built or recorded for the stored scenes is kept (references of their --set "
+    "variants, verdicts of cbox reference verify), the package's own files staying read-only; a scene file of "
+    "yours keeps these beside it. Default: $CBOX_HOME, else the platform's user data folder (cbox --version "
+    "shows it)."))
 
 # Where a command's independent units of work run (cornell_harness.workflows.executor): here by default.
 WorkersOpt = typer.Option(None, "--workers", min=1, metavar="N",
@@ -255,9 +260,17 @@ def version_line() -> str:
     return f"cbox {of('cornell-harness')} (Python {platform.python_version()}, {keys})"
 
 
+def home_line(home: Path | None = None) -> str:
+    """``user store: DIR (from $CBOX_HOME)``: where what users build or record goes (cornell_harness.store.home)."""
+    from cornell_harness.store.home import home_source, user_home
+
+    return f"user store: {user_home(home)} (from {home_source(home)})"
+
+
 def _show_version(ctx: typer.Context, value: bool) -> None:
     if value and not ctx.resilient_parsing:
         typer.echo(version_line())
+        typer.echo(home_line())
         raise typer.Exit()
 
 
@@ -266,7 +279,8 @@ def _everywhere(
     quiet: bool = QuietOpt,
     verbose: bool = VerboseOpt,
     version: bool = typer.Option(False, "--version", callback=_show_version, is_eager=True, expose_value=False,
-                                 help="Print the version of cbox and of the packages that decide its results."),
+                                 help="Print the version of cbox and of the packages that decide its results, then "
+                                      "the user store's folder."),
 ) -> None:
     """The options before any command: ``cbox -q converge ...``, ``cbox --version``."""
 

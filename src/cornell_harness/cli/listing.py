@@ -10,23 +10,25 @@ import typer
 from cornell_harness.adapters.api import attribute
 from cornell_harness.adapters.registry import quantities_of, resolve
 from cornell_harness.adapters.settings import declared, describe
-from cornell_harness.cli.common import RendererFilesOpt, app, print_json
+from cornell_harness.cli.common import HomeOpt, RendererFilesOpt, app, home_line, print_json
 from cornell_harness.scenes.library import references_root, resolve_scene, scene_names
 from cornell_harness.scenes.model import FEATURES, SceneError
-from cornell_harness.store.references import VERIFIED_KEY, ReferenceError, load_reference, verdict_line
+from cornell_harness.store.references import (ReferenceError, load_reference, recorded_verdicts, stored_verdicts,
+                                               user_folder, verdict_line)
 
 
 JsonOpt = typer.Option(False, "--json", help="Print a JSON array of objects on stdout instead of the text.")
 
 
 @app.command()
-def scenes(as_json: bool = JsonOpt) -> None:
-    """List the stored scenes: file, size, what is computed, features, named regions, reference and its verdicts
-    (`cbox reference verify`)."""
-    listing = [_scene_entry(name) for name in scene_names()]
+def scenes(as_json: bool = JsonOpt, home: Optional[Path] = HomeOpt) -> None:
+    """List the stored scenes: file, size, what is computed, features, named regions, reference and its verdicts:
+    those it ships with and those `cbox reference verify` recorded in the user store (--home)."""
+    listing = [_scene_entry(name, home) for name in scene_names()]
     if as_json:
         print_json(listing)
         return
+    typer.echo(home_line(home))
     w = max((len(s["name"]) for s in listing), default=0)
     for s in listing:
         if s["error"]:
@@ -39,27 +41,38 @@ def scenes(as_json: bool = JsonOpt) -> None:
                 f"ambient_occlusion ({ao['weighting']}, max_distance={ao['max_distance']:g}, {ao['normal']} normal, "
                 f"miss={ao['miss_value']:g})")
         ref = s["reference"]
-        status = f"reference {ref['spp']} spp" if ref else f"no usable reference ({s['reference_problem']})"
+        status = (f"reference {ref['spp']} spp{' (user store)' if ref['in_user_store'] else ''}" if ref else
+                  f"no usable reference ({s['reference_problem']})")
         typer.echo(f"{s['name']:{w}s} {s['width']}x{s['height']}  {what}  {status}")
         typer.echo(f"{'':{w}s} features: {', '.join(s['features'])}")
         if s["regions"]:
             typer.echo(f"{'':{w}s} regions: {', '.join(s['regions'])}")
         if ref:
             typer.echo(f"{'':{w}s} reference: {ref['verdict']}")
+        if ref and ref["recorded"]:
+            typer.echo(f"{'':{w}s} recorded (user store): {ref['recorded_verdict']}")
         typer.echo(f"{'':{w}s} file: {s['path']}")
 
 
-def _scene_entry(name: str) -> dict:
-    """What ``cbox scenes`` says of one stored scene, as plain data (its text and its JSON)."""
-    entry: dict = {"name": name, "path": _shown(references_root() / name / "scene.toml"), "error": None}
+def _scene_entry(name: str, home: Path | None = None) -> dict:
+    """What ``cbox scenes`` says of one stored scene, as plain data (its text and its JSON).
+
+    ``verified`` are the verdicts the reference ships with (its provenance), ``recorded`` those recorded in the
+    user store (``user_folder``) on the same images; an engine can have one of each."""
+    folder = references_root() / name
+    entry: dict = {"name": name, "path": _shown(folder / "scene.toml"), "user_folder": _shown(user_folder(folder, home)),
+                   "error": None}
     try:
         scene = resolve_scene(name)
     except SceneError as e:
         return {**entry, "error": str(e)}
     try:
-        ref = load_reference(scene)
+        ref = load_reference(scene, home=home)
+        stored, recorded = stored_verdicts(ref.provenance), recorded_verdicts(ref.folder, home)
         reference, problem = {"spp": ref.spp, "renderer_version": ref.provenance.get("renderer_version"),
-                              "verdict": verdict_line(ref.provenance), "verified": _verdicts(ref.provenance)}, None
+                              "folder": _shown(ref.folder), "in_user_store": ref.folder.resolve() != folder.resolve(),
+                              "verdict": verdict_line(stored), "verified": _verdicts(stored),
+                              "recorded_verdict": verdict_line(recorded), "recorded": _verdicts(recorded)}, None
     except ReferenceError as e:
         reference, problem = None, str(e).split(";")[0].split(": ", 1)[-1]
     ao = scene.ambient_occlusion
@@ -71,12 +84,10 @@ def _scene_entry(name: str) -> dict:
             "reference": reference, "reference_problem": problem}
 
 
-def _verdicts(provenance: dict) -> dict:
-    """Each engine's recorded verdict in brief (``cbox reference verify``): passed, max |z|, regions, spp."""
-    verified = provenance.get(VERIFIED_KEY)
+def _verdicts(verified: dict) -> dict:
+    """Each engine's verdict in brief (``cbox reference verify``): passed, max |z|, regions, spp."""
     return {engine: {k: r.get(k) for k in ("passed", "max_abs_z", "chi2", "dof", "chi2_p", "spp", "date")}
-            | {"regions": len(r.get("regions", {}))}
-            for engine, r in (verified.items() if isinstance(verified, dict) else ())}
+            | {"regions": len(r.get("regions", {}))} for engine, r in verified.items()}
 
 
 def _shown(path: Path) -> str:

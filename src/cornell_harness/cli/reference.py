@@ -9,11 +9,12 @@ from typing import List, Optional
 import typer
 
 from cornell_harness.adapters.registry import RendererError, resolve
-from cornell_harness.cli.common import (REFERENCE_RENDERER, DashboardOpt, SceneOpt, SchedulerOpt, SetOpt, WorkersOpt,
-                                check_output_folder, executor_for, reference_app)
+from cornell_harness.cli.common import (REFERENCE_RENDERER, DashboardOpt, HomeOpt, SceneOpt, SchedulerOpt, SetOpt,
+                                        WorkersOpt, check_output_folder, executor_for, reference_app)
 from cornell_harness.cli.output import Progress
 from cornell_harness.scenes.library import resolve_scene
-from cornell_harness.store.references import load_reference
+from cornell_harness.scenes.model import Scene
+from cornell_harness.store.references import ReferenceError, load_reference, reference_folder, reference_folders
 # Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
 # a misspelt config, or `cbox --help`, must answer in a second.
 
@@ -27,16 +28,20 @@ def reference_build(
     workers: Optional[int] = WorkersOpt,
     scheduler: Optional[str] = SchedulerOpt,
     dashboard: Optional[str] = DashboardOpt,
+    home: Optional[Path] = HomeOpt,
 ) -> None:
-    """Render the scene's reference with Mitsuba and store image, variance and provenance beside the scene.
+    """Render the scene's reference with Mitsuba and store image, variance and provenance.
 
-    With --set, the derived scene's reference goes to derived/<content hash>/ beside the scene; the
-    scene's own reference is left as it is. With --workers or --scheduler the batches render on a Dask
-    cluster and are combined here in batch order: the same reference as a build in this process.
+    A scene file of yours keeps its reference beside it; a stored scene's goes to the user store (--home),
+    the package's stored references staying read-only. With --set, the derived scene's reference goes to
+    derived/<content hash>/ there; the scene's own reference is left as it is. With --workers or --scheduler
+    the batches render on a Dask cluster and are combined here in batch order: the same reference as a build
+    in this process.
     """
     sc = resolve_scene(scene, overrides)
     if spp % batches:
         raise typer.BadParameter(f"--spp ({spp}) must be a multiple of --batches ({batches})")
+    _refuse_shadowed_build(sc, home)
     from cornell_harness.workflows.reference_build import build_reference
 
     (entry,) = resolve([REFERENCE_RENDERER])
@@ -45,15 +50,32 @@ def reference_build(
     with executor_for(workers, scheduler, dashboard) as executor, \
             Progress(batches + 1, f"reference {sc.name}", "batch", slots=executor.slots) as bar:  # +1: the noise image
         bar.start(f"{spp // batches} spp per batch")
-        ref = build_reference(sc, spp, batches, entry, executor=executor,
+        ref = build_reference(sc, spp, batches, entry, folder=reference_folder(sc, home), executor=executor,
                               progress=lambda done, total, label: bar.advance(label))
     typer.echo(f"wrote {ref.folder} ({spp} spp in {ref.provenance['wall_time_s']:.0f} s, {ref.provenance['renderer_version']})")
 
 
+def _refuse_shadowed_build(scene: Scene, home: Path | None) -> None:
+    """Stop a build no command would read: the package's stored reference of ``scene`` is valid, and read first."""
+    stored, built = reference_folders(scene, home)[0], reference_folder(scene, home)
+    if stored == built:
+        return
+    try:
+        ref = load_reference(scene, folder=stored)
+    except ReferenceError:
+        return  # none, or stale: the build is the one read
+    raise ReferenceError(
+        f"{stored}: the stored reference of {scene.name} ({ref.spp} spp) is valid for the scene and is the one "
+        f"every command reads, so a build into {built} would never be read; build a variant with --set, or a "
+        "copy of the scene's folder by its path")
+
+
 @reference_app.command("show")
-def reference_show(scene: str = SceneOpt, overrides: Optional[List[str]] = SetOpt) -> None:
-    """Print the provenance of a scene's stored reference (refused if the scene changed)."""
-    ref = load_reference(resolve_scene(scene, overrides))
+def reference_show(scene: str = SceneOpt, overrides: Optional[List[str]] = SetOpt,
+                   home: Optional[Path] = HomeOpt) -> None:
+    """Print the provenance of a scene's reference: the stored one, else the user store's (refused if the scene
+    changed)."""
+    ref = load_reference(resolve_scene(scene, overrides), home=home)
     typer.echo(json.dumps(ref.provenance, indent=1))
 
 
@@ -75,11 +97,12 @@ def reference_verify(
     scheduler: Optional[str] = SchedulerOpt,
     dashboard: Optional[str] = DashboardOpt,
     record: bool = typer.Option(True, "--record/--no-record", help=(
-        "Write the verdict into the reference's provenance.json under verified.<engine> (default), or only "
-        "print it.")),
+        "Record the verdict in the user store (--home), in verdicts.json of the reference's folder there, "
+        "under its engine (default), or only print it. The reference's own files are never written.")),
     report: Optional[Path] = typer.Option(None, "--report", metavar="DIR", help=(
         "Also write DIR/reference-verify-<scene>.html: the two engines' images, the per-pixel |z| map and the "
         "per-region table.")),
+    home: Optional[Path] = HomeOpt,
 ) -> None:
     """Render the scene with a second engine and compare it with the stored reference, region by region.
 
@@ -94,7 +117,7 @@ def reference_verify(
     if report is not None:
         check_output_folder(report, "--report")
     sc = resolve_scene(scene, overrides)
-    ref = load_reference(sc)  # refused (with the build command) before anything renders
+    ref = load_reference(sc, home=home)  # refused (with the build command) before anything renders
     (entry,) = resolve([engine])
     if not entry.available:
         raise RendererError(f"engine {entry.name!r} is unavailable: {entry.reason}")
@@ -116,8 +139,8 @@ def reference_verify(
                f"{a.pixel_z_tail:.2%} beyond |z| 3 (0.27% for normal z; reported, not judged)")
     typer.echo(a.message())
     if record:
-        record_verdict(ref.folder, result.record)
-        typer.echo(f"recorded in {ref.folder / 'provenance.json'} under verified.{result.record['engine']}")
+        path = record_verdict(ref.folder, result.record, home)
+        typer.echo(f"recorded in {path} under {result.record['engine']}")
     if report is not None:
         from cornell_harness.reports.reference_verify import write_verify_page
 

@@ -1,6 +1,8 @@
 """The stored scenes: ``src/cornell_harness/references/<name>/scene.toml``, found by name.
 
-A stored scene's folder also holds its reference (:mod:`cornell_harness.store.references`).
+A stored scene's folder also holds its reference (:mod:`cornell_harness.store.references`). The folder is
+read-only package data: what is built or recorded for its scenes goes to the user store
+(:mod:`cornell_harness.store.home`).
 """
 
 from __future__ import annotations
@@ -15,7 +17,8 @@ from cornell_harness.suggest import did_you_mean
 
 
 def references_root() -> Path:
-    """Folder of stored scenes and references: ``$CBOX_REFERENCES``, else ``src/cornell_harness/references/``, shipped in the package."""
+    """Folder of stored scenes and references, read only: ``$CBOX_REFERENCES``, else
+    ``src/cornell_harness/references/``, shipped in the package."""
     env = os.environ.get("CBOX_REFERENCES")
     return Path(env) if env else Path(__file__).resolve().parents[1] / "references"
 

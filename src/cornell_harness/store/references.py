@@ -13,15 +13,30 @@
   match real renders where a Gaussian model would not;
 - ``provenance.json``: renderer, version, variant, spp, seeds, wall time, the
   scene's content hash, date, command line; and, under ``verified.<engine>``,
-  the verdict of each ``cbox reference verify`` (:func:`record_verdict`,
-  :mod:`cornell_harness.workflows.reference_verify`), which a rebuild drops.
+  the verdicts of ``cbox reference verify`` that ship with the reference.
 
-A scene derived by ``--set`` (:mod:`cornell_harness.scenes.overrides`) keeps its
-reference in ``derived/<content hash>/`` of its file's folder
-(:func:`reference_folder`), with the same files but ``scene.toml``: its
-base's reference is never touched. A missing or stale reference is refused
-with the command that builds it and about how long that takes, scaled from
-the wall time a build recorded in provenance (:func:`build_seconds`).
+Those stored references are read-only package data. What is built or recorded
+for them goes to the same place in the user store
+(:mod:`cornell_harness.store.home`), ``<home>/references/<scene>/``
+(:func:`user_folder`):
+
+- the reference of a scene derived by ``--set``
+  (:mod:`cornell_harness.scenes.overrides`), in ``derived/<content hash>/``,
+  with the same files but ``scene.toml`` (:func:`reference_folder`);
+- ``verdicts.json``: the verdicts ``cbox reference verify`` records
+  (:func:`record_verdict`), one per engine, each with the digest of the
+  images it judged, so a verdict is shown only beside those images
+  (:func:`recorded_verdicts`);
+- a stored scene's own reference, where the package has none valid for the
+  scene (a scene file edited in a checkout).
+
+A scene file of the user's own, outside the stored references, keeps all of
+these in its own folder instead, ``derived/`` and ``verdicts.json`` included.
+A reference is looked for beside its scene file first, then in the user store
+(:func:`reference_folders`): the stored reference of a stored scene is the
+one every command reads while it is valid. A missing or stale reference is
+refused with the command that builds it and about how long that takes, scaled
+from the wall time a build recorded in provenance (:func:`build_seconds`).
 
 References are built by :mod:`cornell_harness.workflows.reference_build`, with seeds from
 :data:`REFERENCE_SEED_BASE` up, a range no user
@@ -30,6 +45,7 @@ run uses by default, so a test render never shares samples with its reference.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shlex
 import statistics
@@ -40,6 +56,7 @@ import numpy as np
 
 from cornell_harness.store.atomic import write_json_atomic
 from cornell_harness.store.exr import ImageFileError, read_exr
+from cornell_harness.store.home import user_home
 from cornell_harness.scenes.library import references_root
 from cornell_harness.scenes.model import Scene
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
@@ -49,9 +66,13 @@ REFERENCE_FILE, VARIANCE_FILE, NOISE_FILE = "reference.exr", "variance.exr", "no
 PROVENANCE_FILE = "provenance.json"
 #: The folder, beside a scene file, of the references of scenes derived from it by ``--set``.
 DERIVED_FOLDER = "derived"
+#: The user store's folder of what is built or recorded for the stored references (:func:`user_folder`).
+USER_REFERENCES = "references"
+#: The file of the verdicts ``cbox reference verify`` recorded for a reference (:func:`record_verdict`).
+VERDICTS_FILE = "verdicts.json"
 #: The spp ``cbox reference build`` is suggested with when no earlier build says better.
 DEFAULT_SPP = 16384
-#: Where a reference's provenance keeps the verdicts of ``cbox reference verify``, one per engine.
+#: Where a reference's provenance keeps the verdicts of ``cbox reference verify`` it ships with, one per engine.
 VERIFIED_KEY = "verified"
 
 
@@ -77,8 +98,8 @@ class Reference:
         return int(self.provenance["noise_spp"])
 
 
-def reference_folder(scene: Scene) -> Path:
-    """Where the reference of ``scene`` is kept: its file's folder or, for a scene derived by ``--set``,
+def _beside_file(scene: Scene) -> Path:
+    """The reference's folder beside ``scene``'s file: the file's folder or, for a scene derived by ``--set``,
     ``derived/<content hash>/`` in it; keyed by content, so the same overrides in any order or spelling
     share one reference, and one made for an older version of the file is never mistaken for current."""
     folder = scene.path.parent
@@ -87,14 +108,38 @@ def reference_folder(scene: Scene) -> Path:
     return folder
 
 
-def rebuild_command(scene: Scene, spp: int = DEFAULT_SPP, batches: int | None = None) -> str:
-    """The ``cbox reference build`` command for ``scene`` (its stored name where it has one, and its ``--set``)."""
+def user_folder(folder: str | Path, home: str | Path | None = None) -> Path:
+    """Where what belongs to the reference folder ``folder`` is written: ``folder`` itself, but for one among the
+    stored references (read-only package data) the same place in the user store, ``<home>/references/...``."""
+    try:
+        inside = Path(folder).resolve().relative_to(references_root().resolve())
+    except ValueError:
+        return Path(folder)
+    return user_home(home) / USER_REFERENCES / inside
+
+
+def reference_folder(scene: Scene, home: str | Path | None = None) -> Path:
+    """Where the reference of ``scene`` is built: beside its file, or in the user store for a stored scene."""
+    return user_folder(_beside_file(scene), home)
+
+
+def reference_folders(scene: Scene, home: str | Path | None = None) -> list[Path]:
+    """Where the reference of ``scene`` is looked for, in order: beside its file (a stored scene's stored
+    reference), then where it is built (:func:`reference_folder`), when that is elsewhere."""
+    return list(dict.fromkeys([_beside_file(scene), reference_folder(scene, home)]))
+
+
+def rebuild_command(scene: Scene, spp: int = DEFAULT_SPP, batches: int | None = None,
+                    home: str | Path | None = None) -> str:
+    """The ``cbox reference build`` command for ``scene`` (its stored name where it has one, its ``--set``, and
+    the ``--home`` it was looked for with)."""
     stored = references_root() / scene.path.parent.name / "scene.toml"
     named = scene.path.exists() and stored.exists() and stored.samefile(scene.path)
     args = ["cbox", "reference", "build", "--scene", scene.path.parent.name if named else str(scene.path.parent)]
     for override in scene.overrides:
         args += ["--set", override]
     args += ["--spp", str(spp)] + (["--batches", str(batches)] if batches else [])
+    args += ["--home", str(home)] if home else []
     return " ".join(map(shlex.quote, args))
 
 
@@ -131,7 +176,7 @@ def _median_cost() -> float | None:
     return statistics.median(costs) if costs else None
 
 
-def _build_hint(scene: Scene, folder: Path) -> str:
+def _build_hint(scene: Scene, folder: Path, home: str | Path | None = None) -> str:
     """The command that builds ``scene``'s reference into ``folder``, and about how long it takes.
 
     The yardstick is the build this one replaces (its spp and batches are
@@ -143,11 +188,11 @@ def _build_hint(scene: Scene, folder: Path) -> str:
     prov = own or (_provenance_at(scene.path.parent) if scene.overrides else None)
     if prov is None:
         if (cost := _median_cost()) is None:
-            return rebuild_command(scene)
-        return (f"{rebuild_command(scene)} (about {_about(cost * cam.width * cam.height * DEFAULT_SPP)}, from the "
+            return rebuild_command(scene, home=home)
+        return (f"{rebuild_command(scene, home=home)} (about {_about(cost * cam.width * cam.height * DEFAULT_SPP)}, from the "
                 f"stored references' median cost of {cost * 1e6:.2g} µs per pixel-sample; the scene's may differ)")
     spp, batches = int(prov.get("spp", DEFAULT_SPP)), prov.get("batches")
-    command = rebuild_command(scene, spp, batches if isinstance(batches, int) else None)
+    command = rebuild_command(scene, spp, batches if isinstance(batches, int) else None, home)
     if (seconds := build_seconds(prov, cam.width, cam.height, spp)) is None:
         return command
     source = "the last build" if own else f"the reference of {prov.get('scene') or scene.path.parent.name}"
@@ -161,55 +206,105 @@ def _build_hint(scene: Scene, folder: Path) -> str:
             f"{spp} spp{f' on {machine}' if machine else ''}{notes})")
 
 
-def load_reference(scene: Scene, folder: Path | None = None) -> Reference:
-    """The stored reference of ``scene`` (in :func:`reference_folder`); refuse one built from different content."""
-    folder = Path(folder) if folder else reference_folder(scene)
+def load_reference(scene: Scene, folder: Path | None = None, home: str | Path | None = None) -> Reference:
+    """The reference of ``scene``: in ``folder``, else the first valid one of :func:`reference_folders`; refuse
+    one built from different content, saying how to build it (into :func:`reference_folder`)."""
+    if folder:
+        return _load(scene, Path(folder), home)
+    folders = reference_folders(scene, home)
+    problem = None
+    for candidate in (f for f in folders if (f / PROVENANCE_FILE).exists()):
+        try:
+            return _load(scene, candidate, home)
+        except ReferenceError as e:
+            problem = problem or e  # the first one's, the stored reference's where there is one
+    raise problem or _missing(scene, folders[-1], home)
+
+
+def _missing(scene: Scene, folder: Path, home: str | Path | None) -> ReferenceError:
+    derived = (f"; the stored reference of {scene.path.parent.name} is for the scene without --set"
+               if scene.overrides else "")
+    return ReferenceError(f"{folder / PROVENANCE_FILE}: no reference for scene {scene.name!r}{derived}; build it "
+                          f"with: {_build_hint(scene, folder, home)}")
+
+
+def _load(scene: Scene, folder: Path, home: str | Path | None) -> Reference:
+    """The reference in ``folder``, checked against ``scene``."""
     prov_path = folder / PROVENANCE_FILE
     if not prov_path.exists():
-        derived = (f"; the stored reference of {scene.path.parent.name} is for the scene without --set"
-                   if scene.overrides else "")
-        raise ReferenceError(f"{prov_path}: no reference for scene {scene.name!r}{derived}; build it with: "
-                             f"{_build_hint(scene, folder)}")
+        raise _missing(scene, folder, home)
     try:
         prov = json.loads(prov_path.read_text())
     except (OSError, json.JSONDecodeError) as e:
-        raise ReferenceError(f"{prov_path}: unreadable ({e}); rebuild with: {_build_hint(scene, folder)}") from None
+        raise ReferenceError(f"{prov_path}: unreadable ({e}); rebuild with: {_build_hint(scene, folder, home)}") from None
     if prov.get("scene_hash") != scene.content_hash():
         raise ReferenceError(
             f"{prov_path}: reference was built for scene hash {prov.get('scene_hash')}, but {scene.name} "
-            f"({scene.path}) now hashes to {scene.content_hash()}; rebuild it with: {_build_hint(scene, folder)}"
+            f"({scene.path}) now hashes to {scene.content_hash()}; rebuild it with: {_build_hint(scene, folder, home)}"
         )
     try:
         image, variance, noise = (read_exr(folder / f) for f in (REFERENCE_FILE, VARIANCE_FILE, NOISE_FILE))
     except ImageFileError as e:
-        raise ReferenceError(f"{e}; rebuild with: {_build_hint(scene, folder)}") from None
+        raise ReferenceError(f"{e}; rebuild with: {_build_hint(scene, folder, home)}") from None
     shape = (scene.camera.height, scene.camera.width, 3)
     if not image.shape == variance.shape == noise.shape == shape:
         raise ReferenceError(
             f"{folder}: reference images are {image.shape[1]}x{image.shape[0]}, scene is {shape[1]}x{shape[0]}; "
-            f"rebuild with: {_build_hint(scene, folder)}"
+            f"rebuild with: {_build_hint(scene, folder, home)}"
         )
     return Reference(image, variance, noise, prov, folder, scene.quantity)
 
 
-def record_verdict(folder: Path, record: dict) -> dict:
-    """Store ``record`` as ``verified.<engine>`` in ``folder``'s provenance.json (atomically); the new provenance.
-
-    The rest of the provenance is kept as it is, read from the file just before writing."""
-    path = Path(folder) / PROVENANCE_FILE
-    prov = json.loads(path.read_text())
-    verified = prov.get(VERIFIED_KEY)
-    verified = dict(verified) if isinstance(verified, dict) else {}
-    verified[record["engine"]] = record
-    prov[VERIFIED_KEY] = verified
-    write_json_atomic(path, prov)
-    return prov
+def reference_digest(folder: str | Path) -> str:
+    """``sha256:...`` of the reference's image and variance files in ``folder``: what a verdict judged."""
+    digest = hashlib.sha256()
+    for name in (REFERENCE_FILE, VARIANCE_FILE):
+        digest.update((Path(folder) / name).read_bytes())
+    return f"sha256:{digest.hexdigest()}"
 
 
-def verdict_line(provenance: dict) -> str:
-    """One line of a reference's verdicts: ``verified by luxcore: max |z| 1.9 (7 regions)``, or ``not verified``."""
+def _verdicts_at(path: Path) -> dict:
+    try:
+        verdicts = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return verdicts if isinstance(verdicts, dict) else {}
+
+
+def record_verdict(folder: str | Path, record: dict, home: str | Path | None = None) -> Path:
+    """Record ``record`` as the verdict of its engine on the reference in ``folder``, in :data:`VERDICTS_FILE` of
+    :func:`user_folder` (atomically), with the digest of the images it judged; the file written.
+
+    The reference's own files are not touched, the package's stored ones included. The file's other engines'
+    verdicts are kept as they are, read just before writing."""
+    path = user_folder(folder, home) / VERDICTS_FILE
+    verdicts = _verdicts_at(path)
+    verdicts[record["engine"]] = {**record, "reference_digest": reference_digest(folder)}
+    write_json_atomic(path, verdicts)
+    return path
+
+
+def recorded_verdicts(folder: str | Path, home: str | Path | None = None) -> dict:
+    """The verdicts recorded (:func:`record_verdict`) on the reference in ``folder`` as it is now, by engine:
+    those of the images it holds; one recorded on images since rebuilt judged others, and is left out."""
+    verdicts = _verdicts_at(user_folder(folder, home) / VERDICTS_FILE)
+    if not verdicts:
+        return {}
+    digest = reference_digest(folder)
+    return {engine: r for engine, r in verdicts.items()
+            if isinstance(r, dict) and r.get("reference_digest") == digest}
+
+
+def stored_verdicts(provenance: dict) -> dict:
+    """The verdicts a reference's provenance carries (``verified.<engine>``), by engine."""
     verified = provenance.get(VERIFIED_KEY)
-    if not isinstance(verified, dict) or not verified:
+    return dict(verified) if isinstance(verified, dict) else {}
+
+
+def verdict_line(verified: dict) -> str:
+    """One line of verdicts by engine (:func:`stored_verdicts`, :func:`recorded_verdicts`):
+    ``verified by luxcore: max |z| 1.9 (7 regions, 1024 spp)``, or ``not verified``."""
+    if not verified:
         return "not verified"
     parts = []
     for engine, r in verified.items():

@@ -48,8 +48,9 @@ def build_reference(
     provenance. The harness's reference renderer is Mitsuba 3; the CLI names it, this module names none.
 
     ``spp`` must be a multiple of ``batches``. The files are written only when
-    every batch is done, each atomically, provenance last; by default into the
-    scene's reference folder (:func:`~cornell_harness.store.references.reference_folder`).
+    every batch is done, each atomically, provenance last; by default where the
+    scene's reference is built (:func:`~cornell_harness.store.references.reference_folder`:
+    beside a scene file of the user's, in the user store for a stored scene).
 
     The batches render on ``executor`` (:func:`render_batches`: combined in batch order, so every backend gives
     the same reference, bit for bit); ``progress(done, total, label)`` follows finished batches (``batch 3``,

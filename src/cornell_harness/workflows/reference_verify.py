@@ -10,12 +10,11 @@ independent renders, as the reference's does (:func:`render_batches`, on the
 executor ``--workers`` opens), or, with ``batches`` = 1, from the engine
 itself (its :class:`~cornell_harness.adapters.api.RenderResult` ``variance``).
 
-:func:`cornell_harness.store.references.record_verdict` writes the verdict into the reference's
-``provenance.json`` under ``verified.<engine>``, atomically. The reference's
-images and its ``scene_hash`` are untouched, so the reference stays valid
-(:func:`cornell_harness.store.references.load_reference` checks the hash and the
-images only); rebuilding the reference writes a new provenance, which drops
-the old verdicts with the images they judged.
+:func:`cornell_harness.store.references.record_verdict` records the verdict in the
+user store (``verdicts.json`` of the reference's folder there), atomically, with
+the digest of the images it judged: the reference's own files, the package's
+stored ones included, are never written. A rebuilt reference has other images,
+so the verdicts recorded on the old ones are no longer shown beside it.
 """
 
 from __future__ import annotations
