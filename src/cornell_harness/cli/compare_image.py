@@ -110,11 +110,12 @@ def compare_image(
     write_map = error_map if error_map is not None else not check
     keys = _scored_keys(thresholds, fail_percent is not None or write_map, with_flip,
                         all_metrics or report or not check)
+    from cornell_harness.evaluate.score import NOISE_PREFIX
     from cornell_harness.workflows import compare_image as workflow
 
     target = (workflow.load_scene_target(resolve_scene(scene)) if scene is not None
               else workflow.load_file_target(reference, input_transfer, exposure,
-                                             noise=keys is None or any(k.startswith(workflow.NOISE_PREFIX)
+                                             noise=keys is None or any(k.startswith(NOISE_PREFIX)
                                                                        for k in keys)))
     _check_regions(thresholds, target)
     sources = workflow.load_images(images, target, input_transfer, spp, exposure)

@@ -1,11 +1,9 @@
 """Scoring images made outside the harness (``cbox compare-image``): load them, check them, score them.
 
 An idiff- or FLIP-style comparison of image files against a reference,
-with the harness's own numbers: every image metric, through the very
-functions ``cbox compare`` scores a render with
-(:func:`cornell_harness.evaluate.metrics.image_metrics`,
-:func:`cornell_harness.evaluate.noise.noise_yardsticks`,
-:func:`cornell_harness.workflows.runner.score_regions`), so a file written by
+with the harness's own numbers: every image metric, by the one scorer
+``cbox compare`` scores a render with
+(:func:`cornell_harness.evaluate.score.score_image`), so a file written by
 ``cbox render`` scores exactly as ``cbox compare`` scored that render.
 A check scores a chosen set (:func:`score`'s ``keys``), each value the same
 as in the full set.
@@ -45,18 +43,18 @@ from typing import Collection, Sequence
 
 import numpy as np
 
-from cornell_harness.evaluate import flip, metrics
+from cornell_harness.evaluate import flip
+from cornell_harness.evaluate import regions as named_regions
 from cornell_harness.evaluate.ciede2000 import srgb_eotf
-from cornell_harness.evaluate import noise as stats
 from cornell_harness.evaluate.image_scores import ImageScore, InputImage, Target
 from cornell_harness.evaluate.registry import region_metric
+from cornell_harness.evaluate.score import every_region_key, score_image
 from cornell_harness.scenes.model import Scene
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
 from cornell_harness.store.exr import ImageFileError, read_exr
 from cornell_harness.store.image_files import SPP_ATTRIBUTE, ImageFile, header_spp, read_image_file
 from cornell_harness.store.references import (NOISE_FILE, PROVENANCE_FILE, REFERENCE_FILE, VARIANCE_FILE, Reference,
                                       ReferenceError, load_reference)
-from cornell_harness.workflows import runner
 
 #: How a display-referred (integer) file is turned into linear values, by name.
 INPUT_TRANSFERS = {
@@ -182,10 +180,6 @@ def load_images(paths: Sequence[Path], target: Target, transfer: str | None = No
 # Scoring
 # --------------------------------------------------------------------------
 
-#: The keys of the noise yardsticks (:func:`cornell_harness.evaluate.noise.noise_yardsticks`) start with it.
-NOISE_PREFIX = "noise_"
-
-
 def noise_gap(target: Target, spp: int | None) -> str | None:
     """Why the noise yardsticks cannot be computed for an image at ``spp`` against ``target``; None if they can."""
     if target.noise_note is not None:
@@ -197,39 +191,21 @@ def noise_gap(target: Target, spp: int | None) -> str | None:
 
 def score(source: InputImage, target: Target, with_flip: bool = True,
           keys: Collection[str] | None = None) -> ImageScore:
-    """Every metric of one test image against the target, computed as ``cbox compare`` computes them
-    (``flip_mean`` only ``with_flip``: :func:`cornell_harness.evaluate.metrics.image_metrics`).
+    """Every metric of one test image against the target, by the scorer ``cbox compare`` scores a render with
+    (:func:`cornell_harness.evaluate.score.score_image`; ``flip_mean`` only ``with_flip``).
 
     ``keys`` (:func:`cornell_harness.evaluate.registry.check_metrics`' choice for a check) computes only what they
-    name (with what comes at no cost with it, :func:`cornell_harness.evaluate.metrics.image_metrics`): the ΔE00 map
-    for a ``delta_e2000_*`` key, HDR-FLIP for ``flip_mean``, the noise yardsticks for a ``noise_*`` key, the
-    scene's regions for a ``region.*`` key; each value the same as with every metric.
+    name, each value the same as with every metric; a ``region.*`` key scores every region of the scene, as
+    the table and ``--json`` show them all.
     """
-    ref = target.reference
-    every = keys is None
-    keys = frozenset(keys or ())
-    with_de = every or not keys.isdisjoint(metrics.DELTA_E_KEYS)
-    with_noise = every or any(k.startswith(NOISE_PREFIX) for k in keys)
-    with_regions = target.scene is not None and (every or any(region_metric(k) for k in keys))
-    # float64 once, where each metric would convert the float32 pixels again (the same values, exactly: the
-    # metrics take as_pair's arrays), and the exposure once (each would compute it from the reference again).
-    image, ref_image = metrics.as_pair(source.image, ref.image)
-    exposure = metrics.display_exposure(ref_image, ref.quantity)
-    # the ΔE00 map once: its statistics, the error map and --fail-percent
-    de = pixel_errors(image, ref_image, exposure) if with_de and metrics.has_colour(ref.quantity) else None
-    values = metrics.image_metrics(image, ref_image, exposure=exposure, quantity=ref.quantity,
-                                   with_flip=with_flip if every else "flip_mean" in keys, delta_e_map=de,
-                                   keys=None if every else keys)
-    note = noise_gap(target, source.spp) if with_noise else None
-    yardsticks = stats.noise_yardsticks(image, ref, source.spp, exposure=exposure) if with_noise and note is None \
-        else None
-    regions = runner.score_regions(target.scene, source.image, ref, source.spp) if with_regions else {}
-    parameters = flip.flip_parameters(ref.image) if "flip_mean" in values else None
-    return ImageScore(source, values, yardsticks, note, regions, parameters, de)
+    masks = None
+    if target.scene is not None and (keys is None or any(region_metric(k) for k in keys)):
+        masks = named_regions.region_masks(target.scene)
+        if keys is not None:
+            keys = {*keys, *every_region_key(masks)}
+    result = score_image(source.image, target.reference, source.spp, masks=masks, keys=keys, with_flip=with_flip,
+                         noise_note=noise_gap(target, source.spp))
+    parameters = flip.flip_parameters(target.reference.image) if "flip_mean" in result.metrics else None
+    return ImageScore(source, result.metrics, result.noise, result.noise_note, result.regions, parameters,
+                      result.delta_e_map)
 
-
-def pixel_errors(image: np.ndarray, ref: np.ndarray, exposure: float) -> np.ndarray:
-    """The (H, W) CIEDE2000 of each pixel at ``exposure`` (the reference's display exposure): the map
-    ``delta_e2000_*`` summarise and the error-map file shows, what ``--fail-percent`` counts (of the image with
-    its broken pixels zeroed, as the metrics take it)."""
-    return metrics.delta_e2000(image, ref, exposure=exposure, full=True)[1]
