@@ -14,6 +14,7 @@ from cornell_harness.adapters.api import RenderResult
 from cornell_harness.adapters.registry import resolve
 from cornell_harness.evaluate import regions as named_regions
 from cornell_harness.evaluate.score import metric_value, score_image
+from cornell_harness.evaluate.thresholds import parse_threshold
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.store.exr import write_exr
 from cornell_harness.store.image_files import SPP_ATTRIBUTE
@@ -54,10 +55,13 @@ def scored(tmp_path_factory):
 
 
 def test_one_image_three_paths_equal_metrics(scored):
+    from cornell_harness.workflows import compare_image as ci
+
     run = scored["run"]
     assert {"flip_mean", "noise_delta_e2000_mean", "nan_count", "region.walls.mean_z"} <= set(run)
     assert run["nan_count"] == 1 and run["inf_count"] == 1 and run["negative_count"] == 1
-    file = _file_score(scored).row()
+    (checked,) = ci.compare_images([scored["exr"]], scored["scene"], with_flip=True).images
+    file = checked.score.row()
     masks = named_regions.region_masks(scored["scene"])
     gate = {k: metric_value(scored["image"], scored["reference"], SPP, k, masks) for k in run}
     np.testing.assert_equal(file, run)
@@ -66,21 +70,15 @@ def test_one_image_three_paths_equal_metrics(scored):
 
 def test_a_check_scores_its_subset_with_the_same_values(scored):
     """compare-image as a check scores what its thresholds name and the cheap metrics: each value the run's."""
-    from cornell_harness.evaluate.registry import check_metrics
+    from cornell_harness.workflows import compare_image as ci
 
-    row = _file_score(scored, check_metrics(["ssim", "region.floor.rmse"]), with_flip=False).row()
+    checks = ci.Checks([parse_threshold("ssim=0.1", "warn"), parse_threshold("region.floor.rmse=1", "fail")])
+    (checked,) = ci.compare_images([scored["exr"]], scored["scene"], checks=checks).images
+    row = checked.score.row()
     assert "ssim" in row and "rmse" in row and "delta_e2000_mean" not in row and "flip_mean" not in row
     assert "region.walls.delta_e2000_mean" in row  # a region threshold scores every region, as the table shows
     assert row == {k: scored["run"][k] for k in row}
-
-
-def _file_score(scored, keys=None, with_flip=True):
-    """The EXR file scored as ``cbox compare-image --scene`` scores it."""
-    from cornell_harness.workflows import compare_image as ci
-
-    target = ci.load_scene_target(scored["scene"])
-    (source,) = ci.load_images([scored["exr"]], target)
-    return ci.score(source, target, with_flip=with_flip, keys=keys)
+    assert checked.verdict["status"] == "pass" and checked.broken == []
 
 
 def test_keys_compute_only_what_they_name(scored):

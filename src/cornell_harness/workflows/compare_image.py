@@ -38,6 +38,7 @@ variance when it reports one, so there ``mean_z`` may differ).
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Collection, Sequence
 
@@ -47,14 +48,18 @@ from cornell_harness.evaluate import flip
 from cornell_harness.evaluate import regions as named_regions
 from cornell_harness.evaluate.ciede2000 import srgb_eotf
 from cornell_harness.evaluate.image_scores import ImageScore, InputImage, Target
-from cornell_harness.evaluate.registry import region_metric
-from cornell_harness.evaluate.score import every_region_key, score_image
+from cornell_harness.evaluate.metrics import DELTA_E_KEYS
+from cornell_harness.evaluate.registry import check_metrics, region_metric
+from cornell_harness.evaluate.score import NOISE_PREFIX, every_region_key, score_image
+from cornell_harness.evaluate.thresholds import Threshold, broken, fraction_above, percent_line
 from cornell_harness.scenes.model import Scene
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
+from cornell_harness.store.atomic import json_safe
 from cornell_harness.store.exr import ImageFileError, read_exr
 from cornell_harness.store.image_files import SPP_ATTRIBUTE, ImageFile, header_spp, read_image_file
 from cornell_harness.store.references import (NOISE_FILE, PROVENANCE_FILE, REFERENCE_FILE, VARIANCE_FILE, Reference,
                                       ReferenceError, load_reference)
+from cornell_harness.suggest import did_you_mean
 
 #: How a display-referred (integer) file is turned into linear values, by name.
 INPUT_TRANSFERS = {
@@ -209,3 +214,120 @@ def score(source: InputImage, target: Target, with_flip: bool = True,
     return ImageScore(source, result.metrics, result.noise, result.noise_note, result.regions, parameters,
                       result.delta_e_map)
 
+
+# --------------------------------------------------------------------------
+# The command's flow: what to score, scoring every image, the verdicts
+# --------------------------------------------------------------------------
+
+
+class OptionError(ValueError):
+    """Bad input that one option of the command gave (exit 2, the message naming that option)."""
+
+    def __init__(self, message: str, option: str):
+        super().__init__(message)
+        self.option = option
+
+
+@dataclass
+class Checks:
+    """The pass/warn/fail criteria of a check: thresholds on metrics (``--fail``/``--warn``) and the share of
+    pixels above a per-pixel ΔE00 (``--fail-percent`` of ``--pixel-threshold``). None of them: no check."""
+
+    thresholds: Sequence[Threshold] = ()
+    fail_percent: float | None = None
+    pixel_threshold: float | None = None
+
+    def __bool__(self) -> bool:
+        return bool(self.thresholds) or self.fail_percent is not None
+
+
+@dataclass
+class Checked:
+    """One image's score, and with checks its verdict (``--json``'s) and the broken criteria's lines."""
+
+    score: ImageScore
+    verdict: dict | None = None
+    broken: list[tuple[str, str]] = field(default_factory=list)  # (level, line), fails first
+
+
+@dataclass
+class ImageComparison:
+    """What ``cbox compare-image`` computed: the target, and each image scored and checked, in order."""
+
+    target: Target
+    images: list[Checked]
+    error_maps: bool  # whether each image's ΔE00 error map is to be written
+
+    @property
+    def failed(self) -> bool:
+        return any(c.verdict is not None and c.verdict["status"] == "fail" for c in self.images)
+
+
+def compare_images(paths: Sequence[Path], scene: Scene | None = None, reference: Path | None = None,
+                   transfer: str | None = None, spp: int | None = None, exposure: float | None = None,
+                   checks: Checks = Checks(), with_flip: bool = False, every: bool = False,
+                   error_maps: bool | None = None) -> ImageComparison:
+    """Score ``paths`` against ``scene``'s stored reference or the ``reference`` file, and check them.
+
+    Without checks every metric is scored and the error maps are made; a check scores what its criteria name
+    and the cheap metrics (:func:`scored_keys`; ``every``: every metric) and makes the error maps only when
+    ``error_maps`` asks. HDR-FLIP (``flip_mean``, more than every other metric together) is scored
+    ``with_flip`` or where a threshold names it. Inputs are checked before anything is scored: refused with
+    :class:`OptionError` or, naming the file, ``ImageFileError``.
+    """
+    maps = error_maps if error_maps is not None else not checks
+    keys = scored_keys([t.metric for t in checks.thresholds], checks.fail_percent is not None or maps, with_flip,
+                       every or not checks)
+    target = (load_scene_target(scene) if scene is not None else
+              load_file_target(reference, transfer, exposure,
+                               noise=keys is None or any(k.startswith(NOISE_PREFIX) for k in keys)))
+    check_regions(checks.thresholds, target)
+    sources = load_images(paths, target, transfer, spp, exposure)
+    if exposure is not None and all(s.clipped is None for s in (*sources, target)):
+        raise OptionError("applies to display-referred (integer) images only, and every image given is "
+                          "floating-point (radiance already)", "--exposure")
+    flip_too = with_flip or any(t.metric == "flip_mean" for t in checks.thresholds)
+    scored = [check(score(source, target, with_flip=flip_too, keys=keys), checks) for source in sources]
+    return ImageComparison(target, scored, maps)
+
+
+def scored_keys(named: Sequence[str], de_map: bool, with_flip: bool, every: bool) -> frozenset[str] | None:
+    """The metrics a check scores (:func:`cornell_harness.evaluate.registry.check_metrics`: the ``named`` ones and
+    the cheap ones; the ΔE00 statistics too where the map is made anyway, ``de_map``: for --fail-percent or the
+    error map), or None for every metric (``every``: not a check, --all-metrics, --report)."""
+    if every:
+        return None
+    return check_metrics([*named, *(DELTA_E_KEYS if de_map else ()), *(["flip_mean"] if with_flip else [])])
+
+
+def check_regions(thresholds: Sequence[Threshold], target: Target) -> None:
+    """A region threshold needs a scene that names the region: refused otherwise, before anything is scored."""
+    for t in thresholds:
+        parts = region_metric(t.metric)
+        if parts is None:
+            continue
+        regions = target.scene.regions if target.scene is not None else {}
+        if parts[0] not in regions:
+            where = f"scene {target.scene.name!r}" if target.scene is not None else "a --reference file"
+            raise OptionError(f"{t.metric}: {where} has no region {parts[0]!r}{did_you_mean(parts[0], regions)}",
+                              f"--{t.level}")
+
+
+def check(result: ImageScore, checks: Checks) -> Checked:
+    """One score against the checks: the verdict for --json and the broken criteria's lines (no checks: none)."""
+    if not checks:
+        return Checked(result)
+    label, row = result.source.label, result.row()
+    rows = [{"metric": t.metric, "level": t.level, "limit": t.value, "value": row.get(t.metric),
+             "broken": t.exceeded(row.get(t.metric))} for t in checks.thresholds]
+    lines = [(t.level, t.line(label, row.get(t.metric))) for t in broken(checks.thresholds, row)]
+    if checks.fail_percent is not None:
+        percent = 100 * fraction_above(result.delta_e_map, checks.pixel_threshold)
+        rows.append({"metric": "percent_pixels_delta_e2000_above", "level": "fail", "limit": checks.fail_percent,
+                     "pixel_threshold": checks.pixel_threshold, "value": percent,
+                     "broken": percent > checks.fail_percent})
+        if percent > checks.fail_percent:
+            lines.append(("fail", percent_line(label, percent, checks.fail_percent, checks.pixel_threshold)))
+    status = ("fail" if any(c["broken"] and c["level"] == "fail" for c in rows)
+              else "warn" if any(c["broken"] for c in rows) else "pass")
+    return Checked(result, json_safe({"status": status, "checks": rows}), lines)
