@@ -1,8 +1,8 @@
 """The cost of scoring one results row (issue 34: ≤ 0.15 s at 256² with every metric, FLIP included; ΔE00 at
 1024² ≤ 0.2 s).
 
-A row is what :func:`cornell_harness.workflows.runner.score` and :func:`~cornell_harness.workflows.runner.score_regions` compute
-for each (renderer, spp, seed) of a sweep: every image metric (:func:`cornell_harness.evaluate.metrics.image_metrics`,
+A row is what :func:`cornell_harness.workflows.runner.score` (the one scorer,
+:func:`cornell_harness.evaluate.score.score_image`, with the scene's regions) computes for each (renderer, spp, seed) of a sweep: every image metric (:func:`cornell_harness.evaluate.metrics.image_metrics`,
 FLIP included), the noise yardsticks and the named regions' metrics. The test image is the reference's stored
 independent noise batch (a real 128-spp render of ``cornell-box``, 256²), scored against the stored reference as
 a sweep scores its rows: the same reference object for every row, a new test image array each time.
@@ -58,7 +58,7 @@ def items(scene, reference, image: np.ndarray) -> dict:
         return image.copy()
 
     def row():
-        return runner.score(fresh(), reference, 128), runner.score_regions(scene, fresh(), reference, 128)
+        return runner.score(scene, fresh(), reference, 128)
 
     return {
         "whole row (score + regions)": row,
@@ -75,7 +75,7 @@ def items(scene, reference, image: np.ndarray) -> dict:
                                           metrics.mean_radiance_rel_error(fresh(), ref)),
         "display exposure": lambda: metrics.display_exposure(ref),
         "noise yardsticks": lambda: yardsticks.noise_yardsticks(fresh(), reference, 128),
-        "region metrics": lambda: runner.score_regions(scene, fresh(), reference, 128),
+        "region metrics": lambda: regions.region_metrics(fresh(), reference, regions.region_masks(scene), spp=128),
         "ΔE00 map at 1024²": lambda: ciede2000.delta_e2000_linear(big_img, big_ref, exposure),
         BEFORE_DELTA_E: lambda: _as_before(lambda: ciede2000.delta_e2000_linear(big_img, big_ref, exposure)),
     }

@@ -3,6 +3,10 @@
 Each command lives in the module named for what it does; importing them
 registers them on the one typer app (:data:`cornell_harness.cli.common.app`), in the
 order ``cbox --help`` lists them.
+
+A command parses its options, calls a workflow (:mod:`cornell_harness.workflows`) and prints what it
+returns. Its function is as long as its options' declarations, which typer reads from the signature (and its
+docstring is the command's ``--help``, so the reason is said here, once); the body stays under about 40 lines.
 """
 
 from __future__ import annotations

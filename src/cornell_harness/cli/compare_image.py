@@ -105,50 +105,22 @@ def compare_image(
     if (fail_percent is None) != (pixel_threshold is None):
         raise typer.BadParameter("give --fail-percent P and --pixel-threshold T together",
                                  param_hint="--fail-percent" if pixel_threshold is None else "--pixel-threshold")
-    thresholds = _thresholds(fail_at, warn_at)
-    check = bool(thresholds) or fail_percent is not None
-    write_map = error_map if error_map is not None else not check
-    keys = _scored_keys(thresholds, fail_percent is not None or write_map, with_flip,
-                        all_metrics or report or not check)
     from cornell_harness.workflows import compare_image as workflow
 
-    target = (workflow.load_scene_target(resolve_scene(scene)) if scene is not None
-              else workflow.load_file_target(reference, input_transfer, exposure,
-                                             noise=keys is None or any(k.startswith(workflow.NOISE_PREFIX)
-                                                                       for k in keys)))
-    _check_regions(thresholds, target)
-    sources = workflow.load_images(images, target, input_transfer, spp, exposure)
-    if exposure is not None and all(s.clipped is None for s in (*sources, target)):
-        raise typer.BadParameter("applies to display-referred (integer) images only, and every image given is "
-                                 "floating-point (radiance already)", param_hint="--exposure")
-    from cornell_harness.evaluate import thresholds as th
-    from cornell_harness.reports.compare_image import ERROR_MAP_SUFFIX, write_compare_image_report, write_error_map
-
-    scores, verdicts = [], []
-    _warn_clipped(target.path, target.clipped)
-    for source in sources:
-        _warn_clipped(source.path, source.clipped)
-        result = workflow.score(source, target, with_flip=with_flip or report
-                                or any(t.metric == "flip_mean" for t in thresholds), keys=keys)
-        de = result.delta_e_map  # computed once: the ΔE00 statistics, the error map and --fail-percent's count
-        written = write_error_map(out, result, target, de) if write_map else None
-        scores.append(result)
-        verdict = _verdict(result, thresholds, de, fail_percent, pixel_threshold, th)
-        verdicts.append(verdict)
-        if as_json:
-            record = {**result.record(target), "error_map": None if written is None else str(written)}
-            if verdict is not None:
-                record["verdict"] = verdict
-            typer.echo(json.dumps(record, allow_nan=False))
-        if result.noise_note:
-            info(f"{source.path}: noise yardsticks skipped: {result.noise_note}")
-    if not as_json:
-        _print_table(scores, [t.metric for t in thresholds])
-    if write_map:
-        info(f"error maps: {out}/*{ERROR_MAP_SUFFIX}")
+    checks = workflow.Checks(_thresholds(fail_at, warn_at), fail_percent, pixel_threshold)
+    try:
+        run = workflow.compare_images(images, resolve_scene(scene) if scene is not None else None, reference,
+                                      input_transfer, spp, exposure, checks, with_flip or report,
+                                      every=all_metrics or report, error_maps=error_map)
+    except workflow.OptionError as e:
+        raise typer.BadParameter(str(e), param_hint=e.option) from None
+    _show(run, out, as_json, [t.metric for t in checks.thresholds])
     if report:
-        info(f"report: {write_compare_image_report(out / 'report.html', target, scores, command_line())}")
-    if any(v is not None and v["status"] == "fail" for v in verdicts):
+        from cornell_harness.reports.compare_image import write_compare_image_report
+
+        scores = [c.score for c in run.images]
+        info(f"report: {write_compare_image_report(out / 'report.html', run.target, scores, command_line())}")
+    if run.failed:
         raise typer.Exit(1)
 
 
@@ -174,33 +146,29 @@ def _thresholds(fail_at, warn_at) -> list:
     return out
 
 
-def _scored_keys(thresholds, de_map: bool, with_flip: bool, every: bool) -> frozenset[str] | None:
-    """The metrics a check scores (:func:`cornell_harness.evaluate.registry.check_metrics`: what its thresholds name and
-    the cheap ones; the ΔE00 statistics too where the map is made anyway, ``de_map``: for --fail-percent or the
-    error map), or None for every metric (``every``: not a check, --all-metrics, --report)."""
-    if every:
-        return None
-    from cornell_harness.evaluate.metrics import DELTA_E_KEYS
-    from cornell_harness.evaluate.registry import check_metrics
+def _show(run, out: Path, as_json: bool, named: list[str]) -> None:
+    """Per image: its clipping warning, the error map written, the broken criteria (stderr), the --json line,
+    why there are no noise yardsticks; then the table (without --json) and where the error maps are."""
+    from cornell_harness.reports.compare_image import ERROR_MAP_SUFFIX, write_error_map
 
-    return check_metrics([t.metric for t in thresholds] + list(DELTA_E_KEYS if de_map else ())
-                         + (["flip_mean"] if with_flip else []))
-
-
-def _check_regions(thresholds, target) -> None:
-    """A region threshold needs a scene that names the region: refused otherwise, before anything is scored."""
-    from cornell_harness.evaluate.registry import region_metric
-    from cornell_harness.suggest import did_you_mean
-
-    for t in thresholds:
-        parts = region_metric(t.metric)
-        if parts is None:
-            continue
-        regions = target.scene.regions if target.scene is not None else {}
-        if parts[0] not in regions:
-            where = f"scene {target.scene.name!r}" if target.scene is not None else "a --reference file"
-            raise typer.BadParameter(f"{t.metric}: {where} has no region {parts[0]!r}"
-                                     f"{did_you_mean(parts[0], regions)}", param_hint=f"--{t.level}")
+    _warn_clipped(run.target.path, run.target.clipped)
+    for checked in run.images:
+        result = checked.score
+        _warn_clipped(result.source.path, result.source.clipped)
+        written = write_error_map(out, result, run.target, result.delta_e_map) if run.error_maps else None
+        for level, line in checked.broken:
+            typer.echo(f"cbox: fail: {line}" if level == "fail" else f"cbox: warning: {line}", err=True)
+        if as_json:
+            record = {**result.record(run.target), "error_map": None if written is None else str(written)}
+            if checked.verdict is not None:
+                record["verdict"] = checked.verdict
+            typer.echo(json.dumps(record, allow_nan=False))
+        if result.noise_note:
+            info(f"{result.source.path}: noise yardsticks skipped: {result.noise_note}")
+    if not as_json:
+        _print_table([c.score for c in run.images], named)
+    if run.error_maps:
+        info(f"error maps: {out}/*{ERROR_MAP_SUFFIX}")
 
 
 def _warn_clipped(path: Path, clipped: float | None) -> None:
@@ -208,30 +176,6 @@ def _warn_clipped(path: Path, clipped: float | None) -> None:
     if clipped is not None and clipped > CLIPPED_WARNING:
         warn(f"{path}: {100 * clipped:.3g}% of the pixels are clipped (a channel at 0 or at the maximum code "
              "value): their errors are the encoding's, not the renderer's")
-
-
-def _verdict(result, thresholds, de, fail_percent, pixel_threshold, th) -> dict | None:
-    """Check one score against the thresholds; print each broken one; the verdict for --json (None without
-    thresholds)."""
-    if not thresholds and fail_percent is None:
-        return None
-    label, row = result.source.label, result.row()
-    checks = [{"metric": t.metric, "level": t.level, "limit": t.value, "value": row.get(t.metric),
-               "broken": t.exceeded(row.get(t.metric))} for t in thresholds]
-    for t in th.broken(thresholds, row):
-        line = t.line(label, row.get(t.metric))
-        typer.echo(f"cbox: fail: {line}" if t.level == "fail" else f"cbox: warning: {line}", err=True)
-    if fail_percent is not None:
-        percent = 100 * th.fraction_above(de, pixel_threshold)
-        checks.append({"metric": "percent_pixels_delta_e2000_above", "level": "fail", "limit": fail_percent,
-                       "pixel_threshold": pixel_threshold, "value": percent, "broken": percent > fail_percent})
-        if percent > fail_percent:
-            typer.echo(f"cbox: fail: {th.percent_line(label, percent, fail_percent, pixel_threshold)}", err=True)
-    status = ("fail" if any(c["broken"] and c["level"] == "fail" for c in checks)
-              else "warn" if any(c["broken"] for c in checks) else "pass")
-    from cornell_harness.store.atomic import json_safe
-
-    return json_safe({"status": status, "checks": checks})
 
 
 def _print_table(scores, named: list[str]) -> None:

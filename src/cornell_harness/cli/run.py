@@ -85,74 +85,33 @@ def write_compare_outputs(out: Path, sc, ref, records, command: str, sections=()
     return write_experiment_report(out, sc, ref, results=results, sections=sections, title=title)
 
 
-def default_time_repeats(time_budget, target_error) -> int:
-    """``--time-repeats`` when not given: 3 for an equal-time or equal-quality comparison (the time is the
-    result), 1 for a plain one at --spp (issue 30)."""
-    return 3 if time_budget or target_error else 1
-
-
 def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int, out: Path, as_json: bool,
                  time_budget: Optional[str] = None, target_error: Optional[str] = None, max_spp: int = 4096,
                  sections=(), overrides: Optional[List[str]] = None, title: Optional[str] = None,
                  time_repeats: Optional[int] = None, time_basis: str = "wall", series_label: Optional[List[str]] = None,
                  crop: Optional[List[str]] = None) -> tuple[int, list, object, object]:
-    """Compare renderers on one scene, write its folder and report; (exit code, run records, scene, reference).
-
-    With ``time_budget`` each renderer's spp comes from calibration renders, ``time_repeats`` rounds of them
-    interleaved over the renderers; every final render is then timed ``time_repeats`` times in all, in rounds
-    interleaved over the renderers too (:func:`cornell_harness.workflows.compare.retime`)."""
-    from cornell_harness.evaluate.convergence import parse_target
+    """``cbox compare``'s body (and each of ``cbox demo``'s comparisons): the options parsed, the comparison run
+    (:func:`cornell_harness.workflows.compare.run_comparison`), its folder and report written, its table
+    printed; (exit code, run records, scene, reference)."""
     from cornell_harness.workflows import compare as cmp
     from cornell_harness.workflows import runner
-    from cornell_harness.workflows.budgets import parse_duration
 
-    try:
-        budget = parse_duration(time_budget) if time_budget else None
-        target = parse_target(target_error) if target_error else None
-    except ValueError as e:
-        raise typer.BadParameter(str(e)) from None
-    repeats = time_repeats or default_time_repeats(budget, target)
-    sc = resolve_scene(scene, overrides)
-    ref = load_reference(sc)
-    entries = resolve(renderer)
-    keep_report_options(out, series_labels_for(series_label, [e.name for e in entries]),
+    comparison = _comparison(scene, overrides, renderer, spp, seed, time_budget, target_error, max_spp,
+                             time_repeats, time_basis)
+    sc, ref = comparison.scene, comparison.reference
+    keep_report_options(out, series_labels_for(series_label, [e.name for e in comparison.entries]),
                         parse_crops(crop, sc.camera.width, sc.camera.height))
-    runnable = [e.available and not missing_features(e.renderer, sc) for e in entries]
-    mode = f"{budget:g} s each" if budget else f"to {target[0]}<={target[1]:g}" if target else f"{spp} spp"
-    calibrations = 2 * repeats * sum(runnable) if budget else 0
-    bar = Progress(calibrations + len(entries) + (repeats - 1) * sum(runnable), f"{sc.name} @ {mode}", "render")
-    if budget:
-        bar.start("the time budget's calibration renders")
-    choices = iter(cmp.calibrate_time_budget([e for e, ok in zip(entries, runnable) if ok], sc, budget, seed,
-                                             repeats, time_basis, on_render=bar.advance) if budget else ())
-    records = []
-    for entry, ok in zip(entries, runnable):
-        bar.start(entry.name)
-        if budget and ok:
-            choice = next(choices)
-            if isinstance(choice, Exception):
-                rec = runner.RunRecord.new(sc, entry, 1, seed)
-                rec.status, rec.reason = "failed", f"time budget calibration: {type(choice).__name__}: {choice}"
-            else:
-                rec = runner.run_one(entry, sc, choice.spp, seed, ref)
-                choice.record_in(rec.info, budget)
-        elif target and ok:
-            rec = cmp.render_to_target(entry, sc, ref, target[0], target[1], seed, max_spp)
-        else:
-            rec = runner.run_one(entry, sc, spp, seed, ref)
-        cmp.judge_agreement(rec, sc, ref)
-        records.append(rec)
-        bar.advance(f"{rec.renderer} {rec.status}")
-        if as_json and repeats == 1:  # as it finishes; with repeats, once they are all in
-            bar.write(json.dumps(runner.json_record(rec), allow_nan=False))
-    cmp.retime(entries, records, sc, repeats, on_render=bar.advance)
-    if as_json and repeats > 1:
+    bar = Progress(comparison.renders, f"{sc.name} @ {comparison.mode}", "render")
+    streamed = as_json and comparison.repeats == 1  # each record as it finishes; with repeats, once all are in
+    records = cmp.run_comparison(comparison, on_start=bar.start, on_render=bar.advance, on_record=(
+        lambda rec: bar.write(json.dumps(runner.json_record(rec), allow_nan=False))) if streamed else None)
+    if as_json and not streamed:
         for rec in records:
             bar.write(json.dumps(runner.json_record(rec), allow_nan=False))
     bar.close()
     warn_contention(runner.rows_frame(records))
     report = write_compare_outputs(out, sc, ref, records, command_line(), sections=sections, title=title,
-                                   time_basis=time_basis, time_repeats=repeats)
+                                   time_basis=time_basis, time_repeats=comparison.repeats)
     if not as_json:
         typer.echo(compare_table([r.row() for r in records], time_basis))
         for r in records:
@@ -160,6 +119,24 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
                 typer.echo(f"{r.renderer}: {r.status}: {r.reason}")
     info(f"report: {report}")
     return (1 if any(r.status == "failed" for r in records) else 0), records, sc, ref
+
+
+def _comparison(scene: str, overrides, renderer, spp: int, seed: int, time_budget: Optional[str],
+                target_error: Optional[str], max_spp: int, time_repeats: Optional[int], time_basis: str):
+    """The comparison the options ask for (:class:`cornell_harness.workflows.compare.Comparison`): a bad
+    --time-budget or --target-error is a usage error."""
+    from cornell_harness.evaluate.convergence import parse_target
+    from cornell_harness.workflows.budgets import parse_duration
+    from cornell_harness.workflows.compare import Comparison, default_time_repeats
+
+    try:
+        budget = parse_duration(time_budget) if time_budget else None
+        target = parse_target(target_error) if target_error else None
+    except ValueError as e:
+        raise typer.BadParameter(str(e)) from None
+    sc = resolve_scene(scene, overrides)
+    return Comparison(sc, load_reference(sc), resolve(renderer), spp, seed, budget, target, max_spp,
+                      time_repeats or default_time_repeats(budget, target), time_basis)
 
 
 def compare_table(rows: list[dict], time_basis: str = "wall") -> str:

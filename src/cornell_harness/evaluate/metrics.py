@@ -271,12 +271,13 @@ def image_metrics(img, ref, exposure: float | None = None, quantity: str = DEFAU
     three pixel counts. Each value is the same, bit for bit, as with every metric.
     """
     img, ref = as_pair(img, ref)
-    if exposure is None:
-        exposure = display_exposure(ref, quantity)
     wanted = None if keys is None else frozenset(keys)
 
     def want(*names: str) -> bool:
         return wanted is None or not wanted.isdisjoint(names)
+
+    if exposure is None and want("psnr", "ssim", *DELTA_E_KEYS):  # a pass over the reference's logarithms
+        exposure = display_exposure(ref, quantity)
 
     clean = img if all_finite(img) else zero_broken_pixels(img)  # no copy without broken pixels
     out = {}

@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Collection, Mapping
 
 import numpy as np
 
@@ -248,8 +248,8 @@ def nested_regions(row: Mapping) -> dict[str, dict]:
     return out
 
 
-def region_metrics(image, reference, masks: dict[str, np.ndarray], spp: int | None = None,
-                   variance=None) -> dict[str, dict[str, float]]:
+def region_metrics(image, reference, masks: Mapping[str, np.ndarray], spp: int | None = None,
+                   variance=None, keys: Collection[str] | None = None) -> dict[str, dict[str, float]]:
     """Per region, :data:`REGION_METRICS` of ``image`` against ``reference`` on the region's pixels.
 
     ``reference`` is a :class:`cornell_harness.store.references.Reference` (its
@@ -269,19 +269,23 @@ def region_metrics(image, reference, masks: dict[str, np.ndarray], spp: int | No
       (:func:`cornell_harness.evaluate.noise.render_variance`), else none (the image
       is taken as noise-free).
 
-    An empty region has ``pixels`` 0 and NaN metrics.
+    An empty region has ``pixels`` 0 and NaN metrics. ``keys`` (of :data:`REGION_METRICS`) computes those
+    only, with ``pixels``: each value the same as with every one (a gate's slope scores one metric per
+    checkpoint, and ΔE is most of a region's cost).
     """
     img, ref = metrics.as_pair(image, reference.image)
-    ref_var = np.asarray(reference.variance, dtype=np.float64)
-    if variance is not None:
-        img_var = np.asarray(variance, dtype=np.float64)
-    elif spp is not None:
-        img_var = noise.render_variance(ref_var, reference.spp, spp)
-    else:
-        img_var = 0.0
-    diff_var = ref_var + img_var
-    exposure = metrics.display_exposure(ref, reference.quantity)
     colour = has_colour(reference.quantity)
+    wanted = [k for k in REGION_METRICS[1:] if (keys is None or k in keys) and (colour or k not in COLOUR_METRICS)]
+    if "mean_z" in wanted:
+        ref_var = np.asarray(reference.variance, dtype=np.float64)
+        if variance is not None:
+            img_var = np.asarray(variance, dtype=np.float64)
+        elif spp is not None:
+            img_var = noise.render_variance(ref_var, reference.spp, spp)
+        else:
+            img_var = 0.0
+        diff_var = ref_var + img_var
+    exposure = metrics.display_exposure(ref, reference.quantity) if "delta_e2000_mean" in wanted else None
     clean = metrics.zero_broken_pixels(img)
     out = {}
     for name, mask in masks.items():
@@ -290,20 +294,22 @@ def region_metrics(image, reference, masks: dict[str, np.ndarray], spp: int | No
             raise ValueError(f"region {name!r}: mask shape {mask.shape} does not match image shape {img.shape[:2]}")
         n = int(np.count_nonzero(mask))
         if n == 0:
-            out[name] = {"pixels": 0,
-                         **{k: float("nan") for k in REGION_METRICS[1:] if colour or k not in COLOUR_METRICS}}
+            out[name] = {"pixels": 0, **{k: float("nan") for k in wanted}}
             continue
         im, rf = metrics.masked_pixels(clean, mask), metrics.masked_pixels(ref, mask)
-        out[name] = {
-            "pixels": n,
-            "mean_radiance_rel_error": metrics.mean_radiance_rel_error(metrics.masked_pixels(img, mask), rf),
-            "mean_z": noise.mean_difference_z(metrics.masked_pixels(img, mask), rf,
-                                              metrics.masked_pixels(diff_var, mask)),
-            "rmse": metrics.rmse(im, rf),
-            "rel_mse": metrics.rel_mse(im, rf),
-        }
-        if colour:
-            out[name]["delta_e2000_mean"] = metrics.delta_e2000(im, rf, exposure=exposure)
+        values = {"pixels": n}
+        if "mean_radiance_rel_error" in wanted:
+            values["mean_radiance_rel_error"] = metrics.mean_radiance_rel_error(metrics.masked_pixels(img, mask), rf)
+        if "mean_z" in wanted:
+            values["mean_z"] = noise.mean_difference_z(metrics.masked_pixels(img, mask), rf,
+                                                       metrics.masked_pixels(diff_var, mask))
+        if "rmse" in wanted:
+            values["rmse"] = metrics.rmse(im, rf)
+        if "rel_mse" in wanted:
+            values["rel_mse"] = metrics.rel_mse(im, rf)
+        if "delta_e2000_mean" in wanted:
+            values["delta_e2000_mean"] = metrics.delta_e2000(im, rf, exposure=exposure)
+        out[name] = values
     return out
 
 

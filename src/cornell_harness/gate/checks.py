@@ -16,8 +16,8 @@ from typing import Mapping
 import numpy as np
 
 from cornell_harness.evaluate import agreement, bias_extrapolation, convergence, metrics, outliers, variance_check
-from cornell_harness.evaluate import regions as named_regions
-from cornell_harness.evaluate.registry import HIGHER_IS_BETTER, region_metric
+from cornell_harness.evaluate.registry import HIGHER_IS_BETTER
+from cornell_harness.evaluate.score import lookup, metric_value
 from cornell_harness.gate.config import Consistency, Expectation, GateConfig
 from cornell_harness.store.references import Reference
 from cornell_harness.workflows import runner
@@ -59,9 +59,7 @@ class Outcome:
 
 def recorded_metric(rec: runner.RunRecord, key: str) -> float | None:
     """A metric of the run: image-wide from ``rec.metrics``, ``region.<region>.<metric>`` from ``rec.regions``."""
-    parts = region_metric(key)
-    v = rec.metrics.get(key) if parts is None else rec.regions.get(parts[0], {}).get(parts[1])
-    return None if v is None else float(v)
+    return lookup(rec.metrics, rec.regions, key)
 
 
 def _budget_checks(exp: Expectation, rec: runner.RunRecord) -> list[Check]:
@@ -126,36 +124,12 @@ def _shots(rec: runner.RunRecord, first: int) -> tuple[list[int], dict]:
 
 def _slope_check(exp: Expectation, rec: runner.RunRecord, ref: Reference) -> Check:
     xs, shots = _shots(rec, max(1, rec.spp // 64))
-    rmse = [metrics.rmse(metrics.zero_broken_pixels(np.asarray(shots[s], np.float64)), ref.image) for s in xs]
+    rmse = [metric_value(shots[s], ref, s, "rmse") for s in xs]
     slope = convergence.loglog_slope(xs, rmse)
     lo, hi = exp.slope
     ok = lo <= slope <= hi
     return Check(exp.name, "slope.rmse_spp", ok, f"RMSE-vs-spp slope {slope:.3f} over spp {xs[0]}..{xs[-1]}, "
                  f"expected in [{lo:g}, {hi:g}]", slope, None)
-
-
-def metric_at(image: np.ndarray, ref: Reference, spp: int, metric: str,
-              masks: Mapping[str, np.ndarray] | None = None) -> float:
-    """``metric`` (image-wide, or ``region.<region>.<metric>`` with its mask in ``masks``) of one image at ``spp``."""
-    if (parts := region_metric(metric)) is not None:
-        region, key = parts
-        if not masks or region not in masks:
-            raise KeyError(f"no mask for region {region!r}")
-        if key == "mean_radiance_rel_error":  # as region_metrics has it, without its ΔE: a bias limit scores 16+
-            mask = masks[region]
-            return metrics.mean_radiance_rel_error(metrics.masked_pixels(image, mask),
-                                                   metrics.masked_pixels(ref.image, mask))
-        return float(named_regions.region_metrics(image, ref, {region: masks[region]}, spp=spp)[region][key])
-    if metric == "mean_radiance_rel_error":  # skips broken pixels, as metrics.image_metrics does
-        return metrics.mean_radiance_rel_error(image, ref.image)
-    clean = metrics.zero_broken_pixels(np.asarray(image, np.float64))
-    # These need no ΔE or SSIM, which cost most of a full scoring: a slope scores every checkpoint.
-    if metric in ("rmse", "mse"):
-        r = metrics.rmse(clean, ref.image)
-        return r if metric == "rmse" else r * r
-    if metric == "rel_mse":
-        return metrics.rel_mse(clean, ref.image)
-    return float(runner.score(image, ref, spp)[metric])
 
 
 def _budget_text(spp: int, settings: str, keys) -> str:
@@ -172,7 +146,7 @@ def _consistency_slope(exp: Expectation, c: Consistency, rec: runner.RunRecord, 
     if len(xs) < 2:
         return Check(exp.name, name, False, f"no checkpoints from spp {c.first_spp(rec.spp)} below {rec.spp}: "
                      "the slope form needs a progressive renderer (or use max_ratio with smaller)")
-    ys = [abs(metric_at(shots[s], ref, s, c.metric, masks)) for s in xs]
+    ys = [abs(metric_value(shots[s], ref, s, c.metric, masks)) for s in xs]
     slope = convergence.loglog_slope(xs, ys)
     ok = lo <= slope <= hi  # False for NaN (an error of 0 or not finite)
     return Check(exp.name, name, ok, f"{c.metric}-vs-spp slope {slope:.3f} over spp {xs[0]}..{xs[-1]} "

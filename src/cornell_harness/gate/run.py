@@ -22,7 +22,8 @@ from cornell_harness.adapters.registry import ESTIMATORS, RendererEntry, Rendere
 from cornell_harness.adapters.settings import SettingsError
 from cornell_harness.evaluate.regions import region_masks
 from cornell_harness.evaluate.registry import region_metric
-from cornell_harness.gate.checks import Outcome, doubling, evaluate, metric_at
+from cornell_harness.evaluate.score import metric_value
+from cornell_harness.gate.checks import Outcome, doubling, evaluate
 from cornell_harness.gate.config import Expectation, GateConfig, GateConfigError
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.model import SceneError
@@ -179,7 +180,7 @@ def render_bias_efforts(job: GateJob, scene, ref, entry: RendererEntry) -> dict[
     except (RenderError, RenderTimeout, KeyError) as ex:
         return f"the bias limit's renders failed: {ex}"
     # The signed error, as every report has it (a mean radiance skips broken pixels).
-    return {m: np.array([[metric_at(images[j, i], ref, b.spp or effort, m, masks) for i, effort in enumerate(b.efforts)]
+    return {m: np.array([[metric_value(images[j, i], ref, b.spp or effort, m, masks) for i, effort in enumerate(b.efforts)]
                          for j in range(len(seeds))]) for m in b.metrics}
 
 

@@ -1,5 +1,6 @@
-"""Equal-time and equal-quality comparisons: the spp a time budget buys, the time a target error costs, and
-the repeated timing of their renders (``--time-repeats``), interleaved over the renderers."""
+"""``cbox compare``: renderers on one scene scored against its reference (:func:`run_comparison`), at equal spp,
+equal time (the spp a time budget buys) or equal quality (the time a target error costs), their renders timed
+again (``--time-repeats``) in rounds interleaved over the renderers; and the comparison's folder."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from cornell_harness.adapters.api import attribute
-from cornell_harness.adapters.registry import RendererEntry
+from cornell_harness.adapters.registry import RendererEntry, missing_features
 from cornell_harness.evaluate import timing_stats
 from cornell_harness.scenes.model import Scene
 from cornell_harness.store.atomic import atomic_path, json_safe, write_json_atomic
@@ -179,6 +180,97 @@ def render_to_target(entry: RendererEntry, scene: Scene, reference: Reference, m
         if value <= target or spp >= max_spp or stalls >= 2:
             return rec
         spp, previous = min(2 * spp, max_spp), value
+
+
+def default_time_repeats(time_budget: float | None, target: tuple[str, float] | None) -> int:
+    """The timings of each final render when none is asked for: 3 for an equal-time or equal-quality
+    comparison (the time is the result), 1 for a plain one at a given spp."""
+    return 3 if time_budget or target else 1
+
+
+@dataclass
+class Comparison:
+    """What one ``cbox compare`` runs: ``entries`` on ``scene`` against ``reference``, each at ``spp``, or at the
+    spp ``budget_s`` seconds buy it (equal time), or at the least of 1, 2, 4, ... ``max_spp`` that brings
+    ``target`` = (metric, value) within its value (equal quality); each final render timed ``repeats`` times."""
+
+    scene: Scene
+    reference: Reference
+    entries: Sequence[RendererEntry]
+    spp: int
+    seed: int = 0
+    budget_s: float | None = None
+    target: tuple[str, float] | None = None
+    max_spp: int = 4096
+    repeats: int = 1
+    time_basis: str = "wall"
+
+    @property
+    def runnable(self) -> list[bool]:
+        """Per entry: whether it renders here (available, and it models every feature the scene uses)."""
+        return [e.available and not missing_features(e.renderer, self.scene) for e in self.entries]
+
+    @property
+    def mode(self) -> str:
+        """``10 s each``, ``to rel_mse<=0.001`` or ``64 spp``."""
+        if self.budget_s:
+            return f"{self.budget_s:g} s each"
+        return f"to {self.target[0]}<={self.target[1]:g}" if self.target else f"{self.spp} spp"
+
+    @property
+    def renders(self) -> int:
+        """The renders it makes (a progress bar's length): the calibrations, one per renderer, the repeats."""
+        runnable = sum(self.runnable)
+        calibrations = 2 * self.repeats * runnable if self.budget_s else 0
+        return calibrations + len(self.entries) + (self.repeats - 1) * runnable
+
+
+def run_comparison(c: Comparison, on_start: Callable[[str], None] | None = None,
+                   on_render: Callable[[str], None] | None = None,
+                   on_record: Callable[[runner.RunRecord], None] | None = None) -> list[runner.RunRecord]:
+    """Render, score and time every entry of ``c``; one record per entry, in order (a renderer's failure is
+    its record's, never raised). An unbiased renderer's run gets the agreement test (:func:`judge_agreement`).
+
+    With a time budget each renderer's spp comes from calibration renders, ``c.repeats`` rounds of them
+    interleaved over the renderers; every final render is then timed ``c.repeats`` times in all, in rounds
+    interleaved over the renderers too (:func:`retime`). ``on_start(label)`` comes before each renderer's
+    renders, ``on_render(label)`` after each render (progress), ``on_record(record)`` as each record is
+    scored, before the repeats retime it.
+    """
+    runnable = c.runnable
+    if c.budget_s and on_start:
+        on_start("the time budget's calibration renders")
+    choices = iter(calibrate_time_budget([e for e, ok in zip(c.entries, runnable) if ok], c.scene, c.budget_s,
+                                         c.seed, c.repeats, c.time_basis, on_render=on_render) if c.budget_s else ())
+    records = []
+    for entry, ok in zip(c.entries, runnable):
+        if on_start:
+            on_start(entry.name)
+        rec = _run_entry(c, entry, next(choices) if c.budget_s and ok else None, ok)
+        judge_agreement(rec, c.scene, c.reference)
+        records.append(rec)
+        if on_render:
+            on_render(f"{rec.renderer} {rec.status}")
+        if on_record:
+            on_record(rec)
+    retime(c.entries, records, c.scene, c.repeats, on_render=on_render)
+    return records
+
+
+def _run_entry(c: Comparison, entry: RendererEntry, choice: BudgetChoice | Exception | None,
+               runnable: bool) -> runner.RunRecord:
+    """One entry's scored run: at its time budget's ``choice``, to the target error, or at ``c.spp``."""
+    if isinstance(choice, Exception):
+        rec = runner.RunRecord.new(c.scene, entry, 1, c.seed)
+        rec.status, rec.reason = "failed", f"time budget calibration: {type(choice).__name__}: {choice}"
+        return rec
+    if choice is not None:
+        rec = runner.run_one(entry, c.scene, choice.spp, c.seed, c.reference)
+        choice.record_in(rec.info, c.budget_s)
+        return rec
+    if c.target and runnable:
+        return render_to_target(entry, c.scene, c.reference, c.target[0], c.target[1], c.seed, c.max_spp)
+    return runner.run_one(entry, c.scene, c.spp, c.seed, c.reference)
 
 
 #: Family-wise false-alarm rate of the agreement test :func:`judge_agreement` gives a run (its ``agreement``

@@ -1,11 +1,9 @@
 """Scoring images made outside the harness (``cbox compare-image``): load them, check them, score them.
 
 An idiff- or FLIP-style comparison of image files against a reference,
-with the harness's own numbers: every image metric, through the very
-functions ``cbox compare`` scores a render with
-(:func:`cornell_harness.evaluate.metrics.image_metrics`,
-:func:`cornell_harness.evaluate.noise.noise_yardsticks`,
-:func:`cornell_harness.workflows.runner.score_regions`), so a file written by
+with the harness's own numbers: every image metric, by the one scorer
+``cbox compare`` scores a render with
+(:func:`cornell_harness.evaluate.score.score_image`), so a file written by
 ``cbox render`` scores exactly as ``cbox compare`` scored that render.
 A check scores a chosen set (:func:`score`'s ``keys``), each value the same
 as in the full set.
@@ -40,23 +38,28 @@ variance when it reports one, so there ``mean_z`` may differ).
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Collection, Sequence
 
 import numpy as np
 
-from cornell_harness.evaluate import flip, metrics
+from cornell_harness.evaluate import flip
+from cornell_harness.evaluate import regions as named_regions
 from cornell_harness.evaluate.ciede2000 import srgb_eotf
-from cornell_harness.evaluate import noise as stats
 from cornell_harness.evaluate.image_scores import ImageScore, InputImage, Target
-from cornell_harness.evaluate.registry import region_metric
+from cornell_harness.evaluate.metrics import DELTA_E_KEYS
+from cornell_harness.evaluate.registry import check_metrics, region_metric
+from cornell_harness.evaluate.score import NOISE_PREFIX, every_region_key, score_image
+from cornell_harness.evaluate.thresholds import Threshold, broken, fraction_above, percent_line
 from cornell_harness.scenes.model import Scene
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
+from cornell_harness.store.atomic import json_safe
 from cornell_harness.store.exr import ImageFileError, read_exr
 from cornell_harness.store.image_files import SPP_ATTRIBUTE, ImageFile, header_spp, read_image_file
 from cornell_harness.store.references import (NOISE_FILE, PROVENANCE_FILE, REFERENCE_FILE, VARIANCE_FILE, Reference,
                                       ReferenceError, load_reference)
-from cornell_harness.workflows import runner
+from cornell_harness.suggest import did_you_mean
 
 #: How a display-referred (integer) file is turned into linear values, by name.
 INPUT_TRANSFERS = {
@@ -182,10 +185,6 @@ def load_images(paths: Sequence[Path], target: Target, transfer: str | None = No
 # Scoring
 # --------------------------------------------------------------------------
 
-#: The keys of the noise yardsticks (:func:`cornell_harness.evaluate.noise.noise_yardsticks`) start with it.
-NOISE_PREFIX = "noise_"
-
-
 def noise_gap(target: Target, spp: int | None) -> str | None:
     """Why the noise yardsticks cannot be computed for an image at ``spp`` against ``target``; None if they can."""
     if target.noise_note is not None:
@@ -197,39 +196,138 @@ def noise_gap(target: Target, spp: int | None) -> str | None:
 
 def score(source: InputImage, target: Target, with_flip: bool = True,
           keys: Collection[str] | None = None) -> ImageScore:
-    """Every metric of one test image against the target, computed as ``cbox compare`` computes them
-    (``flip_mean`` only ``with_flip``: :func:`cornell_harness.evaluate.metrics.image_metrics`).
+    """Every metric of one test image against the target, by the scorer ``cbox compare`` scores a render with
+    (:func:`cornell_harness.evaluate.score.score_image`; ``flip_mean`` only ``with_flip``).
 
     ``keys`` (:func:`cornell_harness.evaluate.registry.check_metrics`' choice for a check) computes only what they
-    name (with what comes at no cost with it, :func:`cornell_harness.evaluate.metrics.image_metrics`): the ΔE00 map
-    for a ``delta_e2000_*`` key, HDR-FLIP for ``flip_mean``, the noise yardsticks for a ``noise_*`` key, the
-    scene's regions for a ``region.*`` key; each value the same as with every metric.
+    name, each value the same as with every metric; a ``region.*`` key scores every region of the scene, as
+    the table and ``--json`` show them all.
     """
-    ref = target.reference
-    every = keys is None
-    keys = frozenset(keys or ())
-    with_de = every or not keys.isdisjoint(metrics.DELTA_E_KEYS)
-    with_noise = every or any(k.startswith(NOISE_PREFIX) for k in keys)
-    with_regions = target.scene is not None and (every or any(region_metric(k) for k in keys))
-    # float64 once, where each metric would convert the float32 pixels again (the same values, exactly: the
-    # metrics take as_pair's arrays), and the exposure once (each would compute it from the reference again).
-    image, ref_image = metrics.as_pair(source.image, ref.image)
-    exposure = metrics.display_exposure(ref_image, ref.quantity)
-    # the ΔE00 map once: its statistics, the error map and --fail-percent
-    de = pixel_errors(image, ref_image, exposure) if with_de and metrics.has_colour(ref.quantity) else None
-    values = metrics.image_metrics(image, ref_image, exposure=exposure, quantity=ref.quantity,
-                                   with_flip=with_flip if every else "flip_mean" in keys, delta_e_map=de,
-                                   keys=None if every else keys)
-    note = noise_gap(target, source.spp) if with_noise else None
-    yardsticks = stats.noise_yardsticks(image, ref, source.spp, exposure=exposure) if with_noise and note is None \
-        else None
-    regions = runner.score_regions(target.scene, source.image, ref, source.spp) if with_regions else {}
-    parameters = flip.flip_parameters(ref.image) if "flip_mean" in values else None
-    return ImageScore(source, values, yardsticks, note, regions, parameters, de)
+    masks = None
+    if target.scene is not None and (keys is None or any(region_metric(k) for k in keys)):
+        masks = named_regions.region_masks(target.scene)
+        if keys is not None:
+            keys = {*keys, *every_region_key(masks)}
+    result = score_image(source.image, target.reference, source.spp, masks=masks, keys=keys, with_flip=with_flip,
+                         noise_note=noise_gap(target, source.spp))
+    parameters = flip.flip_parameters(target.reference.image) if "flip_mean" in result.metrics else None
+    return ImageScore(source, result.metrics, result.noise, result.noise_note, result.regions, parameters,
+                      result.delta_e_map)
 
 
-def pixel_errors(image: np.ndarray, ref: np.ndarray, exposure: float) -> np.ndarray:
-    """The (H, W) CIEDE2000 of each pixel at ``exposure`` (the reference's display exposure): the map
-    ``delta_e2000_*`` summarise and the error-map file shows, what ``--fail-percent`` counts (of the image with
-    its broken pixels zeroed, as the metrics take it)."""
-    return metrics.delta_e2000(image, ref, exposure=exposure, full=True)[1]
+# --------------------------------------------------------------------------
+# The command's flow: what to score, scoring every image, the verdicts
+# --------------------------------------------------------------------------
+
+
+class OptionError(ValueError):
+    """Bad input that one option of the command gave (exit 2, the message naming that option)."""
+
+    def __init__(self, message: str, option: str):
+        super().__init__(message)
+        self.option = option
+
+
+@dataclass
+class Checks:
+    """The pass/warn/fail criteria of a check: thresholds on metrics (``--fail``/``--warn``) and the share of
+    pixels above a per-pixel ΔE00 (``--fail-percent`` of ``--pixel-threshold``). None of them: no check."""
+
+    thresholds: Sequence[Threshold] = ()
+    fail_percent: float | None = None
+    pixel_threshold: float | None = None
+
+    def __bool__(self) -> bool:
+        return bool(self.thresholds) or self.fail_percent is not None
+
+
+@dataclass
+class Checked:
+    """One image's score, and with checks its verdict (``--json``'s) and the broken criteria's lines."""
+
+    score: ImageScore
+    verdict: dict | None = None
+    broken: list[tuple[str, str]] = field(default_factory=list)  # (level, line), fails first
+
+
+@dataclass
+class ImageComparison:
+    """What ``cbox compare-image`` computed: the target, and each image scored and checked, in order."""
+
+    target: Target
+    images: list[Checked]
+    error_maps: bool  # whether each image's ΔE00 error map is to be written
+
+    @property
+    def failed(self) -> bool:
+        return any(c.verdict is not None and c.verdict["status"] == "fail" for c in self.images)
+
+
+def compare_images(paths: Sequence[Path], scene: Scene | None = None, reference: Path | None = None,
+                   transfer: str | None = None, spp: int | None = None, exposure: float | None = None,
+                   checks: Checks = Checks(), with_flip: bool = False, every: bool = False,
+                   error_maps: bool | None = None) -> ImageComparison:
+    """Score ``paths`` against ``scene``'s stored reference or the ``reference`` file, and check them.
+
+    Without checks every metric is scored and the error maps are made; a check scores what its criteria name
+    and the cheap metrics (:func:`scored_keys`; ``every``: every metric) and makes the error maps only when
+    ``error_maps`` asks. HDR-FLIP (``flip_mean``, more than every other metric together) is scored
+    ``with_flip`` or where a threshold names it. Inputs are checked before anything is scored: refused with
+    :class:`OptionError` or, naming the file, ``ImageFileError``.
+    """
+    maps = error_maps if error_maps is not None else not checks
+    keys = scored_keys([t.metric for t in checks.thresholds], checks.fail_percent is not None or maps, with_flip,
+                       every or not checks)
+    target = (load_scene_target(scene) if scene is not None else
+              load_file_target(reference, transfer, exposure,
+                               noise=keys is None or any(k.startswith(NOISE_PREFIX) for k in keys)))
+    check_regions(checks.thresholds, target)
+    sources = load_images(paths, target, transfer, spp, exposure)
+    if exposure is not None and all(s.clipped is None for s in (*sources, target)):
+        raise OptionError("applies to display-referred (integer) images only, and every image given is "
+                          "floating-point (radiance already)", "--exposure")
+    flip_too = with_flip or any(t.metric == "flip_mean" for t in checks.thresholds)
+    scored = [check(score(source, target, with_flip=flip_too, keys=keys), checks) for source in sources]
+    return ImageComparison(target, scored, maps)
+
+
+def scored_keys(named: Sequence[str], de_map: bool, with_flip: bool, every: bool) -> frozenset[str] | None:
+    """The metrics a check scores (:func:`cornell_harness.evaluate.registry.check_metrics`: the ``named`` ones and
+    the cheap ones; the ΔE00 statistics too where the map is made anyway, ``de_map``: for --fail-percent or the
+    error map), or None for every metric (``every``: not a check, --all-metrics, --report)."""
+    if every:
+        return None
+    return check_metrics([*named, *(DELTA_E_KEYS if de_map else ()), *(["flip_mean"] if with_flip else [])])
+
+
+def check_regions(thresholds: Sequence[Threshold], target: Target) -> None:
+    """A region threshold needs a scene that names the region: refused otherwise, before anything is scored."""
+    for t in thresholds:
+        parts = region_metric(t.metric)
+        if parts is None:
+            continue
+        regions = target.scene.regions if target.scene is not None else {}
+        if parts[0] not in regions:
+            where = f"scene {target.scene.name!r}" if target.scene is not None else "a --reference file"
+            raise OptionError(f"{t.metric}: {where} has no region {parts[0]!r}{did_you_mean(parts[0], regions)}",
+                              f"--{t.level}")
+
+
+def check(result: ImageScore, checks: Checks) -> Checked:
+    """One score against the checks: the verdict for --json and the broken criteria's lines (no checks: none)."""
+    if not checks:
+        return Checked(result)
+    label, row = result.source.label, result.row()
+    rows = [{"metric": t.metric, "level": t.level, "limit": t.value, "value": row.get(t.metric),
+             "broken": t.exceeded(row.get(t.metric))} for t in checks.thresholds]
+    lines = [(t.level, t.line(label, row.get(t.metric))) for t in broken(checks.thresholds, row)]
+    if checks.fail_percent is not None:
+        percent = 100 * fraction_above(result.delta_e_map, checks.pixel_threshold)
+        rows.append({"metric": "percent_pixels_delta_e2000_above", "level": "fail", "limit": checks.fail_percent,
+                     "pixel_threshold": checks.pixel_threshold, "value": percent,
+                     "broken": percent > checks.fail_percent})
+        if percent > checks.fail_percent:
+            lines.append(("fail", percent_line(label, percent, checks.fail_percent, checks.pixel_threshold)))
+    status = ("fail" if any(c["broken"] and c["level"] == "fail" for c in rows)
+              else "warn" if any(c["broken"] for c in rows) else "pass")
+    return Checked(result, json_safe({"status": status, "checks": rows}), lines)

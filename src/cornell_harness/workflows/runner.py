@@ -33,9 +33,9 @@ from typing import Sequence
 import numpy as np
 
 from cornell_harness.evaluate import metrics
-from cornell_harness.evaluate import noise as stats
 from cornell_harness.evaluate import regions as named_regions
 from cornell_harness.evaluate import timing_stats
+from cornell_harness.evaluate.score import score_image
 from cornell_harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, SettingsError, attribute, default_threads
 from cornell_harness.adapters.registry import RendererEntry, estimator_of, missing_features
 from cornell_harness.adapters.settings import canonical
@@ -282,8 +282,7 @@ def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: 
     if reference is None:
         rec.metrics = metrics.invalid_pixel_counts(result.image)
     else:
-        rec.metrics = score(result.image, reference, spp)
-        rec.regions = score_regions(scene, result.image, reference, spp, result.variance)
+        rec.metrics, rec.regions = score(scene, result.image, reference, spp, result.variance)
     return rec
 
 
@@ -315,28 +314,21 @@ def run_checkpoints(entry: RendererEntry, scene: Scene, spps: Sequence[int], see
         rec = RunRecord.new(scene, entry, spp, seed, version=top.version, time_s=float(t), info=dict(top.info),
                             cpu_time_s=cpu, setup_s=top.setup_s, threads=top.threads, load_before=top.load_before,
                             load_after=top.load_after, calibration_s=top.calibration_s)
-        rec.image, rec.metrics = image, score(image, reference, spp)
         # Only the highest-spp image comes with the renderer's own variance.
-        rec.regions = score_regions(scene, image, reference, spp, top.variance if spp == top.spp else None)
+        rec.image = image
+        rec.metrics, rec.regions = score(scene, image, reference, spp, top.variance if spp == top.spp else None)
         out.append(rec)
     out[-1].variance = top.variance
     return out
 
 
-def score(image: np.ndarray, reference: Reference, spp: int) -> dict:
-    """Every metric of ``image`` against the reference, plus its noise yardsticks."""
-    out = metrics.image_metrics(image, reference.image, quantity=reference.quantity)
-    out.update(stats.noise_yardsticks(image, reference, spp))
-    return out
+def score(scene: Scene, image: np.ndarray, reference: Reference, spp: int,
+          variance: np.ndarray | None = None) -> tuple[dict, dict]:
+    """A run's metrics (every image metric and the noise yardsticks) and its regions' (per named region of the
+    scene; {} without regions), by the one scorer (:func:`cornell_harness.evaluate.score.score_image`).
 
-
-def score_regions(scene: Scene, image: np.ndarray, reference: Reference, spp: int,
-                  variance: np.ndarray | None = None) -> dict:
-    """Per named region of the scene, its metrics ({} for a scene without regions).
-
-    ``variance`` is the image's own variance of its mean, when the renderer
-    gives it; otherwise the noise model at ``spp`` stands in for it
-    (:func:`cornell_harness.evaluate.regions.region_metrics`). Masks are cached per scene.
+    ``variance`` is the image's own variance of its mean, when the renderer gives it; otherwise the noise
+    model at ``spp`` stands in for it in a region's ``mean_z``. Masks are cached per scene.
     """
-    masks = named_regions.region_masks(scene)
-    return named_regions.region_metrics(image, reference, masks, spp=spp, variance=variance) if masks else {}
+    result = score_image(image, reference, spp, masks=named_regions.region_masks(scene), variance=variance)
+    return result.values, result.regions
