@@ -10,7 +10,8 @@ import pytest
 from benchmarks import markdown_blocks, schema_tables
 from cornell_harness.adapters.api import ESTIMATORS
 from cornell_harness.adapters.commands import NAME
-from cornell_harness.gate.config import DEFAULT_REGRESSION_METRICS, DEFAULT_TIME_LIMIT_S
+from cornell_harness.gate.config import (DEFAULT_ALPHA, DEFAULT_REGRESSION_MARGIN, DEFAULT_REGRESSION_METRICS,
+                                         DEFAULT_TIME_LIMIT_S, BiasLimit, Consistency, Expectation)
 from cornell_harness.schemas.reader import FORMATS, FormatProblem, check, schema
 from cornell_harness.scenes.loader import load_scene
 from cornell_harness.scenes.materials import MATERIAL_TYPES, MAX_IOR, material_fields
@@ -69,6 +70,15 @@ def test_the_scene_schema_states_the_codes_choices_and_limits():
 def test_the_gate_and_renderers_schemas_state_the_codes_choices_and_defaults():
     gate = schema("gate")["properties"]
     assert gate["regression_metrics"]["default"] == list(DEFAULT_REGRESSION_METRICS)
+    assert (gate["alpha"]["default"], gate["regression_margin"]["default"]) == (DEFAULT_ALPHA, DEFAULT_REGRESSION_MARGIN)
+    for table, cls in (("expectation", Expectation), ("consistency", Consistency), ("bias_limit", BiasLimit)):
+        fields = {f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory()
+                  for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING
+                  or f.default_factory is not dataclasses.MISSING}
+        for key, node in schema("gate")["$defs"][table]["properties"].items():
+            if "default" in node and key in fields:
+                value = fields[key]
+                assert (list(value) if isinstance(value, tuple) else value) == node["default"], (table, key)
     assert parse_duration(gate["time_limit"]["default"]) == DEFAULT_TIME_LIMIT_S
     renderer = schema("renderers")["$defs"]["renderer"]["properties"]
     assert renderer["estimator"]["enum"] == list(ESTIMATORS)

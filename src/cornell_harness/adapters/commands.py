@@ -35,11 +35,12 @@ activated: ``.venv/bin/cbox`` run with the system's ``PATH``), then on
 folder. A renderer whose executable or scene format is missing is
 unavailable, with the reason.
 
-The file is strict, as a scene file and a gate config are: an unknown key,
-a misspelt placeholder, an unknown format, feature, quantity or estimator, or
-a time regex without exactly one group is a :class:`RenderersFileError`
-(one line naming the file and the field, exit 2), raised when the file is
-read, before anything runs.
+The file is strict, as a scene file and a gate config are: its format is
+``src/cornell_harness/schemas/renderers.schema.json`` (every key, in ``docs/formats.md``),
+checked by :mod:`cornell_harness.schemas.reader`, then what the schema cannot say is checked
+here. An unknown key, a misspelt placeholder, an unknown format, feature, quantity or estimator,
+or a time regex without exactly one group is a :class:`RenderersFileError` (one line naming the
+file and the field, exit 2), raised when the file is read, before anything runs.
 
 A render (:class:`CommandRenderer`) exports the scene once, then runs the
 program once per spp asked for: every progress checkpoint is a run of its

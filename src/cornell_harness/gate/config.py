@@ -26,7 +26,9 @@ A gate config (TOML) lists expectations::
     time_limit = "10m"                # optional: kill the render after this long (default: time_limit above)
     finite_only = true                # only to allow an expectation with no accuracy check (see below)
 
-The config is strict: an unknown key at any level, or an unknown metric in a
+The config is strict: its format is ``src/cornell_harness/schemas/gate.schema.json``
+(every key with its type, default and range, in ``docs/formats.md``), checked by
+:mod:`cornell_harness.schemas.reader`. An unknown key at any level, or an unknown metric in a
 budget or in ``regression_metrics``, is a config error (exit 2) with a
 did-you-mean, before anything renders; a misspelt key must never turn a
 gate green. An expectation must check accuracy (``unbiased``, a budget, a
@@ -126,6 +128,9 @@ from cornell_harness.schemas.reader import FormatProblem, check, read_toml
 from cornell_harness.suggest import closest
 from cornell_harness.workflows.budgets import parse_duration
 
+#: The config's defaults (gate.schema.json states the same; tests/test_schemas.py holds them equal).
+DEFAULT_ALPHA = 0.01
+DEFAULT_REGRESSION_MARGIN = 0.05
 DEFAULT_REGRESSION_METRICS = ("delta_e2000_mean", "rel_mse_trimmed", "ssim")
 #: Default wall-time limit of one expectation's render: generous, it only has to stop a hang.
 DEFAULT_TIME_LIMIT_S = 1800.0
@@ -211,7 +216,7 @@ class GateConfig:
     alpha: float
     expectations: list[Expectation]
     baseline: Path | None = None
-    regression_margin: float = 0.05
+    regression_margin: float = DEFAULT_REGRESSION_MARGIN
     regression_metrics: tuple[str, ...] = DEFAULT_REGRESSION_METRICS
 
 
@@ -274,8 +279,9 @@ def load_config(path: str | Path) -> GateConfig:
     for i, name in enumerate(names):
         if name in names[:i]:
             raise GateConfigError(path, f"expect[{i}].name", f"two expectations are named {name!r}; give one a name")
-    return GateConfig(path, float(doc.get("alpha", 0.01)), exps, path.parent / baseline if baseline else None,
-                      float(doc.get("regression_margin", 0.05)), tuple(reg))
+    return GateConfig(path, float(doc.get("alpha", DEFAULT_ALPHA)), exps,
+                      path.parent / baseline if baseline else None,
+                      float(doc.get("regression_margin", DEFAULT_REGRESSION_MARGIN)), tuple(reg))
 
 
 def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expectation:

@@ -53,12 +53,14 @@ def load_scene(path: str | Path) -> Scene:
 def read_scene_document(path: str | Path) -> tuple[dict, Path]:
     """The parsed TOML of a scene file (not yet validated) and the file's path (``scene.toml`` for a folder)."""
     path = Path(path)
-    if path.is_dir():
-        path = path / "scene.toml"
     try:
+        if path.is_dir():
+            path = path / "scene.toml"
         return read_toml(path, MAX_SCENE_FILE_BYTES), path
     except FormatProblem as e:
         raise _error(path, e.field, e.message) from None
+    except OSError as e:  # a folder that cannot be looked into
+        raise _error(path, "(file)", e.strerror or str(e)) from None
 
 
 def parse_scene(doc: dict, path: Path) -> Scene:

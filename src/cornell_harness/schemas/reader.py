@@ -14,7 +14,9 @@ TOML is read as the JSON data model the schemas speak of, with three rules of it
 in a float64; an ``integer`` is a TOML integer (``2.0`` is a float); arrays and tables nest at most
 :data:`MAX_NESTING` deep. Two annotations shape the messages: a node's ``title`` names its values in an unknown-value
 message (``material type``), and its ``x-expected`` says in words what it takes (``a non-empty list of strings,
-the program and its arguments``) where the words written from its keywords would say less.
+the program and its arguments``) where the words written from its keywords would say less. ``x-unit`` is
+for the docs' tables only (``benchmarks/schema_tables.py``); like every ``x-`` keyword, other validators (an
+editor's) ignore it.
 """
 
 from __future__ import annotations
@@ -25,11 +27,12 @@ import math
 import re
 import tomllib
 from pathlib import Path
-from typing import Any, Iterable
-
-from jsonschema import Draft202012Validator, ValidationError, validators
+from typing import TYPE_CHECKING, Any, Iterable
 
 from cornell_harness.suggest import closest
+
+if TYPE_CHECKING:
+    from jsonschema import ValidationError
 
 #: Where the schemas are: ``<format>.schema.json`` for each of :data:`FORMATS`.
 SCHEMA_DIR = Path(__file__).resolve().parent
@@ -179,13 +182,13 @@ def _is_integer(checker, x) -> bool:
     return isinstance(x, int) and not isinstance(x, bool)
 
 
-_TYPE = Draft202012Validator.VALIDATORS["type"]
-
-
 def _type(validator, types, instance, schema):
+    """jsonschema's ``type``, but where ``x-allowInfinity`` lets ``inf`` through."""
+    from jsonschema import Draft202012Validator
+
     if schema.get("x-allowInfinity") and isinstance(instance, float) and instance == math.inf:
         return
-    yield from _TYPE(validator, types, instance, schema)
+    yield from Draft202012Validator.VALIDATORS["type"](validator, types, instance, schema)
 
 
 def _extras(instance: dict, schema: dict) -> list:
@@ -196,6 +199,8 @@ def _extras(instance: dict, schema: dict) -> list:
 
 def _additional_properties(validator, aP, instance, schema):
     """jsonschema's ``additionalProperties``, in document order (so the first problem is the same every run)."""
+    from jsonschema import ValidationError
+
     if not validator.is_type(instance, "object"):
         return
     extras = _extras(instance, schema)
@@ -206,14 +211,17 @@ def _additional_properties(validator, aP, instance, schema):
         yield ValidationError(f"unknown key {extras[0]!r}")
 
 
-_TomlValidator = validators.extend(
-    Draft202012Validator, validators={"type": _type, "additionalProperties": _additional_properties},
-    type_checker=Draft202012Validator.TYPE_CHECKER.redefine_many({"number": _is_number, "integer": _is_integer}))
-
-
 @functools.cache
 def _validator(fmt: str):
-    return _TomlValidator(schema(fmt))
+    """The validator of format ``fmt``: draft 2020-12 with the TOML rules above (jsonschema imported only when a
+    file is checked: about 0.1 s that a command reading no file does not pay)."""
+    from jsonschema import Draft202012Validator, validators
+
+    checker = Draft202012Validator.TYPE_CHECKER.redefine_many({"number": _is_number, "integer": _is_integer})
+    cls = validators.extend(Draft202012Validator, validators={"type": _type,
+                                                              "additionalProperties": _additional_properties},
+                            type_checker=checker)
+    return cls(schema(fmt))
 
 
 def _problem(error: ValidationError, doc: Any, label: str | None) -> FormatProblem:
