@@ -260,10 +260,10 @@ def _write(tmp_path: Path, table: dict, name: str = "r", top: str = "") -> Path:
     ({"command": ["prog", "{spp:04d}"]}, "renderer.r.command[1]", "takes no format or conversion"),
     ({"command": ["prog", "{scene"]}, "renderer.r.command[1]", "a literal brace is written {{"),
     ({"scene_format": "mitsuba3"}, "renderer.r.scene_format", "not an export format (did you mean 'mitsuba'?)"),
-    ({"models": ["difuse"]}, "renderer.r.models", "'difuse' is not a scene feature (did you mean 'diffuse'?)"),
+    ({"models": ["difuse"]}, "renderer.r.models[0]", "unknown scene feature 'difuse'; did you mean 'diffuse'?"),
     ({"models": "diffuse"}, "renderer.r.models", "expected a list of scene features"),
-    ({"quantity": "radiance2"}, "renderer.r.quantity", "is not one of radiance, ambient_occlusion"),
-    ({"estimator": "unbiassed"}, "renderer.r.estimator", "(did you mean 'unbiased'?)"),
+    ({"quantity": "radiance2"}, "renderer.r.quantity", "unknown quantity 'radiance2'; did you mean 'radiance'?"),
+    ({"estimator": "unbiassed"}, "renderer.r.estimator", "did you mean 'unbiased'?"),
     ({"variance": "{out}.{spps}.exr"}, "renderer.r.variance", "unknown placeholder {spps} (did you mean {spp}?)"),
     ({"variance": 1}, "renderer.r.variance", "expected a path"),
     ({"time": "took [0-9.]+ s"}, "renderer.r.time", "the regex has 0 groups; give exactly one"),
@@ -280,11 +280,11 @@ def test_a_wrong_field_is_one_line_naming_file_and_field(tmp_path, fake_format, 
 
 @pytest.mark.parametrize("text, field, says", [
     ("[renderer.r]\ncommand = [\"p\"]\nscene_format = \"fake\"\n", "renderer.r.models", "missing"),
-    ("[renderers.r]\n", "renderers", "unknown key; a renderers file holds [renderer.NAME] tables and a [series_labels] table only"),
+    ("[renderers.r]\n", "renderers", "unknown key (did you mean 'renderer'?)"),
     ("x = 1\n", "x", "unknown key"),
     ("", "renderer", "declares no renderer"),
-    ("[renderer]\n\"a#b\" = {}\n", "renderer.a#b", "is not a renderer name"),
-    ("[renderer.r\n", "(file)", "not valid TOML"),
+    ("[renderer]\n\"a#b\" = {}\n", "renderer.\"a#b\"", "is not a renderer name"),
+    ("[renderer.r\n", "(syntax)", "invalid TOML"),
 ])
 def test_a_wrong_file_is_one_line(tmp_path, fake_format, text, field, says):
     path = tmp_path / "r.toml"

@@ -86,7 +86,7 @@ def test_agreement_rejects_what_it_cannot_evaluate():
     ('[[expect]]\nscene = "cornell-box"\nrenderer = "x"\nspp = 0\n', "expect[0].spp"),
     ('[[expect]]\nscene = "cornell-box"\nrenderer = "x"\ntime = "soon"\n', "expect[0].time"),
     ('[[expect]]\nscene = "cornell-box"\nrenderer = "x"\nspp = 4\nslope = [-0.4, -0.6]\n', "expect[0].slope"),
-    ('[[expect]]\nscene = "cornell-box"\nrenderer = "x"\nspp = 4\nmax = { ssim = "high" }\n', "expect[0].max"),
+    ('[[expect]]\nscene = "cornell-box"\nrenderer = "x"\nspp = 4\nmax = { ssim = "high" }\n', "expect[0].max.ssim"),
     ('[[expect]]\nscene = 3\nrenderer = "x"\nspp = 4\n', "expect[0].scene"),
     ("[[expect]\n", "(syntax)"),
 ])

@@ -33,12 +33,12 @@ def test_values_parse_as_toml_or_comma_lists(text, value):
 
 # (assignments, texts the one-line error must contain)
 BAD = [
-    (["render.max_depth=-5"], ["--set render.max_depth=-5: render.max_depth: must be -1 (unbounded) or >= 1"]),
+    (["render.max_depth=-5"], ["--set render.max_depth=-5: render.max_depth: out of range: must be -1 (unbounded) or in [1, 2147483647], got -5"]),
     (["render.max_depth=abc"], ["--set render.max_depth=abc: render.max_depth: expected an integer, got str"]),
     (["render.max_depth=2.5"], ["render.max_depth: expected an integer, got float"]),
     (["camera.resolution=64"], ["--set camera.resolution=64: camera.resolution: expected a list, got int"]),
-    (["camera.resolution=0,8"], ["camera.resolution: width and height must be positive"]),
-    (["materials.white.reflectance=0.5,0.5,2"], ["materials.white.reflectance[2]: must be in [0, 1], got 2.0"]),
+    (["camera.resolution=0,8"], ["camera.resolution[0]: out of range: must be >= 1, got 0"]),
+    (["materials.white.reflectance=0.5,0.5,2"], ["materials.white.reflectance[2]: out of range: must be in [0, 1], got 2"]),
     (["render.max_dept=3"], ["--set: render.max_dept: not a key", "did you mean 'render.max_depth'?",
                              "valid keys: camera.type", "camera.resolution", "materials.white.reflectance"]),
     (["meshes.floor.material=white"], ["not a key", "valid keys:"]),

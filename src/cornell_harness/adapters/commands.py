@@ -35,11 +35,12 @@ activated: ``.venv/bin/cbox`` run with the system's ``PATH``), then on
 folder. A renderer whose executable or scene format is missing is
 unavailable, with the reason.
 
-The file is strict, as a scene file and a gate config are: an unknown key,
-a misspelt placeholder, an unknown format, feature, quantity or estimator, or
-a time regex without exactly one group is a :class:`RenderersFileError`
-(one line naming the file and the field, exit 2), raised when the file is
-read, before anything runs.
+The file is strict, as a scene file and a gate config are: its format is
+``src/cornell_harness/schemas/renderers.schema.json`` (every key, in ``docs/formats.md``),
+checked by :mod:`cornell_harness.schemas.reader`, then what the schema cannot say is checked
+here. An unknown key, a misspelt placeholder, an unknown format, feature, quantity or estimator,
+or a time regex without exactly one group is a :class:`RenderersFileError` (one line naming the
+file and the field, exit 2), raised when the file is read, before anything runs.
 
 A render (:class:`CommandRenderer`) exports the scene once, then runs the
 program once per spp asked for: every progress checkpoint is a run of its
@@ -71,21 +72,18 @@ import subprocess
 import sys
 import tempfile
 import time
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 from cornell_harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, SettingsError, Stopwatch, default_threads
 from cornell_harness.scenes.model import FEATURES, Scene
-from cornell_harness.scenes.quantities import DEFAULT_QUANTITY, QUANTITIES
+from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
+from cornell_harness.schemas.reader import FormatProblem, check, read_toml
 from cornell_harness.suggest import did_you_mean
 
 #: The placeholders a command argument (and ``variance``) may hold.
 PLACEHOLDERS = ("scene", "out", "spp", "seed", "width", "height", "threads")
-#: The keys of a ``[renderer.NAME]`` table; the first three are required.
-KEYS = ("command", "scene_format", "models", "quantity", "estimator", "variance", "time")
-REQUIRED = KEYS[:3]
 #: What separates a renderers file from a renderer's name in a spec (:func:`spec_of`).
 SPEC_SEPARATOR = "#"
 #: A renderer's name: what results carry and ``-r`` takes; none of the characters a spec gives meaning to.
@@ -145,25 +143,27 @@ def is_spec(text: str) -> bool:
 
 
 def read_file(path: Path | str) -> dict[str, Declaration]:
-    """Every renderer a renderers file declares, by name, checked; RenderersFileError for anything wrong."""
+    """Every renderer a renderers file declares, by name, checked; RenderersFileError for anything wrong.
+
+    The format is ``src/cornell_harness/schemas/renderers.schema.json``, checked by
+    :mod:`cornell_harness.schemas.reader`; what is left here is what the schema cannot say: placeholders, a
+    time regex's groups, a series spec, and the features the scene format can express."""
     path = Path(path).resolve()
-    try:
-        doc = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise RenderersFileError(path, "(file)", "no such file") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise RenderersFileError(path, "(file)", f"cannot read: {getattr(e, 'strerror', None) or e}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise RenderersFileError(path, "(file)", f"not valid TOML: {e}") from None
-    for key in doc:
-        if key not in ("renderer", "series_labels"):
-            raise RenderersFileError(path, key, "unknown key; a renderers file holds [renderer.NAME] tables and "
-                                     "a [series_labels] table only" + did_you_mean(key, ["renderer", "series_labels"]))
+    doc = _document(path)
     _series_labels(path, doc)
-    tables = doc.get("renderer", {} if "series_labels" in doc else None)
-    if not isinstance(tables, dict) or (not tables and "series_labels" not in doc):
+    if "renderer" not in doc and "series_labels" not in doc:
         raise RenderersFileError(path, "renderer", "declares no renderer; add a [renderer.NAME] table")
-    return {name: _declaration(path, name, t) for name, t in tables.items()}
+    return {name: _declaration(path, name, t) for name, t in doc.get("renderer", {}).items()}
+
+
+def _document(path: Path) -> dict:
+    """The file's TOML, checked against the format's schema."""
+    try:
+        doc = read_toml(path)
+        check(doc, "renderers")
+    except FormatProblem as e:
+        raise RenderersFileError(path, e.field, e.message) from None
+    return doc
 
 
 def read_series_labels(path: Path | str) -> dict[str, str]:
@@ -171,84 +171,51 @@ def read_series_labels(path: Path | str) -> dict[str, str]:
     series spec → the text legends and tables show for it (``--series-label`` gives the same)."""
     path = Path(path).resolve()
     read_file(path)  # the file's other errors first, as every reader of it reports them
-    return _series_labels(path, tomllib.loads(path.read_text()))
+    return _series_labels(path, _document(path))
 
 
 def _series_labels(path: Path, doc: dict) -> dict[str, str]:
     from cornell_harness.adapters.settings import split_spec
 
     table = doc.get("series_labels", {})
-    if not isinstance(table, dict):
-        raise RenderersFileError(path, "series_labels", "expected a table of 'SPEC' = \"text\"")
     for spec, shown in table.items():
-        where = f"series_labels.{spec}"
-        if not isinstance(shown, str) or not shown.strip():
-            raise RenderersFileError(path, where, "expected a non-empty string, the text shown for the series")
+        if not shown.strip():
+            raise RenderersFileError(path, f"series_labels.{spec}", "expected a non-empty string, the text shown "
+                                     "for the series")
         try:
             split_spec(spec)
         except SettingsError as e:
-            raise RenderersFileError(path, where, str(e)) from None
+            raise RenderersFileError(path, f"series_labels.{spec}", str(e)) from None
     return dict(table)
 
 
-def _declaration(path: Path, name: str, t) -> Declaration:
+def _declaration(path: Path, name: str, t: dict) -> Declaration:
     where = f"renderer.{name}"
 
     def bad(field: str, message: str) -> RenderersFileError:
         return RenderersFileError(path, f"{where}.{field}" if field else where, message)
 
-    if not NAME.fullmatch(name):
-        raise bad("", f"{name!r} is not a renderer name: letters, digits and _ . + - only, starting with a "
-                      "letter or digit")
-    if not isinstance(t, dict):
-        raise bad("", "expected a table, [renderer.NAME] with command, scene_format and models")
-    for key in t:
-        if key not in KEYS:
-            raise bad(key, f"unknown key{did_you_mean(key, KEYS)}; keys: {', '.join(KEYS)}")
-    for key in REQUIRED:
-        if key not in t:
-            raise bad(key, "missing (required: " + ", ".join(REQUIRED) + ")")
     command = t["command"]
-    if not isinstance(command, list) or not command or not all(isinstance(a, str) for a in command):
-        raise bad("command", "expected a non-empty list of strings, the program and its arguments")
     if not command[0].strip():
         raise bad("command", "the program (the first argument) is empty")
     for i, arg in enumerate(command):
         _check_placeholders(arg, lambda message, i=i: bad(f"command[{i}]", message))
     from cornell_harness.scenes.export import FORMATS, format_module  # imported when a file is read, not with the registry
 
-    fmt = t["scene_format"]
+    fmt, models = t["scene_format"], t["models"]
     if fmt not in FORMATS:
         raise bad("scene_format", f"{fmt!r} is not an export format{did_you_mean(fmt, FORMATS)}; formats: "
                                   f"{', '.join(FORMATS)}")
-    models = t["models"]
-    if not isinstance(models, list) or not all(isinstance(m, str) for m in models):
-        raise bad("models", "expected a list of scene features (see `cbox features`)")
-    for m in models:
-        if m not in FEATURES:
-            raise bad("models", f"{m!r} is not a scene feature{did_you_mean(m, FEATURES)}; features: "
-                                f"{', '.join(FEATURES)}")
     try:  # a format that cannot be written here makes the renderer unavailable, not the file wrong
         expressible = format_module(fmt).FEATURES
     except ImportError:
         expressible = FEATURES
     if beyond := sorted(set(models) - set(expressible)):
         raise bad("models", f"the scene format {fmt!r} cannot express {', '.join(beyond)}")
-    quantity = t.get("quantity", DEFAULT_QUANTITY)
-    if quantity not in QUANTITIES:
-        raise bad("quantity", f"{quantity!r} is not one of {', '.join(QUANTITIES)}{did_you_mean(quantity, QUANTITIES)}")
-    estimator = t.get("estimator", ESTIMATORS[0])
-    if estimator not in ESTIMATORS:
-        raise bad("estimator", f"{estimator!r} is not one of {', '.join(ESTIMATORS)}"
-                               f"{did_you_mean(estimator, ESTIMATORS)}")
     variance = t.get("variance")
     if variance is not None:
-        if not isinstance(variance, str) or not variance.strip():
-            raise bad("variance", "expected a path (of the EXR the program writes), e.g. \"{out}.var.exr\"")
         _check_placeholders(variance, lambda message: bad("variance", message))
     timing = t.get("time", "wall")
-    if not isinstance(timing, str):
-        raise bad("time", "expected \"wall\" or a regex with one group that reads seconds from stdout")
     if timing != "wall":
         try:
             groups = re.compile(timing).groups
@@ -256,7 +223,8 @@ def _declaration(path: Path, name: str, t) -> Declaration:
             raise bad("time", f"not a regex: {e}") from None
         if groups != 1:
             raise bad("time", f"the regex has {groups} groups; give exactly one, the seconds")
-    return Declaration(name, path, tuple(command), fmt, frozenset(models), quantity, estimator, variance, timing)
+    return Declaration(name, path, tuple(command), fmt, frozenset(models), t.get("quantity", DEFAULT_QUANTITY),
+                       t.get("estimator", ESTIMATORS[0]), variance, timing)
 
 
 def _check_placeholders(text: str, bad) -> None:

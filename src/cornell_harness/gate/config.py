@@ -26,7 +26,9 @@ A gate config (TOML) lists expectations::
     time_limit = "10m"                # optional: kill the render after this long (default: time_limit above)
     finite_only = true                # only to allow an expectation with no accuracy check (see below)
 
-The config is strict: an unknown key at any level, or an unknown metric in a
+The config is strict: its format is ``src/cornell_harness/schemas/gate.schema.json``
+(every key with its type, default and range, in ``docs/formats.md``), checked by
+:mod:`cornell_harness.schemas.reader`. An unknown key at any level, or an unknown metric in a
 budget or in ``regression_metrics``, is a config error (exit 2) with a
 did-you-mean, before anything renders; a misspelt key must never turn a
 gate green. An expectation must check accuracy (``unbiased``, a budget, a
@@ -118,23 +120,20 @@ report say which expectation failed, by how much, and where in the image.
 
 from __future__ import annotations
 
-import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from cornell_harness.evaluate.registry import HIGHER_IS_BETTER, IMAGE_METRICS, REGION_CHECK_METRICS, region_metric
+from cornell_harness.schemas.reader import FormatProblem, check, read_toml
 from cornell_harness.suggest import closest
 from cornell_harness.workflows.budgets import parse_duration
 
+#: The config's defaults (gate.schema.json states the same; tests/test_schemas.py holds them equal).
+DEFAULT_ALPHA = 0.01
+DEFAULT_REGRESSION_MARGIN = 0.05
 DEFAULT_REGRESSION_METRICS = ("delta_e2000_mean", "rel_mse_trimmed", "ssim")
 #: Default wall-time limit of one expectation's render: generous, it only has to stop a hang.
 DEFAULT_TIME_LIMIT_S = 1800.0
-TOP_KEYS = ("alpha", "baseline", "regression_margin", "regression_metrics", "time_limit", "expect")
-EXPECT_KEYS = ("name", "scene", "renderer", "spp", "time", "seed", "unbiased", "tile", "slope", "max", "min",
-               "abs_max", "settings", "time_limit", "finite_only", "consistency", "bias_limit")
-CONSISTENCY_KEYS = ("metric", "slope", "from_spp", "max_ratio", "smaller")
-BIAS_LIMIT_KEYS = ("efforts", "setting", "rate", "seeds", "spp", "metrics", "tolerance")
 #: The signed error a bias limit extrapolates, image-wide or as a region's ``region.<region>.<metric>``.
 BIAS_LIMIT_METRIC = "mean_radiance_rel_error"
 #: Image metrics a consistency check may follow: errors, which fall towards 0 (not PSNR or SSIM).
@@ -217,13 +216,13 @@ class GateConfig:
     alpha: float
     expectations: list[Expectation]
     baseline: Path | None = None
-    regression_margin: float = 0.05
+    regression_margin: float = DEFAULT_REGRESSION_MARGIN
     regression_metrics: tuple[str, ...] = DEFAULT_REGRESSION_METRICS
 
 
-def _check_keys(path: Path, table: dict, allowed, where: str, what: str = "key") -> None:
-    """Refuse any key not in ``allowed``, naming it and the closest allowed one."""
-    for key in table:
+def _check_names(path: Path, names, allowed, where: str, what: str = "metric") -> None:
+    """Refuse any name not in ``allowed``, naming it and the closest allowed one."""
+    for key in names:
         if key not in allowed:
             hint = closest(key, allowed)
             raise GateConfigError(path, f"{where}{key}", f"unknown {what}"
@@ -235,7 +234,7 @@ def _check_metrics(path: Path, names, allowed, where: str) -> None:
     for key in names:
         parts = region_metric(key)
         if parts is None:
-            _check_keys(path, {key: None}, allowed, where, "metric")
+            _check_names(path, [key], allowed, where)
             continue
         region, metric = parts
         if not region or metric not in REGION_CHECK_METRICS:
@@ -243,14 +242,6 @@ def _check_metrics(path: Path, names, allowed, where: str) -> None:
             raise GateConfigError(path, f"{where}{key}", "unknown region metric: expected region.<region>.<metric> "
                                   "with <metric> one of " + ", ".join(REGION_CHECK_METRICS)
                                   + (f" (did you mean 'region.{region}.{hint}'?)" if hint else ""))
-
-
-def _band(path: Path, value, field: str) -> tuple[float, float]:
-    if not (isinstance(value, list) and len(value) == 2
-            and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in value)
-            and value[0] < value[1]):
-        raise GateConfigError(path, field, "expected [low, high] with low < high")
-    return float(value[0]), float(value[1])
 
 
 def _duration(path: Path, table: dict, key: str, where: str, default: float | None) -> float | None:
@@ -262,102 +253,60 @@ def _duration(path: Path, table: dict, key: str, where: str, default: float | No
         raise GateConfigError(path, f"{where}{key}", str(e)) from None
 
 
-def _number(path: Path, table: dict, key: str, where: str, default, kind=(int, float)):
-    v = table.get(key, default)
-    if isinstance(v, bool) or not isinstance(v, kind) or (isinstance(v, float) and not math.isfinite(v)):
-        raise GateConfigError(path, f"{where}{key}", f"expected a finite number, got {v!r}")
-    return v
+def _band(path: Path, value: list, field: str) -> tuple[float, float]:
+    if not value[0] < value[1]:
+        raise GateConfigError(path, field, "expected [low, high] with low < high")
+    return float(value[0]), float(value[1])
 
 
 def load_config(path: str | Path) -> GateConfig:
-    """Parse and validate a gate config; GateConfigError names the file and field of any problem."""
+    """Parse and validate a gate config; GateConfigError names the file and field of any problem.
+
+    The format is ``src/cornell_harness/schemas/gate.schema.json``, checked by :mod:`cornell_harness.schemas.reader`;
+    what is left here is what the schema cannot say: metric names, durations, and the fields that go together."""
     path = Path(path)
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise GateConfigError(path, "(file)", "no such file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise GateConfigError(path, "(syntax)", f"invalid TOML: {e}") from None
-    except (UnicodeDecodeError, RecursionError) as e:
-        raise GateConfigError(path, "(file)", f"not a TOML text file ({type(e).__name__})") from None
-    except OSError as e:
-        raise GateConfigError(path, "(file)", e.strerror or str(e)) from None
-    _check_keys(path, doc, TOP_KEYS, "")
-    alpha = float(_number(path, doc, "alpha", "", 0.01))
-    if not 0 < alpha < 1:
-        raise GateConfigError(path, "alpha", f"must be in (0, 1), got {alpha}")
-    margin = float(_number(path, doc, "regression_margin", "", 0.05))
-    if margin < 0:
-        raise GateConfigError(path, "regression_margin", "must be >= 0")
+        doc = read_toml(path)
+        check(doc, "gate")
+    except FormatProblem as e:
+        raise GateConfigError(path, e.field, e.message) from None
     reg = doc.get("regression_metrics", list(DEFAULT_REGRESSION_METRICS))
-    if not isinstance(reg, list) or not all(isinstance(m, str) for m in reg):
-        raise GateConfigError(path, "regression_metrics", "expected a list of metric names")
-    _check_keys(path, dict.fromkeys(reg), IMAGE_METRICS, "regression_metrics: ", "metric")
+    _check_names(path, reg, IMAGE_METRICS, "regression_metrics: ")
     time_limit = _duration(path, doc, "time_limit", "", DEFAULT_TIME_LIMIT_S)
     baseline = doc.get("baseline")
-    if baseline is not None and not isinstance(baseline, str):
-        raise GateConfigError(path, "baseline", "expected a file name")
-    raw = doc.get("expect")
-    if not isinstance(raw, list) or not raw:
-        raise GateConfigError(path, "expect", "a gate needs at least one [[expect]] table")
-    exps = [_parse_expectation(path, i, t, time_limit) for i, t in enumerate(raw)]
+    exps = [_parse_expectation(path, i, t, time_limit) for i, t in enumerate(doc["expect"])]
     names = [e.name for e in exps]
     for i, name in enumerate(names):
         if name in names[:i]:
             raise GateConfigError(path, f"expect[{i}].name", f"two expectations are named {name!r}; give one a name")
-    return GateConfig(path, alpha, exps, path.parent / baseline if baseline else None, margin, tuple(reg))
+    return GateConfig(path, float(doc.get("alpha", DEFAULT_ALPHA)), exps,
+                      path.parent / baseline if baseline else None,
+                      float(doc.get("regression_margin", DEFAULT_REGRESSION_MARGIN)), tuple(reg))
 
 
 def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expectation:
     w = f"expect[{i}]."
-    if not isinstance(t, dict):
-        raise GateConfigError(path, f"expect[{i}]", "expected a table ([[expect]])")
-    _check_keys(path, t, EXPECT_KEYS, w)
-    for key in ("scene", "renderer"):
-        if not isinstance(t.get(key), str):
-            raise GateConfigError(path, f"{w}{key}", "missing or not a string")
     if ("spp" in t) == ("time" in t):
         raise GateConfigError(path, f"{w}spp", "give exactly one budget: spp = N or time = \"10s\"")
-    spp = None
+    spp = t.get("spp")
     time_s = _duration(path, t, "time", w, None)
-    if "spp" in t:
-        spp = _number(path, t, "spp", w, None, int)
-        if spp < 1:
-            raise GateConfigError(path, f"{w}spp", "must be >= 1")
-    slope = t.get("slope")
-    if slope is not None:
-        slope = _band(path, slope, f"{w}slope")
+    slope = _band(path, t["slope"], f"{w}slope") if "slope" in t else None
     budgets = {}
     for key in ("max", "min", "abs_max"):
-        b = t.get(key, {})
-        if not isinstance(b, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                              for v in b.values()):
-            raise GateConfigError(path, f"{w}{key}", "expected a table of metric = number")
-        _check_metrics(path, b, IMAGE_METRICS, f"{w}{key}.")
-        budgets[key] = {k: float(v) for k, v in b.items()}
-    unbiased = t.get("unbiased", False)
-    if not isinstance(unbiased, bool):
-        raise GateConfigError(path, f"{w}unbiased", "expected true or false")
-    settings = t.get("settings", {})
-    if not isinstance(settings, dict):
-        raise GateConfigError(path, f"{w}settings", "expected a table of setting = value")
-    finite_only = t.get("finite_only", False)
-    if not isinstance(finite_only, bool):
-        raise GateConfigError(path, f"{w}finite_only", "expected true or false")
+        _check_metrics(path, t.get(key, {}), IMAGE_METRICS, f"{w}{key}.")
+        budgets[key] = {k: float(v) for k, v in t.get(key, {}).items()}
+    unbiased, settings = t.get("unbiased", False), t.get("settings", {})
     consistency = _consistency(path, t, w, spp)
     bias_limit = _bias_limit(path, t, w)
-    if not (unbiased or slope or any(budgets.values()) or consistency or bias_limit or finite_only):
+    if not (unbiased or slope or any(budgets.values()) or consistency or bias_limit or t.get("finite_only", False)):
         raise GateConfigError(path, f"expect[{i}]", "no accuracy check: give unbiased = true, a budget (max, min, "
                               "abs_max), a slope or a consistency check; or finite_only = true to check only for "
                               "NaN and Inf")
-    tile = _number(path, t, "tile", w, 16, int)
-    if tile < 1:
-        raise GateConfigError(path, f"{w}tile", "must be >= 1")
     budget = f"{spp}spp" if spp else f"{time_s:g}s"
     shown = f"[{','.join(f'{k}={v}' for k, v in sorted(settings.items()))}]" if settings else ""
     name = t.get("name") or f"{t['scene']}/{t['renderer']}{shown}@{budget}"
-    return Expectation(name, t["scene"], t["renderer"], spp, time_s, _number(path, t, "seed", w, 0, int), unbiased,
-                       tile, slope, budgets["max"], budgets["min"], budgets["abs_max"], settings,
+    return Expectation(name, t["scene"], t["renderer"], spp, time_s, t.get("seed", 0), unbiased, t.get("tile", 16),
+                       slope, budgets["max"], budgets["min"], budgets["abs_max"], settings,
                        _duration(path, t, "time_limit", w, time_limit), consistency, bias_limit)
 
 
@@ -366,34 +315,15 @@ def _bias_limit(path: Path, t: dict, w: str) -> BiasLimit | None:
     if "bias_limit" not in t:
         return None
     b, where = t["bias_limit"], f"{w}bias_limit."
-    if not isinstance(b, dict):
-        raise GateConfigError(path, f"{w}bias_limit", "expected a table, e.g. { efforts = [8, 32], rate = 0.333 }")
-    _check_keys(path, b, BIAS_LIMIT_KEYS, where)
-    efforts = b.get("efforts")
-    if not (isinstance(efforts, list) and len(efforts) >= 2
-            and all(isinstance(e, int) and not isinstance(e, bool) and e >= 1 for e in efforts)
-            and efforts == sorted(set(efforts))):
+    efforts = b["efforts"]
+    if efforts != sorted(set(efforts)):
         raise GateConfigError(path, f"{where}efforts", "expected two or more increasing integers >= 1 (photon "
                               "counts with setting, else spp checkpoints)")
     setting = b.get("setting", [])
-    if isinstance(setting, str):
-        setting = [setting]
-    if not (isinstance(setting, list) and all(isinstance(s, str) for s in setting)):
-        raise GateConfigError(path, f"{where}setting", "expected a setting name or a list of them")
-    rate = float(_number(path, b, "rate", where, 1.0))
-    if not 0 < rate <= 4:
-        raise GateConfigError(path, f"{where}rate", f"must be in (0, 4], got {rate:g}")
-    seeds = _number(path, b, "seeds", where, 8, int)
-    if seeds < 3:
-        raise GateConfigError(path, f"{where}seeds", "must be >= 3: the t-test needs a spread over seeds")
-    spp = _number(path, b, "spp", where, 16, int)
-    if spp < 1:
-        raise GateConfigError(path, f"{where}spp", "must be >= 1")
+    setting = [setting] if isinstance(setting, str) else setting
     if "spp" in b and not setting:
         raise GateConfigError(path, f"{where}spp", "goes with setting; without it the efforts are the spps")
     metrics = b.get("metrics", [BIAS_LIMIT_METRIC])
-    if not (isinstance(metrics, list) and metrics and all(isinstance(m, str) for m in metrics)):
-        raise GateConfigError(path, f"{where}metrics", "expected a list of metric names")
     for m in metrics:
         parts = region_metric(m)
         if (m if parts is None else parts[1]) != BIAS_LIMIT_METRIC or (parts is not None and not parts[0]):
@@ -402,15 +332,9 @@ def _bias_limit(path: Path, t: dict, w: str) -> BiasLimit | None:
     if len(set(metrics)) != len(metrics):
         raise GateConfigError(path, f"{where}metrics", "a metric is named twice")
     tolerance = b.get("tolerance", {})
-    if not isinstance(tolerance, dict):
-        raise GateConfigError(path, f"{where}tolerance", "expected a table of metric = allowed |limit|")
-    _check_keys(path, tolerance, metrics, f"{where}tolerance.", "metric (not in metrics)")
-    for key in tolerance:
-        v = _number(path, tolerance, key, f"{where}tolerance.", None)
-        if v < 0:
-            raise GateConfigError(path, f"{where}tolerance.{key}", "must be >= 0")
-    return BiasLimit(tuple(efforts), tuple(setting), rate, seeds, spp, tuple(metrics),
-                     {k: float(v) for k, v in tolerance.items()})
+    _check_names(path, tolerance, metrics, f"{where}tolerance.", "metric (not in metrics)")
+    return BiasLimit(tuple(efforts), tuple(setting), float(b.get("rate", 1.0)), b.get("seeds", 8), b.get("spp", 16),
+                     tuple(metrics), {k: float(v) for k, v in tolerance.items()})
 
 
 def _consistency(path: Path, t: dict, w: str, spp: int | None) -> Consistency | None:
@@ -418,13 +342,7 @@ def _consistency(path: Path, t: dict, w: str, spp: int | None) -> Consistency | 
     if "consistency" not in t:
         return None
     c, where = t["consistency"], f"{w}consistency."
-    if not isinstance(c, dict):
-        raise GateConfigError(path, f"{w}consistency", 'expected a table, e.g. { metric = "mse", '
-                              "slope = [-0.9, -0.4] }")
-    _check_keys(path, c, CONSISTENCY_KEYS, where)
     metric = c.get("metric", "mse")
-    if not isinstance(metric, str):
-        raise GateConfigError(path, f"{where}metric", "expected a metric name")
     if metric in HIGHER_IS_BETTER:
         raise GateConfigError(path, f"{where}metric", f"{metric!r} is higher-is-better; a consistency check "
                               "follows an error that falls towards 0 (e.g. mse, rel_mse)")
@@ -438,16 +356,14 @@ def _consistency(path: Path, t: dict, w: str, spp: int | None) -> Consistency | 
         if "smaller" in c:
             raise GateConfigError(path, f"{where}smaller", "goes with max_ratio, not with slope")
         if "from_spp" in c:
-            out.from_spp = _number(path, c, "from_spp", where, None, int)
-            if out.from_spp < 1 or (spp is not None and out.from_spp >= spp):
+            out.from_spp = c["from_spp"]
+            if spp is not None and out.from_spp >= spp:
                 raise GateConfigError(path, f"{where}from_spp", f"must be >= 1 and below spp ({spp}): the slope "
                                       "needs two checkpoints")
         return out
     if "from_spp" in c:
         raise GateConfigError(path, f"{where}from_spp", "goes with slope, not with max_ratio")
-    out.max_ratio = float(_number(path, c, "max_ratio", where, None))
-    if not 0 < out.max_ratio <= 1:
-        raise GateConfigError(path, f"{where}max_ratio", f"must be in (0, 1], got {out.max_ratio:g}")
+    out.max_ratio = float(c["max_ratio"])
     out.smaller_spp, out.smaller_settings = _smaller(path, c, where, spp)
     return out
 
@@ -455,14 +371,12 @@ def _consistency(path: Path, t: dict, w: str, spp: int | None) -> Consistency | 
 def _smaller(path: Path, c: dict, where: str, spp: int | None) -> tuple[int | None, dict]:
     """``smaller = { spp = N, <setting> = value, ... }``: its spp (None: the expectation's) and its settings."""
     small = c.get("smaller")
-    if not isinstance(small, dict):
+    if small is None:
         raise GateConfigError(path, f"{where}smaller", "max_ratio needs smaller = { spp = N, <setting> = value, "
                               "... }: the budget the full render's error is compared with")
-    small_spp = None
-    if "spp" in small:
-        small_spp = _number(path, small, "spp", f"{where}smaller.", None, int)
-        if small_spp < 1 or (spp is not None and small_spp > spp):
-            raise GateConfigError(path, f"{where}smaller.spp", f"must be >= 1 and at most spp ({spp})")
+    small_spp = small.get("spp")
+    if small_spp is not None and spp is not None and small_spp > spp:
+        raise GateConfigError(path, f"{where}smaller.spp", f"must be >= 1 and at most spp ({spp})")
     settings = {k: v for k, v in small.items() if k != "spp"}
     if not settings and (small_spp is None or small_spp == spp):
         raise GateConfigError(path, f"{where}smaller", "must lower the budget: a smaller spp and/or settings "

@@ -88,6 +88,8 @@ import numpy as np
 
 # Diffuse is re-exported: scenes built in code (analytic.py, tests) import it from the model.
 from cornell_harness.scenes.materials import Diffuse, Material, hash_payload  # noqa: F401
+# one_line is re-exported: every one-line user error (scene files, exports, the CLI) escapes its text with it.
+from cornell_harness.schemas.reader import one_line  # noqa: F401
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY, AmbientOcclusion
 from cornell_harness.scenes.spectral_scene import SpectralContent
 
@@ -139,17 +141,6 @@ def image_memory_bytes(width: int, height: int) -> int:
     estimate, not an overflow.
     """
     return int(width) * int(height) * 3 * 8 * IMAGE_BUFFERS
-
-
-#: Longest text of a field or message in an error; longer user text (a 50 MB key) is cut.
-MAX_ERROR_TEXT = 300
-
-
-def one_line(text: str, limit: int | None = MAX_ERROR_TEXT) -> str:
-    """``text`` with control characters (newlines) escaped, so an error stays one line, cut to ``limit``."""
-    if limit is not None and len(text) > limit:
-        text = text[: limit - 1] + "…"
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 class SceneError(ValueError):

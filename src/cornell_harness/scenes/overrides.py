@@ -27,11 +27,9 @@ import tomllib
 from pathlib import Path
 from typing import Any, Sequence
 
-from cornell_harness.scenes.loader import SCENE_KEYS, parse_scene, read_scene_document
+from cornell_harness.scenes.loader import keys_of, parse_scene, read_scene_document
 from cornell_harness.scenes.materials import MATERIAL_TYPES, material_fields
 from cornell_harness.scenes.model import Scene, SceneError, one_line
-from cornell_harness.scenes.quantities import AO_KEYS
-from cornell_harness.scenes.spectral_scene import COLOUR_KEYS
 from cornell_harness.suggest import did_you_mean
 
 OPTION = "--set"
@@ -81,16 +79,16 @@ def parse_assignment(text: str) -> tuple[str, Any]:
 def override_keys(doc: dict) -> tuple[str, ...]:
     """The keys a scene document can be overridden at: camera, render, its materials' fields, its AO table, its
     colour pipeline (``colour.rgb_convention``: the RGB projection an RGB renderer runs on)."""
-    keys = [f"camera.{k}" for k in SCENE_KEYS["camera"]] + [f"render.{k}" for k in SCENE_KEYS["render"]]
+    keys = [f"camera.{k}" for k in keys_of("camera")] + [f"render.{k}" for k in keys_of("render")]
     for name, table in (doc.get("materials") or {}).items():
         kind = table.get("type") if isinstance(table, dict) else None
         cls = MATERIAL_TYPES.get(kind) if isinstance(kind, str) else None
         if cls is not None and _BARE_WORD.fullmatch(name):
             keys += [f"materials.{name}.{f.name}" for f in material_fields(cls)]
     if isinstance(doc.get("ambient_occlusion"), dict):
-        keys += [f"ambient_occlusion.{k}" for k in AO_KEYS]
+        keys += [f"ambient_occlusion.{k}" for k in keys_of("ambient_occlusion")]
     if isinstance(doc.get("colour"), dict):
-        keys += [f"colour.{k}" for k in COLOUR_KEYS]
+        keys += [f"colour.{k}" for k in keys_of("colour")]
     return tuple(keys)
 
 

@@ -60,10 +60,6 @@ def has_colour(quantity: str) -> bool:
     return quantity == "radiance"
 
 
-#: The keys of a scene's [ambient_occlusion] table; any other is an error.
-AO_KEYS = ("max_distance", "max_distance_relative", "weighting", "normal", "miss_value")
-
-
 @dataclass(frozen=True)
 class AmbientOcclusion:
     """The AO definition a scene pins (module docstring). ``max_distance`` is in scene units, resolved."""
@@ -80,29 +76,14 @@ class AmbientOcclusion:
                 "normal": self.normal, "miss_value": self.miss_value}
 
 
-def parse_ambient_occlusion(r, table: dict, size: float) -> AmbientOcclusion:
-    """The ``[ambient_occlusion]`` table, validated with the loader's reader ``r``; ``size`` is the scene's."""
-    w = "ambient_occlusion"
-    r.known(table, w, AO_KEYS)
+def parse_ambient_occlusion(err, table: dict, size: float) -> AmbientOcclusion:
+    """The ``[ambient_occlusion]`` table (checked by the scene schema); ``err(field, message)`` is the loader's
+    error of the file, ``size`` the scene's."""
     given = [k for k in ("max_distance", "max_distance_relative") if k in table]
     if len(given) != 1:
-        raise r.err(w, "give exactly one of max_distance (scene units) and max_distance_relative "
-                       f"(fraction of the scene's size), got {len(given) or 'neither'}"
-                    + (f": {', '.join(given)}" if given else ""))
-    key = given[0]
-    raw = table[key]
-    # The reader refuses non-finite numbers; here +inf is meaningful (no limit).
-    value = math.inf if raw == math.inf and isinstance(raw, float) else r.get(table, key, w, float)
-    if not value > 0.0:
-        raise r.err(f"{w}.{key}", f"must be > 0 (inf: no limit), got {value}")
-    distance = value if key == "max_distance" else value * size
-    weighting = r.get(table, "weighting", w, str)
-    if weighting not in AO_WEIGHTINGS:
-        raise r.err(f"{w}.weighting", f"unknown weighting {weighting!r}; known: {', '.join(AO_WEIGHTINGS)}")
-    normal = r.get(table, "normal", w, str)
-    if normal not in AO_NORMALS:
-        raise r.err(f"{w}.normal", f"unknown normal {normal!r}; known: {', '.join(AO_NORMALS)}")
-    miss = r.to_float(r.get(table, "miss_value", w, (int, float)), f"{w}.miss_value")
-    if not 0.0 <= miss <= 1.0:
-        raise r.err(f"{w}.miss_value", f"must be in [0, 1], got {miss}")
-    return AmbientOcclusion(distance, weighting, normal, miss)
+        raise err("ambient_occlusion", "give exactly one of max_distance (scene units) and max_distance_relative "
+                                       f"(fraction of the scene's size), got {len(given) or 'neither'}"
+                  + (f": {', '.join(given)}" if given else ""))
+    value = float(table[given[0]])
+    distance = value if given[0] == "max_distance" else value * size
+    return AmbientOcclusion(distance, table["weighting"], table["normal"], float(table["miss_value"]))

@@ -37,16 +37,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from cornell_harness.scenes.spectra import (EXTRAPOLATIONS, OBSERVER, OUTPUT, RGB_CONVENTIONS, SCENE_LIGHT,
-                                    Spectrum, emission_rgb, reflectance_rgb, spectrum_problem)
+from cornell_harness.scenes.spectra import SCENE_LIGHT, Spectrum, emission_rgb, reflectance_rgb, spectrum_problem
 from cornell_harness.suggest import closest
 
-#: The keys of the [colour] table; any other is an error.
-COLOUR_KEYS = ("observer", "output", "rgb_convention", "light")
-#: The keys of a [spectra.NAME] table.
-SPECTRUM_KEYS = ("wavelengths_nm", "values", "extrapolation")
-#: The keys of a spectral value (``{ spectrum = "NAME" }``).
-REFERENCE_KEYS = ("spectrum",)
 #: The ``RenderResult.info`` key by which a renderer says it rendered a scene's spectra, not their RGB projection;
 #: its value says how (Mitsuba's variant, ``hero``). Absent or empty: the render used the RGB values.
 SPECTRAL_INFO = "spectral"
@@ -101,84 +94,61 @@ class SpectralContent:
                 "emitters": dict(sorted(self.emitters.items()))}
 
 
-def _choice(r, table: dict, key: str, where: str, known, default=...) -> str:
-    value = r.get(table, key, where, str, default)
-    if value not in known:
-        close = closest(value, tuple(known))
-        hint = f"did you mean {close!r}?" if close else f"known: {', '.join(known)}"
-        raise r.err(f"{where}.{key}", f"unknown value {value[:60]!r}; {hint}")
-    return value
-
-
 class SpectralReader:
-    """Reads a scene's [colour] and [spectra] tables, then each spectral value, with the loader's reader ``r``.
+    """Reads a scene's [colour] and [spectra] tables, then each spectral value; ``err(field, message)`` is the
+    loader's error of the file, whose document the scene schema has checked.
 
     State: the bindings found so far, turned into a :class:`SpectralContent`
     by :meth:`finish`. A scene without a [colour] table has no spectral
     content, and a spectral value in it is an error.
     """
 
-    def __init__(self, r, doc: dict, key_text):
-        self.r, self.key_text = r, key_text
-        colour = r.get(doc, "colour", "", dict, None)
-        raw = r.get(doc, "spectra", "", dict, None)
+    def __init__(self, err, doc: dict, key_text):
+        self.err, self.key_text = err, key_text
+        colour = doc.get("colour")
         self.declared = colour is not None
         self.spectra: dict[str, Spectrum] = {}
         self.materials: dict[str, dict[str, str]] = {}
         self.emitters: dict[str, str] = {}
         if not self.declared:
-            if raw is not None:
-                raise r.err("spectra", "a scene with spectra declares its colour pipeline in a [colour] table "
-                                       "(observer, output, rgb_convention)")
+            if "spectra" in doc:
+                raise err("spectra", "a scene with spectra declares its colour pipeline in a [colour] table "
+                                     "(observer, output, rgb_convention)")
             return
-        r.known(colour, "colour", COLOUR_KEYS)
-        self.observer = _choice(r, colour, "observer", "colour", (OBSERVER,))
-        self.output = _choice(r, colour, "output", "colour", (OUTPUT,))
-        self.convention = _choice(r, colour, "rgb_convention", "colour", RGB_CONVENTIONS)
-        for name, t in (raw or {}).items():
+        self.observer, self.output, self.convention = colour["observer"], colour["output"], colour["rgb_convention"]
+        for name, t in doc.get("spectra", {}).items():
             self.spectra[name] = self._spectrum(name, t)
-        self.light = r.get(colour, "light", "colour", str, None)
+        self.light = colour.get("light")
         if self.convention == SCENE_LIGHT and self.light is None:
-            raise r.err("colour.light", f"missing required field: rgb_convention = {SCENE_LIGHT!r} balances "
-                                        "reflectances to the scene's light; name its spectrum")
+            raise err("colour.light", f"missing required field: rgb_convention = {SCENE_LIGHT!r} balances "
+                                      "reflectances to the scene's light; name its spectrum")
         if self.light is not None:
             self._lookup(self.light, "colour.light")
 
-    def _spectrum(self, name: str, t) -> Spectrum:
-        w = f"spectra.{self.key_text(name)}"
-        if not isinstance(t, dict):
-            raise self.r.err(w, f"expected a table, got {type(t).__name__}")
-        self.r.known(t, w, SPECTRUM_KEYS)
-        wavelengths = self.r.get(t, "wavelengths_nm", w, list)
-        values = self.r.get(t, "values", w, list)
-        extrapolation = self.r.get(t, "extrapolation", w, str, "zero")
+    def _spectrum(self, name: str, t: dict) -> Spectrum:
+        wavelengths, values, extrapolation = t["wavelengths_nm"], t["values"], t.get("extrapolation", "zero")
         if problem := spectrum_problem(wavelengths, values, extrapolation):
-            raise self.r.err(f"{w}.{problem[0]}", problem[1])
-        assert extrapolation in EXTRAPOLATIONS
+            raise self.err(f"spectra.{self.key_text(name)}.{problem[0]}", problem[1])
         return Spectrum(tuple(float(x) for x in wavelengths), tuple(float(x) for x in values), extrapolation)
 
-    def _lookup(self, name, field: str) -> Spectrum:
-        if not isinstance(name, str):
-            raise self.r.err(field, f"expected a spectrum's name (a string), got {type(name).__name__}")
+    def _lookup(self, name: str, field: str) -> Spectrum:
         if name not in self.spectra:
             close = closest(name, tuple(self.spectra))
             hint = f"did you mean {close!r}?" if close else f"defined: {', '.join(self.spectra) or '(none)'}"
-            raise self.r.err(field, f"no spectrum named {name[:60]!r} in [spectra]; {hint}")
+            raise self.err(field, f"no spectrum named {name[:60]!r} in [spectra]; {hint}")
         return self.spectra[name]
 
     def _reference(self, value: dict, field: str) -> tuple[str, Spectrum]:
         """The spectrum a ``{ spectrum = "NAME" }`` value names."""
         if not self.declared:
-            raise self.r.err(field, "a spectral value needs the scene's [colour] table (observer, output, "
-                                    "rgb_convention)")
-        self.r.known(value, field, REFERENCE_KEYS)
-        name = self.r.get(value, "spectrum", field, str)
-        return name, self._lookup(name, f"{field}.spectrum")
+            raise self.err(field, "a spectral value needs the scene's [colour] table (observer, output, "
+                                  "rgb_convention)")
+        return value["spectrum"], self._lookup(value["spectrum"], f"{field}.spectrum")
 
     def _check_values(self, name: str, spectrum: Spectrum, lo: float, hi: float | None, what: str) -> None:
         for i, x in enumerate(spectrum.values):
             if x < lo or (hi is not None and x > hi):
-                raise self.r.err(f"spectra.{self.key_text(name)}.values[{i}]",
+                raise self.err(f"spectra.{self.key_text(name)}.values[{i}]",
                                  f"{what} must be in [{lo:g}, {'inf' if hi is None else f'{hi:g}'}], got {x}")
 
     def reflectance(self, value: dict, field: str, material: str, key: str) -> tuple[float, float, float]:
@@ -189,9 +159,9 @@ class SpectralReader:
         try:
             rgb = reflectance_rgb(spectrum, self.convention, light)
         except ValueError as e:
-            raise self.r.err("colour.light", str(e)) from None
+            raise self.err("colour.light", str(e)) from None
         if not all(0.0 <= x <= 1.0 for x in rgb):
-            raise self.r.err(field, f"spectrum {name!r} projects to {[round(x, 6) for x in rgb]} under "
+            raise self.err(field, f"spectrum {name!r} projects to {[round(x, 6) for x in rgb]} under "
                                     f"{self.convention}, outside [0, 1]")
         self.materials.setdefault(material, {})[key] = name
         return rgb
@@ -202,7 +172,7 @@ class SpectralReader:
         self._check_values(name, spectrum, 0.0, None, f"an emission ({field})")
         rgb = emission_rgb(spectrum)
         if min(rgb) < 0.0 or max(rgb) > bound:
-            raise self.r.err(field, f"spectrum {name!r} maps to linear sRGB {[round(x, 6) for x in rgb]}: "
+            raise self.err(field, f"spectrum {name!r} maps to linear sRGB {[round(x, 6) for x in rgb]}: "
                                     f"each channel must be in [0, {bound:g}] for an RGB renderer")
         self.emitters[mesh] = name
         return rgb
@@ -212,7 +182,7 @@ class SpectralReader:
         if not self.declared:
             return None
         if self.light is not None and self.light not in self.emitters.values():
-            raise self.r.err("colour.light", f"spectrum {self.light!r} is no emitter's radiance; the scene_light "
+            raise self.err("colour.light", f"spectrum {self.light!r} is no emitter's radiance; the scene_light "
                                              "convention balances to the scene's own light")
         used = set(self.emitters.values()) | {n for v in self.materials.values() for n in v.values()}
         return SpectralContent(self.observer, self.output, self.convention, self.light,

@@ -24,15 +24,11 @@ from cornell_harness.scenes.transforms import scale_geometry
 LENGTH_SCALE_RANGE = (1e-9, 1e9)
 
 
-def apply_length_scale(r, doc: dict, scene: Scene, check_degenerate) -> Scene:
-    """``scene`` with the file's ``length_scale`` applied; ``r`` is the loader's reader, ``check_degenerate``
-    its check of triangle areas, run again on the scaled meshes."""
-    if "length_scale" not in doc:
-        return scene
-    s = r.get(doc, "length_scale", "", float)
-    lo, hi = LENGTH_SCALE_RANGE
-    if not lo <= s <= hi:
-        raise r.err("length_scale", f"must be in [{lo:g}, {hi:g}] (file lengths times it are scene units), got {s}")
+def apply_length_scale(err, doc: dict, scene: Scene, check_degenerate) -> Scene:
+    """``scene`` with the file's ``length_scale`` (in :data:`LENGTH_SCALE_RANGE`, as the scene schema checks)
+    applied; ``err(field, message)`` is the loader's error of the file, ``check_degenerate`` its check of
+    triangle areas, run again on the scaled meshes."""
+    s = float(doc.get("length_scale", 1.0))
     if s == 1.0:
         return scene
     out = dataclasses.replace(scale_geometry(scene, s), name=scene.name)
@@ -43,6 +39,6 @@ def apply_length_scale(r, doc: dict, scene: Scene, check_degenerate) -> Scene:
     cam = out.camera
     top = max(float(np.abs(lo_).max()), float(np.abs(hi_).max()), *map(abs, cam.position), *map(abs, cam.look_at))
     if top > MAX_COORDINATE:
-        raise r.err("length_scale", f"scales a coordinate to {top:g}, beyond the {MAX_COORDINATE:g} limit")
-    check_degenerate(r, out.meshes)
+        raise err("length_scale", f"scales a coordinate to {top:g}, beyond the {MAX_COORDINATE:g} limit")
+    check_degenerate(err, out.meshes)
     return out
