@@ -47,12 +47,13 @@ PINNED = {
         "77a36639bdfae66a80c317e2f4cf9a5f486440864eb669847a59bf732145b9db",
     ("ao", "cornell-box-ao", 24, 8, 7, (("sampler", "independent"),)):
         "4bd3d5d692e79e83b970b48266633f317bf25b6da6aeb858eb731c610658da41",
-    ("whitted", "cornell-box-caustics", 24, 4, 3, (("ambient", "ao"), ("light_samples", 2))):
+    ("whitted", "cornell-box-caustics", 24, 4, 3, (("sampler", "independent"), ("ambient", "ao"),
+                                                   ("light_samples", 2))):
         "d2dd27145648ed168f378fb7c6ed4e212d936b40313c398ff38de15ef1dee29f",
-    ("whitted", "cornell-box", 16, 2, 1, ()):
+    ("whitted", "cornell-box", 16, 2, 1, (("sampler", "independent"),)):
         "1fc5dd02285ead9b8c5eba4cc8707213247938c7225f856a057252ac2097c132",
-    ("whitted", "cornell-box-caustics", 16, 2, 5, (("ambient", "none"), ("transparent_shadows", "boolean"),
-                                                   ("light_samples", 3))):
+    ("whitted", "cornell-box-caustics", 16, 2, 5, (("sampler", "independent"), ("ambient", "none"),
+                                                   ("transparent_shadows", "boolean"), ("light_samples", 3))):
         "90ddbef25a56ee03dddb5aaff513bd52db1adffd7b6bd175243d00e1c4cdbd0b",
 }
 

@@ -69,9 +69,10 @@ d + 1 ≤ max_depth. So at max_depth 3, a mirror seen by the camera shows the
 emission and the direct light the path tracer's max_depth-3 image shows there
 (the closed-form test of this module).
 
-Random numbers (``independent`` sampler): the camera jitter is the toolkit's
-(:func:`cornell_harness.renderers.core.camera.camera_rays`); light sample s and
-occlusion ray s at vertex d draw from the sampler's blocks
+Random numbers, from the ``sampler`` setting's stream (:mod:`cornell_harness.renderers.core.sampler`;
+default ``independent``, the sampler the gate's expectations were measured with):
+the camera jitter is the toolkit's (:func:`cornell_harness.renderers.core.camera.camera_rays`);
+light sample s and occlusion ray s at vertex d draw from the sampler's blocks
 :data:`cornell_harness.renderers.core.sampler.TREE_LIGHTS` and ``TREE_OCCLUSION``
 (:func:`cornell_harness.renderers.core.sampler.tree_light_dim`, ``tree_occlusion_dim``);
 the two branches of a glass split at the same depth share them (each branch
@@ -103,7 +104,7 @@ from cornell_harness.renderers.core.occlusion import DEFAULT_AO_MAX_DISTANCE, oc
 from cornell_harness.renderers.core.rays import (RayBuffer, ShadowBuffer, ray_buffer, set_path, set_ray, set_shadow,
                                  shadow_buffer)
 from cornell_harness.renderers.core.sampler import (EMITTER_PICK, EMITTER_U, MAX_RAYS, MAX_TREE_DEPTH, Stream,
-                                                    independent, path_point, sample_1d, sample_2d,
+                                                    independent, path_point, sample_1d, sample_2d, sampler_setting,
                                                     tree_light_dim, tree_occlusion_dim)
 from cornell_harness.renderers.core.sampling import jit
 from cornell_harness.renderers.core.schedule import render_image
@@ -394,6 +395,7 @@ class Whitted(ToolkitRenderer):
                 "attenuate (straight through, times each interface's Fresnel transmittance: Pearce's shadow "
                 "attenuation) or ignore (glass casts no shadow)", choices=SHADOW_MODES),
         Setting("ao_samples", int, 4, "occlusion rays per diffuse hit for ambient = ao", low=1, high=MAX_RAYS),
+        sampler_setting("the camera rays, light samples and occlusion rays (one sequence per pixel)"),
     )
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
@@ -411,7 +413,7 @@ class Whitted(ToolkitRenderer):
 
         geom, setup_s = warmed_geometry(scene, prepare)
         tracer = made["tracer"]
-        result = render_image(scene, spp, seed, tracer.trace, checkpoints, self.threads, sampler="independent")
+        result = render_image(scene, spp, seed, tracer.trace, checkpoints, self.threads, sampler=s["sampler"])
         result.info.update(s, max_depth_used=depth, ambient_radiance=[float(x) for x in tracer.la[1]],
                            rays=geom.rays, setup_s=round(setup_s, 3))
         return result

@@ -27,7 +27,7 @@ from cornell_harness.renderers.whitted import Whitted
 
 #: rng's uniform() takes dimensions below this.
 RNG_DIMS = 1 << 24
-OURS = (PathTracer, AORenderer, AOAmbient, PhotonMapper, SPPM, IrradianceProbes)
+OURS = (PathTracer, AORenderer, AOAmbient, PhotonMapper, SPPM, IrradianceProbes, Whitted)
 
 
 def overlaps(blocks) -> list[tuple[str, str]]:
@@ -125,4 +125,4 @@ def test_every_renderer_of_ours_declares_the_one_sampler_setting():
         assert setting(renderer, "sampler").choices == tuple(SAMPLERS), renderer.name
     assert {r.name: setting(r, "sampler").default for r in OURS} == {
         "pathtracer": "pmj02", "ao": "pmj02", "ambient": "independent", "photonmap": "independent",
-        "sppm": "independent", "probes": "independent"}
+        "sppm": "independent", "probes": "independent", "whitted": "independent"}
