@@ -5,7 +5,10 @@
 - no integrator draws raw ``uniform(key, path, dim)`` numbers: every decision goes through
   :mod:`cornell_harness.renderers.core.sampler`, so the ``sampler`` setting means the same in each;
 - light sampling towards a shading point (pbrt-v4's ``SampleLd``) is written once,
-  :func:`cornell_harness.renderers.core.direct.sample_ld`: no other module turns an emitter sample into a shadow ray.
+  :func:`cornell_harness.renderers.core.direct.sample_ld`: no other module turns an emitter sample into a shadow ray;
+- every sample dimension an integrator draws is a name of the sampler's map
+  (:mod:`cornell_harness.renderers.core.sampler`: a block's dimension, offset or dimension function), never a
+  number or a base of its own, and the ``sampler`` setting is declared there once.
 """
 
 from __future__ import annotations
@@ -21,6 +24,9 @@ RENDERERS = ROOT / "src" / "cornell_harness" / "renderers"
 MAX_KERNEL_PARAMETERS = 10
 #: Where raw counter-based numbers may be drawn: the generator itself and the samplers built on it.
 RAW_DRAWS_ALLOWED = {"src/cornell_harness/renderers/core/rng.py", "src/cornell_harness/renderers/core/sampler.py", "src/cornell_harness/renderers/core/sobol.py"}
+SAMPLER = "cornell_harness.renderers.core.sampler"
+#: Calls whose argument at this position is a sample dimension (sample_*) or a vertex block's offset (vertex_*).
+DIMENSION_ARGS = {"sample_1d": 2, "sample_2d": 2, "vertex_1d": 3, "vertex_2d": 3}
 
 
 def sources() -> list[Path]:
@@ -66,8 +72,71 @@ def test_light_sampling_is_written_once():
     assert emitters == {"src/cornell_harness/renderers/core/direct.py", "src/cornell_harness/renderers/core/photons.py"}
 
 
+def own_dimensions(tree: ast.AST) -> list[int]:
+    """Lines that draw a dimension (or pass a walk's ``dim_base``) not named by the sampler's map: a number,
+    arithmetic, a parameter or a constant of the module's own. A name imported from the sampler, or a call of
+    one, is the map's; a ``dim_base`` of 0 is no shift."""
+    theirs = {a.asname or a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module == SAMPLER
+              for a in n.names}
+    lines = []
+    for n in ast.walk(tree):
+        if not isinstance(n, ast.Call):
+            continue
+        name = getattr(n.func, "id", getattr(n.func, "attr", None))
+        given = [n.args[DIMENSION_ARGS[name]]] if name in DIMENSION_ARGS and len(n.args) > DIMENSION_ARGS[name] else []
+        given += [k.value for k in n.keywords if k.arg == "dim_base" and not (isinstance(k.value, ast.Constant)
+                                                                            and k.value.value == 0)]
+        for arg in given:
+            named = arg.func if isinstance(arg, ast.Call) else arg
+            if not (isinstance(named, ast.Name) and named.id in theirs):
+                lines.append(n.lineno)
+    return lines
+
+
+def shifts(tree: ast.AST) -> list[int]:
+    """In a module that draws from the sampler, lines with a literal ``1 << k``, 16 ≤ k ≤ 24: the bases of the
+    dimension blocks (rng takes 2^24 dimensions)."""
+    if not any(isinstance(n, ast.ImportFrom) and n.module == SAMPLER for n in ast.walk(tree)):
+        return []
+    return [n.lineno for n in ast.walk(tree) if isinstance(n, ast.BinOp) and isinstance(n.op, ast.LShift)
+            and isinstance(n.left, ast.Constant) and n.left.value == 1 and isinstance(n.right, ast.Constant)
+            and 16 <= n.right.value <= 24]
+
+
+def sampler_settings(tree: ast.AST) -> list[int]:
+    """Lines that declare a ``sampler`` setting: ``Setting("sampler", ...)``, or a replace() of the sampler's."""
+    return [n.lineno for n in ast.walk(tree) if isinstance(n, ast.Call) and (
+        (getattr(n.func, "id", None) == "Setting" and n.args and isinstance(n.args[0], ast.Constant)
+         and n.args[0].value == "sampler")
+        or (getattr(n.func, "id", getattr(n.func, "attr", None)) == "replace"
+            and any(isinstance(a, ast.Name) and a.id == "SAMPLER_SETTING" for a in n.args)))]
+
+
+def test_every_dimension_is_the_samplers():
+    trees = {str(p.relative_to(ROOT)): ast.parse(p.read_text(encoding="utf-8")) for p in sources()}
+    found = {path: lines for path, tree in trees.items()
+             if path not in RAW_DRAWS_ALLOWED and (lines := own_dimensions(tree) + shifts(tree))}
+    assert found == {}, f"name these dimensions in cornell_harness.renderers.core.sampler's map: {found}"
+
+
+def test_the_sampler_setting_is_declared_once():
+    found = {str(p.relative_to(ROOT)): lines for p in sources()
+             if (lines := sampler_settings(ast.parse(p.read_text(encoding="utf-8"))))}
+    assert found == {"src/cornell_harness/renderers/core/sampler.py": found.get(
+        "src/cornell_harness/renderers/core/sampler.py")} and len(found[next(iter(found))]) == 1, found
+
+
 def test_the_checks_see_what_they_check(tmp_path):
-    """The parsers find a wide kernel and a raw draw when there is one (so the tests above can fail)."""
+    """The parsers find a wide kernel, a raw draw, a dimension of a module's own and a sampler setting declared
+    again when there is one (so the tests above can fail)."""
     tree = ast.parse("@jit\ndef k(a, b, c, d, e, f, g, h, i, j, k):\n    return uniform(a, b, c)\n")
     assert [len(k.args.args) for k in kernels(tree)] == [11]
     assert calls(tree, "uniform") == [3]
+    tree = ast.parse(f"from {SAMPLER} import AO_U, occlusion_dim, sample_2d\nAO_DIM = 1 << 20\n"
+                     "sample_2d(st, pt, AO_U)\nsample_2d(st, pt, occlusion_dim(s))\nsample_2d(st, pt, AO_DIM + 2 * s)\n"
+                     "sample_1d(st, pt, 7)\nvertex_1d(st, pt, d, offset)\nwalk(rays, dim_base=AO_DIM)\n"
+                     "walk(rays, dim_base=0)\n")
+    assert own_dimensions(tree) == [5, 6, 7, 8] and shifts(tree) == [2]
+    tree = ast.parse('Setting("sampler", str, "pmj02", "doc")\nreplace(SAMPLER_SETTING, default="x")\n'
+                     'Setting("spp", int, 1, "doc")\n')
+    assert sampler_settings(tree) == [1, 2]

@@ -1,4 +1,4 @@
-"""The images of ``probes``, ``ambient`` and ``ao`` (independent sampler), pinned bit for bit.
+"""The images of ``probes``, ``ambient``, ``ao`` and ``whitted`` (independent sampler), pinned bit for bit.
 
 Taken before these renderers drew their numbers through the sampler
 (:mod:`cornell_harness.renderers.core.sampler`) and adopted the toolkit's one ``SampleLd``
@@ -23,10 +23,11 @@ from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.renderers.ambient import AOAmbient
 from cornell_harness.renderers.ao import AORenderer
 from cornell_harness.renderers.probes import IrradianceProbes
+from cornell_harness.renderers.whitted import Whitted
 
 pytest.importorskip("embreex")
 
-RENDERERS = {"probes": IrradianceProbes, "ambient": AOAmbient, "ao": AORenderer}
+RENDERERS = {"probes": IrradianceProbes, "ambient": AOAmbient, "ao": AORenderer, "whitted": Whitted}
 _PROBES = {"grid": 3, "rays_per_probe": 64, "bounces": 2, "iterations": 2}
 
 #: (renderer, scene, width, spp, seed, settings) -> sha256 of image then variance (if any), float32 bytes.
@@ -46,6 +47,14 @@ PINNED = {
         "77a36639bdfae66a80c317e2f4cf9a5f486440864eb669847a59bf732145b9db",
     ("ao", "cornell-box-ao", 24, 8, 7, (("sampler", "independent"),)):
         "4bd3d5d692e79e83b970b48266633f317bf25b6da6aeb858eb731c610658da41",
+    ("whitted", "cornell-box-caustics", 24, 4, 3, (("sampler", "independent"), ("ambient", "ao"),
+                                                   ("light_samples", 2))):
+        "d2dd27145648ed168f378fb7c6ed4e212d936b40313c398ff38de15ef1dee29f",
+    ("whitted", "cornell-box", 16, 2, 1, (("sampler", "independent"),)):
+        "1fc5dd02285ead9b8c5eba4cc8707213247938c7225f856a057252ac2097c132",
+    ("whitted", "cornell-box-caustics", 16, 2, 5, (("sampler", "independent"), ("ambient", "none"),
+                                                   ("transparent_shadows", "boolean"), ("light_samples", 3))):
+        "90ddbef25a56ee03dddb5aaff513bd52db1adffd7b6bd175243d00e1c4cdbd0b",
 }
 
 

@@ -128,18 +128,32 @@ def umbra_pixels(scene: Scene, k: int = 4) -> np.ndarray:
 
 # -- closed forms --------------------------------------------------------------------------------------
 
-def check_rectangle_light(renderer, tmp_path: Path) -> None:
+def check_rectangle_light(renderer, tmp_path: Path, sampler: str = "independent"):
     """``ambient = none`` on the analytic rectangle-light scene, 16 light samples, 16², 32 spp: 4×4 tiles and
-    the whole image z-tested against Lambert's polygon formula, α = 1e-3 over the 51 tests."""
+    the whole image z-tested against Lambert's polygon formula, α = 1e-3 over the 51 tests. Returns the render
+    and the exact image."""
     scene = rectangle_light_scene(tmp_path, res=16)
-    ours = render(scene, 32, 5, renderer, ambient="none", light_samples=16)
+    ours = render(scene, 32, 5, renderer, ambient="none", light_samples=16, sampler=sampler)
     exact = rectangle_light_image(scene, sub=64)
     agr = agreement_test(ours.image, ours.variance, exact, np.zeros_like(exact), tile=4, alpha=ALPHA)
     assert agr.passed, agr.message()
+    return ours, exact
 
 
 def test_direct_light_matches_the_polygon_irradiance(tmp_path):
     check_rectangle_light(None, tmp_path)
+
+
+def test_the_sampler_setting_draws_the_numbers(tmp_path):
+    """``sampler = pmj02`` draws other numbers than ``independent`` (same seed, another image), and is as
+    unbiased: z-tested against the polygon formula as above, with the variance of its 8 batches. Its
+    stratified camera jitter and light samples also land closer to the exact image."""
+    indep, exact = check_rectangle_light(None, tmp_path)
+    pmj, _ = check_rectangle_light(None, tmp_path, "pmj02")
+    assert pmj.info["sampler"] == "pmj02" and pmj.info["batches"] == 8 and indep.info["sampler"] == "independent"
+    assert not np.array_equal(pmj.image, indep.image)
+    mse = {name: float(np.mean((r.image - exact) ** 2)) for name, r in (("independent", indep), ("pmj02", pmj))}
+    assert mse["pmj02"] < 0.5 * mse["independent"], mse
 
 
 def check_constant_ambient(renderer, tmp_path: Path) -> None:
@@ -284,7 +298,7 @@ def test_renderers_lists_whitted_and_its_settings():
     lines = proc.stdout.splitlines()
     i = next(k for k, line in enumerate(lines) if line.split()[:1] == ["whitted"])
     block = "\n".join(lines[i:i + 12])
-    for name in ("max_depth", "light_samples", "ambient", "transparent_shadows", "ao_samples"):
+    for name in ("max_depth", "light_samples", "ambient", "transparent_shadows", "ao_samples", "sampler"):
         assert name in block, block
 
 

@@ -95,15 +95,14 @@ the render is refused (ValueError).
 Random numbers, from the ``sampler`` setting's stream (:mod:`cornell_harness.renderers.core.sampler`;
 default ``independent``, the sampler the gate's expectations were measured
 with): the visible-point walk uses the toolkit's per-vertex layout, drawn from the pass's stream;
-occlusion ray s of a sample draws the 2D sample at dimension :data:`AO_DIM` + 2s
-(dimensions :data:`AO_DIM` + 2s and + 2s + 1), far above any vertex's. The image depends on
+occlusion ray s of a sample draws its 2D sample from the sampler's block
+:data:`cornell_harness.renderers.core.sampler.OCCLUSION`, far above any vertex's. The image depends on
 the seed only, bit for bit, for any thread count (:func:`cornell_harness.renderers.core.schedule.render_image`);
 passes double, so power-of-two checkpoints are free.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Sequence
 
 import numpy as np
@@ -115,7 +114,8 @@ from cornell_harness.renderers.core.ambient_radiance import bounces_left, radios
 from cornell_harness.renderers.core.geometry import SceneGeometry
 from cornell_harness.renderers.core.occlusion import DEFAULT_AO_MAX_DISTANCE, occlusion_segment
 from cornell_harness.renderers.core.rays import add_unoccluded, head, shadow_buffer
-from cornell_harness.renderers.core.sampler import SAMPLER_SETTING, Stream, independent, path_point, sample_2d
+from cornell_harness.renderers.core.sampler import (OCCLUSION, Stream, independent, occlusion_dim, path_point,
+                                                    sample_2d, sampler_setting)
 from cornell_harness.renderers.core.sampling import jit
 from cornell_harness.renderers.core.schedule import render_image
 from cornell_harness.renderers.core.settings import with_defaults
@@ -123,10 +123,6 @@ from cornell_harness.renderers.core.visible_points import camera_visible_points
 
 #: Ways of choosing La (module docstring).
 AMBIENTS = ("radiosity", "oracle", "none", "constant")
-#: Occlusion ray s of a sample draws dimensions AO_DIM + 2s, AO_DIM + 2s + 1: above every dimension the
-#: walk uses (vertex d's block starts at 2 + 6(d − 1)), below rng's limit of 2^24 for any ao_samples allowed.
-AO_DIM = 1 << 20
-MAX_AO_SAMPLES = 1024
 
 
 @jit
@@ -141,7 +137,7 @@ def _ambient_rays(found, vp, value, stream, first, sample, tfar, offset, occ):
         q = found[j]
         x = (vp.position[q, 0], vp.position[q, 1], vp.position[q, 2])
         n = (vp.normal[q, 0], vp.normal[q, 1], vp.normal[q, 2])
-        u = sample_2d(stream, path_point(stream, first + q), AO_DIM + 2 * sample)
+        u = sample_2d(stream, path_point(stream, first + q), occlusion_dim(sample))
         occlusion_segment(occ, k, x, n, True, u, tfar, offset, q, v)
         k += 1
     return k
@@ -195,9 +191,7 @@ class AOAmbient(ToolkitRenderer):
     approximations = ("indirect light is one constant ambient radiance per channel, shadowed by short-range "
                       "ambient occlusion: biased, it does not converge to the reference",)
     settings = (
-        dataclasses.replace(SAMPLER_SETTING, default="independent",
-                            doc="random numbers of the camera paths and the occlusion rays (per pixel): independent, "
-                            "pmj02 or sobol (cornell_harness.renderers.core.sampler)"),
+        sampler_setting("the camera paths and the occlusion rays (one sequence per pixel)"),
         Setting("ambient", str, "radiosity", "how the ambient radiance La is chosen: radiosity (Cohen et al. "
                 "1988's ambient term, from the scene alone), oracle (least squares against the stored "
                 "reference by the harness: two renders), none (direct light only), constant (ambient_radiance)",
@@ -206,7 +200,7 @@ class AOAmbient(ToolkitRenderer):
         Setting("ao_max_distance", float, DEFAULT_AO_MAX_DISTANCE, "reach of the occlusion rays, relative to "
                 "the scene's size (bounding-box diagonal); the default is 0.5 scene units on cornell-box",
                 low=1e-6, high=1e3),
-        Setting("ao_samples", int, 1, "occlusion rays per camera sample", low=1, high=MAX_AO_SAMPLES),
+        Setting("ao_samples", int, 1, "occlusion rays per camera sample", low=1, high=OCCLUSION.count),
     )
     #: ambient = oracle: the harness renders D (none) and D + B (constant La = 1) and fits c (module docstring).
     reference_fit = ReferenceFit("ambient", "oracle", without={"ambient": "none"},

@@ -45,7 +45,8 @@ Random numbers: a sample makes two decisions, each with named dimensions of
 its own layout, drawn from the ``sampler`` setting's stream (as
 :mod:`cornell_harness.renderers.core.sampler` describes): the pixel jitter of the toolkit's
 camera rays (dimensions 0-1, :data:`cornell_harness.renderers.core.sampler.CAMERA_U` and
-``CAMERA_V``), then the direction (:data:`AO_U`, :data:`AO_V`), each a 2D draw. The
+``CAMERA_V``), then the direction (the sampler's block ``AO_DIRECTION``: ``AO_U``, ``AO_V``),
+each a 2D draw; no other decision. The
 image depends on the seed only, bit for bit, for any thread count
 (:mod:`cornell_harness.renderers.core.schedule`); passes double, so power-of-two checkpoints
 are free.
@@ -73,16 +74,10 @@ from cornell_harness.renderers.core.camera import camera_basis, camera_rays
 from cornell_harness.renderers.core.geometry import SceneGeometry, ray_hit
 from cornell_harness.renderers.core.occlusion import face_forward, occlusion_segment
 from cornell_harness.renderers.core.rays import add_unoccluded, head, ray_buffer, shadow_buffer
-from cornell_harness.renderers.core.sampler import CAMERA_DIMS, SAMPLER_SETTING, Stream, independent, path_point, sample_2d
+from cornell_harness.renderers.core.sampler import AO_U, Stream, independent, path_point, sample_2d, sampler_setting
 from cornell_harness.renderers.core.sampling import jit
 from cornell_harness.renderers.core.schedule import render_image
 from cornell_harness.renderers.core.settings import with_defaults
-
-#: A sample's layout: the pixel jitter (CAMERA_U, CAMERA_V: dimensions 0 and 1, drawn by the toolkit's
-#: camera rays), then the AO direction's two numbers; no other decision, so AO_DIMS dimensions in all.
-AO_U = CAMERA_DIMS
-AO_V = CAMERA_DIMS + 1
-AO_DIMS = CAMERA_DIMS + 2
 
 
 @jit
@@ -324,7 +319,8 @@ class AORenderer(ToolkitRenderer):
     name = "ao"
     estimator = "unbiased"
     quantities = ("ambient_occlusion",)
-    settings = (SAMPLER_SETTING,)
+    settings = (sampler_setting("the camera rays and their occlusion rays (one sequence per pixel)", "pmj02",
+                                batches=False),)
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:

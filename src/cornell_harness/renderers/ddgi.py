@@ -82,7 +82,8 @@ from cornell_harness.renderers.core.geometry import SceneGeometry, offset_origin
 from cornell_harness.renderers.core.lights import emits, solid_angle_pdf_along
 from cornell_harness.renderers.core.octahedral import bilinear_texels, fill_borders, octahedral_uv, texel_directions
 from cornell_harness.renderers.core.rays import add_unoccluded, head, ray_buffer, set_path, set_ray, set_shadow, shadow_buffer
-from cornell_harness.renderers.core.sampler import Stream, sample_1d, sample_2d, sequence_point
+from cornell_harness.renderers.core.sampler import (PROBE_BSDF_U, PROBE_EMITTER_PICK, PROBE_EMITTER_U, Stream,
+                                                    sample_1d, sample_2d, sequence_point)
 from cornell_harness.renderers.core.sampling import INV_PI, jit, power_heuristic
 
 #: RTXGI's constants of the heuristics (Irradiance.hlsl, ProbeBlendingCS.hlsl, DDGIVolume.h).
@@ -94,10 +95,6 @@ MAX_DISTANCE_SPACINGS = 1.5
 MIN_TRILINEAR = 0.001
 MIN_WEIGHT = 1e-6
 NEGLIGIBLE_WEIGHT = 1e-12
-#: Probe ray j's direct-light numbers are dimensions 0-4 of its point of the update's stream
-#: (:func:`cornell_harness.renderers.core.sampler.sequence_point`): the light sample's emitter and point (1D, then 2D), the
-#: BSDF sample's direction (2D).
-NEE_PICK, NEE_U, NEE_V, BSDF_U, BSDF_V = 0, 1, 2, 3, 4
 
 
 class ProbeGrid(NamedTuple):
@@ -288,12 +285,13 @@ def _shade_probe_rays(prim, t_sphere, rays, stream, first, per_probe, vol, geo, 
         # Direct light by MIS of a light sample and a cosine-weighted BSDF sample (Veach 1997 §9.2, power
         # heuristic): a light sample alone has unbounded variance next to an emitter that meets the surface
         # at an edge (the furnace: every wall emits).
-        u1, u2 = sample_2d(stream, point, NEE_U)
-        found, a, sd, tfar, lc = sample_ld(x, n, mat, rho, (sample_1d(stream, point, NEE_PICK), u1, u2), geo, True)
+        u1, u2 = sample_2d(stream, point, PROBE_EMITTER_U)
+        found, a, sd, tfar, lc = sample_ld(x, n, mat, rho, (sample_1d(stream, point, PROBE_EMITTER_PICK), u1, u2),
+                                           geo, True)
         if found:
             set_shadow(shadow, ns, a, sd, tfar, i, lc)
             ns += 1
-        ub1, ub2 = sample_2d(stream, point, BSDF_U)
+        ub1, ub2 = sample_2d(stream, point, PROBE_BSDF_U)
         dx, dy, dz, cos_b = lambert_sample(n, ub1, ub2)
         if cos_b > 0.0:
             set_ray(bsdf, nb, offset_origin(x, n, geo.offset), (dx, dy, dz))

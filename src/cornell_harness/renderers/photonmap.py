@@ -46,7 +46,9 @@ the photon maps are built once per render, deterministically from the seed
 :data:`CAUSTIC_STREAM`), so images are bit-identical for any thread count.
 The ``sampler`` setting (:mod:`cornell_harness.renderers.core.sampler`) draws every number:
 each map's photons are one sequence, camera paths and gather rays one per
-pixel (default ``independent``, the numbers the gate's budgets were measured with).
+pixel (default ``independent``, the numbers the gate's budgets were measured with);
+gather ray g draws its direction and its walk from the sampler's blocks
+:data:`cornell_harness.renderers.core.sampler.GATHER` and ``GATHER_WALKS``.
 """
 
 from __future__ import annotations
@@ -65,7 +67,7 @@ from cornell_harness.renderers.core.geometry import SceneGeometry
 from cornell_harness.renderers.core.photon_map import KERNELS, UNBOUNDED, PhotonMap, PrecomputedIrradiance, depth_budget
 from cornell_harness.renderers.core.photons import STORE_ALL, STORE_CAUSTIC, empty_photons, shoot, subset
 from cornell_harness.renderers.core.rays import head, ray_buffer
-from cornell_harness.renderers.core.sampler import SAMPLERS, Stream, independent
+from cornell_harness.renderers.core.sampler import GATHER, Stream, gather_walk_base, independent, sampler_setting
 from cornell_harness.renderers.core.schedule import render_image
 from cornell_harness.renderers.core.settings import with_defaults
 from cornell_harness.renderers.core.visible_points import camera_visible_points, gather_rays, walk_to_diffuse
@@ -75,11 +77,6 @@ GLOBAL_STREAM, CAUSTIC_STREAM = 1, 2
 GLOBAL_RADIUS_FACTOR = 4.0
 #: Final gathering's irradiance is precomputed at one global photon in this many (Christensen 1999).
 PRECOMPUTE_STRIDE = 4
-#: Sample dimensions of gather ray g: its direction at GATHER_DIM + 2g, its walk's vertices from
-#: GATHER_WALK_DIM + g·GATHER_WALK_STRIDE (above any camera-path dimension, below rng's 2^24).
-GATHER_DIM = 1 << 20
-GATHER_WALK_DIM = 1 << 21
-GATHER_WALK_STRIDE = 1 << 12
 
 
 class PhotonMapper(ToolkitRenderer):
@@ -101,10 +98,9 @@ class PhotonMapper(ToolkitRenderer):
         Setting("kernel", str, "cone", "density-estimation kernel (Jensen's cone filter, Epanechnikov, uniform)",
                 choices=KERNELS),
         Setting("gather_rays", int, 1, "final-gathering rays per camera sample; 0 shows the global map directly",
-                low=0, high=1024),
-        Setting("sampler", str, "independent", "random numbers of the photons (one sequence per map), the camera "
-                "paths and the gather rays (per pixel): independent, pmj02 or sobol (cornell_harness.renderers.core.sampler)",
-                choices=tuple(SAMPLERS)),
+                low=0, high=GATHER.count),
+        sampler_setting("the photons (one sequence per map), the camera paths and the gather rays (one sequence "
+                        "per pixel)"),
     )
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
@@ -169,10 +165,9 @@ class Pass2:
             return L
         rays = ray_buffer(len(f))
         for g in range(s["gather_rays"]):
-            r = gather_rays(vp, stream, first, GATHER_DIM + 2 * g, s["gather_rays"], geom.offset, rays)
-            _, hit = walk_to_diffuse(geom, self.scene, head(rays, r), stream, first, dim_base=GATHER_WALK_DIM
-                                     + g * GATHER_WALK_STRIDE, emission=False, nee=False, bounded=False,
-                                     paths=len(L))
+            r = gather_rays(vp, stream, first, g, s["gather_rays"], geom.offset, rays)
+            _, hit = walk_to_diffuse(geom, self.scene, head(rays, r), stream, first, dim_base=gather_walk_base(g),
+                                     emission=False, nee=False, bounded=False, paths=len(L))
             h = np.flatnonzero(hit.found)
             depth = vp.depth[h] + hit.depth[h]
             hb = depth_budget(self.scene.max_depth, depth)

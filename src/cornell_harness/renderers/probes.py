@@ -48,7 +48,6 @@ Images are bit-identical for any thread count.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Sequence
 
@@ -59,16 +58,17 @@ from cornell_harness.scenes.model import Scene
 from cornell_harness.renderers import ddgi
 from cornell_harness.renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from cornell_harness.renderers.core.geometry import SceneGeometry
-from cornell_harness.renderers.core.sampler import SAMPLER_SETTING, Stream, independent, path_point, sample_1d, \
-    sample_2d, sequence_stream
+from cornell_harness.renderers.core.sampler import (ROTATION_U1, ROTATION_U2, Stream, independent, path_point,
+                                                    sample_1d, sample_2d, sampler_setting, sequence_stream)
 from cornell_harness.renderers.core.sampling import INV_PI, jit, random_rotation, spherical_fibonacci
 from cornell_harness.renderers.core.schedule import render_image, run_units
 from cornell_harness.renderers.core.settings import with_defaults
 from cornell_harness.renderers.core.visible_points import camera_visible_points
 
 PROBE_STREAM = 3
-#: ``independent``: the update's rotation draws dimensions 0-2 of this path of its key, above any probe ray's
-#: index. A low-discrepancy sampler: update k's rotation is point k of one sequence of this stream's key.
+#: ``independent``: the update's rotation draws its numbers (the sampler's ``PROBE_ROTATION``) from this path of
+#: its key, above any probe ray's index. A low-discrepancy sampler: update k's rotation is point k of one
+#: sequence of this stream's key.
 ROTATION_PATH = (1 << 40) - 1
 ROTATION_STREAM = 4
 #: Most probe rays per work unit (whole probes), as the camera pass's unit sizes.
@@ -85,9 +85,8 @@ class IrradianceProbes(ToolkitRenderer):
                       "between probes, visibility by a Chebyshev bound, RTXGI's energy heuristics; biased",
                       "mirrors and glass seen by probe rays reflect nothing into the probes")
     settings = (
-        dataclasses.replace(SAMPLER_SETTING, default="independent",
-                            doc="random numbers of the camera paths (per pixel) and the probe rays (one sequence per "
-                            "probe over its rays): independent, pmj02 or sobol (cornell_harness.renderers.core.sampler)"),
+        sampler_setting("the camera paths (one sequence per pixel) and the probe rays (one sequence per probe "
+                        "over its rays)"),
         Setting("grid", int, 8, "probes per axis (RTXGI's Cornell box: 9 at spacing 0.3 for a box of 2.4)",
                 low=2, high=64),
         Setting("margin", float, 0.05, "the probe grid spans the scene's bounding box shrunk by this fraction "
@@ -231,10 +230,10 @@ def update_rotation(sampler: str, seed: int, k: int) -> np.ndarray:
 
 @jit
 def _rotation_numbers(stream, path):
-    """Dimension 0 (1D) and 1-2 (2D) of ``path``; in a kernel, since a point's uint64 seed does not survive
-    a round trip through Python ints."""
+    """The rotation's numbers of ``path`` (the sampler's ``PROBE_ROTATION``: 1D, then 2D); in a kernel, since a
+    point's uint64 seed does not survive a round trip through Python ints."""
     point = path_point(stream, path)
-    return sample_1d(stream, point, 0), sample_2d(stream, point, 1)
+    return sample_1d(stream, point, ROTATION_U1), sample_2d(stream, point, ROTATION_U2)
 
 
 def probes_per_unit(probes: int, rays: int, threads: int) -> int:

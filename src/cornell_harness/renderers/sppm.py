@@ -87,7 +87,7 @@ from cornell_harness.renderers.core.camera import pixel_cone_widths
 from cornell_harness.renderers.core.geometry import SceneGeometry
 from cornell_harness.renderers.core.photon_map import depth_budget, pairs_that_count
 from cornell_harness.renderers.core.photons import BATCH, STORE_INDIRECT, trace_photons
-from cornell_harness.renderers.core.sampler import SAMPLERS, Stream, independent, pass_stream, sequence_stream
+from cornell_harness.renderers.core.sampler import Stream, independent, pass_stream, sampler_setting, sequence_stream
 from cornell_harness.renderers.core.schedule import pass_units, run_units
 from cornell_harness.renderers.core.settings import with_defaults
 from cornell_harness.renderers.core.visible_points import VisiblePoints, camera_visible_points, visible_buffer
@@ -114,9 +114,8 @@ class SPPM(ToolkitRenderer):
         Setting("initial_radius_world", float, 0.0, "starting gather radius in scene units for every pixel, "
                 "overriding initial_radius (pbrt-v4's radius); 0: from the pixel footprints",
                 low=0.0, high=1e6),
-        Setting("sampler", str, "independent", "random numbers of the camera passes (one sequence per pixel over "
-                "the iterations) and of each photon pass (one sequence over its photons): independent, pmj02 or "
-                "sobol (cornell_harness.renderers.core.sampler)", choices=tuple(SAMPLERS)),
+        sampler_setting("the camera passes (one sequence per pixel over the iterations) and of each photon pass "
+                        "(one sequence over its photons)", batches=False),
     )
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),

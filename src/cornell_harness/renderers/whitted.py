@@ -69,13 +69,15 @@ d + 1 ≤ max_depth. So at max_depth 3, a mirror seen by the camera shows the
 emission and the direct light the path tracer's max_depth-3 image shows there
 (the closed-form test of this module).
 
-Random numbers (``independent`` sampler): the camera jitter is the toolkit's
-(:func:`cornell_harness.renderers.core.camera.camera_rays`); light sample s at vertex d draws
-dimensions :data:`LIGHT_DIM` + 3·(:data:`MAX_LIGHT_SAMPLES`·(d − 1) + s) .. + 2,
-occlusion ray s at vertex d dimensions :data:`AO_DIM` + 2·(:data:`MAX_AO_SAMPLES`·(d − 1)
-+ s) and + 1; the two branches of a glass split at the same depth share them
-(each branch stays an unbiased estimate of its own term). The image depends
-on the seed only, bit for bit, for any thread count
+Random numbers, from the ``sampler`` setting's stream (:mod:`cornell_harness.renderers.core.sampler`;
+default ``independent``, the sampler the gate's expectations were measured with):
+the camera jitter is the toolkit's (:func:`cornell_harness.renderers.core.camera.camera_rays`);
+light sample s and occlusion ray s at vertex d draw from the sampler's blocks
+:data:`cornell_harness.renderers.core.sampler.TREE_LIGHTS` and ``TREE_OCCLUSION``
+(:func:`cornell_harness.renderers.core.sampler.tree_light_dim`, ``tree_occlusion_dim``);
+the two branches of a glass split at the same depth share them (each branch
+stays an unbiased estimate of its own term). The image depends on the seed
+only, bit for bit, for any thread count
 (:func:`cornell_harness.renderers.core.schedule.render_image`); passes double, so
 power-of-two checkpoints are free. ``estimator = "biased"``: the image does
 not converge to the reference as spp grows.
@@ -101,7 +103,9 @@ from cornell_harness.renderers.core.geometry import (Hits, SceneGeometry, add_un
 from cornell_harness.renderers.core.occlusion import DEFAULT_AO_MAX_DISTANCE, occlusion_segment
 from cornell_harness.renderers.core.rays import (RayBuffer, ShadowBuffer, ray_buffer, set_path, set_ray, set_shadow,
                                  shadow_buffer)
-from cornell_harness.renderers.core.sampler import Stream, independent, path_point, sample_1d, sample_2d
+from cornell_harness.renderers.core.sampler import (EMITTER_PICK, EMITTER_U, MAX_RAYS, MAX_TREE_DEPTH, Stream,
+                                                    independent, path_point, sample_1d, sample_2d, sampler_setting,
+                                                    tree_light_dim, tree_occlusion_dim)
 from cornell_harness.renderers.core.sampling import jit
 from cornell_harness.renderers.core.schedule import render_image
 from cornell_harness.renderers.core.settings import with_defaults
@@ -110,12 +114,6 @@ AMBIENTS = ("none", "constant", "ao")
 NONE, CONSTANT, AO = 0, 1, 2
 SHADOW_MODES = ("boolean", "attenuate", "ignore")
 BOOLEAN, ATTENUATE, IGNORE = 0, 1, 2
-MAX_DEPTH = 64
-MAX_LIGHT_SAMPLES = 1024
-MAX_AO_SAMPLES = 1024
-#: Dimension blocks far above the toolkit's per-vertex layout, below rng's 2^24 for every setting allowed.
-LIGHT_DIM = 1 << 20
-AO_DIM = 1 << 23
 #: A shadow segment crossing more dielectric interfaces than this is taken as blocked.
 MAX_INTERFACES = 32
 
@@ -169,10 +167,10 @@ def _shade(hits, rays, stream, first, depth, extend, geo, opt, la, out):
             pt = path_point(stream, first + q)
             k = 1.0 / opt.light_samples
             for s in range(opt.light_samples):
-                dim = LIGHT_DIM + 3 * (MAX_LIGHT_SAMPLES * (depth - 1) + s)
-                u = sample_2d(stream, pt, dim + 1)
+                u = sample_2d(stream, pt, tree_light_dim(depth, s, EMITTER_U))
                 found, a, sd, tfar, c3 = sample_ld(x, n, mat, (w[0] * k, w[1] * k, w[2] * k),
-                                                   (sample_1d(stream, pt, dim), u[0], u[1]), geo, False)
+                                                   (sample_1d(stream, pt, tree_light_dim(depth, s, EMITTER_PICK)),
+                                                    u[0], u[1]), geo, False)
                 if found:
                     set_shadow(out.shadow, ns, a, sd, tfar, q, c3)
                     ns += 1
@@ -183,7 +181,7 @@ def _shade(hits, rays, stream, first, depth, extend, geo, opt, la, out):
                 h = 1.0 / opt.ao_samples
                 v = (w[0] * la[depth, 0] * h, w[1] * la[depth, 1] * h, w[2] * la[depth, 2] * h)
                 for s in range(opt.ao_samples):
-                    u = sample_2d(stream, pt, AO_DIM + 2 * (MAX_AO_SAMPLES * (depth - 1) + s))
+                    u = sample_2d(stream, pt, tree_occlusion_dim(depth, s))
                     occlusion_segment(out.occ, no, x, n, True, u, opt.ao_tfar, geo.offset, q, v)
                     no += 1
             continue
@@ -387,16 +385,17 @@ class Whitted(ToolkitRenderer):
                       "shadows of glass by a rule (boolean, Fresnel-attenuated straight rays, or ignored)")
     settings = (
         Setting("max_depth", int, 5, "segments from the camera a ray tree may have (the camera ray is 1; a "
-                "shadow ray counts); the scene's max_depth caps it", low=1, high=MAX_DEPTH),
+                "shadow ray counts); the scene's max_depth caps it", low=1, high=MAX_TREE_DEPTH),
         Setting("light_samples", int, 1, "shadow rays to the area light(s) per diffuse hit: 1 gives noisy hard "
-                "edges, many give soft shadows at their cost", low=1, high=MAX_LIGHT_SAMPLES),
+                "edges, many give soft shadows at their cost", low=1, high=MAX_RAYS),
         Setting("ambient", str, "constant", "the ambient term at diffuse hits: none, constant (Cohen et al. "
                 "1988's ambient radiance from the scene, times ρ) or ao (that constant shadowed by ambient "
                 "occlusion)", choices=AMBIENTS),
         Setting("transparent_shadows", str, "attenuate", "shadow rays that meet glass: boolean (glass blocks), "
                 "attenuate (straight through, times each interface's Fresnel transmittance: Pearce's shadow "
                 "attenuation) or ignore (glass casts no shadow)", choices=SHADOW_MODES),
-        Setting("ao_samples", int, 4, "occlusion rays per diffuse hit for ambient = ao", low=1, high=MAX_AO_SAMPLES),
+        Setting("ao_samples", int, 4, "occlusion rays per diffuse hit for ambient = ao", low=1, high=MAX_RAYS),
+        sampler_setting("the camera rays, light samples and occlusion rays (one sequence per pixel)"),
     )
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
@@ -414,7 +413,7 @@ class Whitted(ToolkitRenderer):
 
         geom, setup_s = warmed_geometry(scene, prepare)
         tracer = made["tracer"]
-        result = render_image(scene, spp, seed, tracer.trace, checkpoints, self.threads, sampler="independent")
+        result = render_image(scene, spp, seed, tracer.trace, checkpoints, self.threads, sampler=s["sampler"])
         result.info.update(s, max_depth_used=depth, ambient_radiance=[float(x) for x in tracer.la[1]],
                            rays=geom.rays, setup_s=round(setup_s, 3))
         return result

@@ -19,9 +19,9 @@ from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.renderers.core import film as film_module
 from cornell_harness.renderers.core.film import Film
 from cornell_harness.renderers.core.rng import uniform
-from cornell_harness.renderers.core.photons import EMIT_DIR_U, EMIT_U, BOUNCE_U, bounce_dim
-from cornell_harness.renderers.core.sampler import (BATCHES, CAMERA_U, PMJ02, SOBOL, Stream, independent, path_point, sample_1d,
-                                    sample_2d, sequence_stream, vertex_dim)
+from cornell_harness.renderers.core.sampler import (BATCHES, BOUNCE_U, CAMERA_U, EMIT_DIR_U, EMIT_U, PMJ02, SOBOL,
+                                                    Stream, bounce_dim, independent, path_point, sample_1d,
+                                                    sample_2d, sequence_stream, vertex_dim)
 from cornell_harness.renderers.pathtracer import PathTracer
 
 pytest.importorskip("embreex")

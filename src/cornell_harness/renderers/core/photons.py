@@ -47,7 +47,8 @@ incoming direction and normal, int16 depth, a caustic flag.
 Determinism: photon j of a map draws its numbers from the map's sampler
 stream (:func:`cornell_harness.renderers.core.sampler.sequence_stream`: with ``independent``
 the counter-based numbers of (key, j, dimension), with ``pmj02`` or ``sobol``
-sample j of one sequence over the map's photons) in the layout named below,
+sample j of one sequence over the map's photons) in the sampler's photon layout
+(:data:`cornell_harness.renderers.core.sampler.PHOTON_EMISSION`, ``PHOTON_BOUNCES``),
 so the photons do not depend on how batches are spread over threads, and
 batches are joined in order (:func:`shoot`).
 """
@@ -65,19 +66,13 @@ from cornell_harness.renderers.core.geometry import SceneGeometry, offset_origin
 from cornell_harness.renderers.core.lights import sample_emitter
 from cornell_harness.renderers.core.rays import RayBuffer, set_path, set_ray, wavefront
 from cornell_harness.renderers.core.roulette import Q_MAX
-from cornell_harness.renderers.core.sampler import Stream, path_point, sample_1d, sample_2d, sequence_stream
+from cornell_harness.renderers.core.sampler import (BOUNCE_ROULETTE, BOUNCE_U, EMIT_DIR_U, EMIT_PICK, EMIT_U, Stream,
+                                                    bounce_dim, path_point, sample_1d, sample_2d, sequence_stream)
 from cornell_harness.renderers.core.sampling import cosine_hemisphere, jit
 from cornell_harness.renderers.core.schedule import run_units
 
 #: What a photon pass stores (see the module docstring).
 STORE_ALL, STORE_CAUSTIC, STORE_INDIRECT = 0, 1, 2
-
-#: Dimensions of photon j: the emitter (by power), the point on it (2), the emitted direction (2);
-#: then per bounce k = 1, 2, ... (the surface the k-th segment reaches) its BSDF direction (2) and roulette.
-EMIT_PICK, EMIT_U, EMIT_V, EMIT_DIR_U, EMIT_DIR_V = 0, 1, 2, 3, 4
-EMIT_DIMS = 5
-BOUNCE_U, BOUNCE_V, BOUNCE_ROULETTE = 0, 1, 2
-DIMS_PER_BOUNCE = 3
 
 #: Photons per batch (a work unit): fixed, so which photons a map holds never depends on the thread count.
 BATCH = 1 << 14
@@ -125,12 +120,6 @@ def join(parts: list[Photons]) -> Photons:
     if not parts:
         return empty_photons()
     return Photons(*(np.concatenate(cols) for cols in zip(*parts)))
-
-
-@jit
-def bounce_dim(depth, offset):
-    """Dimension of ``offset`` at the photon's ``depth``-th surface."""
-    return EMIT_DIMS + (depth - 1) * DIMS_PER_BOUNCE + offset
 
 
 @jit

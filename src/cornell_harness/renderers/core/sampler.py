@@ -1,25 +1,35 @@
-"""Samplers, and named sample dimensions: which number of a path each decision uses.
+"""Samplers, and the dimension map: which numbers of a path each decision of every integrator draws.
 
 In the spirit of pbrt-v4's ``Sampler::Get1D``/``Get2D`` (§8.3), a path's
 decisions consume numbers in a fixed order, but every dimension has a name
-instead of hand arithmetic in the kernels:
+instead of hand arithmetic in the kernels. This module owns the map: every
+integrator draws from the named blocks declared here (:class:`Block`,
+:data:`BLOCKS`), through the dimension functions below, and :data:`LAYOUTS`
+says which blocks each kind of path uses; the blocks of one layout never
+overlap (``tests/renderers/core/test_dimensions.py``), and no integrator
+writes a dimension of its own (``tests/test_code_shape.py``). A camera path:
 
-- dimensions 0 and 1 (:data:`CAMERA_U`, :data:`CAMERA_V`) jitter the camera
-  ray inside its pixel;
-- then each path vertex (depth 1, 2, ...: the surface the depth-th segment
-  reaches) owns :data:`DIMS_PER_VERTEX` dimensions, at the offsets named
-  below, whether or not the integrator uses them all;
-- :data:`WAVELENGTH`, the hero wavelength of a spectral path
-  (:mod:`cornell_harness.renderers.hero_wavelength`), is the last dimension a number can
-  have, so that no vertex reaches it and the RGB renders' numbers are those
-  they had before it existed.
+- :data:`CAMERA`: dimensions 0 and 1 (:data:`CAMERA_U`, :data:`CAMERA_V`)
+  jitter the camera ray inside its pixel;
+- :data:`VERTICES`: then each path vertex (depth 1, 2, ...: the surface the
+  depth-th segment reaches) owns six dimensions, at the offsets named below
+  (:func:`vertex_dim`), whether or not the integrator uses them all;
+- from 2^20 on, the blocks of the extra rays an integrator casts from a
+  vertex (occlusion, gather, light-sample rays), each the integrator's own;
+- :data:`HERO`, the hero wavelength of a spectral path
+  (:mod:`cornell_harness.renderers.hero_wavelength`), is the last dimension
+  :func:`cornell_harness.renderers.core.rng.uniform` takes, so that the RGB
+  renders' numbers are those they had before it existed.
 
-A dimension is a pure function of (depth, offset), so a decision that is
-skipped (no emitter, a path ended) never shifts the numbers of the ones
-after it. Changing any number here changes every image:
-``tests/renderers/test_pathtracer_pinned.py`` and ``tests/renderers/test_photon_pinned.py`` pin them.
-Photon paths have their own layout (:mod:`cornell_harness.renderers.core.photons`) and
-draw from :func:`sequence_stream`: one sequence over a map's photons.
+Photon paths (:mod:`cornell_harness.renderers.core.photons`) and probe rays
+(:mod:`cornell_harness.renderers.ddgi`) are paths of their own streams, with
+their own layouts here, drawn from :func:`sequence_stream`.
+
+A dimension is a pure function of (block, item, offset), so a decision that
+is skipped (no emitter, a path ended) never shifts the numbers of the ones
+after it. Changing any number here changes every image: the pinned tests
+(``tests/renderers/test_*pinned.py``, ``tests/renderers/test_hero_wavelength.py``)
+pin them.
 
 Which numbers a dimension gets is the sampler's (:data:`SAMPLERS`), carried
 to kernels as a :class:`Stream`; every sample stays a pure function of
@@ -56,23 +66,86 @@ from cornell_harness.renderers.core.rng import mix64, uniform
 from cornell_harness.renderers.core.sampling import jit, jit_inline
 from cornell_harness.renderers.core.sobol import SOBOL_MATRICES, padded_1d, padded_2d, pixel_seed, sobol_1d
 
-#: The camera ray's jitter inside its pixel (box filter), x then y.
-CAMERA_U = 0
-CAMERA_V = 1
-CAMERA_DIMS = 2
 
-#: Offsets inside a vertex's block: the emitter triangle (by power), the point on it (2),
-#: the BSDF direction (2), Russian roulette.
-EMITTER_PICK = 0
-EMITTER_U = 1
-EMITTER_V = 2
-BSDF_U = 3
-BSDF_V = 4
-ROULETTE = 5
-DIMS_PER_VERTEX = 6
-#: The hero wavelength's number (:mod:`cornell_harness.renderers.core.wavelengths`): dimension 2^24 - 1, the last one
-#: :func:`cornell_harness.renderers.core.rng.uniform` takes, past any vertex a path reaches (vertex ~2.8 million).
-WAVELENGTH = (1 << 24) - 1
+class Block(NamedTuple):
+    """Dimensions ``base`` .. ``stop`` - 1 of a path: ``count`` items (a vertex, a ray, a light sample) of
+    ``stride`` numbers each, item i's at ``base + stride·i`` on."""
+
+    name: str
+    base: int
+    stride: int
+    count: int = 1
+
+    @property
+    def stop(self) -> int:
+        return self.base + self.stride * self.count
+
+
+#: Most rays of one kind an extra block holds per item: the bound of the settings that count them
+#: (ambient's ao_samples, photonmap's gather_rays, whitted's light_samples and ao_samples).
+MAX_RAYS = 1024
+#: Vertices of a whitted ray tree its blocks hold: the bound of its max_depth.
+MAX_TREE_DEPTH = 64
+#: Where the blocks of a camera path's extra rays start: past its first 174,762 vertices, more than any
+#: path reaches (Russian roulette ends them). Every block ends below rng's 2^24 dimensions.
+_EXTRA = 1 << 20
+
+# -- camera paths (one stream per pass, path j sees pixel j mod pixels) --
+CAMERA = Block("camera", 0, 2)
+VERTICES = Block("vertices", CAMERA.stop, 6, (_EXTRA - CAMERA.stop) // 6)
+#: ao: the occlusion ray's direction, where a path's first vertex would be (AO casts no path).
+AO_DIRECTION = Block("ao direction", CAMERA.stop, 2)
+#: ambient: occlusion ray s of a visible point (2D).
+OCCLUSION = Block("occlusion rays", _EXTRA, 2, MAX_RAYS)
+#: photonmap: gather ray g's direction (2D), then its walk, laid out as :data:`VERTICES` from its own base
+#: (:func:`gather_walk_base`; 682 vertices each, more than any walk to a diffuse surface reaches).
+GATHER = Block("gather rays", _EXTRA, 2, MAX_RAYS)
+GATHER_WALKS = Block("gather walks", 1 << 21, 1 << 12, MAX_RAYS)
+#: whitted: light sample s at tree vertex d is item MAX_RAYS·(d − 1) + s (emitter pick, then its point, 2D),
+#: occlusion ray s there the same item of :data:`TREE_OCCLUSION` (2D).
+TREE_LIGHTS = Block("tree light samples", _EXTRA, 3, MAX_RAYS * MAX_TREE_DEPTH)
+TREE_OCCLUSION = Block("tree occlusion rays", 1 << 23, 2, MAX_RAYS * MAX_TREE_DEPTH)
+#: pathtracer, spectral = hero: the path's hero wavelength (:mod:`cornell_harness.renderers.core.wavelengths`).
+HERO = Block("hero wavelength", (1 << 24) - 1, 1)
+# -- photon paths (one sequence per photon pass) --
+#: The emitter (by power), the point on it (2D), the emitted direction (2D); then per bounce k = 1, 2, ...
+#: (the surface the k-th segment reaches) its BSDF direction (2D) and roulette.
+PHOTON_EMISSION = Block("photon emission", 0, 5)
+PHOTON_BOUNCES = Block("photon bounces", PHOTON_EMISSION.stop, 3, ((1 << 24) - PHOTON_EMISSION.stop) // 3)
+# -- probe rays (one sequence per probe over its rays) and probe updates --
+#: A probe ray's direct light: the light sample's emitter and point (1D, then 2D), the BSDF sample (2D).
+PROBE_RAY = Block("probe ray", 0, 5)
+#: An update's random rotation of the probe rays: three numbers, 1D then 2D.
+PROBE_ROTATION = Block("probe rotation", 0, 3)
+
+#: Every block, and the blocks each kind of path draws (blocks of one layout never overlap).
+BLOCKS = (CAMERA, VERTICES, AO_DIRECTION, OCCLUSION, GATHER, GATHER_WALKS, TREE_LIGHTS, TREE_OCCLUSION, HERO,
+          PHOTON_EMISSION, PHOTON_BOUNCES, PROBE_RAY, PROBE_ROTATION)
+LAYOUTS = {
+    "pathtracer, sppm and probes camera paths": (CAMERA, VERTICES),
+    "pathtracer spectral = hero": (CAMERA, VERTICES, HERO),
+    "ao": (CAMERA, AO_DIRECTION),
+    "ambient": (CAMERA, VERTICES, OCCLUSION),
+    "photonmap camera paths": (CAMERA, VERTICES, GATHER, GATHER_WALKS),
+    "whitted": (CAMERA, TREE_LIGHTS, TREE_OCCLUSION),
+    "photons": (PHOTON_EMISSION, PHOTON_BOUNCES),
+    "probe rays": (PROBE_RAY,),
+    "probe rotation": (PROBE_ROTATION,),
+}
+
+#: The dimensions of the single-item blocks, by name.
+CAMERA_U, CAMERA_V = range(CAMERA.base, CAMERA.stop)
+AO_U, AO_V = range(AO_DIRECTION.base, AO_DIRECTION.stop)
+WAVELENGTH = HERO.base
+EMIT_PICK, EMIT_U, EMIT_V, EMIT_DIR_U, EMIT_DIR_V = range(PHOTON_EMISSION.base, PHOTON_EMISSION.stop)
+PROBE_EMITTER_PICK, PROBE_EMITTER_U, PROBE_EMITTER_V, PROBE_BSDF_U, PROBE_BSDF_V = range(PROBE_RAY.base,
+                                                                                         PROBE_RAY.stop)
+ROTATION_U1, ROTATION_U2 = PROBE_ROTATION.base, PROBE_ROTATION.base + 1
+#: Offsets inside a vertex's block (:data:`VERTICES`): the emitter triangle (by power), the point on it (2),
+#: the BSDF direction (2), Russian roulette. The first three are a light sample's offsets in :data:`TREE_LIGHTS`.
+EMITTER_PICK, EMITTER_U, EMITTER_V, BSDF_U, BSDF_V, ROULETTE = range(VERTICES.stride)
+#: Offsets inside a photon bounce's block (:data:`PHOTON_BOUNCES`).
+BOUNCE_U, BOUNCE_V, BOUNCE_ROULETTE = range(PHOTON_BOUNCES.stride)
 
 INDEPENDENT, PMJ02, SOBOL = 0, 1, 2
 #: Sampler names (the ``sampler`` setting) and their ids in a :class:`Stream`.
@@ -80,11 +153,21 @@ SAMPLERS = {"independent": INDEPENDENT, "pmj02": PMJ02, "sobol": SOBOL}
 #: Independent randomisations of a low-discrepancy render: 7 degrees of freedom per pixel's variance.
 #: More give a steadier variance, fewer keep more stratification (docs/sampling.md measures both).
 BATCHES = 8
-#: The ``sampler`` setting of our renderers that draw from a :class:`Stream`.
-SAMPLER_SETTING = Setting("sampler", str, "pmj02",
-                          "random numbers: independent, pmj02 (progressive (0,2)-sequences per decision) or sobol "
-                          f"(Owen-scrambled, all dimensions); the last two report the variance of {BATCHES} "
-                          "independent batches", choices=tuple(SAMPLERS))
+
+
+def sampler_setting(draws: str, default: str = "independent", batches: bool = True) -> Setting:
+    """The ``sampler`` setting of a renderer of ours that draws ``draws`` (words: what, and its sequences) from
+    a :class:`Stream`. ``batches``: its low-discrepancy renders report the variance of :data:`BATCHES`
+    batches. The renderers whose gate expectations were measured with ``independent`` keep it as default."""
+    doc = (f"random numbers of {draws}: independent, pmj02 (progressive (0,2)-sequences per decision) or sobol "
+           "(Owen-scrambled, all dimensions)")
+    if batches:
+        doc += f"; the last two report the variance of {BATCHES} independent batches"
+    return Setting("sampler", str, default, doc, choices=tuple(SAMPLERS))
+
+
+#: The path tracer's ``sampler`` setting.
+SAMPLER_SETTING = sampler_setting("the camera paths (one sequence per pixel)", "pmj02")
 #: How a render of ours gets the variance it reports (``variance`` setting): ``batches`` as above, or ``none``.
 VARIANCE_MODES = ("batches", "none")
 VARIANCE_SETTING = Setting("variance", str, "batches",
@@ -185,7 +268,50 @@ def sample_2d(st, point, dim):
 @jit
 def vertex_dim(depth, offset):
     """Dimension of ``offset`` at path vertex ``depth`` (1: the camera ray's hit)."""
-    return CAMERA_DIMS + (depth - 1) * DIMS_PER_VERTEX + offset
+    return VERTICES.base + (depth - 1) * VERTICES.stride + offset
+
+
+@jit
+def shifted_vertex_dim(base, depth, offset):
+    """:func:`vertex_dim` in a walk whose vertices start at ``base`` (0: the camera path's own;
+    :func:`gather_walk_base`)."""
+    return base + vertex_dim(depth, offset)
+
+
+def gather_walk_base(g: int) -> int:
+    """The base of gather ray ``g``'s walk (:data:`GATHER_WALKS`), for :func:`shifted_vertex_dim`."""
+    return GATHER_WALKS.base + g * GATHER_WALKS.stride
+
+
+@jit
+def gather_dim(g):
+    """Gather ray ``g``'s direction (2D, :data:`GATHER`)."""
+    return GATHER.base + g * GATHER.stride
+
+
+@jit
+def occlusion_dim(s):
+    """Occlusion ray ``s`` of a visible point (2D, :data:`OCCLUSION`)."""
+    return OCCLUSION.base + s * OCCLUSION.stride
+
+
+@jit
+def tree_light_dim(depth, s, offset):
+    """Light sample ``s`` at ray-tree vertex ``depth``: its emitter pick (offset :data:`EMITTER_PICK`) and
+    point (:data:`EMITTER_U`, 2D) in :data:`TREE_LIGHTS`."""
+    return TREE_LIGHTS.base + (MAX_RAYS * (depth - 1) + s) * TREE_LIGHTS.stride + offset
+
+
+@jit
+def tree_occlusion_dim(depth, s):
+    """Occlusion ray ``s`` at ray-tree vertex ``depth`` (2D, :data:`TREE_OCCLUSION`)."""
+    return TREE_OCCLUSION.base + (MAX_RAYS * (depth - 1) + s) * TREE_OCCLUSION.stride
+
+
+@jit
+def bounce_dim(depth, offset):
+    """Dimension of ``offset`` at a photon's ``depth``-th surface (:data:`PHOTON_BOUNCES`)."""
+    return PHOTON_BOUNCES.base + (depth - 1) * PHOTON_BOUNCES.stride + offset
 
 
 @jit

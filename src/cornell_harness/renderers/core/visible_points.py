@@ -35,8 +35,8 @@ from cornell_harness.renderers.core.geometry import SceneGeometry, add_unocclude
 from cornell_harness.renderers.core.rays import (RayBuffer, ShadowBuffer, Wavefront, set_path, set_ray, set_shadow,
                                  wavefront)
 from cornell_harness.renderers.core.roulette import RR_DEPTH, continue_path
-from cornell_harness.renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, Stream, path_point,
-                                    sample_1d, sample_2d, vertex_dim)
+from cornell_harness.renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, Stream, gather_dim,
+                                                    path_point, sample_1d, sample_2d, shifted_vertex_dim)
 from cornell_harness.renderers.core.sampling import jit
 
 
@@ -80,12 +80,12 @@ class Found(NamedTuple):
 
 @jit
 def _vertex_1d(walk, pt, depth, offset) -> float:
-    return sample_1d(walk.stream, pt, walk.dim_base + vertex_dim(depth, offset))
+    return sample_1d(walk.stream, pt, shifted_vertex_dim(walk.dim_base, depth, offset))
 
 
 @jit
 def _vertex_2d(walk, pt, depth, offset):
-    return sample_2d(walk.stream, pt, walk.dim_base + vertex_dim(depth, offset))
+    return sample_2d(walk.stream, pt, shifted_vertex_dim(walk.dim_base, depth, offset))
 
 
 @jit
@@ -203,12 +203,14 @@ def camera_visible_points(geom: SceneGeometry, scene: Scene, first: int, stop: i
 
 
 @jit
-def gather_rays(vp, stream, first, dim, count, offset, rays):
-    """One cosine-weighted ray from each found visible point into ``rays``; returns how many.
+def gather_rays(vp, stream, first, g, count, offset, rays):
+    """Gather ray ``g`` (of ``count``) from each found visible point into ``rays``, cosine-weighted; returns
+    how many.
 
     Ray r carries path = its visible point's index and throughput weight/``count``
     (the weight of Lambert's cosine sample is ρ, already in ``weight``), and
-    the sample's pdf; it uses dimensions ``dim`` and ``dim + 1`` of path
+    the sample's pdf; it draws its direction from the sampler's
+    :func:`cornell_harness.renderers.core.sampler.gather_dim` of path
     ``first + index`` of ``stream``.
     """
     r = 0
@@ -216,7 +218,7 @@ def gather_rays(vp, stream, first, dim, count, offset, rays):
         if not vp.found[i]:
             continue
         n = (vp.normal[i, 0], vp.normal[i, 1], vp.normal[i, 2])
-        u = sample_2d(stream, path_point(stream, first + i), dim)
+        u = sample_2d(stream, path_point(stream, first + i), gather_dim(g))
         dx, dy, dz, cos = lambert_sample(n, u[0], u[1])
         if not cos > 0.0:
             continue
