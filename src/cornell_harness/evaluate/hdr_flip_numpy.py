@@ -11,8 +11,8 @@ does not compute as numba does is the C library's ``powf`` and ``expf``, which n
   own float64 arithmetic may round the other way); those few (under 1 %) are computed by ``powf`` itself;
 - :func:`expf` (the filters' weights, a few dozen per pixels-per-degree) is ``expf`` itself.
 
-The result is the numba path's map bit for bit on the images tests/evaluate/test_hdr_flip_numpy.py checks, at
-several times its cost (BENCHMARKS.md, "A core install").
+The result is the numba path's map bit for bit on the images tests/evaluate/test_hdr_flip_numpy.py checks,
+computed more slowly (BENCHMARKS.md, "A core install and ``[all]``", measures how much).
 """
 
 from __future__ import annotations
