@@ -5,6 +5,8 @@ core install itself is tests/test_packaging.py's, slow)."""
 from __future__ import annotations
 
 import importlib.util
+import subprocess
+import sys
 import tomllib
 
 import pytest
@@ -66,3 +68,14 @@ def test_a_cluster_without_dask_is_one_line_naming_the_extra(monkeypatch, capsys
     assert code == 2
     assert err.splitlines() == [f"cbox: error: {option} needs the [dask] extra (distributed not installed): "
                                 "pip install 'cornell-harness[dask]'"]
+
+
+def test_cbox_luxcore_without_pyluxcore_names_its_extra(tmp_path):
+    (tmp_path / "scene.cfg").write_text("")
+    hidden = ("import sys; sys.modules['pyluxcore'] = None; from cornell_harness.renderers.luxcore_cli import main; "
+              f"main([{str(tmp_path / 'scene.cfg')!r}, '--out', 'x.exr', '--spp', '1', '--seed', '0'])")
+    proc = subprocess.run([sys.executable, "-c", hidden], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert proc.returncode == 2
+    (line,) = proc.stderr.splitlines()  # one line, the import's error and the pip line, no traceback
+    assert line.startswith("cbox-luxcore: ") and "pyluxcore" in line
+    assert line.endswith(": pip install 'cornell-harness[luxcore]'")
