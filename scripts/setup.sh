@@ -65,13 +65,15 @@ PY=${PYTHON:-python3}
   || { say "Python 3.11 or newer is needed (found $("$PY" --version 2>&1))"; exit 1; }
 [[ -x .venv/bin/python ]] || { say "creating .venv"; "$PY" -m venv .venv; }
 
-# Reinstall only when the dependency list (or the --tests choice) changed.
-extras=""; [[ -n $TESTS ]] && extras="[test]"
+# Reinstall only when the dependency list (or the --tests choice) changed. Every extra (pyproject.toml's
+# [all]: our renderers, Mitsuba, LuxCore, pyrender, OIDN, Dask), so that `cbox demo` has every renderer.
+extras="[all]"; [[ -n $TESTS ]] && extras="[all,test]"
 stamp=.venv/.cbox-installed
-want="$(sha256sum pyproject.toml | cut -d' ' -f1)$extras"
+sha=$(sha256sum pyproject.toml | cut -d' ' -f1)
+want="$sha$extras"
 have=$(cat "$stamp" 2>/dev/null || true)
 # A test install is a superset of the plain one: it satisfies both.
-if [[ $have != "$want" && $have != "${want%\[test\]}[test]" ]]; then
+if [[ $have != "$want" && $have != "$sha[all,test]" ]]; then
   say "installing Python packages into .venv (first run takes a minute)"
   # pip's and setuptools' own chatter (build-backend warnings) goes to a log shown only if something fails,
   # so this script prints only its own lines.

@@ -1,6 +1,8 @@
 """A built wheel is the product: installed into a fresh virtual environment, away from this checkout, it runs.
 
-The wheel is built from this tree (``pip wheel --no-deps``) and installed
+The wheel is built from this tree (``pip wheel --no-deps``) and installed into two fresh venvs. One holds the
+core alone (``pip install`` of the wheel, its core dependencies from the package index, no extra), which
+must score, export and gate, and name each missing extra's pip line. The other has the wheel installed
 with ``--no-deps`` into a new venv whose only view of the dependencies is a
 ``.pth`` line naming this project's venv's site-packages: a path line adds
 the folder but runs none of its ``.pth`` files, so the editable install of
@@ -10,6 +12,7 @@ import comes from the wheel. Commands run from an empty folder.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -37,6 +40,12 @@ def wheel(tmp_path_factory) -> Path:
     return path
 
 
+def _pip_env() -> dict:
+    """This environment without PYTHONPATH: pip would take a checkout's ``src/*.egg-info`` there for this
+    distribution installed already, and install nothing."""
+    return {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+
+
 @pytest.fixture(scope="module")
 def venv(tmp_path_factory, wheel) -> Path:
     """A fresh venv with the wheel installed; the dependencies seen through a path line."""
@@ -45,10 +54,7 @@ def venv(tmp_path_factory, wheel) -> Path:
     py = root / "bin" / "python"
     purelib = _run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"]).stdout.strip()
     (Path(purelib) / "cbox_test_deps.pth").write_text("\n".join(site.getsitepackages()) + "\n")
-    # Without PYTHONPATH: a checkout's src/ on it holds the build's egg-info, which pip takes for an installed
-    # cornell-harness and so skips the wheel.
-    proc = _run([str(py), "-m", "pip", "install", "--no-deps", "-q", str(wheel)],
-                env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
+    proc = _run([str(py), "-m", "pip", "install", "--no-deps", "-q", str(wheel)], env=_pip_env())
     assert proc.returncode == 0, proc.stderr
     return root
 
@@ -137,3 +143,83 @@ def test_installed_wheel_builds_and_records_into_the_user_store_never_into_the_p
     assert "recorded (user store): " in listing.stdout and "mitsuba" in listing.stdout
     assert version.stdout.splitlines()[1] == f"user store: {home} (from $CBOX_HOME)", version.stdout
     assert _tree(package) == before
+
+
+# ------------------------------------------------------------------------------------------ the core alone
+
+#: A renderer outside the harness, run as a program (examples/renderers.toml's format): it writes the stored
+#: reference it is given, or (mode=grey) a flat grey.
+_PROGRAM = """
+import sys
+import numpy as np
+import OpenImageIO as oiio
+args = dict(a.split("=", 1) for a in sys.argv[1:])
+img = oiio.ImageBuf(args["ref"]).get_pixels(oiio.FLOAT)[..., :3]
+if args.get("mode") == "grey":
+    img = np.full_like(img, 0.5)
+out = oiio.ImageOutput.create(args["out"])
+out.open(args["out"], oiio.ImageSpec(img.shape[1], img.shape[0], 3, oiio.FLOAT))
+out.write_image(np.ascontiguousarray(img, np.float32))
+out.close()
+"""
+_MODELS = '["triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light", "pinhole_camera", "box_filter"]'
+
+
+@pytest.fixture(scope="module")
+def core_venv(tmp_path_factory, wheel) -> Path:
+    """A fresh venv with the wheel and its core dependencies alone, from the package index (pip's cache)."""
+    root = tmp_path_factory.mktemp("core-venv")
+    assert _run([sys.executable, "-m", "venv", str(root)]).returncode == 0
+    proc = _run([str(root / "bin" / "python"), "-m", "pip", "install", "-q", str(wheel)], timeout=1200, env=_pip_env())
+    assert proc.returncode == 0 and (root / "bin" / "cbox").exists(), proc.stdout + proc.stderr
+    return root
+
+
+def _stored(venv: Path, *parts: str) -> Path:
+    (site_packages,) = (venv / "lib").glob("python3*/site-packages")
+    return site_packages.joinpath("cornell_harness", "references", *parts)
+
+
+@pytest.mark.slow  # pip installs some 50 packages into a new venv (~40 s from an empty cache), then 8 commands
+def test_the_core_install_alone_scores_exports_and_gates(core_venv, tmp_path):
+    py, cbox, env = core_venv / "bin" / "python", str(core_venv / "bin" / "cbox"), _clean_env(tmp_path)
+    run = functools.partial(_run, cwd=tmp_path, env=env)
+    assert run([str(py), "-c", "import harness"]).returncode != 0  # one import package, cornell_harness
+    found = run([str(py), "-c", "import importlib.util as u; print([m for m in ('numba', 'embreex', 'mitsuba', "
+                 "'pyluxcore', 'pyrender', 'pyoidn', 'dask', 'flip_evaluator') if u.find_spec(m)])"])
+    assert found.stdout.strip() == "[]", found.stdout + found.stderr  # no extra came with the core
+
+    listing = run([cbox, "renderers"])
+    assert listing.returncode == 0, listing.stderr
+    lines = {line.split()[0]: line for line in listing.stdout.splitlines() if line and not line[0].isspace()}
+    assert "unavailable" in lines["pathtracer"] and lines["pathtracer"].endswith("pip install 'cornell-harness[ours]'")
+    assert lines["luxcore"].endswith("pip install 'cornell-harness[luxcore]'")
+    assert lines["mitsuba+oidn"].endswith("pip install 'cornell-harness[mitsuba,oidn]'")
+
+    ref = _stored(core_venv, "cornell-box", "reference.exr")
+    scored = run([cbox, "compare-image", str(_stored(core_venv, "cornell-box", "noise.exr")), "--reference", str(ref),
+                  "--fail", "flip_mean=0.5", "--fail", "delta_e2000_mean=5", "--json"])
+    assert scored.returncode == 0, scored.stderr
+    metrics = json.loads(scored.stdout.splitlines()[0])["metrics"]
+    assert 0.01 < metrics["flip_mean"] < 0.5 and 0.1 < metrics["delta_e2000_mean"] < 5  # HDR-FLIP without numba
+
+    exported = run([cbox, "export", "--scene", "cornell-box", "--format", "mitsuba", "--out", "xml"])
+    assert exported.returncode == 0 and (tmp_path / "xml" / "scene.xml").is_file(), exported.stderr
+
+    (tmp_path / "program.py").write_text(_PROGRAM)
+    renderers = tmp_path / "renderers.toml"
+    renderers.write_text("".join(
+        f'[renderer.{name}]\ncommand = ["python", "{tmp_path / "program.py"}", "ref={ref}", "out={{out}}", '
+        f'"mode={name}"]\nscene_format = "mitsuba"\nmodels = {_MODELS}\n' for name in ("copy", "grey")))
+    for name, code in (("copy", 0), ("grey", 1)):  # the stored reference itself passes; a flat grey fails
+        (tmp_path / f"{name}.toml").write_text(f'[[expect]]\nscene = "cornell-box"\nrenderer = "{name}"\nspp = 16\n'
+                                               'unbiased = true\ntile = 16\n')
+        gated = run([cbox, "gate", "--renderers", str(renderers), "--config", f"{name}.toml", "--out", f"gate-{name}"])
+        assert gated.returncode == code, gated.stdout + gated.stderr
+        assert ("gate passed" if code == 0 else "FAIL  cornell-box/grey@16spp  agreement") in gated.stdout
+
+    workers = run([cbox, "gate", "--renderers", str(renderers), "--config", "copy.toml", "--workers", "2",
+                   "--out", "gate-workers"])
+    assert workers.returncode == 2
+    assert workers.stderr.strip().splitlines() == ["cbox: error: --workers needs the [dask] extra (dask, distributed "
+                                                   "not installed): pip install 'cornell-harness[dask]'"]

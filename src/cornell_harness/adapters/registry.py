@@ -26,6 +26,7 @@ from typing import Sequence
 # AOVS, Checkpoint and RenderResult are re-exported for code written before the API had its own module.
 from cornell_harness.adapters.api import AOVS, ESTIMATORS, Checkpoint, Renderer, RenderResult, attribute  # noqa: F401
 from cornell_harness.adapters.settings import declared, label, resolve_settings, split_spec
+from cornell_harness.extras import renderer_problem
 from cornell_harness.scenes.model import Scene
 from cornell_harness.suggest import did_you_mean
 
@@ -164,7 +165,10 @@ def _load_entry_point(ep) -> RendererEntry:
             raise RendererError(f"renderer {ep.name!r}: cannot import {ep.value}: {type(e).__name__}: {e}") from None
         return _instantiate(cls, ep.value)
 
-    return _entry(ep.name, ep.value, load)
+    entry = _entry(ep.name, ep.value, load)
+    if (missing := renderer_problem(ep.name)) is not None:  # its extra's pip line, whatever the import said
+        entry.reason = missing
+    return entry
 
 
 def use_renderer_files(paths: Sequence[Path | str]) -> None:

@@ -37,6 +37,7 @@ from cornell_harness.adapters.commands import RenderersFileError
 from cornell_harness.adapters.registry import RendererError
 from cornell_harness.adapters.settings import SettingsError
 from cornell_harness.cli.output import QuietOpt, VerboseOpt, close_progress_bars, info
+from cornell_harness.extras import MissingExtraError
 from cornell_harness.gate.config import GateConfigError
 from cornell_harness.scenes.model import SceneError, one_line
 from cornell_harness.store.experiments import ExperimentError
@@ -61,7 +62,7 @@ reference_app = typer.Typer(help="Build, inspect and verify stored reference ima
 app.add_typer(reference_app, name="reference")
 
 USER_ERRORS = (SceneError, ReferenceError, RendererError, RenderersFileError, ImageFileError, ExperimentError,
-               GateConfigError, SettingsError, ExecutorError)
+               GateConfigError, SettingsError, ExecutorError, MissingExtraError)
 #: OS errors about a path the user named (an output folder that is a file, no permission), reported as one
 #: line; outputs are checked before a command runs, so these are for what changes during the run.
 PATH_ERRORS = (PermissionError, NotADirectoryError, IsADirectoryError, FileExistsError)

@@ -1,4 +1,4 @@
-"""HDR-FLIP's per-pixel map in numba, with each reference's side of the work done once per exposure and cached.
+"""HDR-FLIP's per-pixel map in numba (numpy without it), with each reference's side done once per exposure, cached.
 
 HDR-FLIP (Andersson, Nilsson, Shirley & Akenine-Möller 2021, "Visualizing Errors in Rendered High Dynamic
 Range Images", Eurographics short papers) exposes both images by ``2^c`` at each exposure ``c``, tone-maps and
@@ -25,6 +25,10 @@ agrees to a few 1e-6 per pixel, often bit for bit (tests/evaluate/test_hdr_flip.
 checks). float32 on purpose, against the harness's float64 rule: it is the metric's definition as published
 and computed, and half the memory traffic of the convolutions.
 
+Without numba (a core install, no ``[ours]`` extra) the per-pixel kernels are
+:mod:`cornell_harness.evaluate.hdr_flip_numpy`'s, the same arithmetic on whole planes, and the scalar helpers
+below run as Python: the same map, slower.
+
 Inputs: (H, W, 3) float32 linear-sRGB images, non-negative and finite (:func:`cornell_harness.evaluate.flip.flip_input`
 makes them so); the exposure range and the pixels per degree come from :mod:`cornell_harness.evaluate.flip`.
 """
@@ -38,51 +42,51 @@ import threading
 from collections import OrderedDict
 
 import numpy as np
-from numba import njit
 
-F = np.float32
-#: The library's π (``FLIP::PI``) and its square, as it computes them in float32.
-PI = F(3.14159265358979)
-PI_SQ = F(PI * PI)
-#: LDR-FLIP's constants (§3-4): q_c, p_c, p_t, w (degrees), q_f.
-GQC, GPC, GPT, GW, GQF = F(0.7), F(0.4), F(0.95), F(0.082), F(0.5)
-#: Contrast-sensitivity filters of Y, Cx, Cz (§3.1): a₁, b₁, a₂, b₂ of each channel's sum of Gaussians.
-CSF_A1, CSF_B1 = (F(1.0), F(1.0), F(34.1)), (F(0.0047), F(0.0053), F(0.04))
-CSF_A2, CSF_B2 = (F(0.0), F(0.0), F(13.5)), (F(1.0e-5), F(1.0e-5), F(0.025))
-#: D65 in XYZ and its reciprocal, as the library states them.
-_ILL = (F(0.950428545), F(1.0), F(1.088900371))
-_INV_ILL = (F(1.052156925), F(1.0), F(0.918357670))
-#: Linear sRGB → XYZ (the library's rational entries) and back.
-_RGB_XYZ = tuple(F(n) / F(d) for n, d in (
-    (10135552.0, 24577794.0), (8788810.0, 24577794.0), (4435075.0, 24577794.0),
-    (2613072.0, 12288897.0), (8788810.0, 12288897.0), (887015.0, 12288897.0),
-    (1425312.0, 73733382.0), (8788810.0, 73733382.0), (70074185.0, 73733382.0)))
-_XYZ_RGB = tuple(F(v) for v in (3.241003275, -1.537398934, -0.498615861, -0.969224334, 1.875930071,
-                                0.041554224, 0.055639423, -0.204011202, 1.057148933))
-_DELTA = F(6.0) / F(29.0)
-_DELTA_CUBE = _DELTA * (_DELTA * _DELTA)
-_LAB_FACTOR = F(1.0) / (F(3.0) * (_DELTA * _DELTA))
-_LAB_TERM = F(4.0) / F(29.0)
-_ZERO, _ONE, _16, _116, _200, _500 = F(0.0), F(1.0), F(16.0), F(116.0), F(200.0), F(500.0)
-_THIRD, _HUNT = F(1.0) / F(3.0), F(0.01)
-_ONE_OVER_116, _SIXTEEN_OVER_116 = F(1.0) / F(116.0), F(16.0) / F(116.0)
-_SQRT_HALF = F(1.0) / F(math.sqrt(2.0))  # the library's 1.0f / std::sqrt(2.0f): sqrt(2) is exact in float32
+# By name: numba reads module globals as compile-time constants (float32 here).
+from cornell_harness.evaluate.flip_constants import (_116, _200, _500, _DELTA_CUBE, _HUNT, _ILL, _INV_ILL,
+                                                     _LAB_FACTOR, _LAB_TERM, _ONE, _ONE_OVER_116, _RGB_XYZ,
+                                                     _SIXTEEN_OVER_116, _SQRT_HALF, _THIRD, _XYZ_RGB, _ZERO, CSF_A1,
+                                                     CSF_A2, CSF_B1, CSF_B2, GPC, GPT, GQC, GQF, GW, PI, PI_SQ, _16, F)
+
+try:
+    from numba import njit
+except ImportError:  # the core install, without [ours]: the kernels of hdr_flip_numpy
+    njit = None
+
+
+def _jit(fn):
+    """``fn`` compiled by numba (cached on disk) where numba is installed; else ``fn`` itself, for the scalar
+    helpers, while :mod:`cornell_harness.evaluate.hdr_flip_numpy` replaces the per-pixel kernels."""
+    return njit(cache=True)(fn) if njit is not None else fn
+
+
+if njit is not None:
+    @_jit
+    def _expf(x):
+        return np.exp(x)
+
+    @_jit
+    def _powf(x, y):
+        return x ** y
+else:
+    from cornell_harness.evaluate.hdr_flip_numpy import expf as _expf, powf as _powf
 
 
 # ---------------------------------------------------------------------------------------------- filters
 
 
-@njit(cache=True)
+@_jit
 def _gaussian(x2, a, b):
-    return a * np.sqrt(PI / b) * np.exp(-PI_SQ * x2 / b)
+    return a * np.sqrt(PI / b) * _expf(-PI_SQ * x2 / b)
 
 
-@njit(cache=True)
+@_jit
 def _gaussian_sqrt(x2, a, b):
-    return np.sqrt(a * np.sqrt(PI / b)) * np.exp(-PI_SQ * x2 / b)
+    return np.sqrt(a * np.sqrt(PI / b)) * _expf(-PI_SQ * x2 / b)
 
 
-@njit(cache=True)
+@_jit
 def _spatial_filters(ppd, radius):
     """Rows Y, Cx, Cz₁, Cz₂ of the separated contrast-sensitivity filters (the library's setSpatialFilters)."""
     width = 2 * radius + 1
@@ -108,7 +112,7 @@ def _spatial_filters(ppd, radius):
     return out
 
 
-@njit(cache=True)
+@_jit
 def _feature_filters(std_dev, radius):
     """Rows Gaussian, its first and its second derivative (the library's setFeatureFilter): the Gaussian sums
     to 1, each derivative's positive and negative weights to ±1."""
@@ -117,7 +121,7 @@ def _feature_filters(std_dev, radius):
     g_sum, d_neg, d_pos, dd_neg, dd_pos = _ZERO, _ZERO, _ZERO, _ZERO, _ZERO
     for i in range(width):
         x = F(i - radius)
-        g = np.exp(-(x * x) / (F(2.0) * std_dev * std_dev))
+        g = _expf(-(x * x) / (F(2.0) * std_dev * std_dev))
         g_sum += g
         dg = -x * g
         if dg > _ZERO:
@@ -150,14 +154,14 @@ def filters(ppd: float) -> tuple[np.ndarray, np.ndarray]:
 # ------------------------------------------------------------------------------------------ one image's side
 
 
-@njit(cache=True)
+@_jit
 def _tone(v, scale, tc):
     v = v * scale
     v = (v * v * tc[0] + v * tc[1] + tc[2]) / (v * v * tc[3] + v * tc[4] + tc[5])
     return min(max(v, _ZERO), _ONE)
 
 
-@njit(cache=True)
+@_jit
 def _exposed_ycxcz(rgb, scale, tc, out):
     """``rgb`` × ``scale``, tone-mapped by t(x) = (t₀x² + t₁x + t₂)/(t₃x² + t₄x + t₅), clamped to [0, 1],
     in YCxCz: ``out`` (4, H, W) as Y, Cx, Cz and the feature pipeline's normalised Y, (Y + 16)/116."""
@@ -177,7 +181,7 @@ def _exposed_ycxcz(rgb, scale, tc, out):
             out[3, y, x] = lum * _ONE_OVER_116 + _SIXTEEN_OVER_116
 
 
-@njit(cache=True)
+@_jit
 def _filter_rows(src, sources, weights, out):
     """out[j, y, x] = Σₖ weights[j, k] · src[sources[j], y, x + k − r], x + k − r clamped to the row."""
     n, h, w = out.shape
@@ -201,7 +205,7 @@ def _filter_rows(src, sources, weights, out):
                     o[x] += wk * pad[x + k]
 
 
-@njit(cache=True)
+@_jit
 def _filter_columns(src, sources, weights, out):
     """out[j, y, x] = Σₖ weights[j, k] · src[sources[j], y + k − r, x], y + k − r clamped to the column."""
     n, h, w = out.shape
@@ -219,12 +223,12 @@ def _filter_columns(src, sources, weights, out):
                     o[x] += wk * row[x]
 
 
-@njit(cache=True)
+@_jit
 def _lab_f(t):
-    return t ** _THIRD if t > _DELTA_CUBE else _LAB_FACTOR * t + _LAB_TERM
+    return _powf(t, _THIRD) if t > _DELTA_CUBE else _LAB_FACTOR * t + _LAB_TERM
 
 
-@njit(cache=True)
+@_jit
 def _perceived(colour, features, out):
     """``out`` (5, H, W): per pixel, Hunt-adjusted CIELAB (L, 0.01·L·a, 0.01·L·b) of the filtered colour,
     clamped in linear RGB, and the edge and point magnitudes of the filtered luminance. One loop body, no
@@ -299,7 +303,7 @@ def image_side(rgb: np.ndarray, scale: float, tone_mapper, ppd: float, ws: Works
 # -------------------------------------------------------------------------------------- the comparison
 
 
-@njit(cache=True)
+@_jit
 def _max_distance():
     """c_max: the HyAB distance of Hunt-adjusted green and blue, raised to q_c (the library's computeMaxDistance)."""
     labs = np.empty((2, 3), np.float32)
@@ -312,10 +316,10 @@ def _max_distance():
         lum = _116 * fy - _16
         labs[i, 0], labs[i, 1], labs[i, 2] = lum, _HUNT * lum * (_500 * (fx - fy)), _HUNT * lum * (_200 * (fy - fz))
     da, db = labs[0, 1] - labs[1, 1], labs[0, 2] - labs[1, 2]
-    return (abs(labs[0, 0] - labs[1, 0]) + np.sqrt(da * da + db * db)) ** GQC
+    return _powf(abs(labs[0, 0] - labs[1, 0]) + np.sqrt(da * da + db * db), GQC)
 
 
-@njit(cache=True)
+@_jit
 def _keep_largest_error(ref, test, error):
     """``error`` = max(``error``, LDR-FLIP of ``test`` against ``ref``), both sides (5, H, W) of one exposure.
 
@@ -336,6 +340,16 @@ def _keep_largest_error(ref, test, error):
             e = c ** (_ONE - f)
             if e > error[y, x]:
                 error[y, x] = e
+
+
+if njit is None:  # numpy's whole-plane kernels, the same arithmetic (hdr_flip_numpy)
+    from cornell_harness.evaluate import hdr_flip_numpy as _planes
+
+    _exposed_ycxcz, _perceived = _planes.exposed_ycxcz, _planes.perceived
+    _filter_rows, _filter_columns = _planes.filter_rows, _planes.filter_columns
+
+    def _keep_largest_error(ref, test, error):
+        _planes.keep_largest_error(ref, test, error, _max_distance())
 
 
 def exposure_scales(start: float, stop: float, count: int) -> list[np.float32]:

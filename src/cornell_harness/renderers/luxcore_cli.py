@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from cornell_harness.adapters.api import default_threads, pass_seed
+from cornell_harness.extras import install_line
 
 #: Exit status of a usage or input error (one line on stderr).
 USAGE_ERROR = 2
@@ -199,6 +200,9 @@ def main(argv: list[str] | None = None) -> None:
     status = 0
     try:
         run(args)
+    except ImportError as e:  # a core install, without the [luxcore] extra
+        print(f"cbox-luxcore: {e}: {install_line(['luxcore'])}", file=sys.stderr)
+        status = USAGE_ERROR
     except (ValueError, OSError, RuntimeError) as e:
         print(f"cbox-luxcore: {' '.join(str(e).split())}", file=sys.stderr)
         status = USAGE_ERROR

@@ -39,6 +39,8 @@ import zlib
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Iterator
 
+from cornell_harness.extras import require
+
 #: Retries of a task that raised on a worker (a worker's death counts against ``allowed-failures`` instead).
 DEFAULT_RETRIES = 2
 #: Times a task may be on a worker that dies before it is recorded as failed (Dask's ``allowed-failures``,
@@ -168,6 +170,7 @@ def open_executor(workers: int | None = None, scheduler: str | None = None, dash
     if workers is None and scheduler is None:
         yield InProcess()
         return
+    require("--workers" if workers is not None else "--scheduler")
     import dask
     from dask.utils import parse_timedelta
     from distributed import Client, LocalCluster

@@ -1,0 +1,71 @@
+"""The optional extras of ``cornell-harness``: which one each registered renderer and each option needs, and the
+``pip install`` line that adds it.
+
+The core install scores images (scenes, export, command-line renderers, the metrics, the gate, reports, the
+stored references, the CLI); an extra adds renderers or a backend (pyproject.toml's
+``[project.optional-dependencies]``, whose lists this module's :data:`MODULES` must name). Whether an extra is
+installed is asked of the import system (``importlib.util.find_spec``), without importing anything.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from typing import Iterable
+
+DISTRIBUTION = "cornell-harness"
+
+#: Each extra's top-level import names, one per distribution it installs.
+MODULES: dict[str, tuple[str, ...]] = {
+    "ours": ("numba", "embreex"),
+    "mitsuba": ("mitsuba",),
+    "luxcore": ("pyluxcore",),
+    "raster": ("pyrender", "OpenGL"),
+    "oidn": ("pyoidn",),
+    "dask": ("dask", "distributed"),
+}
+
+#: The extras each of our registered renderers (pyproject.toml's ``cbox.renderers`` entry points) runs on.
+RENDERERS: dict[str, tuple[str, ...]] = {
+    **{name: ("ours",) for name in ("pathtracer", "photonmap", "sppm", "ao", "ambient", "ssao", "probes", "whitted")},
+    "mitsuba": ("mitsuba",),
+    "luxcore": ("luxcore",),
+    "pyrender": ("raster",),
+    "pathtracer+oidn": ("ours", "oidn"),
+    "mitsuba+oidn": ("mitsuba", "oidn"),
+}
+
+#: Command-line options that need an extra: a cluster's executor (cornell_harness.workflows.executor).
+OPTIONS: dict[str, str] = {"--workers": "dask", "--scheduler": "dask"}
+
+
+class MissingExtraError(RuntimeError):
+    """Something asked for needs an extra that is not installed; ``str()`` ends with the pip line."""
+
+
+def install_line(extras: Iterable[str]) -> str:
+    """The command that installs ``extras``: ``pip install 'cornell-harness[luxcore]'``."""
+    return f"pip install '{DISTRIBUTION}[{','.join(extras)}]'"
+
+
+def missing_modules(extras: Iterable[str]) -> list[str]:
+    """The import names of ``extras`` that cannot be imported here (none: they are all installed)."""
+    return [m for extra in extras for m in MODULES[extra] if importlib.util.find_spec(m) is None]
+
+
+def renderer_problem(name: str) -> str | None:
+    """Why the registered renderer ``name`` cannot run here for want of an extra, with the pip line; None when
+    its extras are installed (or it is not one of ours)."""
+    extras = RENDERERS.get(name, ())
+    missing = missing_modules(extras)
+    if not missing:
+        return None
+    wanting = [extra for extra in extras if missing_modules([extra])]
+    return f"{', '.join(missing)} not installed: {install_line(wanting)}"
+
+
+def require(option: str) -> None:
+    """Raise MissingExtraError, naming the pip line, when the extra ``option`` needs (:data:`OPTIONS`) is missing."""
+    extra = OPTIONS[option]
+    if missing := missing_modules([extra]):
+        raise MissingExtraError(f"{option} needs the [{extra}] extra ({', '.join(missing)} not installed): "
+                                f"{install_line([extra])}")
