@@ -79,3 +79,16 @@ def test_cbox_luxcore_without_pyluxcore_names_its_extra(tmp_path):
     (line,) = proc.stderr.splitlines()  # one line, the import's error and the pip line, no traceback
     assert line.startswith("cbox-luxcore: ") and "pyluxcore" in line
     assert line.endswith(": pip install 'cornell-harness[luxcore]'")
+
+
+def test_the_demo_without_any_renderer_stops_with_the_all_line(monkeypatch, capsys, tmp_path):
+    """In a core install every renderer of ours is unavailable: the demo says how to get them instead of writing
+    an empty report; with one extra there it runs (not tried here: the demo's own tests run it)."""
+    _hide(monkeypatch, *[m for modules in extras.MODULES.values() for m in modules])
+    code, out, err = cbox_in_process(capsys, "demo", "--out", str(tmp_path / "out"))
+    assert code == 2 and not (tmp_path / "out" / "report.html").exists()
+    assert err.splitlines() == ["cbox: error: cbox demo runs the harness's own renderers and Mitsuba, and none is "
+                                "installed here: pip install 'cornell-harness[all]'"]
+    monkeypatch.undo()
+    _hide(monkeypatch, "pyluxcore")
+    extras.require_a_renderer("cbox demo")  # one extra missing is no reason to stop

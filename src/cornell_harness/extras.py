@@ -69,3 +69,11 @@ def require(option: str) -> None:
     if missing := missing_modules([extra]):
         raise MissingExtraError(f"{option} needs the [{extra}] extra ({', '.join(missing)} not installed): "
                                 f"{install_line([extra])}")
+
+
+def require_a_renderer(command: str) -> None:
+    """Raise MissingExtraError, with the ``[all]`` pip line, when none of our registered renderers can run here
+    (the core install): ``command`` runs them, and would only list each as unavailable."""
+    if all(renderer_problem(name) for name in RENDERERS):
+        raise MissingExtraError(f"{command} runs the harness's own renderers and Mitsuba, and none is installed "
+                                f"here: {install_line(['all'])}")

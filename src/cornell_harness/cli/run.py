@@ -15,6 +15,7 @@ from cornell_harness.cli.common import (RendererFilesOpt, RenderersOpt, SceneOpt
 from cornell_harness.cli.figures import CropOpt, SeriesLabelOpt, keep_report_options, parse_crops, series_labels_for
 from cornell_harness.cli.output import Progress, info
 from cornell_harness.cli.timing import TimeBasisOpt, time_repeats_option, warn_contention
+from cornell_harness.extras import require_a_renderer
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.store.exr import write_exr
 from cornell_harness.store.image_files import SPP_ATTRIBUTE
@@ -276,6 +277,8 @@ def demo(
     from cornell_harness.reports.scenes import scene_section
     from cornell_harness.reports.whitted import TITLE, whitted_section
 
+    if not renderer and not renderer_files:
+        require_a_renderer("cbox demo")
     started = time.perf_counter()
     sections, code = [], 0
     for name in DEMO_SCENES[1:]:
