@@ -18,7 +18,6 @@ from PIL import Image
 from cornell_harness.evaluate import metrics
 from cornell_harness.evaluate.regions import region_masks
 from cornell_harness.reports import image_figure as fig
-from cornell_harness.reports import images as report_images
 from cornell_harness.reports.images import DELTA_E_RANGE, apply_colormap, error_maps, to_uint8
 from cornell_harness.reports.regions import region_color
 from tests import report_fixtures as rf
@@ -175,22 +174,6 @@ def test_given_crops_replace_the_regions(tmp_path, case):
     for bad in ([(70, 0, 5, 5)], [(0, 0, 0, 5)], [(1, 2, 3)]):
         with pytest.raises(ValueError, match="crop"):
             fig.checked_crops(bad, N, N)
-
-
-def test_without_flip_the_column_is_left_out_with_a_note(tmp_path, case, monkeypatch):
-    _write(tmp_path, case)
-    assert (tmp_path / "images" / "pt.flip.png").exists()
-    (tmp_path / "images" / "notes.png").write_bytes(b"not ours")
-    monkeypatch.setattr(report_images, "flip_map", lambda img, ref: None)
-    out, svg = _write(tmp_path, case)
-    assert [t.text for t in _by_class(svg, "text", "column-header")] == ["image", "ΔE₀₀ (CIEDE2000)"]
-    assert [b.get("data-map") for b in _by_class(svg, "g", "colorbar")] == ["de"]
-    assert len(_by_class(svg, "image", "cell")) == 1 + 2 * len(case["images"])
-    assert "flip_evaluator is not installed" in out["note"]
-    assert any("flip_evaluator" in (t.text or "") for t in _by_class(svg, "text", "note"))
-    names = {p.name for p in (tmp_path / "images").iterdir()}
-    assert not any(".flip" in n for n in names)  # the earlier report's FLIP PNGs are gone
-    assert "notes.png" in names  # a PNG that is not this module's stays
 
 
 def test_precomputed_maps_are_reused(tmp_path, case):

@@ -388,14 +388,6 @@ def test_viewer_controls_present(report):
     assert "imageSmoothingEnabled = false" in js and "S.fit * 64" in js  # nearest neighbour, ≥ 16× zoom
 
 
-def test_flip_unavailable_disables_its_mode(tmp_path, case, monkeypatch):
-    monkeypatch.setattr(report_images, "flip_map", lambda img, ref: None)
-    text = rf.write_case(tmp_path / "r.html", case).read_text(encoding="utf-8")
-    data = _data(_parse(text))
-    assert not data["maps"]["flip"]["available"] and all(r["flip"] is None for r in data["renderers"])
-    assert re.search(r'data-mode="flip" disabled title="flip-evaluator is not installed"', text)
-
-
 def test_mismatched_image_is_noted_not_shown(tmp_path, case):
     images = dict(case["images"], **{"gamma-raster": np.zeros((8, 8, 3), np.float32)})
     text = rf.write_case(tmp_path / "r.html", case, images=images).read_text(encoding="utf-8")

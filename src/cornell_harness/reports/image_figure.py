@@ -6,8 +6,7 @@ the pbrt-v4 and SeeSharp papers' comparison figures. The pixels are the
 report's own: the image as :func:`cornell_harness.evaluate.metrics.display_encode`
 shows it at the report's exposure, and the false-colour maps of
 :func:`cornell_harness.reports.images.error_maps` on their fixed scales (ΔE₀₀ 0..10 viridis,
-FLIP 0..1 magma), with one shared colour bar per map type. Without
-``flip_evaluator`` the FLIP column is left out and the figure says so.
+FLIP 0..1 magma), with one shared colour bar per map type.
 
 Crops: the bounding box of each named region of the scene
 (:func:`cornell_harness.evaluate.regions.region_masks`; at most :data:`MAX_CROPS`,
@@ -155,25 +154,23 @@ def choose_crops(scene, shape: tuple[int, int], crops: Sequence[Sequence[int]] |
 
 
 def image_rows(reference: np.ndarray, images: Mapping[str, np.ndarray], exposure: float,
-               maps: Mapping[str, Mapping] | None = None) -> tuple[list[tuple[str, list]], bool]:
-    """([(name, [pixels per column: tonemapped, ΔE₀₀, FLIP; None where there is none])], whether FLIP is
-    available for every renderer); the reference first, named "reference". Images whose shape is not the
+               maps: Mapping[str, Mapping] | None = None) -> list[tuple[str, list]]:
+    """[(name, [pixels per column: tonemapped, ΔE₀₀, FLIP; None where there is none])], the reference first,
+    named "reference" (it has no error maps). Images whose shape is not the
     reference's are left out (the viewer notes them). ``maps``: error maps already computed
     (:func:`cornell_harness.reports.images.error_maps`, by renderer), reused."""
     def tonemapped(img):
         return to_uint8(metrics.display_encode(img, exposure))
 
     rows: list[tuple[str, list]] = [("reference", [tonemapped(reference), None, None])]
-    flip_ok = True
     for name, img in images.items():
         if img is None or np.shape(img) != reference.shape:
             continue
         m = (maps or {}).get(name) or error_maps(np.asarray(img, dtype=np.float32), reference, exposure)
-        flip_ok &= m["flip"] is not None
         rows.append((name, [tonemapped(img)] + [
             None if m[key] is None else apply_colormap(m[key], *_RANGES[key], MAP_COLORMAPS[key])
             for key in ("de", "flip")]))
-    return rows, flip_ok
+    return rows
 
 
 def _wrap(text: str, room: float, font: float = _FONT) -> list[str]:
@@ -338,22 +335,21 @@ def write_image_figure(report_dir, *, scene, reference_image, images: Mapping[st
                        series_labels: Mapping[str, str] | None = None, crops: Sequence[Sequence[int]] | None = None,
                        maps: Mapping[str, Mapping] | None = None) -> dict:
     """Write ``figures/images.{svg,pdf,png}`` and ``images/*.png`` under ``report_dir``, atomically; return what
-    was written, paths relative to ``report_dir``: ``{"figure": [(format, path)], "pngs": [path], "note": str}``
+    was written, paths relative to ``report_dir``: ``{"figure": [(format, path)], "pngs": [path]}``
     (empty lists without images to show).
 
     ``images``: renderer -> linear image of the reference's shape; ``exposure``: the report's display exposure;
     ``series_labels``: recorded name -> display text of the rows; ``crops``: (x, y, w, h) rectangles that
     replace the scene's regions; ``maps``: error maps already computed by renderer (the viewer's), reused.
-    Raises ValueError for a crop outside the image; never for a missing converter or ``flip_evaluator``.
+    Raises ValueError for a crop outside the image; never for a missing converter.
     """
     report_dir = Path(report_dir)
     reference = np.asarray(reference_image, dtype=np.float32)
-    rows, flip_ok = image_rows(reference, images, exposure, maps)
+    rows = image_rows(reference, images, exposure, maps)
     if len(rows) < 2:
         _remove_figure(report_dir / FIGURES_DIR, set())
-        return {"figure": [], "pngs": [], "note": ""}
-    shown = (0, 1, 2) if flip_ok else (0, 1)
-    note = "" if flip_ok else "FLIP maps are left out: flip_evaluator is not installed (pip install flip-evaluator)."
+        return {"figure": [], "pngs": []}
+    shown = (0, 1, 2)
     chosen = choose_crops(scene, reference.shape[:2], crops)
 
     uris = encoded(rows, chosen, shown)
@@ -365,7 +361,7 @@ def write_image_figure(report_dir, *, scene, reference_image, images: Mapping[st
         pngs.append(path)
     _stale(folder, {Path(p).name for p in pngs}, {file_stem(name) for name, _ in rows})
 
-    svg = figure_svg(rows, chosen, shown, dict(series_labels or {}), note, uris)
+    svg = figure_svg(rows, chosen, shown, dict(series_labels or {}), uris=uris)
     cairosvg, why_not = figures._converter()  # looked up through the module: tests replace it there
     done, failed = write_svg_pdf_png(report_dir / FIGURES_DIR, STEM, svg, cairosvg)
     _remove_figure(report_dir / FIGURES_DIR, set(done))
@@ -373,6 +369,4 @@ def write_image_figure(report_dir, *, scene, reference_image, images: Mapping[st
         say_once(no_converter_note(why_not))
     elif failed:
         say_once(f"the image figure could not be converted: {failed[0]}")
-    if note:
-        say_once(note)
-    return {"figure": [(fmt.upper(), f"{FIGURES_DIR}/{STEM}.{fmt}") for fmt in done], "pngs": pngs, "note": note}
+    return {"figure": [(fmt.upper(), f"{FIGURES_DIR}/{STEM}.{fmt}") for fmt in done], "pngs": pngs}

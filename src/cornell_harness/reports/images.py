@@ -10,7 +10,7 @@ The report's images are embedded as HDR data (little-endian float16, base64,
 - per-pixel relMSE ``mean_c (x − r)² / (r² + ε)``, ε =
   :data:`cornell_harness.evaluate.metrics.REL_MSE_EPS`, inferno on a fixed log scale
   10⁻⁶..1 (embedded as log10 so float16 keeps its precision);
-- FLIP (Andersson et al. 2020, package ``flip-evaluator``) in its **HDR
+- FLIP (Andersson et al. 2020; computed by :mod:`cornell_harness.evaluate.hdr_flip`) in its **HDR
   mode on the linear images** (non-finite pixels set to 0, negatives
   clipped to 0), magma, 0..1: :func:`cornell_harness.evaluate.flip.flip_map`, whose
   mean is the ``flip_mean`` metric. Its exposure range comes from the
@@ -107,16 +107,7 @@ def rel_mse_map(img, ref, eps: float = metrics.REL_MSE_EPS) -> np.ndarray:
     return np.mean((clean - ref) ** 2 / (ref**2 + eps), axis=-1)
 
 
-def flip_map(img, ref) -> np.ndarray | None:
-    """HDR-FLIP map (H, W) of ``img`` against ``ref`` (:func:`cornell_harness.evaluate.flip.flip_map`, the metric's);
-    None without ``flip_evaluator``."""
-    try:
-        return flip.flip_map(img, ref)
-    except ImportError:
-        return None
-
-
 def error_maps(img, ref, exposure: float) -> dict[str, np.ndarray | None]:
-    """The viewer's three false-colour maps: ``de`` (ΔE00), ``relmse`` and ``flip`` (None if unavailable)."""
+    """The viewer's three false-colour maps: ``de`` (ΔE00), ``relmse`` and ``flip`` (HDR-FLIP, the metric's map)."""
     _, de = metrics.delta_e2000(img, ref, exposure=exposure, full=True)
-    return {"de": np.asarray(de, dtype=np.float64), "relmse": rel_mse_map(img, ref), "flip": flip_map(img, ref)}
+    return {"de": np.asarray(de, dtype=np.float64), "relmse": rel_mse_map(img, ref), "flip": flip.flip_map(img, ref)}

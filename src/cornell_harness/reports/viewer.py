@@ -56,7 +56,6 @@ def image_viewer(reference: np.ndarray, exposure: float, images: Mapping, names,
     renderer's error maps also go into ``maps_out`` (by name) when given, for the image figure to reuse."""
     h, w = reference.shape[:2]
     entries, notes = [], []
-    flip_available = True
     for name in names:
         if name not in images or images[name] is None:
             continue
@@ -68,8 +67,6 @@ def image_viewer(reference: np.ndarray, exposure: float, images: Mapping, names,
         maps = error_maps(img, reference, exposure)
         if maps_out is not None:
             maps_out[name] = maps
-        if maps["flip"] is None:
-            flip_available = False
         spp, seed = _first_seed_image_run(runs, name, seeds)
         entries.append({
             "name": name,
@@ -79,11 +76,11 @@ def image_viewer(reference: np.ndarray, exposure: float, images: Mapping, names,
             "img": f16_base64(img),
             "de": f16_base64(maps["de"]),
             "relmse": f16_base64(np.log10(np.maximum(maps["relmse"], 1e-12))),
-            "flip": None if maps["flip"] is None else f16_base64(maps["flip"]),
+            "flip": f16_base64(maps["flip"]),
             "stats": {
                 "de": _clean(float(np.mean(maps["de"]))),
                 "relmse": _clean(float(np.mean(maps["relmse"]))),
-                "flip": None if maps["flip"] is None else _clean(float(np.mean(maps["flip"]))),
+                "flip": _clean(float(np.mean(maps["flip"]))),
             },
         })
     data = {
@@ -98,7 +95,7 @@ def image_viewer(reference: np.ndarray, exposure: float, images: Mapping, names,
             "relmse": {"lo": REL_MSE_LOG_RANGE[0], "hi": REL_MSE_LOG_RANGE[1], "log": True,
                        "cmap": MAP_COLORMAPS["relmse"], "label": "relMSE"},
             "flip": {"lo": FLIP_RANGE[0], "hi": FLIP_RANGE[1], "log": False, "cmap": MAP_COLORMAPS["flip"],
-                     "label": "FLIP", "available": flip_available and bool(entries)},
+                     "label": "FLIP", "available": bool(entries)},
         },
         "colormaps": {name: table_hex(name) for name in sorted(set(MAP_COLORMAPS.values()))},
     }
