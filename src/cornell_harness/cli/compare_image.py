@@ -183,7 +183,7 @@ def _print_table(scores, named: list[str]) -> None:
     each image's regions, if any.
 
     Laid out as pandas' ``to_string`` lays a frame out, without pandas (its import is ~0.5 s of this
-    command's time, issue 31)."""
+    command's time)."""
     shown = dict.fromkeys([*TABLE_METRICS, *(m for m in named if "." not in m)])
     columns = ["image", "spp", *(c for c in shown if any(c in s.row() for s in scores))]
     rows = [[s.source.label, s.source.spp, *(s.row().get(c) for c in columns[2:])] for s in scores]

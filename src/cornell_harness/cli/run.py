@@ -236,7 +236,7 @@ DEMO_WHITTED = ("transparent_shadows=boolean", "transparent_shadows=attenuate", 
                 "ambient=none")
 
 
-#: The headline of docs/spectral.md (issue 33, ``benchmarks/spectral.py``), which ``cbox demo`` ends with: the
+#: The headline of docs/spectral.md (``benchmarks/spectral.py``), which ``cbox demo`` ends with: the
 #: demo renders the RGB box, and this is how far RGB rendering is from the measured, spectral one. A test keeps it
 #: equal to the figures in docs/spectral.md.
 SPECTRAL_HEADLINE = ("the real Cornell box rendered in RGB (cornell-box-measured, docs/spectral.md): mean ΔE00 8.69 "

@@ -16,10 +16,10 @@ The arithmetic of colour-science's
 (tests/evaluate/test_ciede2000.py compares them, and compares this version with
 that arithmetic written array-wise as colour-science writes it): ``import colour`` costs ~1.5 s (it imports
 its plotting package and SciPy's interpolation), which ``cbox compare-image``
-cannot afford (issue 31: within 3× idiff's time).
+cannot afford (it is held within 3× idiff's time: BENCHMARKS.md).
 
-Written for speed (``cbox compare-image`` computes two 256² maps per image,
-issue 31): one pass over flat channel arrays, no ``np.select``/``np.where``/
+Written for speed (``cbox compare-image`` computes two 256² maps per image):
+one pass over flat channel arrays, no ``np.select``/``np.where``/
 ``np.hypot``/``%`` (each costs 0.6-1.3 ms per 256² here, against ~0.02 ms for
 an addition), the hue's cases as arithmetic on masks, eq. (15)'s four cosines
 from one cos and sin of the mean hue, ``x**7`` as products, ``cbrt`` for the

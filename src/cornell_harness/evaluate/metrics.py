@@ -65,7 +65,7 @@ from cornell_harness.evaluate.pixels import all_finite, as_image, as_pair, finit
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY, has_colour
 
 # No colour-science or skimage: `import colour` costs ~1.5 s and skimage.metrics pulls in scipy.stats (~2 s)
-# and SSIM scipy.ndimage (~0.4 s), which `cbox compare-image` cannot afford (issue 31). CIEDE2000 and the sRGB
+# and SSIM scipy.ndimage (~0.4 s), which `cbox compare-image` cannot afford. CIEDE2000 and the sRGB
 # transfer are cornell_harness.evaluate.ciede2000, SSIM cornell_harness.evaluate.ssim: the same arithmetic, in numpy.
 
 REINHARD_KEY = 0.18
@@ -262,7 +262,7 @@ def image_metrics(img, ref, exposure: float | None = None, quantity: str = DEFAU
     (:data:`cornell_harness.evaluate.registry.COLOUR_METRICS`) are left out.
     ``flip_mean`` is :func:`cornell_harness.evaluate.flip.flip_mean`, with its own
     exposures from the reference (``exposure`` does not apply to it); ``with_flip=False`` leaves it out:
-    at 8 exposures it costs more than all the others together (~0.8 s of 256², issue 31). ``delta_e_map``:
+    at 8 exposures it costs more than all the others together (~0.8 s of 256²). ``delta_e_map``:
     :func:`delta_e2000`'s ``full`` map of these images at ``exposure``, where the caller has it already.
 
     ``keys`` (registry names; :func:`cornell_harness.evaluate.registry.check_metrics` chooses them for a check)

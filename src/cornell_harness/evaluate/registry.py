@@ -134,5 +134,5 @@ def check_metrics(named: Iterable[str]) -> frozenset[str]:
     """What a check that names ``named`` (its thresholds' keys: metrics, or ``region.<region>.<metric>``)
     computes: those and :data:`CHEAP_METRICS`, and not the costly rest (the ΔE00 map, SSIM, PSNR's display
     encoding, HDR-FLIP, the noise yardsticks, the regions), which costs several times what idiff's whole
-    comparison does (issue 31)."""
+    comparison does (BENCHMARKS.md, compare-image)."""
     return frozenset(CHEAP_METRICS).union(named)

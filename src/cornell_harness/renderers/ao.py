@@ -218,7 +218,7 @@ def pooled_variance(mean: np.ndarray, batch_var: np.ndarray, n: int, exact: np.n
     means: the spread of independently randomised replicates), 7 degrees of
     freedom, so z = d/√v̂ has Student-t tails (E z² = 7/5 even where v̂ is
     right); and where AO is nearly 0 or 1 a pixel's batches often all agree,
-    v̂ = 0 while the truth is not, and |z| reaches 10 and more (issue 29).
+    v̂ = 0 while the truth is not, and |z| reaches 10 and more (docs/ambient-occlusion.md).
 
     What it reports: v = ĝ · B, with
 

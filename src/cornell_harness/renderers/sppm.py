@@ -43,7 +43,7 @@ iteration its camera path finds a visible point, and shrinks from there.
 This follows the geometry the camera sees, as Hachisuka's reference code
 (smallppm: 2 pixel widths over the visible points' bounding box) and not
 the scene's bounds (Mitsuba 0.6's ``sppm``: 5 pixel widths of the bounding
-sphere; ours before issue 34: 2 at the scene's centre), which an off-screen
+sphere; ours once: 2 at the scene's centre), which an off-screen
 mirror or wall inflates: a small patch lit through a mirror reaching far
 off-screen started at 19 pixel widths and read -14.8% after 64 iterations,
 against -1.8% with the mirror cut to what lights it; from its own

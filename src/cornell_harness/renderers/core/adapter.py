@@ -64,7 +64,7 @@ def warm_up_shared(geom: SceneGeometry) -> None:
     """Compile (or load) the shared kernels a renderer's own warm-up may not reach: the film's
     (:func:`cornell_harness.renderers.core.film.warm_up`) and the shadow rays' (one segment). A warm-up of one path often
     casts no shadow ray, and then a process's first render compiled these inside its time: 0.9 s of a 1-spp
-    Cornell box with a cold numba cache (issue 30, a Dask worker's first cell)."""
+    Cornell box with a cold numba cache (a Dask worker's first cell; docs/timing.md)."""
     film.warm_up()
     shadow = shadow_buffer(1)
     for array in shadow:

@@ -127,6 +127,6 @@ class Film:
 def warm_up() -> None:
     """Compile (or load from numba's cache) every kernel a film adds with (batches and auxiliary images
     included) on a throwaway one-pixel film, so that a render's clock starts after them: a process's first
-    render otherwise compiled them inside its time (issue 30: 0.3 s of a 1-spp Cornell box, cold cache)."""
+    render otherwise compiled them inside its time (0.3 s of a 1-spp Cornell box, cold cache: docs/timing.md)."""
     film = Film(1, 1, 2, ("albedo", "normal"))
     film.add(0, np.zeros((1, 3)), 0, np.zeros((1, 6)))

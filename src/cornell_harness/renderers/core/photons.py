@@ -31,7 +31,7 @@ Using Photon Mapping", ch. 5) and the photon pass of each SPPM iteration
   estimate ρ/π·E is 0, or through the normal test by a coplanar neighbour's
   disc that reaches over the seam; so a map's stored count
   (``global_photons``, ``caustic_photons``) counts photons that can
-  contribute (issue 34: 83% of a map on the black top of a light). The
+  contribute (83% of a map once lay on the black top of a light). The
   seam loses the photons beyond it, as a disc at a corner does (the
   estimate's border bias, docs/photon-mapping.md). The normalisation does
   not change: each photon's flux is the emitted power over the photons
