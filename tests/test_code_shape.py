@@ -1,4 +1,7 @@
-"""The toolkit's shape, checked on the sources (issue 27): what a reviewer would otherwise grep for.
+"""The code's shape, checked on the sources: what a reviewer would otherwise grep for.
+
+- no module of the package names an issue of the tracker: docstrings and comments say what and why, and the
+  history (issue numbers, when a figure was measured) lives in git, BENCHMARKS.md and docs/;
 
 - every numba kernel and helper of ours takes at most :data:`MAX_KERNEL_PARAMETERS` parameters (outputs and
   inputs travel as NamedTuples of arrays, as :class:`cornell_harness.renderers.core.rays.RayBuffer` does);
@@ -14,6 +17,7 @@
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -140,3 +144,21 @@ def test_the_checks_see_what_they_check(tmp_path):
     tree = ast.parse('Setting("sampler", str, "pmj02", "doc")\nreplace(SAMPLER_SETTING, default="x")\n'
                      'Setting("spp", int, 1, "doc")\n')
     assert sampler_settings(tree) == [1, 2]
+
+
+#: An issue of our tracker named in prose ("issue 31", "Issue 30:", "issues 29 and 30"); another project's
+#: ("mitsuba3 issue #372") is a citation.
+ISSUE = re.compile(r"\b[Ii]ssues? [0-9]+")
+
+
+def issue_mentions(text: str) -> list[int]:
+    """The lines of ``text`` that name an issue."""
+    return [n for n, line in enumerate(text.splitlines(), 1) if ISSUE.search(line)]
+
+
+def test_no_module_names_an_issue():
+    package = ROOT / "src" / "cornell_harness"
+    found = {str(p.relative_to(ROOT)): lines for p in sorted(package.rglob("*"))
+             if p.suffix in (".py", ".json", ".j2", ".toml") and (lines := issue_mentions(p.read_text(encoding="utf-8")))}
+    assert found == {}, f"say what and why, not which issue (history belongs in git and docs/): {found}"
+    assert issue_mentions("x = 1\n# measured for issue 31\n# Issue 30: why\n# an issue with it\n") == [2, 3]
