@@ -71,7 +71,8 @@ from cornell_harness.store.atomic import write_json_atomic
 from cornell_harness.store.references import load_reference
 from cornell_harness.workflows import runner
 from cornell_harness.workflows.compare import spp_for_time_budget
-from cornell_harness.workflows.converge import parse_spp_list, run_experiment
+from cornell_harness.workflows.converge import run_experiment
+from cornell_harness.workflows.spp_list import parse_spp_list
 from cornell_harness.renderers.core.gbuffer import gbuffer, view_space
 from cornell_harness.renderers.core.geometry import SceneGeometry
 from cornell_harness.adapters.api import default_threads

@@ -39,7 +39,8 @@ from cornell_harness.adapters.registry import resolve
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.store.references import load_reference
 from cornell_harness.workflows import cells as cells_module
-from cornell_harness.workflows.converge import parse_spp_list, run_experiment
+from cornell_harness.workflows.converge import run_experiment
+from cornell_harness.workflows.spp_list import parse_spp_list
 from cornell_harness.workflows.executor import DaskExecutor, Task, open_executor, pack, unpack
 
 SPPS = parse_spp_list("1-16")

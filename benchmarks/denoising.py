@@ -51,7 +51,7 @@ from cornell_harness.evaluate import metrics
 from cornell_harness.evaluate.convergence import time_to_target
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.store.references import load_reference
-from cornell_harness.workflows.converge import parse_spp_list
+from cornell_harness.workflows.spp_list import parse_spp_list
 import markdown_blocks
 from irradiance_probes import COLOURS, PT_COLOUR, bias_figure, experiment, fmt, write_svg
 from cornell_harness.reports.charts import convergence_table

@@ -71,7 +71,8 @@ from cornell_harness.store.experiments import SUMMARY_FILE, cell_name, final_ima
 from cornell_harness.store.exr import read_exr
 from cornell_harness.store.references import load_reference
 from cornell_harness.evaluate.summary import summary_table
-from cornell_harness.workflows.converge import parse_spp_list, run_experiment
+from cornell_harness.workflows.converge import run_experiment
+from cornell_harness.workflows.spp_list import parse_spp_list
 from cornell_harness.reports.charts import convergence_table
 from cornell_harness.reports.plots import BarGroup, Series, bars_svg, line_plot_svg
 

@@ -43,7 +43,8 @@ from cornell_harness.adapters.seeds import pass_key
 from cornell_harness.evaluate.convergence import time_to_target
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.store.references import load_reference
-from cornell_harness.workflows.converge import parse_spp_list, run_experiment
+from cornell_harness.workflows.converge import run_experiment
+from cornell_harness.workflows.spp_list import parse_spp_list
 from cornell_harness.renderers.core.geometry import SceneGeometry
 from cornell_harness.renderers.core.photons import STORE_ALL, shoot
 from cornell_harness.adapters.api import default_threads

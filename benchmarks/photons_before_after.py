@@ -53,7 +53,9 @@ def cell(tree: Path, renderer: str, spp: str, seed: int, out: Path) -> None:
     resolve_scene = importlib.import_module(f"{top}.scenes.library").resolve_scene
     load_reference = importlib.import_module(f"{top}.store.references").load_reference
     converge = importlib.import_module(f"{top}.workflows.converge")
-    parse_spp_list, run_experiment = converge.parse_spp_list, converge.run_experiment
+    run_experiment = converge.run_experiment
+    spp_lists = importlib.import_module(f"{top}.workflows.spp_list") if top == "cornell_harness" else converge
+    parse_spp_list = spp_lists.parse_spp_list
     package = importlib.import_module(renderers)
     assert Path(package.__file__).resolve().is_relative_to(tree.resolve()), package.__file__
     scene = resolve_scene("cornell-box-caustics")

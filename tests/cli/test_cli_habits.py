@@ -19,7 +19,7 @@ import pytest
 from tests.conftest import cbox_in_process as cbox, ROOT, run_cbox
 from cornell_harness.cli import common, output
 from cornell_harness.suggest import closest
-from cornell_harness.workflows.converge import parse_spp_list
+from cornell_harness.workflows.spp_list import parse_spp_list
 
 
 def _converge(out, *extra: str) -> list[str]:

@@ -10,7 +10,7 @@ import pytest
 
 from cornell_harness.evaluate import convergence as cv
 from cornell_harness.workflows.budgets import parse_duration
-from cornell_harness.workflows.converge import parse_spp_list
+from cornell_harness.workflows.spp_list import parse_spp_list
 
 
 def _runs(slope: float, seeds=4, noise=0.0, bias=0.0, rng=None) -> pd.DataFrame:

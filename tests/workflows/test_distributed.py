@@ -26,7 +26,8 @@ from cornell_harness.scenes.library import resolve_scene  # noqa: E402
 from cornell_harness.store.experiments import RESULTS_FILE  # noqa: E402
 from cornell_harness.store.exr import read_exr  # noqa: E402
 from cornell_harness.store.references import load_reference  # noqa: E402
-from cornell_harness.workflows.converge import parse_spp_list, run_experiment  # noqa: E402
+from cornell_harness.workflows.converge import run_experiment
+from cornell_harness.workflows.spp_list import parse_spp_list  # noqa: E402
 from cornell_harness.workflows.executor import DEFAULT_RETRIES, Task, open_executor, task_key  # noqa: E402
 from cornell_harness.workflows.reference_build import build_reference  # noqa: E402
 

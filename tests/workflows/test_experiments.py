@@ -171,7 +171,8 @@ def _converge(out, log, spp, monkeypatch, command=None):
     from cornell_harness.adapters.registry import resolve
     from cornell_harness.scenes.library import resolve_scene
     from cornell_harness.store.references import load_reference
-    from cornell_harness.workflows.converge import parse_spp_list, run_experiment
+    from cornell_harness.workflows.converge import run_experiment
+    from cornell_harness.workflows.spp_list import parse_spp_list
 
     monkeypatch.setenv("CBOX_TEST_RENDER_LOG", str(log))
     scene = resolve_scene("cornell-box")

@@ -21,7 +21,7 @@ from cornell_harness.suggest import did_you_mean
 # Heavy modules (SciPy, pandas, the report) are imported inside the commands that use them: `cbox gate` on
 # a misspelt config, or `cbox --help`, must answer in a second.
 
-#: The grammar of converge --spp, exactly as cornell_harness.workflows.converge.parse_spp_list reads it.
+#: The grammar of converge --spp, exactly as cornell_harness.workflows.spp_list.parse_spp_list reads it.
 SPP_HELP = ("spp checkpoints, as a list: exactly those spp, in any order (1,4,16 or 1,3,5); a sequence: the "
             "numbers before '...' continued by their one constant ratio or difference to the last number, "
             "which it must reach exactly (1,2,4,...,256 or 10,20,...,50; 1,2,...,8 fits both ×2 and +1 and is "
@@ -74,7 +74,7 @@ def converge(
     from cornell_harness.adapters.registry import sweep as sweep_entries
     from cornell_harness.adapters.settings import parse_sweep
     from cornell_harness.evaluate.convergence import DEFAULT_TARGETS, parse_target, unknown_target_regions
-    from cornell_harness.workflows.converge import parse_spp_list
+    from cornell_harness.workflows.spp_list import parse_spp_list
 
     try:
         spps = parse_spp_list(spp)
