@@ -68,9 +68,8 @@ class HeroPaths(NamedTuple):
     """The state of a work unit's hero-wavelength paths (the :class:`Hero` channel type), per path (indexed by
     the path, not the ray: a path has one live ray): linear-sRGB radiance, no AOVs (they come from the RGB
     mode: 0 rows), and per wavelength the table nodes, linear-sRGB weights cmf_rgb / (4 p) and throughput, which
-    the bounces update in place; then the scene's spectra (:class:`SpectralTables`' fields of the same names),
-    fields of their own rather than a nested tuple: a nested tuple that a kernel binds to a name costs a
-    reference-count update per array at every use (measured: hero renders twice as slow)."""
+    the bounces update in place; then the scene's spectra that the bounces read (:class:`SpectralTables`'
+    fields of the same names), as fields of their own so the channel functions read them with one lookup."""
 
     L: np.ndarray  # (m, 3) float64 linear sRGB
     aux: np.ndarray  # (0, 6)
@@ -78,7 +77,7 @@ class HeroPaths(NamedTuple):
     lam: np.ndarray  # (m, 4) int64 table nodes
     sensor: np.ndarray  # (m, 4, 3) float64
     beta: np.ndarray  # (m, 4) float64
-    rho: np.ndarray
+    rho: np.ndarray  # SpectralTables.rho, and so on
     rho_row: np.ndarray
     le: np.ndarray
     le_row: np.ndarray

@@ -15,13 +15,24 @@ state type gets its own compiled kernel with the chosen bodies inlined into
 it: nothing is dispatched at run time, and the kernel is an ordinary
 module-level ``jit`` function, so numba's on-disk cache keeps it.
 
+Keep a channel function straight-line code (a loop of fixed length is fine,
+and so is calling a function of scalars that branches) and the decisions in
+the kernel: once inlined, a channel function that branches gets an atomic
+reference-count update of every array of the tuples it is passed (the path
+state, the scene's tables) at every call, which numba's pruning of them does
+not remove. The whole NEE step
+(:func:`cornell_harness.renderers.core.direct.light_sample` and its colour)
+as one channel function made the hero renders markedly slower
+(BENCHMARKS.md); the kernel calls ``light_sample`` itself and leaves only
+the colour to the channel type.
+
 The other ways numba offers, and why not them:
 
 - a kernel factory (a Python function that builds the ``jit`` kernel as a
   closure over per-type helper kernels): numba keys a closure's cache entry
   on its pickled closed-over values, and a pickled dispatcher carries a uuid
   drawn per process, so a factory-made kernel is never found in the cache.
-  It would compile at every process start (~1 min of CPU here), which
+  It would compile at every process start (about a minute of CPU), which
   ``scripts/compile_kernels.py`` exists to avoid, and add an index entry
   each time;
 - first-class function types (the helpers passed as arguments): an indirect
