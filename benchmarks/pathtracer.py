@@ -143,6 +143,7 @@ def _replay_queries(geom, scene: Scene, first: int, m: int, pixels: int, stream)
     assert not geom.has_spheres
     cam, geo = scene.camera, geom.tables()
     wf, L = wavefront(m, False), np.zeros((m, 3))
+    paths = pathtracer.Paths(L, np.zeros((0, 6)), np.ones(0, np.bool_))
     cur, nxt = wf.cur, wf.nxt
     camera_rays(camera_basis(cam), cam.width, cam.height, first, pixels, stream, cur)
     n, depth, spent = m, 1, 0.0
@@ -153,7 +154,7 @@ def _replay_queries(geom, scene: Scene, first: int, m: int, pixels: int, stream)
         spent += time.perf_counter() - t0
         extend = scene.max_depth < 0 or depth + 1 <= scene.max_depth
         ns, n = pathtracer._shade(Hits(prim, wf.t_sphere[:n]), cur, stream, first, depth, extend, depth >= RR_DEPTH,
-                                  geo, pathtracer.Bounce(L, wf.shadow, nxt, np.zeros((0, 6)), np.ones(0, np.bool_)))
+                                  geo, paths, pathtracer.Bounce(wf.shadow, nxt))
         if ns:
             visible = wf.visible[:ns]
             t0 = time.perf_counter()

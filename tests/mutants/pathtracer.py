@@ -107,7 +107,7 @@ MUTANTS: tuple[Mutant, ...] = (
           "        if not faces(mat, cos_o):\n"
           "            if geo.light_pdf_area[p] > 0.0:  # area lights emit on both sides; NEE never samples the back\n"
           "                for c in range(3):\n"
-          "                    out.L[rays.path[i], c] += rays.beta[i, c] * geo.radiance[p, c]\n"
+          "                    paths.L[rays.path[i], c] += rays.beta[i, c] * geo.radiance[p, c]\n"
           "            continue  # back side"),
          ("return -(ny[0] * w[0] + ny[1] * w[1] + ny[2] * w[2])",
           "return abs(ny[0] * w[0] + ny[1] * w[1] + ny[2] * w[2])", f"{CORE}/lights.py")),

@@ -7,8 +7,10 @@ wavelengths, the hero λ_0 and three rotations of it
 (:func:`cornell_harness.renderers.core.wavelengths.hero_wavelengths`, pbrt-v4's visible-wavelength
 pdf), and a throughput per wavelength. Every sampling decision of the path
 (pixel jitter, NEE, BSDF direction, Russian roulette on the largest of the
-four throughputs) is the RGB path tracer's (:mod:`cornell_harness.renderers.pathtracer`, same
-named dimensions, same toolkit), because none of our materials makes a
+four throughputs) is the RGB path tracer's: the same kernel
+(:func:`cornell_harness.renderers.pathtracer._shade`) runs both, with this
+module's channel type :class:`Hero` and path state :class:`HeroPaths` in
+place of RGB's. That is exact because none of our materials makes a
 direction depend on wavelength: a constant-index dielectric refracts every
 wavelength alike, so no secondary wavelength is ever terminated (Wilkie §4's
 dispersion case does not arise), and the hero's balance-heuristic weights
@@ -43,14 +45,11 @@ import numpy as np
 
 from cornell_harness.scenes.materials import Dielectric
 from cornell_harness.scenes.model import Scene
-from cornell_harness.renderers.core.bsdf import bsdf_eval, bsdf_sample, faces, is_delta, refraction_scale
-from cornell_harness.renderers.core.camera import camera_rays, image_plane
-from cornell_harness.renderers.core.direct import emission_weight, light_sample
-from cornell_harness.renderers.core.geometry import SceneGeometry, add_unoccluded_light, offset_origin, ray_hit, wavefront_hits
-from cornell_harness.renderers.core.rays import RayBuffer, ShadowBuffer, set_path, set_ray, set_shadow, wavefront
-from cornell_harness.renderers.core.roulette import RR_DEPTH, continue_spectral_path
-from cornell_harness.renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, WAVELENGTH, Stream, path_point,
-                                    sample_1d, vertex_1d, vertex_2d)
+from cornell_harness.renderers.core.bsdf import bsdf_eval, bsdf_sample
+from cornell_harness.renderers.core.geometry import SceneGeometry
+from cornell_harness.renderers.core.rays import set_path
+from cornell_harness.renderers.core.roulette import continue_spectral_path
+from cornell_harness.renderers.core.sampler import WAVELENGTH, Stream, path_point, sample_1d
 from cornell_harness.renderers.core.sampling import jit
 from cornell_harness.renderers.core.wavelengths import N_WAVELENGTHS, hero_wavelengths, on_grid, sensor_rgb
 
@@ -66,26 +65,22 @@ class SpectralTables(NamedTuple):
 
 
 class HeroPaths(NamedTuple):
-    """A work unit's per-path state: linear-sRGB radiance, and per wavelength the table nodes, sensor weights and
-    throughput (as :class:`HeroBounce` names them)."""
-
-    L: np.ndarray
-    lam: np.ndarray
-    sensor: np.ndarray
-    beta: np.ndarray
-
-
-class HeroBounce(NamedTuple):
-    """What one bounce of :func:`_shade` writes. Per path of the unit (indexed by the path, not the ray: a path
-    has one live ray) its wavelengths' table nodes, their linear-sRGB weights cmf_rgb / (4 p), and its
-    throughput per wavelength, updated in place; per ray, NEE segments and continuation rays."""
+    """The state of a work unit's hero-wavelength paths (the :class:`Hero` channel type), per path (indexed by
+    the path, not the ray: a path has one live ray): linear-sRGB radiance, no AOVs (they come from the RGB
+    mode: 0 rows), and per wavelength the table nodes, linear-sRGB weights cmf_rgb / (4 p) and throughput, which
+    the bounces update in place; then the scene's spectra that the bounces read (:class:`SpectralTables`'
+    fields of the same names), as fields of their own so the channel functions read them with one lookup."""
 
     L: np.ndarray  # (m, 3) float64 linear sRGB
-    shadow: ShadowBuffer
-    nxt: RayBuffer  # its beta column is unused: the throughput is ``beta`` here
+    aux: np.ndarray  # (0, 6)
+    aux_open: np.ndarray  # (0,) bool
     lam: np.ndarray  # (m, 4) int64 table nodes
     sensor: np.ndarray  # (m, 4, 3) float64
     beta: np.ndarray  # (m, 4) float64
+    rho: np.ndarray  # SpectralTables.rho, and so on
+    rho_row: np.ndarray
+    le: np.ndarray
+    le_row: np.ndarray
 
 
 def _refuse(scene: Scene, what: str) -> ValueError:
@@ -129,9 +124,19 @@ def spectral_tables(scene: Scene, geom: SceneGeometry) -> SpectralTables:
                           le, np.asarray(le_of, np.int64)[geom.object])
 
 
+def start_paths(spec: SpectralTables, stream: Stream, first: int, m: int) -> HeroPaths:
+    """The state of paths ``first .. first + m - 1`` before their first bounce: each path's wavelengths (its
+    number at dimension WAVELENGTH), their sRGB weights, throughput 1 and radiance 0."""
+    paths = HeroPaths(np.zeros((m, 3)), np.zeros((0, 6)), np.ones(0, np.bool_), np.empty((m, N_WAVELENGTHS), np.int64),
+                      np.empty((m, N_WAVELENGTHS, 3)), np.empty((m, N_WAVELENGTHS)), spec.rho, spec.rho_row, spec.le,
+                      spec.le_row)
+    _start_paths(stream, first, spec, paths.lam, paths.sensor, paths.beta)
+    return paths
+
+
 @jit
 def _start_paths(stream, first, spec, lam, sensor, beta):
-    """Each path's wavelengths (its number at dimension WAVELENGTH), their sRGB weights, and throughput 1."""
+    """:func:`start_paths`' kernel."""
     for q in range(lam.shape[0]):
         nodes, pdf = hero_wavelengths(sample_1d(stream, path_point(stream, first + q), WAVELENGTH))
         for j in range(N_WAVELENGTHS):
@@ -143,100 +148,60 @@ def _start_paths(stream, first, spec, lam, sensor, beta):
                 sensor[q, j, c] = spec.cmf_rgb[nodes[j], c] * inv
 
 
-# The kernel is the algorithm of one bounce, as src/cornell_harness/renderers/pathtracer.py's _shade; see src/cornell_harness/renderers/core/rays.py
-# for why the buffer writes stay in it.
-@jit
-def _shade(hits, rays, stream, first, depth, extend, roulette, geo, spec, out):
-    """One bounce of a wavefront, per wavelength (cornell_harness.renderers.pathtracer._shade's algorithm): emission found,
-    then, if ``extend``, one NEE segment and one continuation ray per path. Returns (segments, rays)."""
-    ns = 0
-    nn = 0
-    for i in range(hits.prim.size):
-        p = hits.prim[i]
-        if p < 0:
-            continue
-        d, x, n, cos_o, t, mat = ray_hit(geo, rays, i, p, hits.t_sphere)
-        if not faces(mat, cos_o):
-            continue  # back side (or grazing): nothing reflected or emitted, the path ends
-        q = rays.path[i]
-        b = (out.beta[q, 0], out.beta[q, 1], out.beta[q, 2], out.beta[q, 3])
-        lam = (out.lam[q, 0], out.lam[q, 1], out.lam[q, 2], out.lam[q, 3])
-        pa = geo.light_pdf_area[p]
-        if pa > 0.0 and cos_o > 0.0:
-            w = emission_weight(rays.pdf[i], pa, t, cos_o)
-            r = spec.le_row[p]
-            for j in range(N_WAVELENGTHS):
-                s = b[j] * spec.le[r, lam[j]] * w
-                for c in range(3):
-                    out.L[q, c] += s * out.sensor[q, j, c]
-        if not extend:
-            continue
-        pt = path_point(stream, first + q)
-        k = spec.rho_row[p]
-        rho = (spec.rho[k, lam[0]], spec.rho[k, lam[1]], spec.rho[k, lam[2]], spec.rho[k, lam[3]])
-        if geo.emitter_ids.size > 0 and not is_delta(mat):
-            u = vertex_2d(stream, pt, depth, EMITTER_U)
-            found, a, sd, tfar, e, cos_x, g = light_sample(x, n, mat, (vertex_1d(stream, pt, depth, EMITTER_PICK),
-                                                                        u[0], u[1]), geo, True)
-            if found:
-                r = spec.le_row[e]
-                c0 = c1 = c2 = 0.0
-                for j in range(N_WAVELENGTHS):
-                    s = bsdf_eval(mat, b[j] * rho[j], cos_x) * spec.le[r, lam[j]] * g
-                    c0 += s * out.sensor[q, j, 0]
-                    c1 += s * out.sensor[q, j, 1]
-                    c2 += s * out.sensor[q, j, 2]
-                set_shadow(out.shadow, ns, a, sd, tfar, q, (c0, c1, c2))
-                ns += 1
-        u = vertex_2d(stream, pt, depth, BSDF_U)
-        # The direction and its weight at unit reflectance: for our materials f·cos/pdf is ρ(λ) times that.
-        wi, cos_w, f, valid = bsdf_sample(mat, n, (-d[0], -d[1], -d[2]), cos_o, (1.0, 1.0, 1.0), geo.eta[p],
-                                          u[0], u[1])
-        scale = rays.scale[i] * refraction_scale(mat, cos_o, cos_w, geo.eta[p])
-        alive, bn, pdf = continue_spectral_path(
-            mat, valid, cos_w, (f[0] * rho[0], f[0] * rho[1], f[0] * rho[2], f[0] * rho[3]), b, scale,
-            vertex_1d(stream, pt, depth, ROULETTE) if roulette else 1.0, roulette)
-        if alive:
-            side = n if cos_w > 0.0 else (-n[0], -n[1], -n[2])
-            set_ray(out.nxt, nn, offset_origin(x, side, geo.offset), wi)
-            set_path(out.nxt, nn, q, (1.0, 1.0, 1.0), pdf, scale)
-            out.beta[q, 0], out.beta[q, 1], out.beta[q, 2], out.beta[q, 3] = bn
-            nn += 1
-    return ns, nn
+class Hero:
+    """The hero-wavelength channel type (:mod:`cornell_harness.renderers.core.channels`) of the path tracer's
+    kernel (:func:`cornell_harness.renderers.pathtracer._shade`): 4 wavelengths per path, state
+    :class:`HeroPaths`, the throughput per path in it (the rays' own is left 1). Each function is
+    :class:`cornell_harness.renderers.pathtracer.RGB`'s per wavelength."""
 
+    @jit
+    def throughput(paths, rays, i, q):
+        """β of path ``q`` per wavelength."""
+        return paths.beta[q, 0], paths.beta[q, 1], paths.beta[q, 2], paths.beta[q, 3]
 
-def trace_hero_paths(geom: SceneGeometry, spec: SpectralTables, scene: Scene, first: int, stop: int, pixels: int,
-                     stream: Stream, rr_depth: int = RR_DEPTH) -> np.ndarray:
-    """Linear-sRGB estimates (m, 3) of paths ``first .. stop-1`` (path j sees pixel j mod ``pixels``), as
-    :func:`cornell_harness.renderers.pathtracer.trace_paths` but per wavelength (module docstring)."""
-    m = stop - first
-    cam = scene.camera
-    L = np.zeros((m, 3))
-    lam, sensor, beta = np.empty((m, N_WAVELENGTHS), np.int64), np.empty((m, N_WAVELENGTHS, 3)), \
-        np.empty((m, N_WAVELENGTHS))
-    _start_paths(stream, first, spec, lam, sensor, beta)
-    geom.count(_trace(geom.tables(), spec, image_plane(cam), first, pixels, stream, (scene.max_depth, rr_depth),
-                      wavefront(m, geom.has_spheres), HeroPaths(L, lam, sensor, beta)))
-    return L
+    @jit
+    def reflectance(paths, geo, p, q):
+        """ρ of primitive ``p`` at path ``q``'s wavelengths."""
+        k = paths.rho_row[p]
+        return (paths.rho[k, paths.lam[q, 0]], paths.rho[k, paths.lam[q, 1]], paths.rho[k, paths.lam[q, 2]],
+                paths.rho[k, paths.lam[q, 3]])
 
+    @jit
+    def add_emission(paths, q, beta, geo, p, w):
+        """Path ``q``'s linear sRGB += Σ_λ β(λ) · Le(p, λ) · w · sensor(λ)."""
+        r = paths.le_row[p]
+        for j in range(N_WAVELENGTHS):
+            s = beta[j] * paths.le[r, paths.lam[q, j]] * w
+            for c in range(3):
+                paths.L[q, c] += s * paths.sensor[q, j, c]
 
-@jit
-def _trace(geo, spec, plane, first, pixels, stream, depths, wf, paths):
-    """The bounce loop of :func:`trace_hero_paths` as one kernel, as :func:`cornell_harness.renderers.pathtracer._trace` (why
-    there); returns the rays traced."""
-    max_depth, rr_depth = depths
-    L, lam, sensor, beta = paths
-    cur, nxt = wf.cur, wf.nxt
-    camera_rays(plane.basis, plane.width, plane.height, first, pixels, stream, cur)
-    n, depth, traced = L.shape[0], 1, 0
-    while n:
-        hits = wavefront_hits(geo, wf, cur, n)
-        extend = max_depth < 0 or depth + 1 <= max_depth
-        ns, n_next = _shade(hits, cur, stream, first, depth, extend, depth >= rr_depth, geo, spec,
-                            HeroBounce(L, wf.shadow, nxt, lam, sensor, beta))
-        traced += n + ns
-        add_unoccluded_light(geo, L, wf.shadow, wf.visible[:ns], wf.record)
-        cur, nxt = nxt, cur
-        n = n_next
-        depth += 1
-    return traced
+    @jit
+    def light_rgb(paths, q, mat, beta, rho, cos_x, g, geo, e):
+        """The linear sRGB that a light sample of emitter triangle ``e`` adds to path ``q`` if unoccluded:
+        Σ_λ f(λ) · Le(e, λ) · g · sensor(λ), f of reflectance β(λ)·ρ(λ)."""
+        r = paths.le_row[e]
+        c0 = c1 = c2 = 0.0
+        for j in range(N_WAVELENGTHS):
+            s = bsdf_eval(mat, beta[j] * rho[j], cos_x) * paths.le[r, paths.lam[q, j]] * g
+            c0 += s * paths.sensor[q, j, 0]
+            c1 += s * paths.sensor[q, j, 1]
+            c2 += s * paths.sensor[q, j, 2]
+        return c0, c1, c2
+
+    @jit
+    def sample_bsdf(paths, mat, n, wo, cos_o, rho, eta, u1, u2):
+        """The direction and its weight at unit reflectance, times ρ(λ): for our materials f·cos/pdf is ρ(λ)
+        times that, and no direction depends on the wavelength (module docstring)."""
+        wi, cos_w, f, valid = bsdf_sample(mat, n, wo, cos_o, (1.0, 1.0, 1.0), eta, u1, u2)
+        return wi, cos_w, (f[0] * rho[0], f[0] * rho[1], f[0] * rho[2], f[0] * rho[3]), valid
+
+    @jit
+    def next_throughput(paths, mat, valid, cos_w, f, beta, scale, u_rr, roulette):
+        """:func:`cornell_harness.renderers.core.roulette.continue_spectral_path`: (alive, β', pdf)."""
+        return continue_spectral_path(mat, valid, cos_w, f, beta, scale, u_rr, roulette)
+
+    @jit
+    def set_throughput(paths, nxt, k, q, beta, pdf, scale):
+        """Ray ``k`` of ``nxt`` continues path ``q``, whose throughput per wavelength becomes ``beta``."""
+        set_path(nxt, k, q, (1.0, 1.0, 1.0), pdf, scale)
+        paths.beta[q, 0], paths.beta[q, 1], paths.beta[q, 2], paths.beta[q, 3] = beta

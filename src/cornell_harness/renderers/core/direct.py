@@ -24,9 +24,9 @@ from __future__ import annotations
 
 from cornell_harness.renderers.core.bsdf import bsdf_eval, bsdf_pdf
 from cornell_harness.renderers.core.geometry import offset_origin
-from cornell_harness.renderers.core.lights import sample_emitter, solid_angle_pdf, solid_angle_pdf_along, towards_emitter
+from cornell_harness.renderers.core.lights import sample_emitter, solid_angle_pdf, towards_emitter
 from cornell_harness.renderers.core.rays import shadow_segment
-from cornell_harness.renderers.core.sampling import jit, jit_inline, power_heuristic
+from cornell_harness.renderers.core.sampling import jit_inline, power_heuristic
 
 _NONE = ((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0))
 _NONE_GEOMETRY = ((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.0, 0, 0.0, 0.0)
@@ -36,8 +36,8 @@ _NONE_GEOMETRY = ((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.0, 0, 0.0, 0.0)
 def light_sample(x, n, mat, u, geo, mis):
     """The colour-free part of :func:`sample_ld`: ``(found, origin, direction, tfar, emitter triangle, cos θ_x,
     g)``, g = cos θ_x cos θ_y / r² / p_A · w, so that a channel (or wavelength) of radiance Le and BSDF weight
-    ρ' adds ``bsdf_eval(mat, ρ', cos θ_x) · Le · g``. Used by :func:`sample_ld` (RGB) and the hero-wavelength
-    path tracer (:mod:`cornell_harness.renderers.hero_wavelength`, whose radiance is per wavelength)."""
+    ρ' adds ``bsdf_eval(mat, ρ', cos θ_x) · Le · g`` (:func:`unoccluded_rgb` for RGB). Used by :func:`sample_ld`
+    and the path tracer, whose radiance is RGB or per wavelength (:mod:`cornell_harness.renderers.pathtracer`)."""
     if geo.emitter_ids.size == 0:
         return (False,) + _NONE_GEOMETRY
     y, ny, e, pe = sample_emitter(u[0], u[1], u[2], geo)
@@ -69,17 +69,14 @@ def sample_ld(x, n, mat, weight, u, geo, mis):
     found, a, sd, tfar, e, cos_x, g = light_sample(x, n, mat, u, geo, mis)
     if not found:
         return (False,) + _NONE
-    c = (bsdf_eval(mat, weight[0], cos_x) * geo.radiance[e, 0] * g,
-         bsdf_eval(mat, weight[1], cos_x) * geo.radiance[e, 1] * g,
-         bsdf_eval(mat, weight[2], cos_x) * geo.radiance[e, 2] * g)
-    return True, a, sd, tfar, c
+    return True, a, sd, tfar, unoccluded_rgb(mat, weight, cos_x, g, geo, e)
 
 
-@jit
-def emission_weight(pdf_bsdf, pa, t, cos_o) -> float:
-    """MIS weight of emission found at distance ``t`` by a ray sampled with solid-angle pdf ``pdf_bsdf``, against
-    light sampling's area pdf ``pa`` of that point (power heuristic, Veach 1997 eq. 9.13); a pdf of 0 marks a
-    ray light sampling could not have made (a camera ray, a delta-BSDF sample): weight 1. The hero-wavelength
-    path tracer's; the RGB one keeps its own copy, ``cornell_harness.renderers.pathtracer._emission_weight``, which its mutants
-    (tests/mutants/pathtracer.py) patch in place."""
-    return 1.0 if pdf_bsdf == 0.0 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))
+@jit_inline
+def unoccluded_rgb(mat, weight, cos_x, g, geo, e):
+    """The RGB radiance a light sample of :func:`light_sample` (emitter triangle ``e``, ``cos_x``, ``g``) adds if
+    unoccluded, ``bsdf_eval(mat, weight, cos θ_x) · Le · g`` per channel, ``weight`` the BSDF's (β·ρ)."""
+    return (bsdf_eval(mat, weight[0], cos_x) * geo.radiance[e, 0] * g,
+            bsdf_eval(mat, weight[1], cos_x) * geo.radiance[e, 1] * g,
+            bsdf_eval(mat, weight[2], cos_x) * geo.radiance[e, 2] * g)
+
