@@ -157,7 +157,7 @@ def test_denoised_renderer_unavailable_without_pyoidn_or_aovs(monkeypatch):
     assert "gives no albedo and normal AOVs" in oidn.Denoised(SPPM()).unavailable_reason()
     monkeypatch.setitem(sys.modules, "pyoidn", None)  # import pyoidn now raises ImportError
     entry = resolve(["pathtracer+oidn"])[0]
-    assert not entry.available and "pyoidn is not installed" in entry.reason
+    assert not entry.available and entry.reason == "pyoidn not installed: pip install 'cornell-harness[oidn]'"
 
 
 def test_compare_runs_denoised_and_plain_and_shows_the_denoised_image(tmp_path):

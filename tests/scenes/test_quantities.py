@@ -15,7 +15,7 @@ from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.loader import load_scene
 from cornell_harness.scenes.model import SceneError
 from cornell_harness.store.references import Reference
-from cornell_harness.workflows.runner import score
+from cornell_harness.evaluate.score import score_image
 
 AO_TABLE = """
 [ambient_occlusion]
@@ -123,7 +123,7 @@ def test_an_ao_image_is_scored_without_colour_differences():
     img = ao.image * 0.9
     assert COLOUR_METRICS == {"delta_e2000_mean", "delta_e2000_p95", "delta_e2000_max", "delta_e2000_frac_gt_2_3",
                               "flip_mean", "noise_delta_e2000_mean"}
-    ao_row, radiance_row = score(img, ao, 64), score(img, radiance, 64)
+    ao_row, radiance_row = score_image(img, ao, 64).values, score_image(img, radiance, 64).values
     assert not COLOUR_METRICS & set(ao_row) and COLOUR_METRICS <= set(radiance_row)
     assert ao_row["rmse"] == radiance_row["rmse"] and 0 < ao_row["ssim"] < 1
     # AO is shown as it is: a key-value exposure would rescale a darker AO image to mid-grey.
