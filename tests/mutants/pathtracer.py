@@ -27,8 +27,9 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "mis_emitter_double",
         "emission found by BSDF-sampled rays weighted 1 instead of its MIS weight (emitter counted twice)",
-        (Edit("_emission_weight",
-              "1.0 if pdf_bsdf == 0.0 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))", "1.0"),),
+        (Edit("emission_weight",
+              "1.0 if pdf_bsdf == 0.0 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))", "1.0",
+              DIRECT),),
     ),
     Mutant(
         "camera_half_pixel",
@@ -82,8 +83,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "mis_pdf_area_measure",
         "MIS weight of BSDF-found emission compares the cosine pdf (solid angle) with the light pdf "
         "left in area measure (no r²/cos θ_y conversion)",
-        (Edit("_emission_weight", "power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))",
-              "power_heuristic(pdf_bsdf, pa)"),),
+        (Edit("emission_weight", "power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))",
+              "power_heuristic(pdf_bsdf, pa)", DIRECT),),
     ),
     Mutant(
         "offset_minus_n",
@@ -165,10 +166,11 @@ MUTANTS: tuple[Mutant, ...] = (
         "delta_emission_mis_weighted",
         "emission found after a mirror or glass bounce MIS-weighted against light sampling that was never "
         "done there (the weight is 1 only for camera rays): caustics and mirrored lights vanish",
-        (Replace("_emission_weight", """
-                 def _emission_weight(pdf_bsdf, pa, t, cos_o, depth) -> float:
-                     return 1.0 if depth == 1 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))"""),
-         Edit("_shade", "_emission_weight(rays.pdf[i], pa, t, cos_o)", "_emission_weight(rays.pdf[i], pa, t, cos_o, depth)")),
+        (Replace("emission_weight", """
+                 def emission_weight(pdf_bsdf, pa, t, cos_o, depth) -> float:
+                     return 1.0 if depth == 1 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))""",
+                 DIRECT),
+         Edit("_shade", "emission_weight(rays.pdf[i], pa, t, cos_o)", "emission_weight(rays.pdf[i], pa, t, cos_o, depth)")),
     ),
     Mutant(
         "caustic_95",
@@ -176,8 +178,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "ray from the third path segment on (taken to be a caustic: a diffuse bounce, then the specular chain to the "
         "light) weighted 0.95. The caustic (L S+ D) comes out 5% dark, and so does the light seen through both "
         "faces of the glass; the light's image in the mirror (second segment) is untouched",
-        (Edit("_shade", "w = _emission_weight(rays.pdf[i], pa, t, cos_o)", """
-              w = _emission_weight(rays.pdf[i], pa, t, cos_o)
+        (Edit("_shade", "w = emission_weight(rays.pdf[i], pa, t, cos_o)", """
+              w = emission_weight(rays.pdf[i], pa, t, cos_o)
               if rays.pdf[i] == 0.0 and depth > 2:  # a caustic: damp its fireflies
                   w *= 0.95"""),),
     ),

@@ -71,14 +71,13 @@ from cornell_harness.scenes.spectral_scene import SPECTRAL_INFO
 from cornell_harness.renderers.core.adapter import ToolkitRenderer, warmed_geometry
 from cornell_harness.renderers.core.bsdf import bsdf_sample, faces, is_delta, refraction_scale
 from cornell_harness.renderers.core.camera import camera_rays, image_plane
-from cornell_harness.renderers.core.direct import sample_ld
+from cornell_harness.renderers.core.direct import emission_weight, sample_ld
 from cornell_harness.renderers.core.geometry import SceneGeometry, add_unoccluded_light, offset_origin, ray_hit, wavefront_hits
-from cornell_harness.renderers.core.lights import solid_angle_pdf_along
 from cornell_harness.renderers.core.roulette import Q_MAX, RR_DEPTH, continue_path
 from cornell_harness.renderers.core.rays import RayBuffer, ShadowBuffer, set_path, set_ray, set_shadow, wavefront
 from cornell_harness.renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, SAMPLER_SETTING, VARIANCE_SETTING,
                                     Stream, independent, path_point, vertex_1d, vertex_2d)
-from cornell_harness.renderers.core.sampling import jit, power_heuristic
+from cornell_harness.renderers.core.sampling import jit
 from cornell_harness.renderers.core.wavelengths import N_WAVELENGTHS
 from cornell_harness.renderers.hero_wavelength import spectral_tables, trace_hero_paths
 from cornell_harness.renderers.core.schedule import render_image
@@ -102,16 +101,6 @@ class Bounce(NamedTuple):
     nxt: RayBuffer
     aux: np.ndarray  # (m, 6) or (0, 6): albedo, normal
     aux_open: np.ndarray  # (m,) bool: the path has not written its AOVs yet
-
-
-@jit
-def _emission_weight(pdf_bsdf, pa, t, cos_o) -> float:
-    """MIS weight of emission found at distance ``t`` by a ray sampled with ``pdf_bsdf``.
-
-    A pdf of 0 marks a ray that light sampling could not have made (the
-    camera ray, a delta-BSDF sample): its emission counts with weight 1.
-    """
-    return 1.0 if pdf_bsdf == 0.0 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))
 
 
 @jit
@@ -158,7 +147,7 @@ def _shade(hits, rays, stream, first, depth, extend, roulette, geo, out):
             out.aux_open[q] = False
         pa = geo.light_pdf_area[p]
         if pa > 0.0 and cos_o > 0.0:
-            w = _emission_weight(rays.pdf[i], pa, t, cos_o)
+            w = emission_weight(rays.pdf[i], pa, t, cos_o)
             for c in range(3):
                 out.L[q, c] += beta[c] * geo.radiance[p, c] * w
         if not extend:

@@ -79,7 +79,6 @@ def sample_ld(x, n, mat, weight, u, geo, mis):
 def emission_weight(pdf_bsdf, pa, t, cos_o) -> float:
     """MIS weight of emission found at distance ``t`` by a ray sampled with solid-angle pdf ``pdf_bsdf``, against
     light sampling's area pdf ``pa`` of that point (power heuristic, Veach 1997 eq. 9.13); a pdf of 0 marks a
-    ray light sampling could not have made (a camera ray, a delta-BSDF sample): weight 1. The hero-wavelength
-    path tracer's; the RGB one keeps its own copy, ``cornell_harness.renderers.pathtracer._emission_weight``, which its mutants
-    (tests/mutants/pathtracer.py) patch in place."""
+    ray light sampling could not have made (a camera ray, a delta-BSDF sample): weight 1. The path tracers'
+    (RGB and hero-wavelength)."""
     return 1.0 if pdf_bsdf == 0.0 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))
