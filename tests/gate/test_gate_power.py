@@ -150,10 +150,13 @@ def test_catalogue_replace_and_wrap_a_named_function():
     (mutants.Edit("gone", "a + b", "a - b", "demo.py"), "0 definitions of 'gone'"),
     (mutants.Edit("Box.volume", "w * h", "w", "demo.py"), r"0 definitions of 'volume' \(of 'Box.volume'\)"),
     (mutants.Replace("kernel", "def other(a, b):\n    return 0", "demo.py"), "one def named 'kernel'"),
-], ids=["absent", "twice", "no-function", "no-method", "replace-renames"])
+    (mutants.Edit("kernel", "a + b", "(a + b)  # the same", "demo.py"), "the patch does not change the function"),
+    (mutants.Edit("kernel", "a +", "a - b", "demo.py"), "'a \\+' is not Python"),
+], ids=["absent", "twice", "no-function", "no-method", "replace-renames", "no-change", "not-python"])
 def test_catalogue_patch_that_does_not_apply_once_fails_loudly(patch, error):
     """A patch whose function is gone, or whose code is not in it exactly once, raises, naming the mutant and the
-    function: a refactor breaks the catalogue loudly instead of testing an unmutated renderer."""
+    function: a refactor breaks the catalogue loudly instead of testing an unmutated renderer. So does a patch that
+    changes nothing, or is not Python."""
     with pytest.raises(AssertionError, match=f"mutant 'demo', {patch.function} in demo.py: .*{error}"):
         _demo(patch)
 

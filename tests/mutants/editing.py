@@ -57,12 +57,15 @@ def _statement_lists(fn: ast.FunctionDef):
                 yield stmts
 
 
-def _parse(code: str) -> list[ast.stmt]:
-    return ast.parse(textwrap.dedent(code).strip("\n")).body if code.strip() else []
+def _parse(code: str, where: str) -> list[ast.stmt]:
+    try:
+        return ast.parse(textwrap.dedent(code).strip("\n")).body if code.strip() else []
+    except SyntaxError as e:
+        raise AssertionError(f"{where}: {textwrap.dedent(code).strip()!r} is not Python ({e.msg})") from None
 
 
 def _edit(fn: ast.FunctionDef, p: Edit, where: str) -> None:
-    old, new = _parse(p.old), _parse(p.new)
+    old, new = _parse(p.old, where), _parse(p.new, where)
     assert old, f"{where}: an Edit needs the code it changes"
     if len(old) == len(new) == 1 and isinstance(old[0], ast.Expr) and isinstance(new[0], ast.Expr):
         # An expression for an expression, wherever it occurs in the function.
@@ -93,7 +96,7 @@ def _assert_once(hits: list, what: str, old: str, where: str) -> None:
 
 
 def _replace(fn: ast.FunctionDef, p: Replace, where: str) -> ast.FunctionDef:
-    defs = _parse(p.source)
+    defs = _parse(p.source, where)
     assert len(defs) == 1 and isinstance(defs[0], _DEFS) and defs[0].name == fn.name, \
         f"{where}: a Replace's source is one def named {fn.name!r}"
     new = defs[0]
@@ -102,7 +105,7 @@ def _replace(fn: ast.FunctionDef, p: Replace, where: str) -> ast.FunctionDef:
 
 
 def _wrap(fn: ast.FunctionDef, p: Wrap, where: str) -> list[ast.stmt]:
-    defs = _parse(p.wrapper)
+    defs = _parse(p.wrapper, where)
     assert len(defs) == 1 and isinstance(defs[0], ast.FunctionDef), f"{where}: a Wrap's wrapper is one def"
     wrapper = defs[0]
     wrapper.name = f"_mutant_wrap_{fn.name}"
@@ -126,6 +129,7 @@ def apply_patch(text: str, p: Patch, mutant: str) -> str:
     """``text`` (the source of ``p.file``) with the patch applied: only the lines of ``p.function`` change."""
     where = f"mutant {mutant!r}, {p.function} in {p.file}"
     fn = find_function(ast.parse(text), p.function, where)
+    before = ast.dump(fn)
     if isinstance(p, Edit):
         _edit(fn, p, where)
         nodes = [fn]
@@ -133,6 +137,7 @@ def apply_patch(text: str, p: Patch, mutant: str) -> str:
         nodes = [_replace(fn, p, where)]
     else:
         nodes = _wrap(fn, p, where)
+    assert len(nodes) > 1 or ast.dump(nodes[0]) != before, f"{where}: the patch does not change the function"
     code = "\n".join(ast.unparse(ast.fix_missing_locations(n)) for n in nodes) + "\n"
     first, last = span(fn)
     lines = text.splitlines(keepends=True)
