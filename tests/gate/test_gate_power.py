@@ -27,6 +27,7 @@ every expectation, 20 seeds, effect sizes): see ``docs/gate-detection.md``.
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 
 import numpy as np
@@ -58,24 +59,106 @@ def work(tmp_path_factory):
 
 # -- the catalogue --------------------------------------------------------------------
 
-def test_catalogue_applies_exactly_once_and_changes_the_source():
-    """Every patch applies exactly once to today's path tracer, and every mutant differs from it."""
-    original = mutants.original_source()
+def _outside(text: str, spans: list[tuple[int, int]]) -> list[str]:
+    """The text of ``text`` around the given line spans (1-based, inclusive, in order): one piece more than spans."""
+    lines, pieces, at = text.splitlines(keepends=True), [], 0
+    for first, last in spans:
+        pieces.append("".join(lines[at:first - 1]))
+        at = last
+    return pieces + ["".join(lines[at:])]
+
+
+def test_catalogue_applies_and_changes_only_the_named_functions():
+    """Every mutant applies to today's sources, and each file it patches differs from the original only inside the
+    functions its patches name: every other line is kept byte for byte, in order, and each named function's syntax
+    tree changes (the patched copy is still Python)."""
     assert len(mutants.MUTANTS) >= 8
     for m in mutants.MUTANTS:
-        text = mutants.patched_source(m)
-        assert text != original and m.description
-        compile(text, m.name, "exec")  # still Python
+        assert m.description
+        for file, names in mutants.named_functions(m.patches).items():
+            original = (mutants.ROOT / file).read_text(encoding="utf-8")
+            patched = mutants.patched_file(m, file)
+            before, after = ast.parse(original), ast.parse(patched, f"{m.name}:{file}")
+            pieces = _outside(original, sorted(mutants.span(mutants.find_function(before, f)) for f in names))
+            assert patched.startswith(pieces[0]) and patched.endswith(pieces[-1]), f"{m.name}: {file}"
+            rest = patched[len(pieces[0]):len(patched) - len(pieces[-1])]
+            for piece in pieces[1:-1]:  # the text between two named functions
+                assert piece in rest, f"{m.name}: {file} changed between {sorted(names)}"
+                rest = rest[rest.index(piece) + len(piece):]
+            for f in names:
+                assert ast.dump(mutants.find_function(after, f)) != ast.dump(mutants.find_function(before, f)), \
+                    f"{m.name}: {f} in {file} unchanged"
 
 
-def test_a_patch_that_does_not_apply_once_fails_loudly():
-    m = mutants.BY_NAME["mis_emitter_double"]  # a patch of the path tracer itself
-    old = m.patches[0][0]
-    source = mutants.original_source()
-    with pytest.raises(AssertionError, match="occurs 0 times"):
-        mutants.patched_source(m, source.replace(old, "pe = light_pdf_area[e]  # refactored\n"))
-    with pytest.raises(AssertionError, match="occurs 2 times"):
-        mutants.patched_source(m, source + "\n# " + old)
+DEMO = '''import math
+
+
+def other(a, b):
+    x = a + b  # the same code as in kernel: left alone
+    return x
+
+
+@decorate
+def kernel(a, b):
+    """Docstring,
+    on two lines."""
+    x = (a +
+         b)  # written over two lines
+    return math.sqrt(x) * x
+
+
+class Box:
+    def area(self, w, h):
+        return w * h
+'''
+
+
+def _demo(patch) -> str:
+    return mutants.apply_patch(DEMO, patch, "demo")
+
+
+def test_catalogue_edit_matches_syntax_inside_its_function_only():
+    """An Edit matches the code's syntax tree (formatting and comments do not matter), only inside the function it
+    names; the function is written out again over its own lines, decorators and docstring kept, the rest of the
+    file byte for byte; an Edit of statements replaces, inserts or deletes them."""
+    out = _demo(mutants.Edit("kernel", "a + b", "a - b", "demo.py"))
+    assert "    x = a - b\n" in out and "    x = a + b  # the same code as in kernel: left alone\n" in out
+    assert '@decorate\ndef kernel(a, b):\n    """Docstring,\n    on two lines."""\n' in out
+    head, tail = DEMO.split("@decorate")[0], DEMO.split("return math.sqrt(x) * x\n")[1]
+    assert out.startswith(head) and out.endswith(tail)
+    out = _demo(mutants.Edit("Box.area", "return w * h", "w = w + 1\nreturn w * h", "demo.py"))
+    assert "    def area(self, w, h):\n        w = w + 1\n        return w * h\n" in out
+    out = _demo(mutants.Edit("other", "x = a + b", "", "demo.py"))
+    assert "def other(a, b):\n    return x\n" in out
+
+
+def test_catalogue_replace_and_wrap_a_named_function():
+    """A Replace keeps the original's decorators; a Wrap decorates the function with the wrapper, outermost, and
+    leaves no name behind."""
+    out = _demo(mutants.Replace("kernel", "def kernel(a, b):\n    return 0.0", "demo.py"))
+    assert "@decorate\ndef kernel(a, b):\n    return 0.0\n" in out
+    out = _demo(mutants.Wrap("Box.area", "def wrap(f):\n    return lambda self, w, h: 2 * f(self, w, h)", "demo.py"))
+    namespace = {"decorate": lambda f: f}
+    exec(compile(out, "demo", "exec"), namespace)
+    box = namespace["Box"]
+    assert box().area(2, 3) == 12 and not [k for k in vars(box) if "wrap" in k] and "_mutant_wrap_area" not in namespace
+
+
+@pytest.mark.parametrize("patch, error", [
+    (mutants.Edit("kernel", "a * b", "a - b", "demo.py"), r"'a \* b' occur\(s\) 0 times in the function"),
+    (mutants.Edit("kernel", "x", "y", "demo.py"), r"'x' occur\(s\) 2 times in the function"),
+    (mutants.Edit("gone", "a + b", "a - b", "demo.py"), "0 definitions of 'gone'"),
+    (mutants.Edit("Box.volume", "w * h", "w", "demo.py"), r"0 definitions of 'volume' \(of 'Box.volume'\)"),
+    (mutants.Replace("kernel", "def other(a, b):\n    return 0", "demo.py"), "one def named 'kernel'"),
+    (mutants.Edit("kernel", "a + b", "(a + b)  # the same", "demo.py"), "the patch does not change the function"),
+    (mutants.Edit("kernel", "a +", "a - b", "demo.py"), "'a \\+' is not Python"),
+], ids=["absent", "twice", "no-function", "no-method", "replace-renames", "no-change", "not-python"])
+def test_catalogue_patch_that_does_not_apply_once_fails_loudly(patch, error):
+    """A patch whose function is gone, or whose code is not in it exactly once, raises, naming the mutant and the
+    function: a refactor breaks the catalogue loudly instead of testing an unmutated renderer. So does a patch that
+    changes nothing, or is not Python."""
+    with pytest.raises(AssertionError, match=f"mutant 'demo', {patch.function} in demo.py: .*{error}"):
+        _demo(patch)
 
 
 def test_load_mutant_imports_a_renderer_from_a_real_file(work):

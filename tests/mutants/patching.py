@@ -1,6 +1,6 @@
 """Applying a mutant (copies of the patched modules, loaded as the renderer's entry) and running the gate on it.
 
-See :mod:`tests.mutants` for how a mutant becomes a renderer, and why every patch must apply exactly once.
+See :mod:`tests.mutants` for how a mutant becomes a renderer, and why every patch must apply.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from pathlib import Path
 from cornell_harness.adapters.registry import RendererEntry
 from cornell_harness.adapters.settings import resolve_settings
 from tests.mutants.catalogue import BY_NAME
+from tests.mutants.editing import apply_patch, named_functions
 from tests.mutants.model import CORE, INTEGRATORS, PATHTRACER, ROOT, Mutant
 
 #: Core modules every mutant shares with the real renderer: scalar helpers, no types of their own.
@@ -65,12 +66,24 @@ def _redirect(text: str, module: str, to: str) -> str:
     return text
 
 
+def patched_file(mutant: Mutant | str, file: str, text: str | None = None) -> str:
+    """``file``'s source (``text``, default the repository's) with the mutant's patches of it applied, its imports
+    as they are: it differs from ``text`` only in the lines of the functions the patches name."""
+    m = BY_NAME[mutant] if isinstance(mutant, str) else mutant
+    text = (ROOT / file).read_text(encoding="utf-8") if text is None else text
+    for p in m.patches:
+        if p.file == file:
+            text = apply_patch(text, p, m.name)
+    return text
+
+
 def patched_sources(mutant: Mutant | str, sources: dict[str, str] | None = None) -> dict[str, str]:
     """Every module of the mutant: {file it replaces: patched text with imports redirected to the copies}.
 
     ``sources`` overrides the text of some files (default: read from the
-    repository). AssertionError if a patch does not apply exactly once, or
-    if the mutant changes nothing.
+    repository). AssertionError if a patch's function is not found, or the
+    code an Edit changes is not in it exactly once, or if the mutant changes
+    nothing.
     """
     m = BY_NAME[mutant] if isinstance(mutant, str) else mutant
     sources = dict(sources or {})
@@ -82,12 +95,8 @@ def patched_sources(mutant: Mutant | str, sources: dict[str, str] | None = None)
 
     top = integrator(m)
     texts = {top: read(top)}
-    for p in m.patches:
-        text = texts.get(p.file, read(p.file))
-        count = text.count(p.old)
-        assert count == 1, (f"mutant {m.name!r}: the snippet {p.old!r} occurs {count} times in {p.file} "
-                            f"(expected exactly once); update its family module under tests/mutants/ to the refactored source")
-        texts[p.file] = text.replace(p.old, p.new)
+    for f in named_functions(m.patches):
+        texts[f] = patched_file(m, f, read(f))
     assert any(texts[f] != read(f) for f in texts), f"mutant {m.name!r} does not change the source"
     # A mutant of the toolkit gets its own copy of every core module that a kernel may call with the
     # scene tables or ray buffers: a shared module's numba cache would otherwise record a signature

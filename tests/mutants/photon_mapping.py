@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from tests.mutants.model import CORE, SPPM, Mutant
+from tests.mutants.model import CORE, SPPM, Edit, Mutant
+
+PHOTONS, PHOTON_MAP = f"{CORE}/photons.py", f"{CORE}/photon_map.py"
 
 MUTANTS: tuple[Mutant, ...] = (
     # -- photon mapping (photonmap, sppm) ------------------------------------------------
@@ -10,38 +12,38 @@ MUTANTS: tuple[Mutant, ...] = (
         "photon_power_not_divided",
         "photon flux not divided by the number of photons emitted (each photon carries the light's whole "
         "power)",
-        (("    photons.power[:] /= max(emitted, 1)\n", "", f"{CORE}/photons.py"),),
+        (Edit("shoot", "photons.power[:] /= max(emitted, 1)", "", PHOTONS),),
         "photonmap",
     ),
     Mutant(
         "double_cosine",
         "density estimate weighted by the cosine of each photon's incidence, which its flux already counts",
-        (("            w = kernel_weight(kernel, dist[i, a], r)\n",
-          "            w = kernel_weight(kernel, dist[i, a], r) * cos_in\n", f"{CORE}/photon_map.py"),),
+        (Edit("_estimate", "w = kernel_weight(kernel, dist[i, a], r)", "w = kernel_weight(kernel, dist[i, a], r) * cos_in",
+              PHOTON_MAP),),
         "photonmap",
     ),
     Mutant(
         "caustic_photon_on_specular_surface",
         "caustic photons stored where they leave the last specular surface (the ray's origin) instead of "
         "where they land",
-        (("                _store(out.photons, ns, x, power, d, n, depth, caustic)\n",
-          "                o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])\n"
-          "                _store(out.photons, ns, o if mode == STORE_CAUSTIC else x, power, d, n, depth, caustic)\n",
-          f"{CORE}/photons.py"),),
+        (Edit("_scatter", "_store(out.photons, ns, x, power, d, n, depth, caustic)", """
+              o = (rays.o[i, 0], rays.o[i, 1], rays.o[i, 2])
+              _store(out.photons, ns, o if mode == STORE_CAUSTIC else x, power, d, n, depth, caustic)""", PHOTONS),),
         "photonmap",
     ),
     Mutant(
         "photon_direction_reuses_point_dims",
         "a photon's emitted direction drawn from the sample dimensions of its point on the emitter (EMIT_U for "
         "both decisions): where a photon leaves the light decides where it goes",
-        (("        w = sample_2d(stream, pt, EMIT_DIR_U)\n", "        w = sample_2d(stream, pt, EMIT_U)\n",
-          f"{CORE}/photons.py"),),
+        (Edit("_emit", "sample_2d(stream, pt, EMIT_DIR_U)", "sample_2d(stream, pt, EMIT_U)", PHOTONS),),
         "photonmap",
     ),
     Mutant(
         "no_normal_test",
         "no normal test in the density estimate: photons on a wall count on the floor at their corner",
-        (("    if cos_n < NORMAL_COS_MIN:\n        return 0.0\n", "", f"{CORE}/photon_map.py"),),
+        (Edit("photon_faces", """
+              if cos_n < NORMAL_COS_MIN:
+                  return 0.0""", "", PHOTON_MAP),),
         "photonmap",
     ),
     Mutant(
@@ -49,15 +51,14 @@ MUTANTS: tuple[Mutant, ...] = (
         "the photons emitted counted 2% high, so every photon's flux is 2% low (the flux divided by 1.02 times the "
         "photons emitted): an emitted count that also counts photons that never left the light, e.g. samples "
         "re-drawn after a zero-pdf emission, or batches traced and then dropped",
-        (('    emitted = state["emitted"]\n', '    emitted = state["emitted"] + state["emitted"] // 50\n',
-          f"{CORE}/photons.py"),),
+        (Edit("shoot", 'emitted = state["emitted"]', 'emitted = state["emitted"] + state["emitted"] // 50', PHOTONS),),
         "photonmap",
     ),
     Mutant(
         "sppm_flux_98",
         "SPPM's photons per iteration counted 2% high, so the gathered flux is 2% low (the flux divided by 1.02 "
         "times the photons shot), as photon_flux_98 in the photon mapper",
-        (("            phi /= photons\n", "            phi /= photons + photons // 50\n", SPPM),),
+        (Edit("Progress.iterate", "phi /= photons", "phi /= photons + photons // 50", SPPM),),
         "sppm",
     ),
     Mutant(
@@ -65,21 +66,21 @@ MUTANTS: tuple[Mutant, ...] = (
         "SPPM's flux update adds the iteration's flux after scaling the sum to the new radius "
         "(τ' = τ·r'²/r² + Φ instead of (τ + Φ)·r'²/r²): the photons gathered in the old disc are counted in the "
         "smaller new one, a bias that falls only as log(i)/i",
-        (("        self.tau[hit] = (self.tau[hit] + phi[hit]) * (r_new ** 2 / self.radius[hit] ** 2)[:, None]\n",
-          "        self.tau[hit] = self.tau[hit] * (r_new ** 2 / self.radius[hit] ** 2)[:, None] + phi[hit]\n", SPPM),),
+        (Edit("Progress._update", "(self.tau[hit] + phi[hit]) * (r_new ** 2 / self.radius[hit] ** 2)[:, None]",
+              "self.tau[hit] * (r_new ** 2 / self.radius[hit] ** 2)[:, None] + phi[hit]", SPPM),),
         "sppm",
     ),
     Mutant(
         "no_radius_shrinking",
         "SPPM's α left out of the photon-count update (N' = N + M): the radius never shrinks, and the image "
         "converges to a blurred one",
-        (("        n_new = self.n[hit] + alpha * m[hit]\n", "        n_new = self.n[hit] + m[hit]\n", SPPM),),
+        (Edit("Progress._update", "self.n[hit] + alpha * m[hit]", "self.n[hit] + m[hit]", SPPM),),
         "sppm",
     ),
     Mutant(
         "sppm_power_not_divided",
         "SPPM's gathered flux not divided by the iteration's photon count",
-        (("            phi /= photons\n", "", SPPM),),
+        (Edit("Progress.iterate", "phi /= photons", "", SPPM),),
         "sppm",
     ),
     Mutant(
@@ -87,7 +88,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "SPPM's pixel footprint taken as its area, the pixel's solid angle times the squared distance (Ω·t²), "
         "instead of its width (√Ω·t): on a 256² image the radius starts about 100 times too small, so few photons "
         "are gathered and the estimate is noise",
-        (("    return cone_width * distance\n", "    return cone_width ** 2 * distance ** 2\n", SPPM),),
+        (Edit("footprints", "cone_width * distance", "cone_width ** 2 * distance ** 2", SPPM),),
         "sppm",
     ),
 )

@@ -5,35 +5,32 @@ spectral furnace failing each."""
 
 from __future__ import annotations
 
-from tests.mutants.model import Mutant
-
-HERO = "cornell_harness/renderers/hero_wavelength.py"
+from tests.mutants.model import HERO, Edit, Mutant
 
 MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "hero_wrong_cmf",
         "each wavelength's radiance weighted by the matching functions of the next wavelength of the path "
         "(nodes[(j + 1) % 4]: the rotation applied twice), so wavelengths are paired with the wrong CMF",
-        (("sensor[q, j, c] = spec.cmf_rgb[nodes[j], c] * inv",
-          "sensor[q, j, c] = spec.cmf_rgb[nodes[(j + 1) % N_WAVELENGTHS], c] * inv", HERO),),
+        (Edit("_start_paths", "spec.cmf_rgb[nodes[j], c] * inv",
+              "spec.cmf_rgb[nodes[(j + 1) % N_WAVELENGTHS], c] * inv", HERO),),
     ),
     Mutant(
         "hero_pdf_ignored",
         "the wavelengths' sampling pdf ignored: each divided by the uniform density 1/(λ_max - λ_min) as if "
         "sampled uniformly, though they follow the visible-wavelength pdf",
-        (("            p = pdf[j]\n",
-          "            p = 1.0 / (LAMBDA_MAX - LAMBDA_MIN)  # uniform over the range\n", HERO),
-         ("from cornell_harness.renderers.core.wavelengths import N_WAVELENGTHS,",
-          "from cornell_harness.renderers.core.wavelengths import LAMBDA_MAX, LAMBDA_MIN, N_WAVELENGTHS,", HERO)),
+        # The sampled range, LAMBDA_MAX - LAMBDA_MIN of core/wavelengths.py, which the kernel's module does not import.
+        (Edit("_start_paths", "p = pdf[j]", "p = 1.0 / (830.5 - 359.5)  # uniform over the range", HERO),),
     ),
     Mutant(
         "hero_emission_normalised_twice",
         "the emission spectra divided by Σȳ when resampled (as emission_rgb's projection does), though the "
         "sensor weights already divide by it: every emitter 1/106.9 as bright",
-        (("le = np.array([on_grid(s) for s in rows_le])",
-          "le = np.array([on_grid(s) / sensor_rgb_norm() for s in rows_le])", HERO),
-         ("def spectral_tables(",
-          "def sensor_rgb_norm():\n    from cornell_harness.scenes.spectra import observer\n\n    return observer()[1][:, 1].sum()\n\n\n"
-          "def spectral_tables(", HERO)),
+        (Edit("spectral_tables",
+              "le = np.array([on_grid(s) for s in rows_le]).reshape(len(rows_le), -1) if rows_le "
+              "else np.zeros((1, rho.shape[1]))", """
+              from cornell_harness.scenes.spectra import observer
+              le = np.array([on_grid(s) / observer()[1][:, 1].sum() for s in rows_le]).reshape(len(rows_le), -1) \\
+                  if rows_le else np.zeros((1, rho.shape[1]))""", HERO),),
     ),
 )

@@ -79,14 +79,13 @@ from cornell_harness.renderers.core.adapter import ToolkitRenderer, warmed_geome
 from cornell_harness.renderers.core.bsdf import bsdf_sample, faces, is_delta, refraction_scale
 from cornell_harness.renderers.core.camera import camera_rays, image_plane
 from cornell_harness.renderers.core.channels import channel_functions
-from cornell_harness.renderers.core.direct import light_sample, unoccluded_rgb
+from cornell_harness.renderers.core.direct import emission_weight, light_sample, unoccluded_rgb
 from cornell_harness.renderers.core.geometry import SceneGeometry, add_unoccluded_light, offset_origin, ray_hit, wavefront_hits
-from cornell_harness.renderers.core.lights import solid_angle_pdf_along
 from cornell_harness.renderers.core.roulette import Q_MAX, RR_DEPTH, continue_path
 from cornell_harness.renderers.core.rays import RayBuffer, ShadowBuffer, set_path, set_ray, set_shadow, wavefront
 from cornell_harness.renderers.core.sampler import (BSDF_U, EMITTER_PICK, EMITTER_U, ROULETTE, SAMPLER_SETTING, VARIANCE_SETTING,
                                     Stream, independent, path_point, vertex_1d, vertex_2d)
-from cornell_harness.renderers.core.sampling import jit, power_heuristic
+from cornell_harness.renderers.core.sampling import jit
 from cornell_harness.renderers.core.wavelengths import N_WAVELENGTHS
 from cornell_harness.renderers.hero_wavelength import Hero, HeroPaths, SpectralTables, spectral_tables, start_paths
 from cornell_harness.renderers.core.schedule import render_image
@@ -108,16 +107,6 @@ class Bounce(NamedTuple):
 
     shadow: ShadowBuffer
     nxt: RayBuffer
-
-
-@jit
-def _emission_weight(pdf_bsdf, pa, t, cos_o) -> float:
-    """MIS weight of emission found at distance ``t`` by a ray sampled with ``pdf_bsdf``.
-
-    A pdf of 0 marks a ray that light sampling could not have made (the
-    camera ray, a delta-BSDF sample): its emission counts with weight 1.
-    """
-    return 1.0 if pdf_bsdf == 0.0 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))
 
 
 @jit
@@ -215,7 +204,7 @@ def _shade(hits, rays, stream, first, depth, extend, roulette, geo, paths, out):
             paths.aux_open[q] = False
         pa = geo.light_pdf_area[p]
         if pa > 0.0 and cos_o > 0.0:
-            w = _emission_weight(rays.pdf[i], pa, t, cos_o)
+            w = emission_weight(rays.pdf[i], pa, t, cos_o)
             add_emission(paths, q, beta, geo, p, w)
         if not extend:
             continue

@@ -24,9 +24,9 @@ from __future__ import annotations
 
 from cornell_harness.renderers.core.bsdf import bsdf_eval, bsdf_pdf
 from cornell_harness.renderers.core.geometry import offset_origin
-from cornell_harness.renderers.core.lights import sample_emitter, solid_angle_pdf, towards_emitter
+from cornell_harness.renderers.core.lights import sample_emitter, solid_angle_pdf, solid_angle_pdf_along, towards_emitter
 from cornell_harness.renderers.core.rays import shadow_segment
-from cornell_harness.renderers.core.sampling import jit_inline, power_heuristic
+from cornell_harness.renderers.core.sampling import jit, jit_inline, power_heuristic
 
 _NONE = ((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0))
 _NONE_GEOMETRY = ((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.0, 0, 0.0, 0.0)
@@ -80,3 +80,11 @@ def unoccluded_rgb(mat, weight, cos_x, g, geo, e):
             bsdf_eval(mat, weight[1], cos_x) * geo.radiance[e, 1] * g,
             bsdf_eval(mat, weight[2], cos_x) * geo.radiance[e, 2] * g)
 
+
+@jit
+def emission_weight(pdf_bsdf, pa, t, cos_o) -> float:
+    """MIS weight of emission found at distance ``t`` by a ray sampled with solid-angle pdf ``pdf_bsdf``, against
+    light sampling's area pdf ``pa`` of that point (power heuristic, Veach 1997 eq. 9.13); a pdf of 0 marks a
+    ray light sampling could not have made (a camera ray, a delta-BSDF sample): weight 1. The path tracer's,
+    in RGB and hero-wavelength mode alike."""
+    return 1.0 if pdf_bsdf == 0.0 else power_heuristic(pdf_bsdf, solid_angle_pdf_along(pa, t, cos_o))
