@@ -55,6 +55,9 @@ def test_pass_warn_and_fail(render16, tmp_path, capsys):
     # A region's metric, of a region the scene names.
     code, out, err = _compare(capsys, tmp_path, render16, "--fail", "region.walls.rmse=1e-6")
     assert code == 1 and "cbox: fail: m16: region.walls.rmse = " in err
+    # Thresholds at the ends of their metric's range are accepted (and these can only pass).
+    code, out, err = _compare(capsys, tmp_path, render16, "--fail", "ssim=-1", "--warn", "delta_e2000_frac_gt_2_3=1")
+    assert code == 0 and err == "" and json.loads(out)["verdict"]["status"] == "pass"
 
 
 def test_fail_percent_counts_pixels_above_the_delta_e_threshold(render16, tmp_path, capsys):
@@ -72,6 +75,12 @@ def test_fail_percent_counts_pixels_above_the_delta_e_threshold(render16, tmp_pa
     (("--fail", "delta_e200_mean=0.1"), ["--fail", "unknown metric", "did you mean 'delta_e2000_mean'?"]),
     (("--warn", "rmse"), ["--warn", "expected METRIC=VALUE"]),
     (("--fail", "region.causti.rmse=1"), ["--fail", "no region 'causti'", "did you mean 'caustic'?"]),
+    (("--fail", "delta_e2000_mean=-1"), ["--fail", "delta_e2000_mean is at least 0"]),
+    (("--warn", "ssim=1.5"), ["--warn", "ssim is between -1 and 1"]),
+    (("--fail", "rmse=-0.1"), ["--fail", "rmse is at least 0"]),
+    (("--fail", "rel_mse=-1"), ["--fail", "rel_mse is at least 0"]),
+    (("--warn", "flip_mean=-1"), ["--warn", "flip_mean is between 0 and 1"]),
+    (("--fail", "negative_count=-1"), ["--fail", "negative_count is at least 0"]),
     (("--fail-percent", "5"), ["--fail-percent", "--pixel-threshold", "together"]),
     (("--fail-percent", "101", "--pixel-threshold", "1"), ["--fail-percent"]),
     (("--exposure", "1"), ["--exposure", "display-referred"]),

@@ -29,6 +29,29 @@ def test_bad_thresholds_are_refused(text, words):
     assert words in str(e.value)
 
 
+@pytest.mark.parametrize("text, words", [
+    ("delta_e2000_mean=-1", "delta_e2000_mean is at least 0, so -1 would fail every image"),
+    ("ssim=1.5", "ssim is between -1 and 1, so 1.5 would fail every image"),
+    ("ssim=-2", "would pass every image"), ("rmse=-0.1", "rmse is at least 0"), ("rel_mse=-1", "rel_mse"),
+    ("flip_mean=1.5", "flip_mean is between 0 and 1, so 1.5 would pass every image"),
+    ("flip_mean=-0.5", "flip_mean"), ("nan_count=-1", "nan_count is at least 0"),
+    ("delta_e2000_frac_gt_2_3=2", "between 0 and 1"),
+    ("mean_radiance_rel_error=-0.1", "|mean_radiance_rel_error| is at least 0"),
+    ("region.caustic.rmse=-1", "region.caustic.rmse is at least 0"),
+    ("region.caustic.mean_z=-3", "|region.caustic.mean_z| is at least 0"),
+])
+def test_thresholds_outside_the_metric_range_are_refused(text, words):
+    with pytest.raises(ThresholdError) as e:
+        parse_threshold(text, "warn")
+    assert words in str(e.value) and str(e.value).startswith(repr(text))
+
+
+@pytest.mark.parametrize("text", ["ssim=1", "ssim=-1", "ssim=0.5", "delta_e2000_mean=0", "flip_mean=1", "psnr=0",
+                                  "nan_count=0", "mean_radiance_rel_error=0", "region.caustic.mean_z=3"])
+def test_thresholds_at_the_ends_of_the_range_are_accepted(text):
+    assert parse_threshold(text, "fail").value == float(text.split("=")[1])
+
+
 def test_exceeded_each_way():
     assert Threshold("rmse", 0.1, "fail").exceeded(0.2) and not Threshold("rmse", 0.1, "fail").exceeded(0.1)
     assert Threshold("ssim", 0.9, "fail").exceeded(0.5) and not Threshold("ssim", 0.9, "fail").exceeded(0.95)

@@ -14,8 +14,14 @@ validates them without importing the mask code, which pulls in SciPy.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Iterable
+
+#: The values a metric can take (:attr:`Metric.values`): any, an error's (0 and up), a fraction's.
+ANY = (-math.inf, math.inf)
+NON_NEGATIVE = (0.0, math.inf)
+UNIT = (0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -32,19 +38,20 @@ class Metric:
     per_image: bool = False  # computed from one image against the reference (a gate may budget it)
     colour: bool = False  # radiance images only (a colour difference, HDR-FLIP); an AO image is one scalar
     cheap: bool = False  # a per-image metric of a few passes over the pixels: a check computes it unasked
+    values: tuple[float, float] = ANY  # the closed range it lies in: a threshold outside it is meaningless
 
 
 def _m(key, label, definition, better=None, axis=None, slope=None, per_image=True, colour=False,
-       cheap=False) -> Metric:
-    return Metric(key, label, definition, better, axis, slope, per_image, colour, cheap)
+       cheap=False, values=NON_NEGATIVE) -> Metric:
+    return Metric(key, label, definition, better, axis, slope, per_image, colour, cheap, values)
 
 
 _TABLE = (
-    _m("renderer", "renderer", "renderer name, with settings that differ from its defaults", per_image=False),
-    _m("status", "status", "ok, skipped, unavailable or failed", per_image=False),
-    _m("version", "version", "renderer version", per_image=False),
+    _m("renderer", "renderer", "renderer name, with settings that differ from its defaults", per_image=False, values=ANY),
+    _m("status", "status", "ok, skipped, unavailable or failed", per_image=False, values=ANY),
+    _m("version", "version", "renderer version", per_image=False, values=ANY),
     _m("estimator", "estimator", "what the renderer's image estimates: unbiased, consistent (biased, error → 0 "
-       "as the budget grows) or biased (does not converge to the reference)", per_image=False),
+       "as the budget grows) or biased (does not converge to the reference)", per_image=False, values=ANY),
     _m("spp", "spp", "samples per pixel of the row (the highest reached)", per_image=False),
     _m("seeds", "seeds", "number of seeds (independent runs) the medians are over", per_image=False),
     _m("time_s", "time (s)", "wall time to reach this spp (median over seeds)", "low", per_image=False),
@@ -56,22 +63,23 @@ _TABLE = (
     _m("rel_mse_trimmed", "relMSE trim.", "relMSE without the worst pixels (fireflies)", "low",
        "relMSE (trimmed)", -1.0),
     _m("psnr", "PSNR (dB)", "PSNR of the display-encoded images", "high"),
-    _m("ssim", "SSIM", "mean SSIM of the display-encoded images", "high"),
+    _m("ssim", "SSIM", "mean SSIM of the display-encoded images", "high", values=(-1.0, 1.0)),
     _m("delta_e2000_mean", "ΔE mean", "mean CIEDE2000", "low", "mean ΔE₀₀", -0.5, colour=True),
     _m("delta_e2000_p95", "ΔE p95", "95th percentile of CIEDE2000", "low", "ΔE₀₀ 95th percentile", -0.5,
        colour=True),
     _m("delta_e2000_max", "ΔE max", "maximum CIEDE2000", "low", colour=True),
     _m("delta_e2000_frac_gt_2_3", "ΔE > 2.3", "fraction of pixels above the just-noticeable difference", "low",
-       colour=True),
+       colour=True, values=UNIT),
     # Radiance only: HDR-FLIP re-exposes the image over a range of stops from the reference; an AO image
     # is a fraction shown as it is (exposure 1), which those exposures would brighten.
     _m("flip_mean", "FLIP mean", "mean HDR-FLIP on linear radiance (Andersson et al. 2021): how visible the "
        "difference is when flipping between the images, worst over exposures from the reference's brightest "
-       "to its median pixel; 0 none, 1 the largest", "low", "mean HDR-FLIP", colour=True),
-    _m("mean_radiance_r", "mean R", "mean radiance of the red channel (broken pixels skipped)", cheap=True),
-    _m("mean_radiance_g", "mean G", "mean radiance of the green channel (broken pixels skipped)", cheap=True),
-    _m("mean_radiance_b", "mean B", "mean radiance of the blue channel (broken pixels skipped)", cheap=True),
-    _m("mean_radiance_rel_error", "mean rad. err", "relative error of the image's mean radiance", cheap=True),
+       "to its median pixel; 0 none, 1 the largest", "low", "mean HDR-FLIP", colour=True, values=UNIT),
+    _m("mean_radiance_r", "mean R", "mean radiance of the red channel (broken pixels skipped)", cheap=True, values=ANY),
+    _m("mean_radiance_g", "mean G", "mean radiance of the green channel (broken pixels skipped)", cheap=True, values=ANY),
+    _m("mean_radiance_b", "mean B", "mean radiance of the blue channel (broken pixels skipped)", cheap=True, values=ANY),
+    _m("mean_radiance_rel_error", "mean rad. err", "relative error of the image's mean radiance", cheap=True,
+       values=ANY),
     _m("nan_count", "NaN px", "pixels with a NaN channel", "low", cheap=True),
     _m("inf_count", "Inf px", "pixels with an infinite channel", "low", cheap=True),
     _m("negative_count", "neg px", "pixels with a negative channel", "low", cheap=True),
@@ -79,17 +87,17 @@ _TABLE = (
     _m("noise_delta_e2000_mean", "ΔE mean (noise)", "ΔE mean of a simulated noise-only image at this spp",
        colour=True),
     _m("noise_mean_radiance_z", "mean rad. z",
-       "z-score of the mean-radiance difference given the noise; |z| > 3 points at bias"),
+       "z-score of the mean-radiance difference given the noise; |z| > 3 points at bias", values=ANY),
     _m("efficiency", "efficiency", "1/(MSE·time) at the highest spp: higher is better; unchanged by more time "
        "for an unbiased renderer", "high", per_image=False),
     _m("slope_rmse_spp", "slope RMSE/spp", "log-log slope of RMSE against spp, mean over seeds ± 95% CI; "
-       "−0.5 for an unbiased renderer, towards 0 once bias dominates", per_image=False),
+       "−0.5 for an unbiased renderer, towards 0 once bias dominates", per_image=False, values=ANY),
     _m("slope_rmse_time", "slope RMSE/time", "log-log slope of RMSE against wall time, mean over seeds ± 95% CI",
-       per_image=False),
+       per_image=False, values=ANY),
     _m("bias2", "bias²", "squared bias, mean over pixels and channels (from several seeds' images)", "low",
        per_image=False),
     _m("variance", "variance", "between-seed variance, mean over pixels and channels", "low", per_image=False),
-    _m("bias2_fraction", "bias share", "bias² / (bias² + variance)", per_image=False),
+    _m("bias2_fraction", "bias share", "bias² / (bias² + variance)", per_image=False, values=UNIT),
 )
 
 #: Every known column, by key.
