@@ -122,6 +122,17 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
     return (1 if any(r.status == "failed" for r in records) else 0), records, sc, ref
 
 
+def _parsed(parse, text: Optional[str], option: str):
+    """``parse(text)``, None without the option; a ValueError is a usage error naming ``option``. An empty
+    value is parsed too (and refused), not taken for the option's absence."""
+    if text is None:
+        return None
+    try:
+        return parse(text)
+    except ValueError as e:
+        raise typer.BadParameter(str(e), param_hint=option) from None
+
+
 def _comparison(scene: str, overrides, renderer, spp: int, seed: int, time_budget: Optional[str],
                 target_error: Optional[str], max_spp: int, time_repeats: Optional[int], time_basis: str):
     """The comparison the options ask for (:class:`cornell_harness.workflows.compare.Comparison`): a bad
@@ -130,11 +141,8 @@ def _comparison(scene: str, overrides, renderer, spp: int, seed: int, time_budge
     from cornell_harness.workflows.budgets import parse_duration
     from cornell_harness.workflows.compare import Comparison, default_time_repeats
 
-    try:
-        budget = parse_duration(time_budget) if time_budget else None
-        target = parse_target(target_error) if target_error else None
-    except ValueError as e:
-        raise typer.BadParameter(str(e)) from None
+    budget = _parsed(parse_duration, time_budget, "--time-budget")
+    target = _parsed(parse_target, target_error, "--target-error")
     sc = resolve_scene(scene, overrides)
     return Comparison(sc, load_reference(sc), resolve(renderer), spp, seed, budget, target, max_spp,
                       time_repeats or default_time_repeats(budget, target), time_basis)
@@ -209,7 +217,7 @@ def compare(
     Exit code 1 if a renderer failed; renderers that are unavailable or do not
     model the scene are listed as such and are not failures.
     """
-    if time_budget and target_error:
+    if time_budget is not None and target_error is not None:
         raise typer.BadParameter("give --time-budget or --target-error, not both")
     raise typer.Exit(_run_compare(scene, renderer, spp, seed, out, as_json, time_budget, target_error, max_spp,
                                   overrides=overrides, title=title, time_repeats=time_repeats,
