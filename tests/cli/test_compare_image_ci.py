@@ -218,3 +218,24 @@ def test_a_check_writes_the_error_map_only_when_asked(render16, tmp_path, capsys
     written.unlink()
     code, out, _ = _compare(capsys, tmp_path, render16)
     assert code == 0 and json.loads(out)["error_map"] == str(written) and written.is_file()
+
+
+def test_nan_pixels_print_no_numpy_warning(render16, tmp_path):
+    """Images with some NaN pixels and with nothing but NaN, scored with every metric and the noise yardsticks
+    (whose mean-radiance z skips NaN pixels), in a fresh interpreter as a user's shell sees it: numpy's
+    RuntimeWarning lines ("Mean of empty slice") do not reach stderr; the NaN pixels are counted."""
+    from cornell_harness.store.exr import read_exr
+
+    image = np.array(read_exr(render16), dtype=np.float32)
+    some, every = image.copy(), np.full_like(image, np.nan)
+    some[10:20, 10:20] = np.nan
+    write_exr(tmp_path / "some.exr", some)
+    write_exr(tmp_path / "every.exr", every)
+    proc = run_cbox("compare-image", str(tmp_path / "some.exr"), str(tmp_path / "every.exr"), "--scene",
+                    "cornell-box", "--spp", "16", "--all-metrics", "--fail", "rmse=10", "--json",
+                    "--out", str(tmp_path / "o"))
+    assert proc.returncode == 0, proc.stderr
+    assert "Warning" not in proc.stderr and "numpy" not in proc.stderr, proc.stderr
+    records = [json.loads(line) for line in proc.stdout.splitlines()]
+    assert [r["metrics"]["nan_count"] for r in records] == [100, 256 * 256]
+    assert records[0]["noise"]["noise_mean_radiance_z"] is not None

@@ -12,6 +12,8 @@ stores one independent batch (``noise.exr``), a sample of real noise.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from cornell_harness.evaluate import metrics
@@ -49,7 +51,10 @@ def mean_difference_z(image: np.ndarray, ref: np.ndarray, var: np.ndarray) -> fl
     n = image.shape[0] * image.shape[1]
     pixel_sd = np.sqrt(var).sum(axis=-1) / 3.0  # sd of the channel mean, correlated bound
     sd = np.sqrt(np.sum(pixel_sd**2)) / n
-    diff = float(np.nanmean(np.asarray(image, np.float64)) - np.mean(ref, dtype=np.float64))
+    values = np.asarray(image, np.float64)
+    kept = values[~np.isnan(values)]  # NaN pixels skipped, as nanmean does, without its warning when none is left
+    mean = float(kept.mean()) if kept.size else math.nan  # an all-NaN image: the z is NaN
+    diff = mean - float(np.mean(ref, dtype=np.float64))
     return diff / sd if sd > 0 else (0.0 if diff == 0 else float(np.sign(diff)) * np.inf)
 
 
