@@ -110,8 +110,9 @@ def test_time_limit_kills_a_hanging_renderer_and_fails_with_its_time(tmp_path):
                     r"5 s \(ran ([0-9.]+) s\)", proc.stdout)
     assert ran and 5.0 <= float(ran[1]) < 120.0, proc.stdout
     junit = ET.parse(out / "gate-junit.xml").getroot()
-    case = next(c for c in junit.iter("testcase") if c.get("name") == "time_limit")
-    assert case.find("failure") is not None and case.find("error") is None
+    (case,) = junit.iter("testcase")  # the render, killed: its failure, not a pass
+    assert case.get("name") == "render" and case.find("error") is None
+    assert case.find("failure").get("message").startswith("killed at its time limit of 5 s")
 
 
 def test_junit_errors_failures_and_honest_times(tmp_path):
@@ -123,7 +124,7 @@ def test_junit_errors_failures_and_honest_times(tmp_path):
     assert proc.returncode == 1
     suite = ET.parse(out / "gate-junit.xml").getroot().find("testsuite")
     cases = {(c.get("classname").split("/")[1], c.get("name")): c for c in suite.iter("testcase")}
-    assert cases[("tests.user_renderers:Crashes@1spp", "run")].find("error") is not None
+    assert cases[("tests.user_renderers:Crashes@1spp", "render")].find("error") is not None
     assert cases[("tests.user_renderers:FlatGrey@1spp", "max.delta_e2000_mean")].find("failure") is not None
     assert suite.get("errors") == "1" and suite.get("failures") == "1"
     check_times = [float(c.get("time")) for (_, name), c in cases.items() if name != "render"]
@@ -142,7 +143,7 @@ def test_crash_traceback_in_the_log_junit_error_and_report(tmp_path):
                     "--out", str(out), "-v", env_path=ROOT)
     assert proc.returncode == 1, proc.stderr
     raise_line = 'raise RuntimeError("segfault simulator")'  # tests/user_renderers.py, Crashes.render
-    case = next(c for c in ET.parse(out / "gate-junit.xml").getroot().iter("testcase") if c.get("name") == "run")
+    case = next(c for c in ET.parse(out / "gate-junit.xml").getroot().iter("testcase") if c.get("name") == "render")
     assert case.find("failure") is None
     body = case.find("error").text
     assert body.startswith("failed: RenderError: renderer raised RuntimeError: segfault simulator\n\nTraceback")

@@ -13,8 +13,8 @@ from cornell_harness.reports.ci import ROW_CHARS, junit_xml, markdown_summary
 LONG = "cornell-box-caustics/pathtracer[sampler=\"independent\",max_depth=12]@1024spp"
 
 
-def _outcome(name: str, *checks: Check) -> SimpleNamespace:
-    record = SimpleNamespace(time_s=1.5, renderer="pathtracer", status="ok", spp=1024, seed=0)
+def _outcome(name: str, *checks: Check, status: str = "ok") -> SimpleNamespace:
+    record = SimpleNamespace(time_s=1.5, renderer="pathtracer", status=status, spp=1024, seed=0)
     return SimpleNamespace(expectation=SimpleNamespace(name=name), record=record, checks=list(checks))
 
 
@@ -25,7 +25,8 @@ def _outcomes() -> list[SimpleNamespace]:
             _outcome(LONG, Check("b", "finite", True, "no NaN or Inf pixel"),
                      Check("b", "agreement", False, wordy)),
             _outcome("furnace/crashes@1spp", Check("c", "run", False, "failed: RuntimeError: boom", error=True,
-                                                   traceback="Traceback (most recent call last):\n  raise boom\n"))]
+                                                   traceback="Traceback (most recent call last):\n  raise boom\n"),
+                     status="failed")]
 
 
 def test_markdown_failures_first_the_rest_folded_rows_at_most_120_characters():
@@ -53,10 +54,23 @@ def test_junit_skipped_error_failure_and_pass():
     assert cases[("cornell-box/mitsuba@256spp", "variance")].find("skipped") is not None
     assert cases[("cornell-box/mitsuba@256spp", "finite")].find("skipped") is None
     assert cases[(LONG, "agreement")].find("failure") is not None
-    error = cases[("furnace/crashes@1spp", "run")].find("error")
-    assert error.get("message") == "failed: RuntimeError: boom"
+    # A crashed render's render case is its <error>, with the reason and traceback, not a pass beside it.
+    crashed = cases[("furnace/crashes@1spp", "render")]
+    error = crashed.find("error")
+    assert error.get("message") == "failed: RuntimeError: boom" and crashed.find("system-out") is None
     assert error.text == "failed: RuntimeError: boom\n\nTraceback (most recent call last):\n  raise boom"
-    assert (suite.get("tests"), suite.get("failures"), suite.get("errors"), suite.get("skipped")) == ("8", "1", "1", "1")
+    assert ("furnace/crashes@1spp", "run") not in cases  # the one error, counted once
+    assert cases[("cornell-box/mitsuba@256spp", "render")].find("system-out").text == "pathtracer: ok, 1024 spp"
+    assert (suite.get("tests"), suite.get("failures"), suite.get("errors"), suite.get("skipped")) == ("7", "1", "1", "1")
+
+
+def test_junit_render_killed_at_its_time_limit_is_a_failure():
+    killed = _outcome("cornell-box/slow@1spp", Check("d", "time_limit", False, "killed at its time limit of 5 s"),
+                      status="failed")
+    suite = ET.fromstring(junit_xml([killed])).find("testsuite")
+    (case,) = suite.iter("testcase")
+    assert case.get("name") == "render" and case.find("failure").get("message") == "killed at its time limit of 5 s"
+    assert (suite.get("tests"), suite.get("failures"), suite.get("errors")) == ("1", "1", "0")
 
 
 def test_markdown_of_a_passing_gate_is_all_folded():

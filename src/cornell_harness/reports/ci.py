@@ -3,7 +3,8 @@
 Both are written for every run, a config error included, so a CI's test
 view always has something to show. In JUnit a check that ran and failed is a
 ``<failure>``; a crash, or a config error that stopped the gate before it
-rendered, is an ``<error>`` (with the renderer's traceback as its body); a check
+rendered, is an ``<error>`` (with the renderer's traceback as its body; a
+crash's is on its ``render`` case, never a pass); a check
 that was not made (a renderer that reports no variance has none to check) is
 ``<skipped/>``, never a pass. Times are honest: each expectation's render is
 timed once, on a test case of its own (``render``); its checks take no time.
@@ -19,42 +20,53 @@ if TYPE_CHECKING:  # only for annotations: writing a config error's JUnit must n
 
 
 def junit_xml(outcomes: Sequence[Outcome], suite: str = "cbox gate", config_error: str | None = None) -> str:
-    """JUnit XML: per expectation a ``render`` case with its time, then one case per check."""
+    """JUnit XML: per expectation a ``render`` case with its time, then one case per check.
+
+    A render that did not finish (crashed, killed at its time limit, unavailable) is not a pass: its
+    ``render`` case carries the run's own check, the crash's ``<error>`` with its traceback or the time
+    limit's ``<failure>``, rather than a case of its own beside a passed ``render``."""
     root = ET.Element("testsuites")
     ts = ET.SubElement(root, "testsuite", name=suite)
-    tests = failures = errors = skipped = 0
+    counts = dict.fromkeys(("tests", "failures", "errors", "skipped"), 0)
     total = 0.0
     if config_error is not None:
         case = ET.SubElement(ts, "testcase", classname="config", name="config", time="0")
         ET.SubElement(case, "error", message=config_error).text = config_error
-        tests, errors = 1, 1
+        counts.update(tests=1, errors=1)
     for o in outcomes:
         t = float(o.record.time_s or 0.0)
         total += t
         render = ET.SubElement(ts, "testcase", classname=o.expectation.name, name="render", time=f"{t:.3f}")
-        ET.SubElement(render, "system-out").text = f"{o.record.renderer}: {o.record.status}, {o.record.spp} spp"
-        tests += 1
-        for c in o.checks:
+        counts["tests"] += 1
+        checks = list(o.checks)
+        if o.record.status == "ok" or not checks:
+            ET.SubElement(render, "system-out").text = f"{o.record.renderer}: {o.record.status}, {o.record.spp} spp"
+        else:  # the outcome of a run that did not finish is that run's one check (checks.evaluate)
+            _result(render, checks.pop(0), counts)
+        for c in checks:
             case = ET.SubElement(ts, "testcase", classname=o.expectation.name, name=c.name, time="0")
-            tests += 1
-            if c.skipped:
-                skipped += 1
-                ET.SubElement(case, "skipped", message=c.message)
-            elif c.passed:
-                ET.SubElement(case, "system-out").text = c.message
-            elif c.error:
-                errors += 1
-                ET.SubElement(case, "error", message=c.message).text = \
-                    c.message + (f"\n\n{c.traceback.rstrip()}" if c.traceback else "")
-            else:
-                failures += 1
-                ET.SubElement(case, "failure", message=c.message).text = c.message
-    ts.set("tests", str(tests))
-    ts.set("failures", str(failures))
-    ts.set("errors", str(errors))
-    ts.set("skipped", str(skipped))
+            counts["tests"] += 1
+            _result(case, c, counts)
+    for key, n in counts.items():
+        ts.set(key, str(n))
     ts.set("time", f"{total:.3f}")
     return ET.tostring(root, encoding="unicode", xml_declaration=True)
+
+
+def _result(case: ET.Element, c: Check, counts: dict[str, int]) -> None:
+    """``c``'s result on its test case (``<skipped/>``, ``<error>``, ``<failure>``, or a pass's message), counted."""
+    if c.skipped:
+        counts["skipped"] += 1
+        ET.SubElement(case, "skipped", message=c.message)
+    elif c.passed:
+        ET.SubElement(case, "system-out").text = c.message
+    elif c.error:
+        counts["errors"] += 1
+        ET.SubElement(case, "error", message=c.message).text = \
+            c.message + (f"\n\n{c.traceback.rstrip()}" if c.traceback else "")
+    else:
+        counts["failures"] += 1
+        ET.SubElement(case, "failure", message=c.message).text = c.message
 
 
 #: The widest a Markdown table row may be: wider rows wrap into unreadable columns in a step summary.
