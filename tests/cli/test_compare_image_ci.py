@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from tests.conftest import cbox_in_process as cbox, run_cbox
+from tests.conftest import ROOT, cbox_in_process as cbox, run_cbox
 from cornell_harness.store.exr import write_exr
 from cornell_harness.evaluate.ciede2000 import srgb_eotf
 
@@ -93,6 +93,29 @@ def test_bad_input_is_exit_2_naming_the_option(render16, tmp_path, capsys, extra
     (line,) = err.strip().splitlines()
     assert code == 2 and line.startswith("cbox: error: ") and all(w in line for w in words), line
     assert not (tmp_path / "o").exists()
+
+
+AO_REFERENCE = ROOT / "src" / "cornell_harness" / "references" / "cornell-box-ao" / "reference.exr"
+
+
+@pytest.mark.parametrize("extra", [("--fail", "delta_e2000_mean=1"), ("--warn", "flip_mean=0.5"),
+                                   ("--fail", "region.walls.delta_e2000_mean=3"), ("--warn", "noise_delta_e2000_mean=1"),
+                                   ("--fail-percent", "50", "--pixel-threshold", "5")])
+def test_a_colour_criterion_on_a_scene_without_colour_is_exit_2(tmp_path, capsys, extra):
+    """On cornell-box-ao (one value per pixel) ΔE00 and HDR-FLIP are not defined: a threshold on them, or
+    --fail-percent (which counts pixels by ΔE00), is refused naming the option and the quantity, where it
+    used to fail a correct image ("n/a > 1", "100% of the pixels")."""
+    code, out, err = cbox(capsys, "compare-image", str(AO_REFERENCE), "--scene", "cornell-box-ao",
+                          "--out", str(tmp_path / "o"), *extra)
+    (line,) = err.strip().splitlines()
+    assert code == 2 and line.startswith(f"cbox: error: {extra[0]}: ") and "ambient_occlusion" in line, line
+    assert "no colour" in line and out == "" and not (tmp_path / "o").exists()
+
+
+def test_a_scene_without_colour_takes_the_thresholds_it_defines(tmp_path, capsys):
+    code, out, err = cbox(capsys, "compare-image", str(AO_REFERENCE), "--scene", "cornell-box-ao", "--json",
+                          "--out", str(tmp_path / "o"), "--fail", "rmse=1e-9", "--fail", "ssim=0.999")
+    assert code == 0 and json.loads(out)["verdict"]["status"] == "pass", err
 
 
 def _synthetic(tmp_path, clip_fraction=0.0):

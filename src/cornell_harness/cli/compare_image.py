@@ -61,7 +61,8 @@ def compare_image(
         None, "--fail-percent", metavar="P", min=0.0, max=100.0, help="Exit 1 when more than P percent of the "
         "pixels have a per-pixel error above --pixel-threshold; the per-pixel error is CIEDE2000 (ΔE00) at the "
         "reference's display exposure, the error map's (idiff's -failpercent, on ΔE00 rather than channel "
-        "difference)."),
+        "difference). Radiance only: on a scene without colour (ambient occlusion) it is refused, as are "
+        "thresholds on ΔE00 and flip_mean."),
     pixel_threshold: Optional[float] = typer.Option(
         None, "--pixel-threshold", metavar="T", min=0.0, help="The per-pixel ΔE00 --fail-percent counts pixels "
         "above (2.3 is a just-noticeable difference)."),

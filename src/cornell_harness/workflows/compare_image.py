@@ -49,11 +49,11 @@ from cornell_harness.evaluate import regions as named_regions
 from cornell_harness.evaluate.ciede2000 import srgb_eotf
 from cornell_harness.evaluate.image_scores import ImageScore, InputImage, Target
 from cornell_harness.evaluate.metrics import DELTA_E_KEYS
-from cornell_harness.evaluate.registry import check_metrics, region_metric
+from cornell_harness.evaluate.registry import COLOUR_METRICS, check_metrics, region_metric
 from cornell_harness.evaluate.score import NOISE_PREFIX, every_region_key, score_image
 from cornell_harness.evaluate.thresholds import Threshold, broken, fraction_above, percent_line
 from cornell_harness.scenes.model import Scene
-from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
+from cornell_harness.scenes.quantities import DEFAULT_QUANTITY, has_colour
 from cornell_harness.store.atomic import json_safe
 from cornell_harness.store.exr import ImageFileError, read_exr
 from cornell_harness.store.image_files import SPP_ATTRIBUTE, ImageFile, header_spp, read_image_file
@@ -282,6 +282,7 @@ def compare_images(paths: Sequence[Path], scene: Scene | None = None, reference:
               load_file_target(reference, transfer, exposure,
                                noise=keys is None or any(k.startswith(NOISE_PREFIX) for k in keys)))
     check_regions(checks.thresholds, target)
+    check_quantity(checks, target)
     sources = load_images(paths, target, transfer, spp, exposure)
     if exposure is not None and all(s.clipped is None for s in (*sources, target)):
         raise OptionError("applies to display-referred (integer) images only, and every image given is "
@@ -311,6 +312,23 @@ def check_regions(thresholds: Sequence[Threshold], target: Target) -> None:
             where = f"scene {target.scene.name!r}" if target.scene is not None else "a --reference file"
             raise OptionError(f"{t.metric}: {where} has no region {parts[0]!r}{did_you_mean(parts[0], regions)}",
                               f"--{t.level}")
+
+
+def check_quantity(checks: Checks, target: Target) -> None:
+    """A criterion the target's quantity does not define is refused, before anything is scored: an image
+    without colour (ambient occlusion, one value per pixel) has no ΔE00 or HDR-FLIP (the registry's
+    COLOUR_METRICS), so a threshold on them, or --fail-percent's per-pixel ΔE00, could never pass."""
+    quantity = target.reference.quantity
+    if has_colour(quantity):
+        return
+    what = f"scene {target.label!r} holds {quantity}, which has no colour"
+    for t in checks.thresholds:
+        if (region_metric(t.metric) or (None, t.metric))[1] in COLOUR_METRICS:
+            raise OptionError(f"{t.metric}: {what}: a colour metric (ΔE00, HDR-FLIP) is not defined on it; "
+                              "use rmse, rel_mse, psnr or ssim", f"--{t.level}")
+    if checks.fail_percent is not None:
+        raise OptionError(f"counts pixels by their ΔE00, and {what}: ΔE00 is not defined on it; use --fail rmse=V "
+                          "or another threshold", "--fail-percent")
 
 
 def check(result: ImageScore, checks: Checks) -> Checked:
