@@ -99,12 +99,10 @@ AO_REFERENCE = ROOT / "src" / "cornell_harness" / "references" / "cornell-box-ao
 
 
 @pytest.mark.parametrize("extra", [("--fail", "delta_e2000_mean=1"), ("--warn", "flip_mean=0.5"),
-                                   ("--fail", "region.walls.delta_e2000_mean=3"), ("--warn", "noise_delta_e2000_mean=1"),
-                                   ("--fail-percent", "50", "--pixel-threshold", "5")])
-def test_a_colour_criterion_on_a_scene_without_colour_is_exit_2(tmp_path, capsys, extra):
-    """On cornell-box-ao (one value per pixel) ΔE00 and HDR-FLIP are not defined: a threshold on them, or
-    --fail-percent (which counts pixels by ΔE00), is refused naming the option and the quantity, where it
-    used to fail a correct image ("n/a > 1", "100% of the pixels")."""
+                                   ("--fail", "region.walls.delta_e2000_mean=3"), ("--warn", "noise_delta_e2000_mean=1")])
+def test_a_colour_threshold_on_a_scene_without_colour_is_exit_2(tmp_path, capsys, extra):
+    """On cornell-box-ao (one value per pixel) ΔE00 and HDR-FLIP are not defined: a threshold on them is
+    refused naming the option and the quantity, where it used to fail a correct image ("n/a > 1")."""
     code, out, err = cbox(capsys, "compare-image", str(AO_REFERENCE), "--scene", "cornell-box-ao",
                           "--out", str(tmp_path / "o"), *extra)
     (line,) = err.strip().splitlines()
@@ -116,6 +114,27 @@ def test_a_scene_without_colour_takes_the_thresholds_it_defines(tmp_path, capsys
     code, out, err = cbox(capsys, "compare-image", str(AO_REFERENCE), "--scene", "cornell-box-ao", "--json",
                           "--out", str(tmp_path / "o"), "--fail", "rmse=1e-9", "--fail", "ssim=0.999")
     assert code == 0 and json.loads(out)["verdict"]["status"] == "pass", err
+
+
+def test_fail_percent_on_a_scene_without_colour_counts_the_absolute_difference(tmp_path, capsys):
+    """--fail-percent on cornell-box-ao counts pixels by |image − reference| of the AO value: the correct image
+    passes (it used to be "100% of the pixels have ΔE00 > 5"); one off by 0.2 in its top half breaks 40%."""
+    from cornell_harness.store.exr import read_exr
+
+    def run(image, percent):
+        return cbox(capsys, "compare-image", str(image), "--scene", "cornell-box-ao", "--json", "--out",
+                    str(tmp_path / "o"), "--fail-percent", percent, "--pixel-threshold", "0.1")
+
+    code, out, err = run(AO_REFERENCE, "50")
+    (check,) = json.loads(out)["verdict"]["checks"]
+    assert code == 0 and check["metric"] == "percent_pixels_abs_error_above" and check["value"] == 0.0, err
+    off = np.array(read_exr(AO_REFERENCE), dtype=np.float32)
+    off[:128] += 0.2
+    write_exr(tmp_path / "off.exr", off)
+    code, out, err = run(tmp_path / "off.exr", "40")
+    assert code == 1 and json.loads(out)["verdict"]["checks"][0]["value"] == pytest.approx(50.0)
+    assert "cbox: fail: off: 50% of the pixels have |Δ| > 0.1 (--fail-percent 40)" in err
+    assert run(tmp_path / "off.exr", "60")[0] == 0
 
 
 def _synthetic(tmp_path, clip_fraction=0.0):

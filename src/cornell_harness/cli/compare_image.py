@@ -61,11 +61,11 @@ def compare_image(
         None, "--fail-percent", metavar="P", min=0.0, max=100.0, help="Exit 1 when more than P percent of the "
         "pixels have a per-pixel error above --pixel-threshold; the per-pixel error is CIEDE2000 (ΔE00) at the "
         "reference's display exposure, the error map's (idiff's -failpercent, on ΔE00 rather than channel "
-        "difference). Radiance only: on a scene without colour (ambient occlusion) it is refused, as are "
-        "thresholds on ΔE00 and flip_mean."),
+        "difference). On a scene without colour (ambient occlusion) the per-pixel error is the absolute "
+        "difference of its one value (|Δ|), and thresholds on ΔE00 and flip_mean are refused."),
     pixel_threshold: Optional[float] = typer.Option(
         None, "--pixel-threshold", metavar="T", min=0.0, help="The per-pixel ΔE00 --fail-percent counts pixels "
-        "above (2.3 is a just-noticeable difference)."),
+        "above (2.3 is a just-noticeable difference); |Δ| on a scene without colour."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object per image on stdout: metrics, "
                                                        "noise, regions, HDR-FLIP parameters, and with thresholds "
                                                        "its verdict."),

@@ -28,8 +28,10 @@ from cornell_harness.suggest import did_you_mean
 
 #: The levels of a threshold, the worse first.
 LEVELS = ("fail", "warn")
-#: What ``--fail-percent`` counts per pixel.
+#: What ``--fail-percent`` counts per pixel: a radiance image's ΔE00; an image without colour (ambient
+#: occlusion, one value per pixel) has none, and its pixels are counted by the absolute difference of that value.
 PIXEL_METRIC = "ΔE00"
+GREY_PIXEL_METRIC = "|Δ|"
 
 
 class ThresholdError(ValueError):
@@ -123,9 +125,10 @@ def fraction_above(per_pixel: np.ndarray, threshold: float) -> float:
     return float(np.count_nonzero(~(errors <= threshold)) / errors.size)
 
 
-def percent_line(label: str, percent: float, limit: float, pixel_threshold: float) -> str:
+def percent_line(label: str, percent: float, limit: float, pixel_threshold: float,
+                 pixel_metric: str = PIXEL_METRIC) -> str:
     """``LABEL: 12.3% of the pixels have ΔE00 > 2 (--fail-percent 5)``."""
-    return (f"{label}: {percent:.4g}% of the pixels have {PIXEL_METRIC} > {pixel_threshold:g} "
+    return (f"{label}: {percent:.4g}% of the pixels have {pixel_metric} > {pixel_threshold:g} "
             f"(--fail-percent {limit:g})")
 
 

@@ -51,7 +51,8 @@ from cornell_harness.evaluate.image_scores import ImageScore, InputImage, Target
 from cornell_harness.evaluate.metrics import DELTA_E_KEYS
 from cornell_harness.evaluate.registry import COLOUR_METRICS, check_metrics, region_metric
 from cornell_harness.evaluate.score import NOISE_PREFIX, every_region_key, score_image
-from cornell_harness.evaluate.thresholds import Threshold, broken, fraction_above, percent_line
+from cornell_harness.evaluate.thresholds import (GREY_PIXEL_METRIC, PIXEL_METRIC, Threshold, broken, fraction_above,
+                                                 percent_line)
 from cornell_harness.scenes.model import Scene
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY, has_colour
 from cornell_harness.store.atomic import json_safe
@@ -288,7 +289,7 @@ def compare_images(paths: Sequence[Path], scene: Scene | None = None, reference:
         raise OptionError("applies to display-referred (integer) images only, and every image given is "
                           "floating-point (radiance already)", "--exposure")
     flip_too = with_flip or any(t.metric == "flip_mean" for t in checks.thresholds)
-    scored = [check(score(source, target, with_flip=flip_too, keys=keys), checks) for source in sources]
+    scored = [check(score(source, target, with_flip=flip_too, keys=keys), checks, target) for source in sources]
     return ImageComparison(target, scored, maps)
 
 
@@ -315,9 +316,10 @@ def check_regions(thresholds: Sequence[Threshold], target: Target) -> None:
 
 
 def check_quantity(checks: Checks, target: Target) -> None:
-    """A criterion the target's quantity does not define is refused, before anything is scored: an image
+    """A threshold the target's quantity does not define is refused, before anything is scored: an image
     without colour (ambient occlusion, one value per pixel) has no ΔE00 or HDR-FLIP (the registry's
-    COLOUR_METRICS), so a threshold on them, or --fail-percent's per-pixel ΔE00, could never pass."""
+    COLOUR_METRICS), so a threshold on them could never pass. (--fail-percent counts its pixels by their own
+    error, :func:`pixel_errors`.)"""
     quantity = target.reference.quantity
     if has_colour(quantity):
         return
@@ -326,12 +328,19 @@ def check_quantity(checks: Checks, target: Target) -> None:
         if (region_metric(t.metric) or (None, t.metric))[1] in COLOUR_METRICS:
             raise OptionError(f"{t.metric}: {what}: a colour metric (ΔE00, HDR-FLIP) is not defined on it; "
                               "use rmse, rel_mse, psnr or ssim", f"--{t.level}")
-    if checks.fail_percent is not None:
-        raise OptionError(f"counts pixels by their ΔE00, and {what}: ΔE00 is not defined on it; use --fail rmse=V "
-                          "or another threshold", "--fail-percent")
 
 
-def check(result: ImageScore, checks: Checks) -> Checked:
+def pixel_errors(result: ImageScore, target: Target) -> tuple[str, str, np.ndarray]:
+    """What --fail-percent counts per pixel: (its name in a line, its --json key, the (H, W) errors). ΔE00 of a
+    radiance image (the error map's); for a quantity without colour (ambient occlusion, grey) the absolute
+    difference of its one value."""
+    if has_colour(target.reference.quantity):
+        return PIXEL_METRIC, "percent_pixels_delta_e2000_above", result.delta_e_map
+    img, ref = np.asarray(result.source.image, np.float64), np.asarray(target.reference.image, np.float64)
+    return GREY_PIXEL_METRIC, "percent_pixels_abs_error_above", np.abs(img - ref).mean(axis=-1)
+
+
+def check(result: ImageScore, checks: Checks, target: Target) -> Checked:
     """One score against the checks: the verdict for --json and the broken criteria's lines (no checks: none)."""
     if not checks:
         return Checked(result)
@@ -340,12 +349,13 @@ def check(result: ImageScore, checks: Checks) -> Checked:
              "broken": t.exceeded(row.get(t.metric))} for t in checks.thresholds]
     lines = [(t.level, t.line(label, row.get(t.metric))) for t in broken(checks.thresholds, row)]
     if checks.fail_percent is not None:
-        percent = 100 * fraction_above(result.delta_e_map, checks.pixel_threshold)
-        rows.append({"metric": "percent_pixels_delta_e2000_above", "level": "fail", "limit": checks.fail_percent,
+        name, key, errors = pixel_errors(result, target)
+        percent = 100 * fraction_above(errors, checks.pixel_threshold)
+        rows.append({"metric": key, "level": "fail", "limit": checks.fail_percent,
                      "pixel_threshold": checks.pixel_threshold, "value": percent,
                      "broken": percent > checks.fail_percent})
         if percent > checks.fail_percent:
-            lines.append(("fail", percent_line(label, percent, checks.fail_percent, checks.pixel_threshold)))
+            lines.append(("fail", percent_line(label, percent, checks.fail_percent, checks.pixel_threshold, name)))
     status = ("fail" if any(c["broken"] and c["level"] == "fail" for c in rows)
               else "warn" if any(c["broken"] for c in rows) else "pass")
     return Checked(result, json_safe({"status": status, "checks": rows}), lines)
