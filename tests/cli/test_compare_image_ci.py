@@ -99,7 +99,8 @@ AO_REFERENCE = ROOT / "src" / "cornell_harness" / "references" / "cornell-box-ao
 
 
 @pytest.mark.parametrize("extra", [("--fail", "delta_e2000_mean=1"), ("--warn", "flip_mean=0.5"),
-                                   ("--fail", "region.walls.delta_e2000_mean=3"), ("--warn", "noise_delta_e2000_mean=1")])
+                                   ("--fail", "region.walls.delta_e2000_mean=3"),
+                                   ("--warn", "noise_delta_e2000_mean=1")])
 def test_a_colour_threshold_on_a_scene_without_colour_is_exit_2(tmp_path, capsys, extra):
     """On cornell-box-ao (one value per pixel) ΔE00 and HDR-FLIP are not defined: a threshold on them is
     refused naming the option and the quantity, where it used to fail a correct image ("n/a > 1")."""

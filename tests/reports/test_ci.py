@@ -61,7 +61,8 @@ def test_junit_skipped_error_failure_and_pass():
     assert error.text == "failed: RuntimeError: boom\n\nTraceback (most recent call last):\n  raise boom"
     assert ("furnace/crashes@1spp", "run") not in cases  # the one error, counted once
     assert cases[("cornell-box/mitsuba@256spp", "render")].find("system-out").text == "pathtracer: ok, 1024 spp"
-    assert (suite.get("tests"), suite.get("failures"), suite.get("errors"), suite.get("skipped")) == ("7", "1", "1", "1")
+    counts = (suite.get("tests"), suite.get("failures"), suite.get("errors"), suite.get("skipped"))
+    assert counts == ("7", "1", "1", "1")
 
 
 def test_junit_render_killed_at_its_time_limit_is_a_failure():

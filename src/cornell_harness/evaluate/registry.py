@@ -47,7 +47,8 @@ def _m(key, label, definition, better=None, axis=None, slope=None, per_image=Tru
 
 
 _TABLE = (
-    _m("renderer", "renderer", "renderer name, with settings that differ from its defaults", per_image=False, values=ANY),
+    _m("renderer", "renderer", "renderer name, with settings that differ from its defaults", per_image=False,
+       values=ANY),
     _m("status", "status", "ok, skipped, unavailable or failed", per_image=False, values=ANY),
     _m("version", "version", "renderer version", per_image=False, values=ANY),
     _m("estimator", "estimator", "what the renderer's image estimates: unbiased, consistent (biased, error → 0 "
@@ -75,9 +76,12 @@ _TABLE = (
     _m("flip_mean", "FLIP mean", "mean HDR-FLIP on linear radiance (Andersson et al. 2021): how visible the "
        "difference is when flipping between the images, worst over exposures from the reference's brightest "
        "to its median pixel; 0 none, 1 the largest", "low", "mean HDR-FLIP", colour=True, values=UNIT),
-    _m("mean_radiance_r", "mean R", "mean radiance of the red channel (broken pixels skipped)", cheap=True, values=ANY),
-    _m("mean_radiance_g", "mean G", "mean radiance of the green channel (broken pixels skipped)", cheap=True, values=ANY),
-    _m("mean_radiance_b", "mean B", "mean radiance of the blue channel (broken pixels skipped)", cheap=True, values=ANY),
+    _m("mean_radiance_r", "mean R", "mean radiance of the red channel (broken pixels skipped)", cheap=True,
+       values=ANY),
+    _m("mean_radiance_g", "mean G", "mean radiance of the green channel (broken pixels skipped)", cheap=True,
+       values=ANY),
+    _m("mean_radiance_b", "mean B", "mean radiance of the blue channel (broken pixels skipped)", cheap=True,
+       values=ANY),
     _m("mean_radiance_rel_error", "mean rad. err", "relative error of the image's mean radiance", cheap=True,
        values=ANY),
     _m("nan_count", "NaN px", "pixels with a NaN channel", "low", cheap=True),

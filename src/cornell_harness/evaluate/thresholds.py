@@ -9,7 +9,9 @@ metric where higher is better (PSNR, SSIM) fails below its value, a signed
 one (``mean_radiance_rel_error``, the z-score) fails when its magnitude is
 above, every other one when it is above. The pixel criterion counts the
 pixels whose CIEDE2000 (at the reference's display exposure, the ΔE map of
-the report) is above ``--pixel-threshold``.
+the report) is above ``--pixel-threshold``; an image without colour (ambient
+occlusion) has no ΔE00, and its pixels are counted by the absolute
+difference of their one value.
 
 Pure functions on numbers: the workflow computes the scores, the CLI turns
 the verdict into an exit code.
