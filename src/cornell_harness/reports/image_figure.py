@@ -69,7 +69,7 @@ _BAR_TITLES = {"de": "ΔE₀₀ per pixel, clipped at 10", "flip": "FLIP per pix
 # Layout in viewBox units (1 unit = 7 in / total width; about 0.6 pt at three columns).
 _CELL, _GAP, _MARGIN, _HEADER, _ROW_GAP, _INSET_GAP, _FONT, _LINE = 240.0, 10.0, 8.0, 22.0, 12.0, 4.0, 13.0, 16.0
 _STYLE = ('text{font-family:Helvetica,Arial,"Liberation Sans","DejaVu Sans",sans-serif;font-size:13px;fill:#000}'
-          ".tick{font-size:11px;fill:#222}.note{font-size:11px;fill:#444}")
+          ".tick{font-size:11px;fill:#222}")
 # A PNG this report writes into images/ (see _stale).
 _DERIVED = re.compile(r"[\w.-]+?(\.delta_e2000|\.flip)?(\.crop-[\w.-]+)?\.png")
 
@@ -254,7 +254,7 @@ def _crop_legend(crops: Sequence[Crop], x: float, y: float) -> list[str]:
 
 
 def figure_svg(rows: Sequence[tuple[str, list]], crops: Sequence[Crop], columns: Sequence[int],
-               labels: Mapping[str, str], note: str = "", uris: Mapping | None = None) -> str:
+               labels: Mapping[str, str], uris: Mapping | None = None) -> str:
     """The grid as a standalone SVG document. ``rows``: :func:`image_rows`'s; ``columns``: indices into
     :data:`COLUMNS` shown; ``labels``: row name -> display text; ``uris``: :func:`encoded`'s, if at hand."""
     uris = encoded(rows, crops, columns) if uris is None else uris
@@ -294,9 +294,7 @@ def figure_svg(rows: Sequence[tuple[str, list]], crops: Sequence[Crop], columns:
     for x, c in zip(col_x, columns):
         if COLUMNS[c][2] is not None:
             body += _colorbar(COLUMNS[c][2], x, y)
-    height = y + 44 + (16 if note else 0) + _MARGIN
-    if note:
-        body.append(f'<text class="note" x="{_MARGIN:.2f}" y="{height - _MARGIN - 4:.2f}">{escape(note)}</text>')
+    height = y + 44 + _MARGIN
     return ('<?xml version="1.0" encoding="UTF-8"?>\n'
             f'<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH_IN}in" '
             f'height="{WIDTH_IN * height / width:.3f}in" viewBox="0 0 {width:.2f} {height:.2f}">'
@@ -349,7 +347,7 @@ def write_image_figure(report_dir, *, scene, reference_image, images: Mapping[st
     if len(rows) < 2:
         _remove_figure(report_dir / FIGURES_DIR, set())
         return {"figure": [], "pngs": []}
-    shown = (0, 1, 2)
+    shown = range(len(COLUMNS))
     chosen = choose_crops(scene, reference.shape[:2], crops)
 
     uris = encoded(rows, chosen, shown)
