@@ -19,7 +19,7 @@ from cornell_harness.scenes.model import FEATURES, FOV_AXES, MAX_COORDINATE, MAX
 from cornell_harness.scenes.quantities import AO_NORMALS, AO_WEIGHTINGS, QUANTITIES
 from cornell_harness.scenes.spectra import EXTRAPOLATIONS, RGB_CONVENTIONS
 from cornell_harness.scenes.units import LENGTH_SCALE_RANGE
-from cornell_harness.workflows.budgets import parse_duration
+from cornell_harness.durations import parse_duration
 from tests.conftest import ROOT
 
 SCENE = schema("scene")

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from cornell_harness.evaluate import convergence as cv
-from cornell_harness.workflows.budgets import parse_duration
+from cornell_harness.durations import parse_duration
 from cornell_harness.workflows.spp_list import parse_spp_list
 
 

@@ -138,7 +138,7 @@ def _comparison(scene: str, overrides, renderer, spp: int, seed: int, time_budge
     """The comparison the options ask for (:class:`cornell_harness.workflows.compare.Comparison`): a bad
     --time-budget or --target-error is a usage error."""
     from cornell_harness.evaluate.convergence import parse_target
-    from cornell_harness.workflows.budgets import parse_duration
+    from cornell_harness.durations import parse_duration
     from cornell_harness.workflows.compare import Comparison, default_time_repeats
 
     budget = _parsed(parse_duration, time_budget, "--time-budget")

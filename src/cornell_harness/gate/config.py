@@ -126,7 +126,7 @@ from pathlib import Path
 from cornell_harness.evaluate.registry import HIGHER_IS_BETTER, IMAGE_METRICS, REGION_CHECK_METRICS, region_metric
 from cornell_harness.schemas.reader import FormatProblem, check, read_toml
 from cornell_harness.suggest import closest
-from cornell_harness.workflows.budgets import parse_duration
+from cornell_harness.durations import parse_duration
 
 #: The config's defaults (gate.schema.json states the same; tests/test_schemas.py holds them equal).
 DEFAULT_ALPHA = 0.01

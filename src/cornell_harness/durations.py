@@ -1,7 +1,8 @@
-"""Time budgets as users write them (``10s``, ``2m``, ``500ms``): parsed once, for every command and the gate.
+"""Durations as users write them (``10s``, ``2m``, ``500ms``): parsed once, for every time budget and time
+limit, in the CLI, the gate's config and a renderers file.
 
-Kept apart from the workflows that use them so that reading a gate config
-imports nothing heavy (a typo must fail in a second, not after loading SciPy).
+Kept apart from the workflows that use them so that reading a gate config or a
+renderers file imports nothing heavy (a typo must fail in a second, not after loading SciPy).
 """
 
 from __future__ import annotations
