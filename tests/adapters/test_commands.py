@@ -64,6 +64,12 @@ if mode == "fail":
     sys.exit(3)
 if mode == "hang":
     time.sleep(600)
+if mode == "spawn-hang":  # a child of its own, logged as a run is (its PID last), then both hang
+    import subprocess
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+    with open(args["log"], "a") as log:
+        log.write(f"{args['spp']} {args['seed']} {child.pid}\\n")
+    time.sleep(600)
 if mode == "hog":  # 400 MB, touched, held
     hog = np.ones(50_000_000)
     time.sleep(600)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from cornell_harness import processes
 from tests.conftest import ROOT
 
 SEEDS = 3
@@ -139,10 +140,14 @@ def test_interrupt_during_start_up_is_one_line_without_traceback(tmp_path):
 
 
 @pytest.mark.slow
-def test_interrupt_on_local_workers_closes_the_cluster(tmp_path):
+@pytest.mark.parametrize("signum, code, word, to_group", [(signal.SIGINT, 130, "interrupted", True),
+                                                          (signal.SIGTERM, 143, "terminated", False)],
+                         ids=["ctrl-c-to-the-group", "sigterm-to-cbox"])
+def test_a_signal_on_local_workers_closes_the_cluster(tmp_path, signum, code, word, to_group):
     """--workers 2, held once one render (spp 1 of a cell) is logged, so no cell ends: Ctrl-C as a terminal
-    sends it (to the whole process group, the workers too) gives the message and exit 130, no traceback from
-    any process, and no process of the group is left behind."""
+    sends it (to the whole process group, the workers too), or SIGTERM to cbox alone as a CI runner sends it,
+    gives the message and its exit code, no traceback from any process, and no process of the run is left
+    behind (of the group, or below cbox before the signal)."""
     out, log = tmp_path / "exp", tmp_path / "renders.log"
     proc = subprocess.Popen([sys.executable, "-m", "cornell_harness", *_converge(out), "--workers", "2"], cwd=ROOT,
                             env=_env(log, CBOX_TEST_RENDER_HOLD_AFTER="1"), stdout=subprocess.PIPE,
@@ -151,20 +156,26 @@ def test_interrupt_on_local_workers_closes_the_cluster(tmp_path):
     deadline = time.monotonic() + PATIENCE_S  # the workers are rendering
     while not (log.exists() and log.read_text()) and time.monotonic() < deadline:
         time.sleep(0.1)
-    os.killpg(proc.pid, signal.SIGINT)
+    tree = processes.descendants(proc.pid)
+    assert len(tree) >= 2, tree  # the workers
+    if to_group:
+        os.killpg(proc.pid, signum)
+    else:
+        proc.send_signal(signum)
     try:
         _, rest = proc.communicate(timeout=PATIENCE_S)
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
         raise
-    assert proc.returncode == 130, said + [rest]
-    assert rest.strip().splitlines()[-1] == f"cbox: interrupted; 0 of {SEEDS} cells kept; rerun the same command " \
+    assert proc.returncode == code, said + [rest]
+    assert rest.strip().splitlines()[-1] == f"cbox: {word}; 0 of {SEEDS} cells kept; rerun the same command " \
                                              "to resume", rest
     assert "Traceback" not in rest, rest
     deadline = time.monotonic() + 30  # the workers' nannies end with their scheduler
-    while _group(proc.pid) and time.monotonic() < deadline:
+    while (left := _group(proc.pid) + [p for p in tree if Path(f"/proc/{p}").exists()]) and \
+            time.monotonic() < deadline:
         time.sleep(0.2)
-    assert not _group(proc.pid), _group(proc.pid)
+    assert not left, left
 
 
 def _group(pgid: int) -> list[str]:

@@ -11,6 +11,7 @@ A renderer written in any language is gated like ours once a renderers file says
     estimator = "unbiased"              # optional; cornell_harness.adapters.api.ESTIMATORS (default unbiased)
     variance = "{out}.var.exr"          # optional: a second EXR the program writes, the variance of its mean
     time = 'render took ([0-9.]+) s'    # optional: "wall" (default) or a regex whose one group is seconds
+    time_limit = "10m"                  # optional: how long one run may take (default: scaled from the samples)
 
 The file may also name how series show in legends and tables (``--series-label`` gives the same)::
 
@@ -49,9 +50,17 @@ image, or one of the wrong size is a :class:`CommandFailed` quoting the tail
 of the program's stderr: a failed run in the results, with the reason. A
 run's ``time_s`` is its wall time (or what ``time`` reads), its
 ``cpu_time_s`` the program's CPU time, all its threads and its own children,
-start-up included (the CPU time of the waited-for child, :func:`os.times`). The
-time limit and memory bound are the sandbox's (:mod:`cornell_harness.workflows.sandbox`):
-the program runs in the sandbox worker's process group and is killed with it.
+start-up included (the CPU time of the waited-for child, :func:`os.times`).
+
+Each run of the program is one child of :mod:`cornell_harness.processes`: it
+ends with the command that started it (a signal, an exception), and a run that
+passes its time limit is ended with what it started and fails the render with
+a :class:`CommandFailed` that says so. The limit is the entry's ``time_limit``,
+or by default :data:`DEFAULT_LIMIT_START_S` plus :data:`DEFAULT_LIMIT_PER_SAMPLE_S`
+per sample (spp × width × height): generous, it ends a hang, not a slow
+program. Its ``$TMPDIR`` is its run folder, so what it leaves there goes with
+the folder. A sandboxed render (``--time-limit``, the gate) is bounded by the
+sandbox as well (:mod:`cornell_harness.workflows.sandbox`).
 
 A declared renderer is known to the registry (:mod:`cornell_harness.adapters.registry`)
 by its name, and travels to other processes (the sandbox, Dask workers) as
@@ -76,7 +85,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
+from cornell_harness import processes
 from cornell_harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, SettingsError, Stopwatch, default_threads
+from cornell_harness.durations import parse_duration
 from cornell_harness.scenes.model import FEATURES, Scene
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
 from cornell_harness.schemas.reader import FormatProblem, check, read_toml
@@ -90,6 +101,8 @@ SPEC_SEPARATOR = "#"
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
 #: Lines of the program's stderr a failure quotes, and their characters at most.
 TAIL_LINES, TAIL_CHARS = 6, 600
+#: A run's time limit where its entry gives none: seconds, plus seconds per sample (spp × width × height).
+DEFAULT_LIMIT_START_S, DEFAULT_LIMIT_PER_SAMPLE_S = 60.0, 1e-5
 
 
 class RenderersFileError(RuntimeError):
@@ -120,6 +133,14 @@ class Declaration:
     estimator: str = ESTIMATORS[0]
     variance: str | None = None
     time: str = "wall"
+    time_limit_s: float | None = None  # None: scaled from the samples (run_time_limit_s)
+
+    def run_time_limit_s(self, spp: int, width: int, height: int) -> float:
+        """How long one run at ``spp`` may take: the entry's ``time_limit``, or the default scaled from the
+        samples."""
+        if self.time_limit_s is not None:
+            return self.time_limit_s
+        return DEFAULT_LIMIT_START_S + DEFAULT_LIMIT_PER_SAMPLE_S * spp * width * height
 
     @property
     def spec(self) -> str:
@@ -223,8 +244,12 @@ def _declaration(path: Path, name: str, t: dict) -> Declaration:
             raise bad("time", f"not a regex: {e}") from None
         if groups != 1:
             raise bad("time", f"the regex has {groups} groups; give exactly one, the seconds")
+    try:
+        limit = parse_duration(t["time_limit"]) if "time_limit" in t else None
+    except ValueError as e:
+        raise bad("time_limit", str(e).replace("time budget", "duration")) from None
     return Declaration(name, path, tuple(command), fmt, frozenset(models), t.get("quantity", DEFAULT_QUANTITY),
-                       t.get("estimator", ESTIMATORS[0]), variance, timing)
+                       t.get("estimator", ESTIMATORS[0]), variance, timing, limit)
 
 
 def _check_placeholders(text: str, bad) -> None:
@@ -334,15 +359,19 @@ class CommandRenderer:
             if stale is not None and stale.exists():
                 stale.unlink()
         stdout, stderr = folder / f"stdout-{spp}.txt", folder / f"stderr-{spp}.txt"
-        with open(stdout, "wb") as o, open(stderr, "wb") as e:
-            clock = Stopwatch()
-            # The program stays in this process's group: the sandbox kills the group at its bounds.
-            code = subprocess.call(argv, cwd=folder, stdin=subprocess.DEVNULL, stdout=o, stderr=e)
-            wall, cpu = clock.read()
 
         def failed(what: str) -> CommandFailed:
             return CommandFailed(f"{d.name} at {spp} spp: {what}; stderr: {_tail(stderr)}")
 
+        with open(stdout, "wb") as o, open(stderr, "wb") as e:
+            clock = Stopwatch()
+            try:
+                code = processes.run(argv, d.run_time_limit_s(spp, cam.width, cam.height), cwd=folder,
+                                     stdin=subprocess.DEVNULL, stdout=o, stderr=e,
+                                     env=dict(os.environ, TMPDIR=str(folder)))
+            except processes.TimeLimitExceeded as limit:
+                raise failed(f"{limit} (ran {limit.time_s:.1f} s; the renderers file's time_limit sets it)") from None
+            wall, cpu = clock.read()
         if code != 0:
             raise failed(f"exited with code {code}" if code > 0 else f"killed by signal {-code}")
         expected = (cam.height, cam.width, 3)

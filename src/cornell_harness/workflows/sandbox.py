@@ -25,20 +25,23 @@ Bounds
 ------
 - **time**: the process's wall time covers interpreter start, imports, JIT or
   LLVM compilation, scene set-up, every render and writing the result. When
-  it passes ``time_bound_s`` the process group is killed (SIGKILL; the worker
-  runs in a session of its own, so anything it started dies with it).
+  it passes ``time_bound_s`` the worker is ended with everything it started
+  (:func:`cornell_harness.processes.end`: SIGTERM, then SIGKILL after a grace period).
 - **memory**: the resident set (``VmRSS``) of the process and of the
   processes it started (a command-line renderer's program,
   :mod:`cornell_harness.adapters.commands`), summed, is polled every :data:`POLL_S`
   seconds; when it passes ``rss_bound_mb`` the process group is killed. Its
   peak is the larger of the kernel's high-water mark of the worker's resident
   set, ``VmHWM`` (read by the worker itself as its last act, and polled by the
-  parent, which covers a killed worker), and the largest polled sum.
+  parent, which covers a killed worker), and the largest polled sum. Past the
+  bound there is no grace period: SIGKILL at once.
   ``ru_maxrss`` from ``wait4`` is not used on Linux: it carries the parent's
   resident set at fork into the child, so it would count the parent's memory. Without ``/proc`` (macOS) the peak is
   ``ru_maxrss`` and only the time bound is enforced.
 
-An interrupt (Ctrl-C) in the parent kills the worker before it propagates.
+An interrupt (a signal, :mod:`cornell_harness.cli.interrupt`) in the parent ends the worker before it
+propagates. The worker's temporary files (a command renderer's run folder) go into the sandbox's own
+folder (its ``$TMPDIR``), which the parent removes however the worker ended.
 """
 
 from __future__ import annotations
@@ -48,7 +51,6 @@ import json
 import math
 import os
 import pickle
-import signal
 import subprocess
 import sys
 import tempfile
@@ -60,6 +62,7 @@ from typing import Sequence
 
 import numpy as np
 
+from cornell_harness import processes
 from cornell_harness.workflows.timing import Timing
 
 #: Seconds between two polls of the worker's wall time and resident memory.
@@ -140,41 +143,19 @@ def _proc_status_mb(pid: int | str, field: str) -> float:
     return 0.0
 
 
-def _family(pid: int) -> list[int]:
-    """``pid`` and every process it started, and they started (a command-line renderer's program: its memory
-    counts against the bound); ``pid`` alone where ``/proc/PID/task/PID/children`` is not kept."""
-    out, todo = [], [pid]
-    while todo:
-        p = todo.pop()
-        out.append(p)
-        try:
-            with open(f"/proc/{p}/task/{p}/children") as f:
-                todo += [int(c) for c in f.read().split()]
-        except (OSError, ValueError):
-            pass
-    return out
-
-
-def _kill_group(pid: int) -> None:
-    """SIGKILL the worker's process group (it was started in a session of its own)."""
-    try:
-        os.killpg(pid, signal.SIGKILL)
-    except (ProcessLookupError, PermissionError):
-        pass
-
-
 def _watch_worker(folder: Path, time_bound_s: float, rss_bound_mb: float) -> _Watched:
-    """Start the worker on ``folder`` and wait for it, killing it at either bound."""
+    """Start the worker on ``folder`` and wait for it, ending it at either bound."""
+    (folder / "tmp").mkdir()
+    env = dict(os.environ, TMPDIR=str(folder / "tmp"))  # what the worker leaves there goes with the folder
     with open(folder / "stdout.txt", "wb") as out, open(folder / "stderr.txt", "wb") as err:
         t0 = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, "-m", "cornell_harness.workflows.sandbox", "--worker", str(folder)],
-                                stdin=subprocess.DEVNULL, stdout=out, stderr=err, start_new_session=True)
+        proc = processes.start([sys.executable, "-m", "cornell_harness.workflows.sandbox", "--worker", str(folder)],
+                               stdin=subprocess.DEVNULL, stdout=out, stderr=err, env=env)
         try:
             status, usage, killed, peak = _poll(proc.pid, t0, time_bound_s, rss_bound_mb)
         except BaseException:  # interrupted: never leave a worker behind
-            _kill_group(proc.pid)
-            os.waitpid(proc.pid, 0)
-            proc.returncode = -9
+            processes.end([proc.pid])
+            proc.wait()
             raise
         wall = time.perf_counter() - t0
         proc.returncode = os.waitstatus_to_exitcode(status)  # reaped by wait4: Popen must not wait again
@@ -184,21 +165,23 @@ def _watch_worker(folder: Path, time_bound_s: float, rss_bound_mb: float) -> _Wa
 
 
 def _poll(pid: int, t0: float, time_bound_s: float, rss_bound_mb: float):
-    """Wait for ``pid`` to end; (wait status, rusage, what killed it or None, polled peak RSS in MB)."""
+    """Wait for ``pid`` to end; (wait status, rusage, what ended it or None, polled peak RSS in MB). The
+    resident set counts every process the worker started (a command-line renderer's program)."""
     killed, peak = None, 0.0
     while True:
         done, status, usage = os.wait4(pid, os.WNOHANG)
         if done:
+            processes.end([pid])  # what the worker left behind in its group, if anything
             return status, usage, killed, peak
         elapsed = time.perf_counter() - t0
-        rss = sum(_proc_status_mb(p, "VmRSS") for p in _family(pid))
+        rss = sum(_proc_status_mb(p, "VmRSS") for p in [pid, *processes.descendants(pid)])
         peak = max(peak, _proc_status_mb(pid, "VmHWM"), rss)
         if killed is None and elapsed > time_bound_s:
             killed = "timeout"
-            _kill_group(pid)
+            processes.end([pid])
         elif killed is None and rss > rss_bound_mb:
             killed = "memory"
-            _kill_group(pid)
+            processes.end([pid], grace_s=0.0)
         time.sleep(POLL_S)
 
 
