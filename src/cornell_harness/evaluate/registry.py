@@ -142,15 +142,13 @@ def region_metric(key: str) -> tuple[str, str] | None:
     return region, metric
 
 
-#: How a bound on a metric is broken: a value above it (``max``), below it (``min``), or a magnitude above it
-#: (``abs_max``): a gate budget's kinds, and a ``--fail``/``--warn`` threshold's direction.
-BOUND_KINDS = ("max", "min", "abs_max")
-
-
 def value_range(key: str, kind: str = "max") -> tuple[float, float]:
-    """The values a bound of ``kind`` (:data:`BOUND_KINDS`) on metric ``key`` (a registry key, or
+    """The values a bound of ``kind`` on metric ``key`` (a registry key, or
     ``region.<region>.<metric>``) can meaningfully take: the metric's :attr:`Metric.values`, or for a bound on
-    its magnitude (``abs_max``) 0 up to the largest magnitude; any value for a name the registry does not know."""
+    its magnitude (``abs_max``) 0 up to the largest magnitude; any value for a name the registry does not know.
+
+    ``kind`` is how the bound is broken: by a value above it (``max``), below it (``min``) or a magnitude above
+    it (``abs_max``), a gate budget's kinds and a ``--fail``/``--warn`` threshold's directions."""
     metric = (region_metric(key) or (None, key))[1]
     lo, hi = METRICS[metric].values if metric in METRICS else ANY
     return (0.0, max(abs(lo), abs(hi))) if kind == "abs_max" else (lo, hi)

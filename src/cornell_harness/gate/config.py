@@ -31,7 +31,8 @@ The config is strict: its format is ``src/cornell_harness/schemas/gate.schema.js
 :mod:`cornell_harness.schemas.reader`. An unknown key at any level, or an unknown metric in a
 budget or in ``regression_metrics``, is a config error (exit 2) with a
 did-you-mean, before anything renders; a misspelt key must never turn a
-gate green. So is a budget outside its metric's range or a ``min`` above its ``max``. An expectation must check accuracy (``unbiased``, a budget, a
+gate green. A budget outside its metric's range, or a ``min`` above its
+``max``, is a config error too. An expectation must check accuracy (``unbiased``, a budget, a
 slope or ``consistency``) unless it says ``finite_only = true``.
 
 A budget may name a region's metric as a quoted key,
