@@ -77,6 +77,7 @@ def test_fail_percent_counts_pixels_above_the_delta_e_threshold(render16, tmp_pa
     (("--fail", "region.causti.rmse=1"), ["--fail", "no region 'causti'", "did you mean 'caustic'?"]),
     (("--fail", "delta_e2000_mean=-1"), ["--fail", "delta_e2000_mean is at least 0"]),
     (("--warn", "ssim=1.5"), ["--warn", "ssim is between -1 and 1"]),
+    (("--fail", "ssim_mean=1.5"), ["--fail", "unknown metric 'ssim_mean'", "metrics: "]),
     (("--fail", "rmse=-0.1"), ["--fail", "rmse is at least 0"]),
     (("--fail", "rel_mse=-1"), ["--fail", "rel_mse is at least 0"]),
     (("--warn", "flip_mean=-1"), ["--warn", "flip_mean is between 0 and 1"]),

@@ -126,6 +126,11 @@ def test_parse_target_and_duration():
     assert cv.unknown_target_regions(targets, {"floor": None}) == ["caustic"]
     with pytest.raises(ValueError):
         cv.parse_target("ssim>=0.9")
+    assert cv.parse_target("rel_mse=0") == ("rel_mse", 0.0)  # the end of its range: taken
+    for bad, words in (("rel_mse=-1e-3", "rel_mse is at least 0"), ("flip_mean=1.5", "between 0 and 1"),
+                       ("1e999", "must be finite")):
+        with pytest.raises(ValueError, match=words):
+            cv.parse_target(bad)
     assert [parse_duration(t) for t in ("10s", "2m", "500ms", "1.5")] == [10, 120, 0.5, 1.5]
     with pytest.raises(ValueError):
         parse_duration("soon")

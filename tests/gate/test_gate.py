@@ -89,6 +89,7 @@ def test_agreement_rejects_what_it_cannot_evaluate():
     ('[[expect]]\nscene = "cornell-box"\nrenderer = "x"\nspp = 4\nmax = { ssim = "high" }\n', "expect[0].max.ssim"),
     ('[[expect]]\nscene = 3\nrenderer = "x"\nspp = 4\n', "expect[0].scene"),
     ("[[expect]\n", "(syntax)"),
+    ('[[expect]]\nname = 3\nscene = "cornell-box"\nrenderer = "x"\nspp = 4\nfinite_only = true\n', "expect[0].name"),
 ])
 def test_bad_config_names_file_and_field(tmp_path, text, field):
     path = _config(tmp_path, text, head="")
@@ -96,12 +97,53 @@ def test_bad_config_names_file_and_field(tmp_path, text, field):
         load_config(path)
 
 
-def test_cli_bad_config_exit_2_one_line(tmp_path):
-    path = _config(tmp_path, '[[expect]]\nscene = "cornell-box"\nrenderer = "x"\n', head="")
+BUDGET = '[[expect]]\nscene = "cornell-box"\nrenderer = "x"\nspp = 4\n'
+
+
+@pytest.mark.parametrize("text, field, message", [
+    (BUDGET + "max = { delta_e2000_mean = -1 }\n", "expect[0].max.delta_e2000_mean",
+     "delta_e2000_mean is at least 0, so -1 would fail every render"),
+    (BUDGET + "min = { ssim = 1.5 }\n", "expect[0].min.ssim", "ssim is between -1 and 1, so 1.5 would fail every render"),
+    (BUDGET + "min = { ssim = -2 }\n", "expect[0].min.ssim", "so -2 would pass every render"),
+    (BUDGET + "max = { flip_mean = 1.5 }\n", "expect[0].max.flip_mean", "between 0 and 1, so 1.5 would pass every"),
+    (BUDGET + "abs_max = { mean_radiance_rel_error = -0.1 }\n", "expect[0].abs_max.mean_radiance_rel_error",
+     "|mean_radiance_rel_error| is at least 0"),
+    (BUDGET + 'max = { "region.caustic.rmse" = -1 }\n', "expect[0].max.region.caustic.rmse",
+     "region.caustic.rmse is at least 0"),
+    (BUDGET + "max = { rmse = 0.5 }\nmin = { rmse = 0.9 }\n", "expect[0].min.rmse",
+     "0.9 is above max.rmse = 0.5: every render would fail one of them"),
+    (BUDGET + "abs_max = { rmse = 0.1 }\nmin = { rmse = 0.2 }\n", "expect[0].min.rmse", "above abs_max.rmse = 0.1"),
+])
+def test_a_budget_no_render_can_meet_or_break_is_refused(tmp_path, text, field, message):
+    """A budget outside its metric's range (the registry's, as --fail's) or a min above its max decides every
+    render alike: refused, naming the field."""
+    path = _config(tmp_path, text, head="")
+    with pytest.raises(GateConfigError) as e:
+        load_config(path)
+    assert str(e.value).startswith(f"{path}: {field}: ") and message in str(e.value), str(e.value)
+
+
+def test_budgets_at_the_ends_of_their_range_are_taken(tmp_path):
+    path = _config(tmp_path, BUDGET + "max = { ssim = 1, rmse = 0 }\nmin = { ssim = -1, rmse = 0 }\n"
+                   "abs_max = { mean_radiance_rel_error = 0 }\n", head="")
+    exp = load_config(path).expectations[0]
+    assert exp.max == {"ssim": 1.0, "rmse": 0.0} and exp.min == {"ssim": -1.0, "rmse": 0.0}
+
+
+@pytest.mark.parametrize("text, line", [
+    ('[[expect]]\nscene = "cornell-box"\nrenderer = "x"\n', 'expect[0].spp: give exactly one budget: spp = N or '
+                                                             'time = "10s"'),
+    # used to render, pass every check, then crash writing the JUnit file (exit 1, nothing written)
+    ('[[expect]]\nname = 3\nscene = "cornell-box"\nrenderer = "pathtracer"\nspp = 1\nfinite_only = true\n',
+     "expect[0].name: expected a string, got int"),
+    (BUDGET.replace('"x"', '"pathtracer"') + "max = { delta_e2000_mean = -1 }\n",
+     "expect[0].max.delta_e2000_mean: delta_e2000_mean is at least 0, so -1 would fail every render"),
+])
+def test_cli_bad_config_exit_2_one_line(tmp_path, text, line):
+    path = _config(tmp_path, text, head="")
     proc = run_cbox("gate", "--config", path, "--out", str(tmp_path / "out"))
     assert proc.returncode == 2
-    assert proc.stderr.strip() == f"cbox: error: {path}: expect[0].spp: give exactly one budget: spp = N or " \
-                                  f"time = \"10s\""
+    assert proc.stderr.strip() == f"cbox: error: {path}: {line}"
 
 
 def test_project_gate_config_is_valid():

@@ -16,7 +16,7 @@ import colour
 import numpy as np
 import pytest
 
-from tests.conftest import MINIMAL_SCENE, ROOT
+from tests.conftest import MINIMAL_SCENE, ROOT, cbox_in_process
 from cornell_harness.scenes.loader import load_scene
 from cornell_harness.scenes.model import SceneError
 from cornell_harness.scenes.spectra import (CORNELL_PCG, ILLUMINANT_E, SCENE_LIGHT, Spectrum, emission_rgb, interpolate,
@@ -218,3 +218,39 @@ def test_reflectance_above_one_and_missing_pipeline_are_refused(write_scene):
     with pytest.raises(SceneError, match=r"colour\.light: missing required field"):
         load_scene(write_scene(spectral_scene(SCENE_LIGHT, light_line=""), "c.toml"))
 
+
+
+def _with_sample(text: str, spectrum: str, index: int, value: float) -> str:
+    """``text`` with sample ``index`` of Cornell's ``spectrum`` (``white_reflectance``, ``light_emission``) set."""
+    values = DATA["spectra"][spectrum]
+    values = values["values"] if isinstance(values, dict) else values
+    assert _toml_list(values) in text
+    return text.replace(_toml_list(values), _toml_list(values[:index] + [value] + values[index + 1:]), 1)
+
+
+NEGATIVE_SAMPLES = [("light_emission", 2, -15.6, "spectra.light.values[2]", "an emission (colour.light) must be in "
+                     "[0, inf], got -15.6"),
+                    ("white_reflectance", 0, -0.1, "spectra.white.values[0]", "a reflectance "
+                     "(materials.white.reflectance) must be in [0, 1], got -0.1")]
+
+
+@pytest.mark.parametrize("convention", [ILLUMINANT_E, SCENE_LIGHT])
+@pytest.mark.parametrize("spectrum, index, value, field, message", NEGATIVE_SAMPLES)
+def test_a_negative_sample_is_refused_as_itself(write_scene, convention, spectrum, index, value, field, message):
+    """A negative sample is named with its spectrum and index in either convention. Under scene_light the
+    reflectances are white-balanced to the light, and a negative light sample used to surface as a light whose
+    colour is not positive (field colour.light), not as the sample it is."""
+    path = write_scene(_with_sample(spectral_scene(convention), spectrum, index, value))
+    with pytest.raises(SceneError) as e:
+        load_scene(path)
+    assert str(e.value) == f"{path}: {field}: {message}"
+
+
+@pytest.mark.parametrize("command", [["render", "-r", "pathtracer", "-o", "x.exr"], ["compare", "-r", "pathtracer"]])
+def test_a_negative_sample_is_one_line_exit_2_from_the_cli(write_scene, capsys, tmp_path, monkeypatch, command):
+    monkeypatch.chdir(tmp_path)
+    path = write_scene(_with_sample(spectral_scene(SCENE_LIGHT), "light_emission", 1, -8.0))
+    code, out, err = cbox_in_process(capsys, command[0], "--scene", str(path), *command[1:])
+    assert code == 2 and err.splitlines() == [f"cbox: error: {path}: spectra.light.values[1]: an emission "
+                                              "(colour.light) must be in [0, inf], got -8.0"], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]  # refused before anything ran

@@ -43,7 +43,7 @@ import pandas as pd
 from scipy import stats as _st
 
 from cornell_harness.evaluate import bootstrap
-from cornell_harness.evaluate.registry import IMAGE_METRICS, REGION_CHECK_METRICS, region_metric
+from cornell_harness.evaluate.registry import IMAGE_METRICS, REGION_CHECK_METRICS, bound_problem, region_metric
 from cornell_harness.suggest import closest
 
 #: Targets of ``time_to_*`` columns by default: (metric, value).
@@ -205,6 +205,11 @@ def parse_target(text: str) -> tuple[str, float]:
         value = float(m.group(2))
     except ValueError:
         raise ValueError(f"target error {text!r}: {m.group(2)!r} is not a number") from None
+    if not math.isfinite(value):
+        raise ValueError(f"target error {text!r}: the value must be finite")
+    # A target is reached once the error is at most it: an upper bound, refused outside the metric's range.
+    if problem := bound_problem(metric, value, "max"):
+        raise ValueError(f"target error {text!r}: {problem}")
     return metric, value
 
 

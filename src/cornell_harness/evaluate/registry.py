@@ -142,6 +142,31 @@ def region_metric(key: str) -> tuple[str, str] | None:
     return region, metric
 
 
+def value_range(key: str, kind: str = "max") -> tuple[float, float]:
+    """The values a bound of ``kind`` on metric ``key`` (a registry key, or
+    ``region.<region>.<metric>``) can meaningfully take: the metric's :attr:`Metric.values`, or for a bound on
+    its magnitude (``abs_max``) 0 up to the largest magnitude; any value for a name the registry does not know.
+
+    ``kind`` is how the bound is broken: by a value above it (``max``), below it (``min``) or a magnitude above
+    it (``abs_max``), a gate budget's kinds and a ``--fail``/``--warn`` threshold's directions."""
+    metric = (region_metric(key) or (None, key))[1]
+    lo, hi = METRICS[metric].values if metric in METRICS else ANY
+    return (0.0, max(abs(lo), abs(hi))) if kind == "abs_max" else (lo, hi)
+
+
+def bound_problem(key: str, value: float, kind: str, what: str = "image") -> str | None:
+    """Why a bound ``value`` of ``kind`` on metric ``key`` is meaningless, or None: outside the values the metric
+    can take (a negative ΔE00, an SSIM above 1) it passes every ``what`` or fails every one, whatever the
+    render. One rule for ``--fail``/``--warn`` and the gate's budgets."""
+    lo, hi = value_range(key, kind)
+    if lo <= value <= hi:
+        return None
+    shown = f"|{key}|" if kind == "abs_max" else key
+    where = f"at least {lo:g}" if hi == math.inf else f"between {lo:g} and {hi:g}"
+    passes = (value < lo) == (kind == "min")
+    return f"{shown} is {where}, so {value:g} would {'pass' if passes else 'fail'} every {what}"
+
+
 def check_metrics(named: Iterable[str]) -> frozenset[str]:
     """What a check that names ``named`` (its thresholds' keys: metrics, or ``region.<region>.<metric>``)
     computes: those and :data:`CHEAP_METRICS`, and not the costly rest (the ΔE00 map, SSIM, PSNR's display

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cornell_harness.evaluate.registry import (ANY, HIGHER_IS_BETTER, IMAGE_METRICS, METRICS, REGION_CHECK_METRICS,
-                                               region_metric)
+from cornell_harness.evaluate.registry import (HIGHER_IS_BETTER, IMAGE_METRICS, METRICS, REGION_CHECK_METRICS,
+                                               bound_problem, region_metric)
 from cornell_harness.suggest import did_you_mean
 
 #: The levels of a threshold, the worse first.
@@ -53,14 +53,6 @@ class Threshold:
         if metric in HIGHER_IS_BETTER:
             return "min"
         return "abs_max" if METRICS.get(metric) is None or METRICS[metric].better is None else "max"
-
-    @property
-    def bounds(self) -> tuple[float, float]:
-        """The values the threshold can take: the metric's range (the registry's), or for one bounding a
-        magnitude (``abs_max``) 0 up to the largest magnitude. Outside it a threshold always or never fails."""
-        metric = (region_metric(self.metric) or (None, self.metric))[1]
-        lo, hi = METRICS[metric].values if metric in METRICS else ANY
-        return (0.0, max(abs(lo), abs(hi))) if self.direction == "abs_max" else (lo, hi)
 
     def exceeded(self, value: float | None) -> bool:
         """Whether ``value`` breaks the threshold; a missing or NaN value does (it cannot be shown to pass)."""
@@ -109,14 +101,9 @@ def parse_threshold(text: str, level: str) -> Threshold:
 def _in_range(threshold: Threshold, text: str) -> Threshold:
     """``threshold``, or a ThresholdError when its value is outside what its metric can be (a negative ΔE00, an
     SSIM above 1): such a threshold fails every image, or none."""
-    lo, hi = threshold.bounds
-    if lo <= threshold.value <= hi:
-        return threshold
-    shown = f"|{threshold.metric}|" if threshold.direction == "abs_max" else threshold.metric
-    where = f"at least {lo:g}" if hi == math.inf else f"between {lo:g} and {hi:g}"
-    raise ThresholdError(f"{text!r}: {shown} is {where}, so {threshold.value:g} would "
-                         f"{'pass' if (threshold.value < lo) == (threshold.direction == 'min') else 'fail'} "
-                         "every image")
+    if problem := bound_problem(threshold.metric, threshold.value, threshold.direction):
+        raise ThresholdError(f"{text!r}: {problem}")
+    return threshold
 
 
 def fraction_above(per_pixel: np.ndarray, threshold: float) -> float:

@@ -31,7 +31,8 @@ The config is strict: its format is ``src/cornell_harness/schemas/gate.schema.js
 :mod:`cornell_harness.schemas.reader`. An unknown key at any level, or an unknown metric in a
 budget or in ``regression_metrics``, is a config error (exit 2) with a
 did-you-mean, before anything renders; a misspelt key must never turn a
-gate green. An expectation must check accuracy (``unbiased``, a budget, a
+gate green. A budget outside its metric's range, or a ``min`` above its
+``max``, is a config error too. An expectation must check accuracy (``unbiased``, a budget, a
 slope or ``consistency``) unless it says ``finite_only = true``.
 
 A budget may name a region's metric as a quoted key,
@@ -123,7 +124,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cornell_harness.evaluate.registry import HIGHER_IS_BETTER, IMAGE_METRICS, REGION_CHECK_METRICS, region_metric
+from cornell_harness.evaluate.registry import (HIGHER_IS_BETTER, IMAGE_METRICS, REGION_CHECK_METRICS, bound_problem,
+                                               region_metric)
 from cornell_harness.schemas.reader import FormatProblem, check, read_toml
 from cornell_harness.suggest import closest
 from cornell_harness.durations import parse_duration
@@ -295,6 +297,7 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
     for key in ("max", "min", "abs_max"):
         _check_metrics(path, t.get(key, {}), IMAGE_METRICS, f"{w}{key}.")
         budgets[key] = {k: float(v) for k, v in t.get(key, {}).items()}
+    _check_budgets(path, w, budgets)
     unbiased, settings = t.get("unbiased", False), t.get("settings", {})
     consistency = _consistency(path, t, w, spp)
     bias_limit = _bias_limit(path, t, w)
@@ -308,6 +311,21 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
     return Expectation(name, t["scene"], t["renderer"], spp, time_s, t.get("seed", 0), unbiased, t.get("tile", 16),
                        slope, budgets["max"], budgets["min"], budgets["abs_max"], settings,
                        _duration(path, t, "time_limit", w, time_limit), consistency, bias_limit)
+
+
+def _check_budgets(path: Path, w: str, budgets: dict[str, dict[str, float]]) -> None:
+    """Refuse a budget no render can break or none can meet: outside its metric's range (the registry's
+    :func:`~cornell_harness.evaluate.registry.bound_problem`, as ``--fail``), or a ``min`` above the same metric's
+    ``max`` or ``abs_max``."""
+    for kind, table in budgets.items():
+        for key, value in table.items():
+            if problem := bound_problem(key, value, kind, "render"):
+                raise GateConfigError(path, f"{w}{kind}.{key}", problem)
+    for key, low in budgets["min"].items():
+        for kind in ("max", "abs_max"):
+            if key in budgets[kind] and low > budgets[kind][key]:
+                raise GateConfigError(path, f"{w}min.{key}", f"{low:g} is above {kind}.{key} = "
+                                      f"{budgets[kind][key]:g}: every render would fail one of them")
 
 
 def _bias_limit(path: Path, t: dict, w: str) -> BiasLimit | None:

@@ -123,7 +123,10 @@ class SpectralReader:
             raise err("colour.light", f"missing required field: rgb_convention = {SCENE_LIGHT!r} balances "
                                       "reflectances to the scene's light; name its spectrum")
         if self.light is not None:
-            self._lookup(self.light, "colour.light")
+            # The light is an emission: its samples are checked here, before a reflectance is white-balanced to
+            # it, so a negative sample is reported as itself, not as a light that cannot be balanced to.
+            self._check_values(self.light, self._lookup(self.light, "colour.light"), 0.0, None,
+                               "an emission (colour.light)")
 
     def _spectrum(self, name: str, t: dict) -> Spectrum:
         wavelengths, values, extrapolation = t["wavelengths_nm"], t["values"], t.get("extrapolation", "zero")
