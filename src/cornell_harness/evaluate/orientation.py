@@ -42,7 +42,7 @@ import numpy as np
 
 from cornell_harness.evaluate import metrics
 from cornell_harness.evaluate import noise
-from cornell_harness.evaluate.pixels import zero_broken_pixels
+from cornell_harness.evaluate.pixels import all_finite, zero_broken_pixels
 
 if TYPE_CHECKING:
     from cornell_harness.store.references import Reference
@@ -101,9 +101,11 @@ def block_size(shape: tuple) -> int:
 def block_means(image: np.ndarray, size: int) -> np.ndarray:
     """The mean of each ``size`` × ``size`` block of an (H, W, C) image (rows and columns beyond a whole block
     dropped)."""
-    h, w = image.shape[0] // size * size, image.shape[1] // size * size
-    a = np.asarray(image, np.float64)[:h, :w]
-    return a.reshape(h // size, size, w // size, size, -1).mean(axis=(1, 3))
+    h, w = image.shape[0] // size, image.shape[1] // size
+    a = np.asarray(image)[:h * size, :w * size]
+    # rows, then columns: two reductions over a contiguous axis each, several times faster than one over both
+    rows = a.reshape(h, size, w * size, -1).sum(axis=1, dtype=np.float64)
+    return rows.reshape(h, w, size, -1).sum(axis=2) / size**2
 
 
 def noise_rel_mse(reference: "Reference", spp: int) -> float:
@@ -121,10 +123,12 @@ def check_orientation(image: np.ndarray, reference: "Reference", spp: int | None
     :func:`block_means`), and the noise level at ``spp`` when it and the reference's variance are known.
 
     The transforms act on the block means (the same as on the pixels where the blocks tile the image; where
-    they do not, on its top-left whole blocks), so the check costs three passes over the pixels.
+    they do not, on its top-left whole blocks), so the check costs a pass over the pixels of the image, the
+    reference and (with ``spp``) its variance: a few milliseconds at 256².
     """
     size = block_size(reference.image.shape)
-    img = block_means(zero_broken_pixels(np.asarray(image)), size)
+    img = np.asarray(image)
+    img = block_means(img if all_finite(img) else zero_broken_pixels(img), size)
     ref = block_means(reference.image, size)
     transformed = {name: metrics.rel_mse(f(img), ref, trim=TRIM) for name, f in TRANSFORMS.items()}
     known = spp is not None and reference.variance is not None
