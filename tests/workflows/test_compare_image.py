@@ -158,7 +158,7 @@ def test_labels_are_unique():
     assert ci.unique_labels(["a/x.exr", "b/x.exr", "y.png", "c/x.exr"]) == ["x", "x-2", "y", "x-3"]
 
 
-# -- an image of unknown spp -------------------------------------------------------------------
+# -- an image of unknown spp, and one the wrong way up --------------------------------------------
 
 
 
@@ -169,6 +169,13 @@ def correct(tmp_path):
     path = tmp_path / "correct.exr"
     write_exr(path, read_exr(CORNELL.parent / "noise.exr"))
     return path
+
+
+def _pfm(path, image, upside_down=False) -> None:
+    """PFM as a C program writes it: rows bottom to top (``upside_down``: top to bottom, the common mistake)."""
+    h, w, _ = image.shape
+    rows = np.ascontiguousarray((image if upside_down else image[::-1]).astype("<f4"))
+    path.write_bytes(b"PF\n%d %d\n-1.0\n" % (w, h) + rows.tobytes())
 
 
 def test_without_spp_no_region_z_and_the_score_says_why(correct):
@@ -194,3 +201,19 @@ def test_a_threshold_that_needs_the_spp_is_refused_without_it(metric, correct):
     assert e.value.option == "--spp"
     ci.compare_images([correct], resolve_scene("cornell-box"), spp=128,
                       checks=ci.Checks([parse_threshold(f"{metric}=3", "fail")]))
+
+
+def test_a_pfm_scores_as_its_exr_and_one_upside_down_is_noted(tmp_path, correct):
+    """The PFM a C renderer writes scores exactly as the same pixels in EXR, with no note; written top row first,
+    it is scored upside down, and its score says so."""
+    pixels = read_exr(correct)
+    write_exr(tmp_path / "right.exr", pixels)
+    _pfm(tmp_path / "right.pfm", pixels)
+    _pfm(tmp_path / "wrong.pfm", pixels, upside_down=True)
+    run = ci.compare_images([tmp_path / n for n in ("right.exr", "right.pfm", "wrong.pfm")],
+                            resolve_scene("cornell-box"), spp=128)
+    exr, pfm, wrong = (c.score for c in run.images)
+    assert pfm.metrics == exr.metrics and pfm.regions == exr.regions and pfm.noise == exr.noise
+    assert exr.orientation_note is None and pfm.orientation_note is None
+    assert wrong.orientation_note.startswith("image looks flipped vertically: ")
+    assert wrong.record(run.target)["orientation_note"] == wrong.orientation_note

@@ -149,15 +149,17 @@ def _thresholds(fail_at, warn_at) -> list:
 
 
 def _show(run, out: Path, as_json: bool, named: list[str]) -> None:
-    """Per image: its clipping warning, the error map written, the broken criteria (stderr), the --json line
-    (which holds why there are no noise yardsticks); then the table (without --json) with that note under it,
-    and where the error maps are."""
+    """Per image: its clipping and orientation warnings, the error map written, the broken criteria (stderr),
+    the --json line (which holds why there are no noise yardsticks, and the orientation note); then the table
+    (without --json) with those notes under it, and where the error maps are."""
     from cornell_harness.reports.compare_image import ERROR_MAP_SUFFIX, write_error_map
 
     _warn_clipped(run.target.path, run.target.clipped)
     for checked in run.images:
         result = checked.score
         _warn_clipped(result.source.path, result.source.clipped)
+        if result.orientation_note:
+            warn(f"{result.source.path}: {result.orientation_note}")
         written = write_error_map(out, result, run.target, result.delta_e_map) if run.error_maps else None
         for level, line in checked.broken:
             typer.echo(f"cbox: fail: {line}" if level == "fail" else f"cbox: warning: {line}", err=True)
@@ -200,8 +202,9 @@ def _print_table(scores, named: list[str]) -> None:
 
 def _print_notes(scores) -> None:
     """Under the table, part of the result (--quiet keeps it): per image, why its noise yardsticks and region
-    z are missing."""
-    lines = [f"{s.source.label}: noise yardsticks skipped: {s.noise_note}" for s in scores if s.noise_note]
+    z are missing, and its orientation note."""
+    lines = [f"{s.source.label}: {what}" for s in scores
+             for what in (s.noise_note and f"noise yardsticks skipped: {s.noise_note}", s.orientation_note) if what]
     if lines:
         typer.echo("\nnotes:\n" + "\n".join(lines))
 

@@ -36,6 +36,10 @@ variance when it reports one, so there ``mean_z`` may differ); without an
 spp it is left out, not computed as if the image were noise-free (a
 correct render's z would read in the tens), and a threshold on it or on a
 yardstick is refused (:func:`check_spp`).
+
+Each score carries an orientation note where the image agrees with the
+reference far better flipped or mirrored than as it is
+(:mod:`cornell_harness.evaluate.orientation`).
 """
 
 from __future__ import annotations
@@ -52,6 +56,7 @@ from cornell_harness.evaluate import regions as named_regions
 from cornell_harness.evaluate.ciede2000 import srgb_eotf
 from cornell_harness.evaluate.image_scores import ImageScore, InputImage, Target
 from cornell_harness.evaluate.metrics import DELTA_E_KEYS
+from cornell_harness.evaluate.orientation import check_orientation
 from cornell_harness.evaluate.registry import COLOUR_METRICS, check_metrics, region_metric
 from cornell_harness.evaluate.score import NOISE_PREFIX, every_region_key, score_image
 from cornell_harness.evaluate.thresholds import (GREY_PIXEL_METRIC, PIXEL_METRIC, Threshold, broken, fraction_above,
@@ -239,8 +244,9 @@ def score(source: InputImage, target: Target, with_flip: bool = True,
     if source.spp is None:  # the region z needs the image's noise: unknown without its spp
         regions = {name: {k: v for k, v in values.items() if k != REGION_Z} for name, values in regions.items()}
     parameters = flip.flip_parameters(target.reference.image) if "flip_mean" in result.metrics else None
+    orientation = check_orientation(source.image, target.reference, source.spp).note
     return ImageScore(source, result.metrics, result.noise, result.noise_note, regions, parameters,
-                      result.delta_e_map)
+                      result.delta_e_map, orientation)
 
 
 # --------------------------------------------------------------------------
