@@ -123,8 +123,8 @@ def check_orientation(image: np.ndarray, reference: "Reference", spp: int | None
     :func:`block_means`), and the noise level at ``spp`` when it and the reference's variance are known.
 
     The transforms act on the block means (the same as on the pixels where the blocks tile the image; where
-    they do not, on its top-left whole blocks), so the check costs a pass over the pixels of the image, the
-    reference and (with ``spp``) its variance: a few milliseconds at 256².
+    they do not, on its top-left whole blocks), so the check costs one pass over the pixels of the image, of
+    the reference and (with ``spp``) of its variance, the rest on the block means (1024 of them at 256²).
     """
     size = block_size(reference.image.shape)
     img = np.asarray(image)
