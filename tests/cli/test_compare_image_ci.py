@@ -283,3 +283,24 @@ def test_nan_pixels_print_no_numpy_warning(render16, tmp_path):
     records = [json.loads(line) for line in proc.stdout.splitlines()]
     assert [r["metrics"]["nan_count"] for r in records] == [100, 256 * 256]
     assert records[0]["noise"]["noise_mean_radiance_z"] is not None
+
+
+def test_unknown_spp_and_an_upside_down_pfm_are_said_in_the_result(tmp_path, capsys):
+    """Under the table, kept by --quiet: why an image without spp has no yardsticks or region z, and that an
+    image looks flipped (also a warning on stderr); with --spp the yardsticks come back."""
+    from cornell_harness.store.exr import read_exr
+
+    pixels = read_exr(ROOT / "src" / "cornell_harness" / "references" / "cornell-box" / "noise.exr")
+    write_exr(tmp_path / "right.exr", pixels)
+    h, w, _ = pixels.shape
+    (tmp_path / "wrong.pfm").write_bytes(b"PF\n%d %d\n-1.0\n" % (w, h) + pixels.astype("<f4").tobytes())  # top first
+    code, out, err = cbox(capsys, "compare-image", str(tmp_path / "right.exr"), str(tmp_path / "wrong.pfm"),
+                          "--scene", "cornell-box", "--out", str(tmp_path / "o"), "-q")
+    notes = out.split("\nnotes:\n")[1].splitlines()
+    assert code == 0 and "mean_z" not in out.split("\nnotes:\n")[0]
+    assert notes[0].startswith("right: noise yardsticks skipped: no spp: ") and "--spp N" in notes[0]
+    assert notes[-1].startswith("wrong: image looks flipped vertically: ") and len(notes) == 3
+    assert f"cbox: warning: {tmp_path / 'wrong.pfm'}: image looks flipped vertically" in err
+    code, out, err = cbox(capsys, "compare-image", str(tmp_path / "right.exr"), "--scene", "cornell-box",
+                          "--spp", "128", "--out", str(tmp_path / "o"), "-q")
+    assert code == 0 and "notes:" not in out and "mean_z" in out and "noise_delta_e2000_mean" in out

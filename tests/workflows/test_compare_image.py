@@ -13,6 +13,7 @@ from cornell_harness.adapters.registry import resolve
 from cornell_harness.evaluate import flip
 from cornell_harness.evaluate.ciede2000 import srgb_eotf_inverse
 from cornell_harness.evaluate.registry import IMAGE_METRICS
+from cornell_harness.evaluate.thresholds import parse_threshold
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.store.exr import ImageFileError, read_exr, write_exr
 from cornell_harness.store.image_files import ImageFile
@@ -155,3 +156,64 @@ def test_spp_from_header_or_option():
 
 def test_labels_are_unique():
     assert ci.unique_labels(["a/x.exr", "b/x.exr", "y.png", "c/x.exr"]) == ["x", "x-2", "y", "x-3"]
+
+
+# -- an image of unknown spp, and one the wrong way up --------------------------------------------
+
+
+
+@pytest.fixture
+def correct(tmp_path):
+    """A correct 128-spp render of cornell-box (the stored noise batch's pixels) in a file without a cbox:spp
+    header, as any renderer but ours writes it."""
+    path = tmp_path / "correct.exr"
+    write_exr(path, read_exr(CORNELL.parent / "noise.exr"))
+    return path
+
+
+def _pfm(path, image, upside_down=False) -> None:
+    """PFM as a C program writes it: rows bottom to top (``upside_down``: top to bottom, the common mistake)."""
+    h, w, _ = image.shape
+    rows = np.ascontiguousarray((image if upside_down else image[::-1]).astype("<f4"))
+    path.write_bytes(b"PF\n%d %d\n-1.0\n" % (w, h) + rows.tobytes())
+
+
+def test_without_spp_no_region_z_and_the_score_says_why(correct):
+    """No header, no --spp: no yardsticks and no region mean_z (it used to be computed as if the image were
+    noise-free: tens of sigma on a correct render); the note in the result names --spp. With --spp, both."""
+    target = ci.load_scene_target(resolve_scene("cornell-box"))
+    (unknown,) = ci.load_images([correct], target)
+    scored = ci.score(unknown, target)
+    assert unknown.spp is None and scored.noise is None and "--spp N" in scored.noise_note
+    assert scored.regions and all("mean_z" not in values for values in scored.regions.values())
+    assert scored.record(target)["noise_note"] == scored.noise_note
+    (known,) = ci.load_images([correct], target, spp=128)
+    scored = ci.score(known, target)
+    assert scored.noise and scored.noise_note is None
+    assert all(abs(values["mean_z"]) < 4 for values in scored.regions.values())  # a correct render: within noise
+
+
+@pytest.mark.parametrize("metric", ["region.walls.mean_z", "noise_rmse"])
+def test_a_threshold_that_needs_the_spp_is_refused_without_it(metric, correct):
+    with pytest.raises(ci.OptionError, match=f"{metric}: .*correct.exr has no cbox:spp header") as e:
+        ci.compare_images([correct], resolve_scene("cornell-box"),
+                          checks=ci.Checks([parse_threshold(f"{metric}=3", "fail")]))
+    assert e.value.option == "--spp"
+    ci.compare_images([correct], resolve_scene("cornell-box"), spp=128,
+                      checks=ci.Checks([parse_threshold(f"{metric}=3", "fail")]))
+
+
+def test_a_pfm_scores_as_its_exr_and_one_upside_down_is_noted(tmp_path, correct):
+    """The PFM a C renderer writes scores exactly as the same pixels in EXR, with no note; written top row first,
+    it is scored upside down, and its score says so."""
+    pixels = read_exr(correct)
+    write_exr(tmp_path / "right.exr", pixels)
+    _pfm(tmp_path / "right.pfm", pixels)
+    _pfm(tmp_path / "wrong.pfm", pixels, upside_down=True)
+    run = ci.compare_images([tmp_path / n for n in ("right.exr", "right.pfm", "wrong.pfm")],
+                            resolve_scene("cornell-box"), spp=128)
+    exr, pfm, wrong = (c.score for c in run.images)
+    assert pfm.metrics == exr.metrics and pfm.regions == exr.regions and pfm.noise == exr.noise
+    assert exr.orientation_note is None and pfm.orientation_note is None
+    assert wrong.orientation_note.startswith("image looks flipped vertically: ")
+    assert wrong.record(run.target)["orientation_note"] == wrong.orientation_note

@@ -36,9 +36,10 @@ def compare_image(
     scene: Optional[str] = typer.Option(None, "--scene", "-s", help="Score against this scene's stored reference "
                                         "(name, .toml file or folder), with its variance and named regions."),
     spp: Optional[int] = typer.Option(None, "--spp", min=1, help="Samples per pixel of the images, for the noise "
-                                      "yardsticks, where an image has no cbox:spp header (cbox render writes "
-                                      "one); one that contradicts its header is refused. Without either the "
-                                      "yardsticks are skipped."),
+                                      "yardsticks and the regions' mean_z, where an image has no cbox:spp header "
+                                      "(cbox render writes one); one that contradicts its header is refused. "
+                                      "Without either they are left out, the result says so (its notes, --json's "
+                                      "noise_note), and a threshold on them is refused."),
     input_transfer: Optional[str] = typer.Option(
         None, "--input-transfer", metavar="srgb|linear", callback=choice_callback("--input-transfer", _transfers),
         help="How to linearise display-referred (integer) images: srgb (the sRGB EOTF, IEC 61966-2-1) or linear "
@@ -148,14 +149,17 @@ def _thresholds(fail_at, warn_at) -> list:
 
 
 def _show(run, out: Path, as_json: bool, named: list[str]) -> None:
-    """Per image: its clipping warning, the error map written, the broken criteria (stderr), the --json line,
-    why there are no noise yardsticks; then the table (without --json) and where the error maps are."""
+    """Per image: its clipping and orientation warnings, the error map written, the broken criteria (stderr),
+    the --json line (which holds why there are no noise yardsticks, and the orientation note); then the table
+    (without --json) with those notes under it, and where the error maps are."""
     from cornell_harness.reports.compare_image import ERROR_MAP_SUFFIX, write_error_map
 
     _warn_clipped(run.target.path, run.target.clipped)
     for checked in run.images:
         result = checked.score
         _warn_clipped(result.source.path, result.source.clipped)
+        if result.orientation_note:
+            warn(f"{result.source.path}: {result.orientation_note}")
         written = write_error_map(out, result, run.target, result.delta_e_map) if run.error_maps else None
         for level, line in checked.broken:
             typer.echo(f"cbox: fail: {line}" if level == "fail" else f"cbox: warning: {line}", err=True)
@@ -164,10 +168,9 @@ def _show(run, out: Path, as_json: bool, named: list[str]) -> None:
             if checked.verdict is not None:
                 record["verdict"] = checked.verdict
             typer.echo(json.dumps(record, allow_nan=False))
-        if result.noise_note:
-            info(f"{result.source.path}: noise yardsticks skipped: {result.noise_note}")
     if not as_json:
         _print_table([c.score for c in run.images], named)
+        _print_notes([c.score for c in run.images])
     if run.error_maps:
         info(f"error maps: {out}/*{ERROR_MAP_SUFFIX}")
 
@@ -195,6 +198,15 @@ def _print_table(scores, named: list[str]) -> None:
             typer.echo(f"\n{s.source.label} per region:\n" + _format_table(
                 ["", *names], [[region, *(values.get(k) for k in names)] for region, values in s.regions.items()],
                 left_first=True))
+
+
+def _print_notes(scores) -> None:
+    """Under the table, part of the result (--quiet keeps it): per image, why its noise yardsticks and region
+    z are missing, and its orientation note."""
+    lines = [f"{s.source.label}: {what}" for s in scores
+             for what in (s.noise_note and f"noise yardsticks skipped: {s.noise_note}", s.orientation_note) if what]
+    if lines:
+        typer.echo("\nnotes:\n" + "\n".join(lines))
 
 
 def _cell(value) -> str:

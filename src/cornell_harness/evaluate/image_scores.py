@@ -54,6 +54,7 @@ class ImageScore:
     regions: dict
     flip_parameters: dict | None  # the HDR-FLIP viewing conditions flip_mean was computed under
     delta_e_map: Any = None  # (H, W) ΔE00 at the reference's display exposure: the error map's and --fail-percent's
+    orientation_note: str | None = None  # "image looks flipped vertically: ..." (evaluate.orientation), or None
 
     def record(self, target: Target) -> dict:
         """The score as strict-JSON-ready nested dicts (non-finite numbers as None)."""
@@ -61,7 +62,7 @@ class ImageScore:
             "image": str(self.source.path), "label": self.source.label, "reference": str(target.path),
             "scene": target.scene.name if target.scene is not None else None, "spp": self.source.spp,
             "metrics": self.metrics, "noise": self.noise, "noise_note": self.noise_note, "regions": self.regions,
-            "flip_parameters": self.flip_parameters})
+            "flip_parameters": self.flip_parameters, "orientation_note": self.orientation_note})
 
     def row(self) -> dict:
         """Flat: metrics, yardsticks and ``region.<name>.<metric>`` columns (a results-table row's form)."""

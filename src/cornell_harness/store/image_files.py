@@ -7,6 +7,13 @@ JPEG, 8- and 16-bit TIFF) are display-referred code values, which mean
 radiance only once a transfer function is undone. This module reports which
 (:attr:`ImageFile.scene_linear`) and leaves the decision to the caller. The
 harness's own images are float32 OpenEXR (:mod:`cornell_harness.store.exr`).
+
+Every file is read the right way up, its first row the image's top. A PFM
+file stores its rows bottom to top (the format's definition, netpbm's PFM
+page; OpenImageIO's PFM writer does so too), and OpenImageIO 3 reads PFM
+rows in file order unless its ``pnm:pfmflip`` hint is set, so the reader
+sets it (:data:`READ_HINTS`; other formats ignore it). EXR, TIFF and
+Radiance HDR (``-Y H +X W``) store their top row first.
 """
 
 from __future__ import annotations
@@ -26,6 +33,9 @@ SPP_ATTRIBUTE = "cbox:spp"
 
 #: OpenImageIO's names of the floating-point pixel types.
 FLOAT_PIXEL_TYPES = ("half", "float", "double")
+
+#: OpenImageIO's read configuration: flip PFM rows, stored bottom to top, so that row 0 is the top.
+READ_HINTS = {"pnm:pfmflip": 1}
 
 
 @dataclass(frozen=True)
@@ -60,7 +70,10 @@ def read_image_file(path: str | Path) -> ImageFile:
     path = Path(path)
     if not path.is_file():
         raise ImageFileError(f"{path}: {'is a folder' if path.is_dir() else 'no such file'}")
-    inp = oiio.ImageInput.open(str(path))
+    config = oiio.ImageSpec()
+    for name, value in READ_HINTS.items():
+        config.attribute(name, value)
+    inp = oiio.ImageInput.open(str(path), config)
     if inp is None:
         raise ImageFileError(f"{path}: cannot read image: {oiio.geterror().strip() or 'unknown format'}")
     try:

@@ -32,7 +32,14 @@ The noise yardsticks need the image's spp (its ``cbox:spp`` header, which
 either they are skipped, and the score says why (``noise_note``). A region's
 ``mean_z`` takes the image's variance from the noise model at that spp (a
 file carries no variance of its own; ``cbox compare`` uses a renderer's own
-variance when it reports one, so there ``mean_z`` may differ).
+variance when it reports one, so there ``mean_z`` may differ); without an
+spp it is left out, not computed as if the image were noise-free (a
+correct render's z would read in the tens), and a threshold on it or on a
+yardstick is refused (:func:`check_spp`).
+
+Each score carries an orientation note where the image agrees with the
+reference far better flipped or mirrored than as it is
+(:mod:`cornell_harness.evaluate.orientation`).
 """
 
 from __future__ import annotations
@@ -49,6 +56,7 @@ from cornell_harness.evaluate import regions as named_regions
 from cornell_harness.evaluate.ciede2000 import srgb_eotf
 from cornell_harness.evaluate.image_scores import ImageScore, InputImage, Target
 from cornell_harness.evaluate.metrics import DELTA_E_KEYS
+from cornell_harness.evaluate.orientation import check_orientation
 from cornell_harness.evaluate.registry import COLOUR_METRICS, check_metrics, region_metric
 from cornell_harness.evaluate.score import NOISE_PREFIX, every_region_key, score_image
 from cornell_harness.evaluate.thresholds import (GREY_PIXEL_METRIC, PIXEL_METRIC, Threshold, broken, fraction_above,
@@ -191,8 +199,29 @@ def noise_gap(target: Target, spp: int | None) -> str | None:
     if target.noise_note is not None:
         return target.noise_note
     if spp is None:
-        return f"no spp: the image has no {SPP_ATTRIBUTE} header and no --spp was given"
+        return (f"no spp: the image has no {SPP_ATTRIBUTE} header and no --spp was given (--spp N gives the noise "
+                "yardsticks and the regions' mean_z)")
     return None
+
+
+#: The region metric that needs the image's spp (the noise model's variance at it); left out without one.
+REGION_Z = "mean_z"
+
+
+def needs_spp(metric: str) -> bool:
+    """Whether ``metric`` (a threshold's) is computed from the image's spp: a noise yardstick or a region's z."""
+    parts = region_metric(metric)
+    return metric.startswith(NOISE_PREFIX) if parts is None else parts[1] == REGION_Z
+
+
+def check_spp(thresholds: Sequence[Threshold], sources: Sequence[InputImage]) -> None:
+    """A threshold on a metric that needs the image's spp (:func:`needs_spp`) is refused, before anything is
+    scored, for an image whose spp is unknown: it could only fail (its value n/a) or, taken as noise-free, mislead."""
+    for t in thresholds:
+        for source in sources:
+            if needs_spp(t.metric) and source.spp is None:
+                raise OptionError(f"{t.metric}: {source.path} has no {SPP_ATTRIBUTE} header, and this metric "
+                                  "needs the image's spp: give it with --spp N", "--spp")
 
 
 def score(source: InputImage, target: Target, with_flip: bool = True,
@@ -211,9 +240,13 @@ def score(source: InputImage, target: Target, with_flip: bool = True,
             keys = {*keys, *every_region_key(masks)}
     result = score_image(source.image, target.reference, source.spp, masks=masks, keys=keys, with_flip=with_flip,
                          noise_note=noise_gap(target, source.spp))
+    regions = result.regions
+    if source.spp is None:  # the region z needs the image's noise: unknown without its spp
+        regions = {name: {k: v for k, v in values.items() if k != REGION_Z} for name, values in regions.items()}
     parameters = flip.flip_parameters(target.reference.image) if "flip_mean" in result.metrics else None
-    return ImageScore(source, result.metrics, result.noise, result.noise_note, result.regions, parameters,
-                      result.delta_e_map)
+    orientation = check_orientation(source.image, target.reference, source.spp).note
+    return ImageScore(source, result.metrics, result.noise, result.noise_note, regions, parameters,
+                      result.delta_e_map, orientation)
 
 
 # --------------------------------------------------------------------------
@@ -285,6 +318,7 @@ def compare_images(paths: Sequence[Path], scene: Scene | None = None, reference:
     check_regions(checks.thresholds, target)
     check_quantity(checks, target)
     sources = load_images(paths, target, transfer, spp, exposure)
+    check_spp(checks.thresholds, sources)
     if exposure is not None and all(s.clipped is None for s in (*sources, target)):
         raise OptionError("applies to display-referred (integer) images only, and every image given is "
                           "floating-point (radiance already)", "--exposure")
