@@ -60,7 +60,10 @@ def read_image_file(path: str | Path) -> ImageFile:
     path = Path(path)
     if not path.is_file():
         raise ImageFileError(f"{path}: {'is a folder' if path.is_dir() else 'no such file'}")
-    inp = oiio.ImageInput.open(str(path))
+    # PFM stores rows bottom to top; OpenImageIO returns them in file order unless told to flip.
+    config = oiio.ImageSpec()
+    config.attribute("pnm:pfmflip", 1)
+    inp = oiio.ImageInput.open(str(path), config)
     if inp is None:
         raise ImageFileError(f"{path}: cannot read image: {oiio.geterror().strip() or 'unknown format'}")
     try:
