@@ -375,9 +375,10 @@ ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples" / "renderers.toml"
 
 
-def test_the_example_file_declares_the_two_programs():
+def test_the_example_file_declares_the_three_programs():
     declared = read_file(EXAMPLES)
-    assert list(declared) == ["mitsuba-cli", "luxcore-cli"]
+    assert list(declared) == ["mitsuba-cli", "luxcore-cli", "c-ao"]
+    assert (declared["c-ao"].scene_format, declared["c-ao"].quantity) == ("json", "ambient_occlusion")
     assert declared["mitsuba-cli"].command[0] == "mitsuba" and declared["mitsuba-cli"].scene_format == "mitsuba"
     assert declared["luxcore-cli"].command[:2] == ("cbox-luxcore", "{scene}")
     assert commands.find_program("mitsuba", EXAMPLES) is not None  # the Mitsuba wheel's, beside this Python
