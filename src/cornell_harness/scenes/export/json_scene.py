@@ -73,6 +73,9 @@ MAPPING = (
                                                       "`miss_value`"),
     ("samples", "spp, seed", "not in the file: a renderers file passes them on the command line (`{spp}`, "
                              "`{seed}`)"),
+    ("image", "float linear image, pixel (0, 0) top-left", "what the renderer writes at `{out}`: OpenEXR, PFM "
+                                                           "(rows bottom to top, as its specification says) or "
+                                                           "any float image OpenImageIO reads"),
 )
 
 
