@@ -222,7 +222,8 @@ static double sample(double x, double y, double tx, double ty, double offset) {
     double sign = copysign(1.0, n[2]), a = -1.0 / (sign + n[2]), b = n[0] * n[1] * a;
     double b1[3] = {1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]}, b2[3] = {b, sign + n[1] * n[1] * a, -n[1]};
     double u1 = uniform01(), phi = 2.0 * PI * uniform01();
-    double cos_theta = strcmp(weighting, "cosine") ? u1 : sqrt(1.0 - u1), sin_theta = sqrt(fmax(0.0, 1.0 - cos_theta * cos_theta));
+    double cos_theta = strcmp(weighting, "cosine") ? u1 : sqrt(1.0 - u1); /* uniform: cos θ = u1 */
+    double sin_theta = sqrt(fmax(0.0, 1.0 - cos_theta * cos_theta));
     for (int k = 0; k < 3; k++) {
         w[k] = sin_theta * cos(phi) * b1[k] + sin_theta * sin(phi) * b2[k] + cos_theta * n[k];
         o[k] = position[k] + t * d[k] + offset * n[k];
@@ -243,7 +244,8 @@ int main(int argc, char **argv) {
     float *image = malloc(sizeof *image * 3 * (size_t)width * (size_t)height);
     for (int row = 0; row < height; row++)
         for (int col = 0; col < width; col++) {
-            rng_state = seed * 0x100000001B3ull ^ ((uint64_t)row * (uint64_t)width + (uint64_t)col) * 0xD1B54A32D192ED03ull;
+            uint64_t pixel = (uint64_t)row * (uint64_t)width + (uint64_t)col;
+            rng_state = seed * 0x100000001B3ull ^ pixel * 0xD1B54A32D192ED03ull; /* a stream per pixel and seed */
             double sum = 0.0;
             for (long s = 0; s < spp; s++) {
                 double jx = uniform01(), jy = uniform01();
@@ -256,7 +258,8 @@ int main(int argc, char **argv) {
     if (!f) die("cannot write ", argv[2]);
     const uint16_t one = 1;
     fprintf(f, "PF\n%d %d\n%s\n", width, height, *(const uint8_t *)&one ? "-1.0" : "1.0");
-    for (int row = height - 1; row >= 0; row--) fwrite(image + 3 * (size_t)row * width, sizeof *image, 3 * (size_t)width, f);
+    for (int row = height - 1; row >= 0; row--)
+        fwrite(image + 3 * (size_t)row * width, sizeof *image, 3 * (size_t)width, f);
     if (fclose(f)) die("cannot write ", argv[2]);
     return 0;
 }
