@@ -131,3 +131,14 @@ def test_each_format_carries_its_own_quantities():
         assert quantities(fmt) == ("radiance",)
         why = refusal(scene, fmt)
         assert isinstance(why, SceneError) and why.field == "quantity" and "carries radiance only" in str(why)
+
+
+def test_the_format_claims_what_the_model_has_today():
+    """A feature or quantity added to the model fails here until the format (and its schema) writes it."""
+    from cornell_harness.scenes.export import json_scene
+    from cornell_harness.scenes.model import FEATURES
+    from cornell_harness.scenes.quantities import QUANTITIES
+
+    assert json_scene.FEATURES == set(FEATURES) and set(json_scene.QUANTITIES) == set(QUANTITIES)
+    props = schema(SCHEMA)["properties"]
+    assert set(props["features"]["items"]["enum"]) == set(FEATURES) and set(props["quantity"]["enum"]) == set(QUANTITIES)

@@ -23,13 +23,14 @@ import math
 from pathlib import Path
 
 from cornell_harness.scenes.materials import material_fields
-from cornell_harness.scenes.model import FEATURES as ALL_FEATURES
 from cornell_harness.scenes.model import Scene
-from cornell_harness.scenes.quantities import QUANTITIES as ALL_QUANTITIES
 
 NAME = "json"
-FEATURES = frozenset(ALL_FEATURES)
-QUANTITIES = tuple(ALL_QUANTITIES)
+# Named, not taken from the model's lists: a feature or quantity added there is written here (and to the
+# schema) before the format claims it.
+FEATURES = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
+                      "pinhole_camera", "box_filter"})
+QUANTITIES = ("radiance", "ambient_occlusion")
 #: The document's ``format`` and ``version``: a reader checks both before reading on.
 FORMAT, VERSION = "cornell-harness-scene", 1
 #: The schema's name (:func:`cornell_harness.schemas.reader.schema_file` finds ``<name>.schema.json``).
