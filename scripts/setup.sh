@@ -41,6 +41,9 @@ have_lib 'libcairo\.so\.2' || need_pkgs+=(libcairo2)
 # chromium: the report's browser test (Playwright drives Debian's build;
 # Playwright's own browser download is not used).
 [[ -n $TESTS ]] && ! command -v chromium >/dev/null 2>&1 && need_pkgs+=(chromium)
+# gcc and libc6-dev (cc and the C headers; libc6-dev is only a recommendation of gcc): the test that
+# compiles examples/c-renderer/ao.c and gates it (tests/examples/test_c_renderer.py).
+[[ -n $TESTS ]] && ! command -v cc >/dev/null 2>&1 && need_pkgs+=(gcc libc6-dev)
 # pdflatex and booktabs.sty (in texlive-latex-recommended): the test that compiles OUT/summary.tex
 # (tests/reports/test_summary_files.py; skipped without them). Small: 48 MB of downloads, 147 MB installed,
 # about 30 s to install with --no-install-recommends (Debian 12).

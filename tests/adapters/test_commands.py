@@ -24,6 +24,7 @@ from cornell_harness.scenes import export
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.model import FEATURES
 from cornell_harness.workflows import runner
+from tests.conftest import cbox_in_process as cbox
 
 # --- the fake export format ------------------------------------------------------------------------------------
 
@@ -55,6 +56,8 @@ mode = args.get("mode", "ok")
 with open(args["log"], "a") as log:
     log.write(f"{args['spp']} {args['seed']} {os.getpid()}\\n")
 width, height = int(args["width"]), int(args["height"])
+if "copy" in args:  # the scene file it was given, kept for the test
+    open(args["copy"], "w").write(open(args["scene"]).read())
 if args["scene"].endswith(".txt"):  # the fake format's: the resolution (a real format's is only read there)
     assert list(map(int, open(args["scene"]).read().split())) == [width, height]
 spp, seed = int(args["spp"]), int(args["seed"])
@@ -182,6 +185,29 @@ def test_a_relative_program_path_is_the_renderers_file_folders(tmp_path, fake_fo
     assert np.all(the_renderer(path, "sh").render(scene, 2, 0).image == 2.0)
 
 
+def test_a_renderer_of_ambient_occlusion_runs_on_the_ao_scene_through_the_json_export(tmp_path):
+    """The json format carries the AO definition: a command renderer that declares the quantity is run on an AO
+    scene (every other format refuses to export one), and given the scene with its distance and miss value."""
+    path = renderers_file(tmp_path, scene_format="json", extra='quantity = "ambient_occlusion"\n',
+                          command_extra=(f"copy={tmp_path / 'given.json'}",))
+    (entry,) = resolve([spec_of(path, "fake-cli")])
+    scene = resolve_scene("cornell-box-ao").with_resolution(8, 6)
+    rec = runner.run_one(entry, scene, 2, 0, None)
+    assert rec.status == "ok", rec.reason
+    given = json.loads((tmp_path / "given.json").read_text())
+    assert given["quantity"] == "ambient_occlusion" and given["ambient_occlusion"]["max_distance"] == 0.5
+
+
+def test_a_quantity_the_format_cannot_carry_is_exit_2_when_the_file_is_read(tmp_path, capsys, no_files):
+    path = renderers_file(tmp_path, scene_format="mitsuba", extra='quantity = "ambient_occlusion"\n')
+    code, _, err = cbox(capsys, "compare", "--scene", "cornell-box-ao", "--renderers", str(path), "-r", "fake-cli", "--spp",
+                        "1", "--out", str(tmp_path / "out"))
+    (line,) = err.strip().splitlines()
+    assert code == 2, err
+    assert f"{path}: renderer.fake-cli.quantity: the scene format 'mitsuba' cannot carry ambient_occlusion" in line
+    assert not runs(tmp_path)
+
+
 def _sandbox_format() -> str | None:
     """A real export format (a sandboxed child knows no fake one), or None while none is written."""
     for name in export.FORMATS:
@@ -269,6 +295,8 @@ def _write(tmp_path: Path, table: dict, name: str = "r", top: str = "") -> Path:
     ({"models": ["difuse"]}, "renderer.r.models[0]", "unknown scene feature 'difuse'; did you mean 'diffuse'?"),
     ({"models": "diffuse"}, "renderer.r.models", "expected a list of scene features"),
     ({"quantity": "radiance2"}, "renderer.r.quantity", "unknown quantity 'radiance2'; did you mean 'radiance'?"),
+    ({"quantity": "ambient_occlusion"}, "renderer.r.quantity",
+     "the scene format 'fake' cannot carry ambient_occlusion; scene formats that can: json"),
     ({"estimator": "unbiassed"}, "renderer.r.estimator", "did you mean 'unbiased'?"),
     ({"variance": "{out}.{spps}.exr"}, "renderer.r.variance", "unknown placeholder {spps} (did you mean {spp}?)"),
     ({"variance": 1}, "renderer.r.variance", "expected a path"),
@@ -353,9 +381,10 @@ ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples" / "renderers.toml"
 
 
-def test_the_example_file_declares_the_two_programs():
+def test_the_example_file_declares_the_three_programs():
     declared = read_file(EXAMPLES)
-    assert list(declared) == ["mitsuba-cli", "luxcore-cli"]
+    assert list(declared) == ["mitsuba-cli", "luxcore-cli", "c-ao"]
+    assert (declared["c-ao"].scene_format, declared["c-ao"].quantity) == ("json", "ambient_occlusion")
     assert declared["mitsuba-cli"].command[0] == "mitsuba" and declared["mitsuba-cli"].scene_format == "mitsuba"
     assert declared["luxcore-cli"].command[:2] == ("cbox-luxcore", "{scene}")
     assert commands.find_program("mitsuba", EXAMPLES) is not None  # the Mitsuba wheel's, beside this Python

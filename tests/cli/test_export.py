@@ -39,6 +39,13 @@ def test_an_ambient_occlusion_scene_is_refused_in_one_line(capsys, tmp_path):
     assert not (tmp_path / "d").exists()
 
 
+def test_the_json_format_exports_an_ambient_occlusion_scene(capsys, tmp_path):
+    code, stdout, err = cbox(capsys, "export", "-s", "cornell-box-ao", "-f", "json", "-o", str(tmp_path / "d"))
+    assert code == 0, err
+    doc = json.loads(Path(stdout.strip()).read_text(encoding="utf-8"))
+    assert doc["quantity"] == "ambient_occlusion" and doc["ambient_occlusion"]["max_distance"] == 0.5
+
+
 def test_an_unknown_format_is_refused_with_a_suggestion(capsys, tmp_path):
     code, stdout, err = cbox(capsys, "export", "-s", "cornell-box", "-f", "pbrt", "-o", str(tmp_path / "d"))
     (line,) = err.splitlines()

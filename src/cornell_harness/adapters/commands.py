@@ -20,7 +20,8 @@ The file may also name how series show in legends and tables (``--series-label``
 
 ``command`` is a list of arguments, run without a shell; each argument has
 its placeholders replaced: ``{scene}`` (the exported scene's main file),
-``{out}`` (the EXR the program must write), ``{spp}``, ``{seed}``,
+``{out}`` (the image the program must write: OpenEXR, or any file OpenImageIO reads, which it
+recognises by its content, such as PFM), ``{spp}``, ``{seed}``,
 ``{width}``, ``{height}`` (the scene's resolution) and ``{threads}``
 (:func:`cornell_harness.adapters.api.default_threads`, ``$CBOX_THREADS``); ``{{`` is
 a literal brace. ``variance`` is a path with the same placeholders; a
@@ -39,9 +40,10 @@ unavailable, with the reason.
 The file is strict, as a scene file and a gate config are: its format is
 ``src/cornell_harness/schemas/renderers.schema.json`` (every key, in ``docs/formats.md``),
 checked by :mod:`cornell_harness.schemas.reader`, then what the schema cannot say is checked
-here. An unknown key, a misspelt placeholder, an unknown format, feature, quantity or estimator,
-or a time regex without exactly one group is a :class:`RenderersFileError` (one line naming the
-file and the field, exit 2), raised when the file is read, before anything runs.
+here. An unknown key, a misspelt placeholder, an unknown format, feature, quantity or estimator, a
+feature or quantity the scene format cannot carry (``quantity = "ambient_occlusion"`` needs
+``scene_format = "json"``), or a time regex without exactly one group is a :class:`RenderersFileError`
+(one line naming the file and the field, exit 2), raised when the file is read, before anything runs.
 
 A render (:class:`CommandRenderer`) exports the scene once, then runs the
 program once per spp asked for: every progress checkpoint is a run of its
@@ -89,7 +91,7 @@ from cornell_harness import processes
 from cornell_harness.adapters.api import ESTIMATORS, Checkpoint, RenderResult, SettingsError, Stopwatch, default_threads
 from cornell_harness.durations import parse_duration
 from cornell_harness.scenes.model import FEATURES, Scene
-from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
+from cornell_harness.scenes.quantities import DEFAULT_QUANTITY, QUANTITIES
 from cornell_harness.schemas.reader import FormatProblem, check, read_toml
 from cornell_harness.suggest import did_you_mean
 
@@ -221,18 +223,8 @@ def _declaration(path: Path, name: str, t: dict) -> Declaration:
         raise bad("command", "the program (the first argument) is empty")
     for i, arg in enumerate(command):
         _check_placeholders(arg, lambda message, i=i: bad(f"command[{i}]", message))
-    from cornell_harness.scenes.export import FORMATS, format_module  # imported when a file is read, not with the registry
-
-    fmt, models = t["scene_format"], t["models"]
-    if fmt not in FORMATS:
-        raise bad("scene_format", f"{fmt!r} is not an export format{did_you_mean(fmt, FORMATS)}; formats: "
-                                  f"{', '.join(FORMATS)}")
-    try:  # a format that cannot be written here makes the renderer unavailable, not the file wrong
-        expressible = format_module(fmt).FEATURES
-    except ImportError:
-        expressible = FEATURES
-    if beyond := sorted(set(models) - set(expressible)):
-        raise bad("models", f"the scene format {fmt!r} cannot express {', '.join(beyond)}")
+    fmt, models, quantity = t["scene_format"], t["models"], t.get("quantity", DEFAULT_QUANTITY)
+    _check_format(bad, fmt, models, quantity)
     variance = t.get("variance")
     if variance is not None:
         _check_placeholders(variance, lambda message: bad("variance", message))
@@ -248,8 +240,33 @@ def _declaration(path: Path, name: str, t: dict) -> Declaration:
         limit = parse_duration(t["time_limit"]) if "time_limit" in t else None
     except ValueError as e:
         raise bad("time_limit", str(e).replace("time budget", "duration")) from None
-    return Declaration(name, path, tuple(command), fmt, frozenset(models), t.get("quantity", DEFAULT_QUANTITY),
-                       t.get("estimator", ESTIMATORS[0]), variance, timing, limit)
+    return Declaration(name, path, tuple(command), fmt, frozenset(models), quantity, t.get("estimator", ESTIMATORS[0]),
+                       variance, timing, limit)
+
+
+def _check_format(bad, fmt: str, models: list[str], quantity: str) -> None:
+    """The scene format is known, expresses every feature the renderer models and carries its quantity."""
+    from cornell_harness.scenes.export import FORMATS, format_module, quantities  # when a file is read
+
+    def carried(f: str) -> tuple[str, ...]:
+        try:
+            return quantities(f)
+        except ImportError:
+            return ()
+
+    if fmt not in FORMATS:
+        raise bad("scene_format", f"{fmt!r} is not an export format{did_you_mean(fmt, FORMATS)}; formats: "
+                                  f"{', '.join(FORMATS)}")
+    try:  # a format that cannot be written here makes the renderer unavailable, not the file wrong
+        expressible, carries = format_module(fmt).FEATURES, quantities(fmt)
+    except ImportError:
+        expressible, carries = FEATURES, QUANTITIES
+    if beyond := sorted(set(models) - set(expressible)):
+        raise bad("models", f"the scene format {fmt!r} cannot express {', '.join(beyond)}")
+    if quantity not in carries:
+        able = [f for f in FORMATS if quantity in carried(f)]
+        raise bad("quantity", f"the scene format {fmt!r} cannot carry {quantity}; scene formats that can: "
+                              f"{', '.join(able) or '(none)'}")
 
 
 def _check_placeholders(text: str, bad) -> None:

@@ -13,8 +13,10 @@ from cornell_harness.scenes.export import FORMATS
 from cornell_harness.scenes.library import resolve_scene
 
 FORMAT_HELP = ("Format to write: mitsuba (scene.xml and meshes/*.ply, Mitsuba 3 XML: `mitsuba DIR/scene.xml -o "
-               "out.exr -D spp=64 -D seed=3`), luxcore (LuxCore SDL: scene.scn and scene.cfg) or pbrt-v4 "
-               "(scene.pbrt: `pbrt DIR/scene.pbrt --spp 64 --seed 3`). How each maps our scene model: "
+               "out.exr -D spp=64 -D seed=3`), luxcore (LuxCore SDL: scene.scn and scene.cfg), pbrt-v4 "
+               "(scene.pbrt: `pbrt DIR/scene.pbrt --spp 64 --seed 3`) or json (scene.json, a neutral "
+               "description for a renderer of your own, ambient occlusion included; its schema: "
+               "src/cornell_harness/schemas/json-scene.schema.json). How each maps our scene model: "
                "docs/export.md.")
 
 
@@ -31,9 +33,9 @@ def export(
     """Write the scene, with its meshes, in another renderer's format.
 
     Prints the path of the main file, the one a renderer is given. A scene
-    the format cannot express (a feature it lacks, or a quantity other than
-    radiance, such as cornell-box-ao's ambient occlusion) is refused before
-    anything is written: one line naming the scene file and field, exit 2.
+    the format cannot express (a feature it lacks, or a quantity it does not
+    carry: only json carries cornell-box-ao's ambient occlusion) is refused
+    before anything is written: one line naming the scene file and field, exit 2.
     """
     from cornell_harness.scenes.export import export_scene
 

@@ -1,7 +1,7 @@
 """Scene export: a scene written in another renderer's own format, with its meshes, for ``cbox export``
 and the command-line renderers (:mod:`cornell_harness.adapters.commands`).
 
-One module per format (``mitsuba``, ``luxcore``, ``pbrt_v4``), each with the same interface:
+One module per format (``mitsuba``, ``luxcore``, ``pbrt_v4``, ``json_scene``), each with the same interface:
 
 - ``NAME``: the format's name, as ``cbox export --format`` and a renderer file's ``scene_format`` give it;
 - ``FEATURES``: the scene features (:data:`cornell_harness.scenes.model.FEATURES`) the format can express;
@@ -9,11 +9,14 @@ One module per format (``mitsuba``, ``luxcore``, ``pbrt_v4``), each with the sam
   handedness, emitter side, two-sidedness, filter, depth, IOR (:func:`mapping_table` prints it; the
   format's page in ``docs/export.md`` shows it);
 - ``write(scene, folder) -> Path``: writes the scene into ``folder`` (which exists and is empty) and
-  returns the main file a renderer is given (``scene.xml``, ``scene.cfg``, ``scene.pbrt``).
+  returns the main file a renderer is given (``scene.xml``, ``scene.cfg``, ``scene.pbrt``, ``scene.json``).
+- optionally ``QUANTITIES``: the scene quantities (:data:`cornell_harness.scenes.quantities.QUANTITIES`)
+  the format carries, with their definitions (``json`` carries ambient occlusion's distance, weighting
+  and miss value); ``("radiance",)`` when absent (:func:`quantities`);
 - optionally ``refusal(scene) -> SceneError | None``: why the format cannot express a scene whose
   features it has (e.g. luxcore and ``render.max_depth = 1``).
 
-A scene the format cannot express (a feature it lacks, a quantity other than radiance) is refused
+A scene the format cannot express (a feature it lacks, a quantity it does not carry) is refused
 before anything is written, with one :class:`~cornell_harness.scenes.model.SceneError` naming the scene file
 and the field (``features``, ``quantity``): the CLI's one line and exit 2.
 """
@@ -28,12 +31,14 @@ from pathlib import Path
 from types import ModuleType
 
 from cornell_harness.scenes.model import SceneError, Scene
+from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
 
 #: Every export format, by name, and the module that writes it (imported when used).
 FORMATS: dict[str, str] = {
     "mitsuba": "cornell_harness.scenes.export.mitsuba",
     "luxcore": "cornell_harness.scenes.export.luxcore",
     "pbrt-v4": "cornell_harness.scenes.export.pbrt_v4",
+    "json": "cornell_harness.scenes.export.json_scene",
 }
 
 
@@ -44,12 +49,17 @@ def format_module(name: str) -> ModuleType:
     return importlib.import_module(FORMATS[name])
 
 
+def quantities(name: str) -> tuple[str, ...]:
+    """The scene quantities format ``name`` carries (its module's ``QUANTITIES``, radiance when it says none)."""
+    return tuple(getattr(format_module(name), "QUANTITIES", (DEFAULT_QUANTITY,)))
+
+
 def refusal(scene: Scene, name: str) -> SceneError | None:
     """Why format ``name`` cannot express ``scene`` (a SceneError naming file and field), or None."""
     module = format_module(name)
-    if scene.quantity != "radiance":
-        return SceneError(scene.path, "quantity", f"{scene.quantity} cannot be exported to {name}: "
-                                                  "the format renders radiance only")
+    if scene.quantity not in (carried := quantities(name)):
+        return SceneError(scene.path, "quantity", f"{scene.quantity} cannot be exported to {name}: the format "
+                                                  f"carries {', '.join(carried)} only")
     if missing := sorted(scene.features - set(module.FEATURES)):
         return SceneError(scene.path, "features", f"{name} cannot express {', '.join(missing)}")
     if hasattr(module, "refusal"):
