@@ -22,6 +22,7 @@ MODULES: dict[str, tuple[str, ...]] = {
     "raster": ("pyrender", "OpenGL"),
     "oidn": ("pyoidn",),
     "dask": ("dask", "distributed"),
+    "gltf": ("pygltflib",),
 }
 
 #: The extras each of our registered renderers (pyproject.toml's ``cbox.renderers`` entry points) runs on.
@@ -34,8 +35,9 @@ RENDERERS: dict[str, tuple[str, ...]] = {
     "mitsuba+oidn": ("mitsuba", "oidn"),
 }
 
-#: Command-line options that need an extra: a cluster's executor (cornell_harness.workflows.executor).
-OPTIONS: dict[str, str] = {"--workers": "dask", "--scheduler": "dask"}
+#: Command-line options that need an extra: a cluster's executor (cornell_harness.workflows.executor), an export
+#: format (cornell_harness.scenes.export).
+OPTIONS: dict[str, str] = {"--workers": "dask", "--scheduler": "dask", "--format gltf": "gltf"}
 
 
 class MissingExtraError(RuntimeError):

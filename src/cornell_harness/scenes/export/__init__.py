@@ -1,7 +1,7 @@
 """Scene export: a scene written in another renderer's own format, with its meshes, for ``cbox export``
 and the command-line renderers (:mod:`cornell_harness.adapters.commands`).
 
-One module per format (``mitsuba``, ``luxcore``, ``pbrt_v4``, ``json_scene``), each with the same interface:
+One module per format (``mitsuba``, ``luxcore``, ``pbrt_v4``, ``json_scene``, ``gltf``), each with the same interface:
 
 - ``NAME``: the format's name, as ``cbox export --format`` and a renderer file's ``scene_format`` give it;
 - ``FEATURES``: the scene features (:data:`cornell_harness.scenes.model.FEATURES`) the format can express;
@@ -39,6 +39,7 @@ FORMATS: dict[str, str] = {
     "luxcore": "cornell_harness.scenes.export.luxcore",
     "pbrt-v4": "cornell_harness.scenes.export.pbrt_v4",
     "json": "cornell_harness.scenes.export.json_scene",
+    "gltf": "cornell_harness.scenes.export.gltf",
 }
 
 
