@@ -17,7 +17,8 @@ from benchmarks import markdown_blocks
 from cornell_harness.scenes.export import FORMATS, mapping_table
 
 #: The block of docs/export.md that holds each format's table (benchmarks/markdown_blocks.py).
-BLOCKS = {"mapping-mitsuba": "mitsuba", "mapping-luxcore": "luxcore", "mapping-pbrt-v4": "pbrt-v4"}
+BLOCKS = {"mapping-mitsuba": "mitsuba", "mapping-luxcore": "luxcore", "mapping-pbrt-v4": "pbrt-v4",
+          "mapping-usd": "usd"}
 
 
 def tables() -> dict[str, str]:

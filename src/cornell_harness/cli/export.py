@@ -13,8 +13,9 @@ from cornell_harness.scenes.export import FORMATS
 from cornell_harness.scenes.library import resolve_scene
 
 FORMAT_HELP = ("Format to write: mitsuba (scene.xml and meshes/*.ply, Mitsuba 3 XML: `mitsuba DIR/scene.xml -o "
-               "out.exr -D spp=64 -D seed=3`), luxcore (LuxCore SDL: scene.scn and scene.cfg) or pbrt-v4 "
-               "(scene.pbrt: `pbrt DIR/scene.pbrt --spp 64 --seed 3`). How each maps our scene model: "
+               "out.exr -D spp=64 -D seed=3`), luxcore (LuxCore SDL: scene.scn and scene.cfg), pbrt-v4 "
+               "(scene.pbrt: `pbrt DIR/scene.pbrt --spp 64 --seed 3`) or usd (scene.usda, OpenUSD: the [usd] "
+               "extra). How each maps our scene model: "
                "docs/export.md.")
 
 
