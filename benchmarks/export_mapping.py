@@ -18,7 +18,7 @@ from cornell_harness.scenes.export import FORMATS, mapping_table
 
 #: The block of docs/export.md that holds each format's table (benchmarks/markdown_blocks.py).
 BLOCKS = {"mapping-mitsuba": "mitsuba", "mapping-luxcore": "luxcore", "mapping-pbrt-v4": "pbrt-v4",
-          "mapping-json": "json", "mapping-gltf": "gltf"}
+          "mapping-json": "json", "mapping-gltf": "gltf", "mapping-usd": "usd"}
 
 
 def tables() -> dict[str, str]:

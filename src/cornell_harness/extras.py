@@ -23,6 +23,7 @@ MODULES: dict[str, tuple[str, ...]] = {
     "oidn": ("pyoidn",),
     "dask": ("dask", "distributed"),
     "gltf": ("pygltflib",),
+    "usd": ("pxr",),
 }
 
 #: The extras each of our registered renderers (pyproject.toml's ``cbox.renderers`` entry points) runs on.
@@ -35,9 +36,11 @@ RENDERERS: dict[str, tuple[str, ...]] = {
     "mitsuba+oidn": ("mitsuba", "oidn"),
 }
 
-#: Command-line options that need an extra: a cluster's executor (cornell_harness.workflows.executor), an export
-#: format (cornell_harness.scenes.export).
-OPTIONS: dict[str, str] = {"--workers": "dask", "--scheduler": "dask", "--format gltf": "gltf"}
+#: The export formats (cornell_harness.scenes.export) that need an extra to be written.
+EXPORT_FORMATS: dict[str, str] = {"gltf": "gltf", "usd": "usd"}
+
+#: Command-line options that need an extra: a cluster's executor (cornell_harness.workflows.executor).
+OPTIONS: dict[str, str] = {"--workers": "dask", "--scheduler": "dask"}
 
 
 class MissingExtraError(RuntimeError):
@@ -71,6 +74,22 @@ def require(option: str) -> None:
     if missing := missing_modules([extra]):
         raise MissingExtraError(f"{option} needs the [{extra}] extra ({', '.join(missing)} not installed): "
                                 f"{install_line([extra])}")
+
+
+def export_format_problem(name: str) -> str | None:
+    """Why the export format ``name`` cannot be written here for want of an extra, with the pip line; None when
+    it can (its extra is installed, or it needs none)."""
+    extra = EXPORT_FORMATS.get(name)
+    if extra is None or not (missing := missing_modules([extra])):
+        return None
+    return (f"the {name} export format needs the [{extra}] extra ({', '.join(missing)} not installed): "
+            f"{install_line([extra])}")
+
+
+def require_export_format(name: str) -> None:
+    """Raise MissingExtraError, naming the pip line, when the export format ``name`` needs a missing extra."""
+    if problem := export_format_problem(name):
+        raise MissingExtraError(problem)
 
 
 def require_a_renderer(command: str) -> None:

@@ -244,8 +244,8 @@ def test_without_pygltflib_the_export_is_one_line_with_the_pip_line(monkeypatch,
     monkeypatch.setattr(extras.importlib.util, "find_spec", lambda n, *a: None if n == "pygltflib" else real(n, *a))
     code, out, err = cbox_in_process(capsys, "export", "-s", "cornell-box", "-f", "gltf", "-o", str(tmp_path / "d"))
     assert code == 2 and out == ""
-    assert err.splitlines() == ["cbox: error: --format gltf needs the [gltf] extra (pygltflib not installed): "
-                                "pip install 'cornell-harness[gltf]'"]
+    assert err.splitlines() == ["cbox: error: the gltf export format needs the [gltf] extra (pygltflib not "
+                                "installed): pip install 'cornell-harness[gltf]'"]
 
 
 def test_cbox_export_writes_the_gltf_and_its_buffer(capsys, tmp_path):

@@ -16,8 +16,9 @@ FORMAT_HELP = ("Format to write: mitsuba (scene.xml and meshes/*.ply, Mitsuba 3 
                "out.exr -D spp=64 -D seed=3`), luxcore (LuxCore SDL: scene.scn and scene.cfg), pbrt-v4 "
                "(scene.pbrt: `pbrt DIR/scene.pbrt --spp 64 --seed 3`), json (scene.json, a neutral "
                "description for a renderer of your own, ambient occlusion included; its schema: "
-               "src/cornell_harness/schemas/json-scene.schema.json) or gltf (glTF 2.0: scene.gltf and "
-               "scene.bin, for real-time engines; needs the [gltf] extra). How each maps our scene model: "
+               "src/cornell_harness/schemas/json-scene.schema.json), gltf (glTF 2.0: scene.gltf and "
+               "scene.bin, for real-time engines; needs the [gltf] extra) or usd (scene.usda, OpenUSD: the "
+               "[usd] extra). How each maps our scene model: "
                "docs/export.md.")
 
 

@@ -1,7 +1,8 @@
 """Scene export: a scene written in another renderer's own format, with its meshes, for ``cbox export``
 and the command-line renderers (:mod:`cornell_harness.adapters.commands`).
 
-One module per format (``mitsuba``, ``luxcore``, ``pbrt_v4``, ``json_scene``, ``gltf``), each with the same interface:
+One module per format (``mitsuba``, ``luxcore``, ``pbrt_v4``, ``json_scene``, ``gltf``, ``usd``), each with the
+same interface:
 
 - ``NAME``: the format's name, as ``cbox export --format`` and a renderer file's ``scene_format`` give it;
 - ``FEATURES``: the scene features (:data:`cornell_harness.scenes.model.FEATURES`) the format can express;
@@ -30,6 +31,7 @@ import tempfile
 from pathlib import Path
 from types import ModuleType
 
+from cornell_harness.extras import export_format_problem, require_export_format
 from cornell_harness.scenes.model import SceneError, Scene
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
 
@@ -39,7 +41,8 @@ FORMATS: dict[str, str] = {
     "luxcore": "cornell_harness.scenes.export.luxcore",
     "pbrt-v4": "cornell_harness.scenes.export.pbrt_v4",
     "json": "cornell_harness.scenes.export.json_scene",
-    "gltf": "cornell_harness.scenes.export.gltf",
+    "gltf": "cornell_harness.scenes.export.gltf",  # the extras of cornell_harness.extras.EXPORT_FORMATS
+    "usd": "cornell_harness.scenes.export.usd",
 }
 
 
@@ -47,6 +50,8 @@ def format_module(name: str) -> ModuleType:
     """The module that writes format ``name``; KeyError-free: an unknown name is a SceneError-free ValueError."""
     if name not in FORMATS:
         raise ValueError(f"unknown export format {name!r}; formats: {', '.join(FORMATS)}")
+    if problem := export_format_problem(name):  # an ImportError: the format cannot be written here
+        raise ModuleNotFoundError(problem, name=FORMATS[name])
     return importlib.import_module(FORMATS[name])
 
 
@@ -73,8 +78,10 @@ def export_scene(scene: Scene, name: str, out: Path | str) -> Path:
 
     Refused (SceneError) before anything is written when the format cannot express the scene. The files
     are written into a temporary folder beside ``out`` and moved into place, so an interrupted export
-    leaves no half-written scene; files already in ``out`` that the export writes are replaced.
+    leaves no half-written scene; files already in ``out`` that the export writes are replaced. A format whose
+    extra is not installed (``usd``) is a MissingExtraError naming the pip line.
     """
+    require_export_format(name)  # before anything is imported or written: one line with the pip command
     if (why := refusal(scene, name)) is not None:
         raise why
     out = Path(out)

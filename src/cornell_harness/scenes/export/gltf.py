@@ -23,7 +23,6 @@ from pathlib import Path
 
 import numpy as np
 
-from cornell_harness.extras import require
 from cornell_harness.scenes.export.luxcore import SPHERE_SEGMENTS, sphere_mesh
 from cornell_harness.scenes.materials import Dielectric, Diffuse, Mirror, material_fields
 from cornell_harness.scenes.model import Scene, SceneError, one_line
@@ -305,8 +304,7 @@ def gltf_dict(scene: Scene) -> tuple[dict, bytes]:
 def write(scene: Scene, folder: Path) -> Path:
     """Write ``scene.gltf`` and ``scene.bin`` into ``folder``; return the ``.gltf``'s path. The JSON goes through
     pygltflib's own model, so what is written is what a pygltflib reader gets."""
-    require("--format gltf")
-    import pygltflib
+    import pygltflib  # its extra was checked by export_scene (cornell_harness.extras.EXPORT_FORMATS)
 
     d, blob = gltf_dict(scene)
     folder = Path(folder)
