@@ -12,6 +12,9 @@ One module per format (``mitsuba``, ``luxcore``, ``pbrt_v4``), each with the sam
   returns the main file a renderer is given (``scene.xml``, ``scene.cfg``, ``scene.pbrt``).
 - optionally ``refusal(scene) -> SceneError | None``: why the format cannot express a scene whose
   features it has (e.g. luxcore and ``render.max_depth = 1``).
+- optionally ``render_command(scene, main) -> str``: the command that renders the written ``main`` file,
+  where running it needs more than the file (Mitsuba's spectral variant for a spectral scene); ``cbox export``
+  prints it.
 
 A scene the format cannot express (a feature it lacks, a quantity other than radiance) is refused
 before anything is written, with one :class:`~cornell_harness.scenes.model.SceneError` naming the scene file
@@ -80,6 +83,12 @@ def export_scene(scene: Scene, name: str, out: Path | str) -> Path:
         return out / main.relative_to(tmp)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def render_command(scene: Scene, name: str, main: Path) -> str | None:
+    """The command that renders ``scene`` written as ``main`` in format ``name``, where the format says one."""
+    module = format_module(name)
+    return module.render_command(scene, main) if hasattr(module, "render_command") else None
 
 
 def mapping_table(name: str) -> str:
