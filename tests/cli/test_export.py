@@ -83,3 +83,16 @@ def test_the_mitsuba_executable_on_an_export_scores_as_the_adapter(tmp_path):
     assert x["delta_e2000_mean"] == pytest.approx(y["delta_e2000_mean"], rel=0.05)
     assert x["rel_mse"] == pytest.approx(y["rel_mse"], rel=0.05)
     assert abs(x["mean_radiance_rel_error"]) < 0.01 and x["nan_count"] == 0
+
+
+def test_a_spectral_mitsuba_export_prints_the_variant_to_render_it_with(capsys, tmp_path):
+    """stdout stays the main file alone; stderr names the spectral variant (an RGB one fails on the spectra)."""
+    out = tmp_path / "d"
+    code, stdout, err = cbox(capsys, "export", "-s", "cornell-box-measured", "-f", "mitsuba", "-o", str(out),
+                             "--set", "camera.resolution=8,8")
+    assert code == 0, err
+    assert stdout.strip() == str(out / "scene.xml")
+    (line,) = err.splitlines()
+    assert line.startswith(f"cbox: render it with: mitsuba -m llvm_ad_spectral {out / 'scene.xml'} -o ")
+    code, _, err = cbox(capsys, "export", "-s", "cornell-box", "-f", "mitsuba", "-o", str(tmp_path / "rgb"))
+    assert code == 0 and "-m " not in err

@@ -100,7 +100,7 @@ def test_mitsubas_cie_tables_against_colour_sciences():
     """The numbers CIE_TABLE_NOTE gives: equal sums, per-wavelength differences up to 11% of x̄, the film's
     normalisation 0.1% off (which spectral_scale removes), and the light's RGB within 2e-4 after it."""
     Mitsuba3().variant("spectral")
-    from cornell_harness.scenes.export.mitsuba import SPECTRAL_RANGE_NM
+    from cornell_harness.scenes.export.mitsuba import MI_CIE_Y_NORMALIZATION, SPECTRAL_RANGE_NM
 
     w, xyz = observer()
     # Mitsuba samples wavelengths over the observer's own range, colour-science's table's: 360-830 nm.
@@ -111,6 +111,8 @@ def test_mitsubas_cie_tables_against_colour_sciences():
     rel = np.where(big, np.abs(table - xyz) / np.where(big, xyz, 1.0), 0.0).max(axis=0)
     assert 0.10 < rel[0] < 0.12 and 0.01 < rel[1] < 0.02 and 0.04 < rel[2] < 0.06, rel
     assert 1.0 / mi.MI_CIE_Y_NORMALIZATION == pytest.approx(106.7503, abs=1e-4)
+    # the export's copy of the constant (the scenes layer does not import Mitsuba) is the installed Mitsuba's
+    assert mi.MI_CIE_Y_NORMALIZATION == MI_CIE_Y_NORMALIZATION
     scale = mitsuba3.spectral_scale()
     assert scale == pytest.approx(106.7503 / 106.8569, abs=2e-6)
     light = load_scene_light()

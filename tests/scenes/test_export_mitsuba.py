@@ -152,8 +152,8 @@ def test_an_unknown_plugin_is_not_written():
 
 def test_a_spectral_scene_exports_its_spectra_and_renders_as_the_adapter(tmp_path):
     """cornell-box-measured: the file holds the measured spectra as ``irregular`` plugins (the light's flat surface
-    padded to 360-830 nm), and in the spectral variant renders one pass bit for bit as the adapter (which then
-    rescales by spectral_scale)."""
+    padded to 360-830 nm), the emission times the film's rescale, and in the spectral variant renders one pass bit
+    for bit as the adapter."""
     scene, seed = small("cornell-box-measured"), 7
     xml = export_scene(scene, "mitsuba", tmp_path)
     root = ET.parse(xml).getroot()
@@ -166,10 +166,73 @@ def test_a_spectral_scene_exports_its_spectra_and_renders_as_the_adapter(tmp_pat
     ours = Mitsuba3().render(scene, 1, seed)
     assert ours.info["variant"].endswith("_spectral")
     loaded = mi.load_file(str(xml), spp=1, seed=pass_seed(seed, 0))
-    theirs = (np.asarray(mi.render(loaded), dtype=np.float64) * mitsuba3.spectral_scale()).astype(np.float32)
+    theirs = np.asarray(mi.render(loaded), dtype=np.float32)
     assert ours.image.mean() > 0.01
     np.testing.assert_array_equal(theirs, ours.image)
     (tmp_path / "rgb").mkdir()
     rgb = export_mitsuba.write(scene, tmp_path / "rgb", spectral=False)
     assert not list(ET.parse(rgb).getroot().iter("spectrum"))
     Mitsuba3().variant()  # back to the RGB variant the module's other tests load files in
+
+
+def test_a_spectral_export_carries_the_films_rescale_and_names_its_variant(tmp_path):
+    """The light's values are the scene's times 1 / (Mitsuba's MI_CIE_Y_NORMALIZATION · colour-science's Σȳ),
+    computed here from colour-science's table; reflectances are not scaled; the printed command names the variant."""
+    import colour
+
+    scene = small("cornell-box-measured")
+    xml = export_scene(scene, "mitsuba", tmp_path)
+    def values(e) -> list[float]:
+        return [float(x) for x in e.find("string[@name='values']").get("value").split(",")]
+
+    spectra = list(ET.parse(xml).getroot().iter("spectrum"))
+    (written,) = [values(e) for e in spectra if e.get("name") == "radiance"]
+    y_sum = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].values[:, 1].sum()
+    scale = 1.0 / (export_mitsuba.MI_CIE_Y_NORMALIZATION * y_sum)
+    assert scale == pytest.approx(0.999002, abs=1e-6)  # 0.1%: the walls' z of +4.5 at 512 spp without it
+    np.testing.assert_allclose(written, np.array(scene.spectral.spectra["light"].values) * scale, rtol=1e-15)
+    reflectances = {tuple(values(e)[-2:]) for e in spectra if e.get("name") == "reflectance"}
+    assert reflectances == {tuple(s.values[-2:]) for n, s in scene.spectral.spectra.items() if n != "light"}
+    command = export_mitsuba.render_command(scene, xml)
+    assert command.startswith(f"mitsuba -m llvm_ad_spectral {xml} -o ") and "scalar_spectral" in command
+    assert export_mitsuba.render_command(small("cornell-box"), xml).startswith(f"mitsuba {xml} -o ")
+
+
+#: Samples per pixel of the executable's render of the spectral export: enough that the missing 0.1% rescale moves
+#: the walls' mean by about 4.5 standard errors (z computed by the harness's scorer against the stored reference).
+SPECTRAL_SPP = 512
+#: |z| above this in any region (or the image's mean) fails: two-sided 6.3e-5 per region for a Gaussian z, and
+#: the scorer's z is conservative (channels bounded as fully correlated), so at most 4.5e-4 over 6 regions + image.
+SPECTRAL_Z = 4.0
+
+
+@pytest.mark.slow
+def test_the_mitsuba_executable_renders_the_spectral_export_within_noise_of_the_reference(tmp_path):
+    """``cbox export`` of cornell-box-measured, then the command it prints (``mitsuba -m llvm_ad_spectral``) at
+    512 spp, scored against the stored reference: every region's mean z and the image's within ±4. The same
+    image without the rescale (divided by it: images are linear in the emission) fails, so the check can."""
+    from cornell_harness.evaluate.regions import region_masks
+    from cornell_harness.evaluate.score import score_image
+    from cornell_harness.store.references import load_reference
+
+    scene = resolve_scene("cornell-box-measured")
+    xml = export_scene(scene, "mitsuba", tmp_path / "export")
+    out = tmp_path / "x.exr"
+    env = {**os.environ, "DRJIT_LIBLLVM_PATH": os.environ.get("DRJIT_LIBLLVM_PATH") or mitsuba3.find_llvm()[0] or ""}
+    variant = export_mitsuba.SPECTRAL_VARIANTS[0 if env["DRJIT_LIBLLVM_PATH"] else 1]  # the command's, or its fallback
+    assert variant in export_mitsuba.render_command(scene, xml)
+    run = subprocess.run([str(mitsuba_executable()), "-m", variant, str(xml), "-o", str(out), "-D",
+                          f"spp={SPECTRAL_SPP}", "-D", "seed=5"], capture_output=True, text=True, timeout=900, env=env)
+    assert run.returncode == 0, run.stderr[-2000:]
+    reference, masks = load_reference(scene), region_masks(scene)
+    image = read_exr(out)[..., :3].astype(np.float64)
+
+    def zs(img) -> dict:
+        result = score_image(img, reference, SPECTRAL_SPP, masks=masks, with_flip=False)
+        return {r: v["mean_z"] for r, v in result.regions.items()} | {"image": result.noise["noise_mean_radiance_z"]}
+
+    scored = zs(image)
+    assert set(scored) == {"walls", "blocks", "floor", "light", "bleed-red", "bleed-green", "image"}
+    assert all(abs(z) < SPECTRAL_Z for z in scored.values()), scored
+    unscaled = zs(image / export_mitsuba.spectral_scale())
+    assert max(abs(z) for z in unscaled.values()) > SPECTRAL_Z, unscaled

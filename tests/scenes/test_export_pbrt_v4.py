@@ -317,3 +317,70 @@ def test_a_misnamed_parameter_fails_the_parser():
 def test_an_ambient_occlusion_scene_is_refused(tmp_path):
     with pytest.raises(SceneError, match="quantity"):
         export_scene(resolve_scene("cornell-box-ao"), "pbrt-v4", tmp_path)
+
+
+def pbrt_spectrum(values: list[float]):
+    """pbrt-v4's inline ``"spectrum"`` (paramdict.cpp, a ``PiecewiseLinearSpectrum``: linear between its samples,
+    zero outside them, util/spectrum.cpp) as a function of wavelength; wavelengths strictly increasing."""
+    lam, v = np.asarray(values[0::2]), np.asarray(values[1::2])
+    assert np.all(np.diff(lam) > 0), "pbrt-v4 stops at wavelengths that are not increasing"
+    return lambda at: np.interp(at, lam, v, left=0.0, right=0.0)
+
+
+def test_a_spectral_scene_writes_its_spectra_and_undoes_pbrt_v4s_light_normalisation(tmp_path):
+    """cornell-box-measured: every reflectance and the light as ``"spectrum"`` [λ v ...], read as pbrt-v4 reads
+    them, equal the scene's spectra (its extrapolation included: explicit zero ends, the flat surface padded to
+    360-830 nm); and the light's ``"float scale"``, recomputed here from colour-science's CIE 1931 tables, makes
+    pbrt-v4's image of the light our emission RGB: pbrt-v4 divides L by Σ L ȳ (SpectrumToPhotometric, 1 nm sums
+    over 360-830 nm) and its cie1931 sensor's XYZ is ∫ L x̄ (film.h, no division by ∫ ȳ)."""
+    import colour
+
+    from cornell_harness.scenes.spectra import emission_rgb
+
+    scene = resolve_scene("cornell-box-measured")
+    statements = parse(export_scene(scene, "pbrt-v4", tmp_path).read_text(encoding="utf-8"))
+    check_structure(statements)
+    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
+    grid, xyz_bar = np.asarray(cmfs.wavelengths), np.asarray(cmfs.values)
+    assert (grid[0], grid[-1]) == pbrt_v4.LAMBDA_RANGE_NM  # pbrt-v4's Lambda_min, Lambda_max
+    fine = np.linspace(360.0, 830.0, 47001)  # where pbrt-v4 samples, every 0.01 nm: the zero ends are 1e-3 nm ramps
+    lights = 0
+    for block, mesh in zip(blocks(statements), scene.meshes):
+        material = one(block, "Material")
+        kind, written = material.params["reflectance"]
+        expected = scene.spectral.reflectance(mesh.material)
+        assert kind == "spectrum" and expected is not None
+        np.testing.assert_array_equal(pbrt_spectrum(written)(fine), expected.at(fine))
+        if expected.extrapolation == "constant":
+            assert (written[0], written[-2]) == pbrt_v4.LAMBDA_RANGE_NM
+        else:  # zero outside: written as an explicit zero beyond each non-zero end
+            assert (written[1], written[-1]) == (0.0, 0.0)
+        light = one(block, "AreaLightSource")
+        if light is None:
+            continue
+        lights += 1
+        kind, written = light.params["L"]
+        emission = scene.spectral.emission(mesh.name)
+        assert kind == "spectrum" and written[-1] == 0.0 and written[-2] == 700.0 + pbrt_v4.ZERO_STEP_NM
+        L = pbrt_spectrum(written)
+        np.testing.assert_array_equal(L(grid), emission.at(grid))
+        (scale,) = vals(light, "scale")
+        assert scale == pytest.approx(float(emission.at(grid) @ xyz_bar[:, 1] / xyz_bar[:, 1].sum()), rel=1e-12)
+        photometric = L(grid) @ xyz_bar[:, 1]  # SpectrumToPhotometric(L)
+        xyz = scale / photometric * (L(grid) @ xyz_bar)  # what the film sees of the light, ∫ as a 1 nm sum
+        rgb = np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_XYZ_to_RGB) @ xyz
+        np.testing.assert_allclose(rgb, emission_rgb(emission), rtol=1e-9)
+        assert abs(xyz[1] / scale - 1.0) < 1e-12 and scale > 10  # without the scale the light would be 1 nit: 12x dim
+    assert lights == 1
+
+
+def test_a_zero_extrapolated_spectrum_gets_explicit_zero_ends_only_where_it_is_not_zero():
+    from cornell_harness.scenes.spectra import Spectrum
+
+    step = pbrt_v4.ZERO_STEP_NM
+    written = pbrt_v4.spectrum_values(Spectrum((400.0, 500.0, 600.0), (0.0, 1.0, 2.0)))
+    assert written == f"[ 400.0 0.0 500.0 1.0 600.0 2.0 {600.0 + step!r} 0.0 ]"
+    written = pbrt_v4.spectrum_values(Spectrum((400.0, 500.0), (3.0, 0.0)))
+    assert written == f"[ {400.0 - step!r} 0.0 400.0 3.0 500.0 0.0 ]"
+    assert pbrt_v4.spectrum_values(Spectrum((400.0, 500.0), (3.0, 4.0), "constant")) == (
+        "[ 360.0 3.0 400.0 3.0 500.0 4.0 830.0 4.0 ]")

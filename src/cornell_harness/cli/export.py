@@ -13,7 +13,8 @@ from cornell_harness.scenes.export import FORMATS
 from cornell_harness.scenes.library import resolve_scene
 
 FORMAT_HELP = ("Format to write: mitsuba (scene.xml and meshes/*.ply, Mitsuba 3 XML: `mitsuba DIR/scene.xml -o "
-               "out.exr -D spp=64 -D seed=3`), luxcore (LuxCore SDL: scene.scn and scene.cfg), pbrt-v4 "
+               "out.exr -D spp=64 -D seed=3`, with `-m llvm_ad_spectral` for a spectral scene), luxcore "
+               "(LuxCore SDL: scene.scn and scene.cfg), pbrt-v4 "
                "(scene.pbrt: `pbrt DIR/scene.pbrt --spp 64 --seed 3`), json (scene.json, a neutral "
                "description for a renderer of your own, ambient occlusion included; its schema: "
                "src/cornell_harness/schemas/json-scene.schema.json), gltf (glTF 2.0: scene.gltf and "
@@ -34,11 +35,17 @@ def export(
 ) -> None:
     """Write the scene, with its meshes, in another renderer's format.
 
-    Prints the path of the main file, the one a renderer is given. A scene
-    the format cannot express (a feature it lacks, or a quantity it does not
-    carry: only json carries cornell-box-ao's ambient occlusion) is refused
-    before anything is written: one line naming the scene file and field, exit 2.
+    Prints the path of the main file, the one a renderer is given, and on
+    stderr the command that renders it where the format needs more than the
+    file (a spectral scene's Mitsuba variant). A scene the format cannot
+    express (a feature it lacks, or a quantity it does not carry: only json
+    and usd carry cornell-box-ao's ambient occlusion) is refused before
+    anything is written: one line naming the scene file and field, exit 2.
     """
-    from cornell_harness.scenes.export import export_scene
+    from cornell_harness.scenes.export import export_scene, render_command
 
-    typer.echo(export_scene(resolve_scene(scene, overrides), fmt, out))
+    resolved = resolve_scene(scene, overrides)
+    main = export_scene(resolved, fmt, out)
+    typer.echo(main)
+    if command := render_command(resolved, fmt, main):
+        typer.echo(f"cbox: render it with: {command}", err=True)

@@ -19,9 +19,10 @@ projection (the scene's ``rgb_convention``) with the RGB variant. A spectral ren
 ``info["spectral"]`` (:data:`cornell_harness.scenes.spectral_scene.SPECTRAL_INFO`: the variant), which
 the results' ``rgb_convention`` column reads. Its film is the same ``hdrfilm``: Mitsuba turns
 each wavelength sample into XYZ with its CIE 1931 2° table, divides by its ``∫ȳ``
-(``1 / MI_CIE_Y_NORMALIZATION``) and converts to linear sRGB; the adapter rescales that to
-colour-science's Σȳ (:func:`spectral_scale`), so an emitter of spectrum L seen directly gives
-:func:`cornell_harness.scenes.spectra.emission_rgb` (L) up to the tables' difference (:data:`CIE_TABLE_NOTE`).
+(``1 / MI_CIE_Y_NORMALIZATION``) and converts to linear sRGB; every emitter's radiance is multiplied by
+:func:`spectral_scale` (as ``cbox export`` writes it), which puts that on colour-science's Σȳ, so an
+emitter of spectrum L seen directly gives :func:`cornell_harness.scenes.spectra.emission_rgb` (L) up to the
+tables' difference (:data:`CIE_TABLE_NOTE`).
 
 Renders are split into passes of at most :data:`MAX_SAMPLES_PER_PASS` samples
 so memory stays bounded at any spp (the LLVM variant keeps a whole wavefront
@@ -52,7 +53,8 @@ import numpy as np
 
 from cornell_harness.adapters.api import AOVS, Checkpoint, RenderResult, Setting, Stopwatch, pass_seed, spp_passes
 from cornell_harness.scenes.export import mitsuba as mitsuba_plugins
-from cornell_harness.scenes.export.mitsuba import bsdf_dict, emission_spectrum, has_spectra, material_spectra
+from cornell_harness.scenes.export.mitsuba import (bsdf_dict, emission_spectrum, has_spectra, material_spectra,
+                                                   spectral_scale)
 from cornell_harness.scenes.model import Scene
 from cornell_harness.scenes.spectral_scene import SPECTRAL_INFO
 from cornell_harness.scenes.transforms import unit_frame
@@ -111,23 +113,13 @@ def find_llvm() -> tuple[str | None, str]:
 #: ``tests/renderers/test_mitsuba_spectral.py``). The tables' sums agree to 1.4e-6, but single wavelengths differ
 #: by up to 11% of x̄, 5% of z̄ and 1.6% of ȳ (largest near 418 nm: another edition of the table). The film
 #: divides by ``1 / MI_CIE_Y_NORMALIZATION`` = 106.7503 where both tables' Σȳ = 106.857, which would make a
-#: spectral image 0.100% brighter than :func:`~cornell_harness.scenes.spectra.emission_rgb`: the adapter multiplies it
-#: by :func:`spectral_scale` to remove that. What remains is the tables' shapes: on the Cornell spectra
+#: spectral image 0.100% brighter than :func:`~cornell_harness.scenes.spectra.emission_rgb`: the adapter multiplies
+#: the emitters by :func:`spectral_scale` to remove that. What remains is the tables' shapes: on the Cornell spectra
 #: (light L, and white, green, red × L) the linear sRGB differs by at most 1.5e-4 for L and white, and
 #: 0.1% (green's R), 0.8% (red's G), 2.3% (green's B) and -1.1% (red's B) in the small channels of the
 #: coloured products.
 CIE_TABLE_NOTE = ("Mitsuba's CIE table differs from colour-science's per wavelength (sums equal); its film's "
                   "1/106.7503 normalisation is rescaled to colour-science's Σȳ (src/cornell_harness/renderers/mitsuba3.py)")
-
-
-def spectral_scale() -> float:
-    """The factor that puts a spectral variant's image on :func:`cornell_harness.scenes.spectra.emission_rgb`'s scale:
-    Mitsuba's film divides by 1 / ``MI_CIE_Y_NORMALIZATION``, colour-science's projection by Σȳ (CIE_TABLE_NOTE)."""
-    import mitsuba as mi
-
-    from cornell_harness.scenes.spectra import observer
-
-    return float(1.0 / (mi.MI_CIE_Y_NORMALIZATION * observer()[1][:, 1].sum()))
 
 
 @cache
@@ -164,7 +156,8 @@ def _use_variant(colour: str) -> tuple[str, str]:
 def scene_dict(scene: Scene, spp: int, sampler: str = "independent", aovs: bool = False,
                spectral: bool = False) -> dict:
     """The scene as a ``mi.load_dict`` dictionary (Mitsuba must be imported, in a spectral variant if
-    ``spectral``: then materials and emitters given as spectra get those spectra, not their RGB projection).
+    ``spectral``: then materials and emitters given as spectra get those spectra, not their RGB projection, and
+    every emitter's radiance is multiplied by :func:`spectral_scale`).
 
     The plugins are :mod:`cornell_harness.scenes.export.mitsuba`'s, the ones ``cbox export --format mitsuba``
     writes as XML; here the meshes are built in memory. ``sampler`` is a Mitsuba sampler plugin (the
@@ -191,6 +184,7 @@ def scene_dict(scene: Scene, spp: int, sampler: str = "independent", aovs: bool 
     if aovs:
         d["integrator"] = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": d["integrator"]}
     spectra = material_spectra(scene, spectral)
+    scale = spectral_scale() if spectral else 1.0
     bsdfs = {name: mi.load_dict(bsdf_dict(m, spectra.get(name))) for name, m in scene.materials.items()}
     for i, s in enumerate(scene.spheres):
         d[f"sphere_{i}"] = mitsuba_plugins.sphere_dict(scene, s) | {"bsdf": bsdfs[s.material]}
@@ -199,7 +193,7 @@ def scene_dict(scene: Scene, spp: int, sampler: str = "independent", aovs: bool 
         props["bsdf"] = bsdfs[m.material]
         if m.is_emitter:
             props["emitter"] = mi.load_dict(mitsuba_plugins.emitter_dict(m.radiance,
-                                                                         emission_spectrum(scene, m, spectral)))
+                                                                         emission_spectrum(scene, m, spectral), scale))
         mesh = mi.Mesh(m.name, len(m.vertices), len(m.triangles), has_vertex_normals=False,
                        has_vertex_texcoords=False, props=props)
         params = mi.traverse(mesh)
@@ -304,15 +298,11 @@ class Mitsuba3:
         if scene.quantity == "ambient_occlusion":
             return self._render_ao(mi_scene, scene, spp, seed, checkpoints, per_pass, info, clock)
 
-        scale = spectral_scale() if spectral else 1.0
-        if spectral:
-            info["spectral_scale"] = round(scale, 9)
+        if spectral:  # folded into the emitters (scene_dict)
+            info["spectral_scale"] = round(spectral_scale(), 9)
 
         def sums(n: int, s: int) -> tuple[np.ndarray]:
-            img = np.asarray(mi.render(mi_scene, spp=n, seed=s), dtype=np.float64) * n
-            if spectral:  # colour channels only, not AOVs
-                img[..., :3] *= scale
-            return (img,)
+            return (np.asarray(mi.render(mi_scene, spp=n, seed=s), dtype=np.float64) * n,)
 
         _warm_up((scene.content_hash(), bool(aovs), variant), sums)
         info["setup_s"] = round(clock.wall(), 3)  # scene load and warm-up, outside time_s

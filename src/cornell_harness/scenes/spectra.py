@@ -132,6 +132,31 @@ def interpolate(wavelengths: np.ndarray, values: np.ndarray, at, extrapolation: 
                      np.asarray(values, dtype=np.float64), left=outside, right=outside)
 
 
+def written_samples(spectrum: Spectrum, lo: float, hi: float, zero_step: float | None = None
+                    ) -> tuple[list[float], list[float]]:
+    """The samples of ``spectrum`` as written for a renderer whose sampled spectra are zero outside their samples
+    and linear between them (Mitsuba's ``irregular`` plugin, pbrt-v4's inline ``"spectrum"``): the extrapolation
+    written out over its wavelength range [``lo``, ``hi``] nm.
+
+    ``"constant"``: the end values repeated at ``lo`` and ``hi``. ``"zero"``: as the samples are, or, with
+    ``zero_step``, with a zero sample ``zero_step`` nm beyond each end whose value is not zero, so that a reader
+    which extends a spectrum's end values instead (pbrt-v4 does for its spectrum files) still reads zero there.
+    That ramp over ``zero_step`` nm is the only change: of the order ``zero_step`` / (the range's width).
+    """
+    w, v = [float(x) for x in spectrum.wavelengths_nm], [float(x) for x in spectrum.values]
+    if spectrum.extrapolation == "constant":
+        if w[0] > lo:
+            w, v = [lo] + w, [v[0]] + v
+        if w[-1] < hi:
+            w, v = w + [hi], v + [v[-1]]
+    elif zero_step is not None:
+        if v[0] != 0.0:
+            w, v = [w[0] - zero_step] + w, [0.0] + v
+        if v[-1] != 0.0:
+            w, v = w + [w[-1] + zero_step], v + [0.0]
+    return w, v
+
+
 def spectrum_problem(wavelengths: list, values: list, extrapolation: str) -> tuple[str, str] | None:
     """What is wrong with a spectrum's samples, as (field, message), the field relative to the spectrum's table
     (``values[3]``); None if nothing is."""
@@ -211,6 +236,12 @@ def _rounded(rgb: np.ndarray) -> tuple[float, float, float]:
     # 12 decimals: the projection enters the scene's content hash, which must not depend on the last bits
     # of a BLAS sum.
     return tuple(float(round(float(x), 12)) for x in rgb)
+
+
+def luminance(emission: Spectrum) -> float:
+    """The luminance Y = Σ L ȳ / Σ ȳ of an emission spectrum, in L's units: the Y of :func:`emission_rgb`'s XYZ."""
+    grid, xyz_bar = observer()
+    return float(tristimulus(emission.at(grid), xyz_bar)[1] / xyz_bar[:, 1].sum())
 
 
 @functools.cache

@@ -76,6 +76,15 @@ class SpectralContent:
     materials: dict[str, dict[str, str]]
     emitters: dict[str, str]
 
+    @property
+    def used(self) -> bool:
+        """Whether any material or emitter is given as a spectrum (a spectral renderer then renders those)."""
+        return bool(self.emitters or any(self.materials.values()))
+
+    def fields(self, material: str) -> dict[str, Spectrum]:
+        """``material``'s fields given as spectra, {field: spectrum}; empty where all are RGB."""
+        return {f: self.spectra[name] for f, name in self.materials.get(material, {}).items()}
+
     def reflectance(self, material: str, field: str = "reflectance") -> Spectrum | None:
         """The spectrum of ``material``'s ``field``, None where that field is RGB."""
         name = self.materials.get(material, {}).get(field)

@@ -16,6 +16,9 @@ same interface:
   and miss value); ``("radiance",)`` when absent (:func:`quantities`);
 - optionally ``refusal(scene) -> SceneError | None``: why the format cannot express a scene whose
   features it has (e.g. luxcore and ``render.max_depth = 1``).
+- optionally ``render_command(scene, main) -> str``: the command that renders the written ``main`` file,
+  where running it needs more than the file (Mitsuba's spectral variant for a spectral scene); ``cbox export``
+  prints it.
 
 A scene the format cannot express (a feature it lacks, a quantity it does not carry) is refused
 before anything is written, with one :class:`~cornell_harness.scenes.model.SceneError` naming the scene file
@@ -98,6 +101,12 @@ def export_scene(scene: Scene, name: str, out: Path | str) -> Path:
         return out / main.relative_to(tmp)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def render_command(scene: Scene, name: str, main: Path) -> str | None:
+    """The command that renders ``scene`` written as ``main`` in format ``name``, where the format says one."""
+    module = format_module(name)
+    return module.render_command(scene, main) if hasattr(module, "render_command") else None
 
 
 def mapping_table(name: str) -> str:

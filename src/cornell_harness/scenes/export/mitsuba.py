@@ -11,9 +11,14 @@ A scene with spectra (``Scene.spectral``, :mod:`cornell_harness.scenes.spectral_
 with the sampled spectra themselves, as ``irregular`` spectrum plugins (Mitsuba 3's
 "Spectra" plugins: linear between samples, zero outside them, as our ``extrapolation =
 "zero"``; a ``"constant"`` one gets end samples at :data:`SPECTRAL_RANGE_NM`), and must be
-rendered with a ``*_spectral`` variant (``mitsuba -m llvm_ad_spectral``); values the
-scene gives as RGB stay ``rgb`` (which a spectral variant upsamples). ``spectral=False``
-writes the scene's RGB projection instead, for an RGB variant.
+rendered with a ``*_spectral`` variant (``mitsuba -m llvm_ad_spectral``, or ``scalar_spectral``
+without LLVM: :func:`render_command`, which ``cbox export`` prints); values the scene gives as RGB
+stay ``rgb`` (which a spectral variant upsamples). A spectral variant's film normalises by its own
+∫ȳ, 0.1% off colour-science's Σȳ (:func:`spectral_scale`): every emitter's radiance is written
+multiplied by that factor, so the file renders on the scale of
+:func:`cornell_harness.scenes.spectra.emission_rgb` and of the stored references, as the adapter does
+with the same dictionaries. ``spectral=False`` writes the scene's RGB projection instead, for an RGB
+variant.
 
 The XML declares ``<default>``s for ``spp``, ``seed``, ``resx`` and ``resy``, so that
 
@@ -37,7 +42,7 @@ import numpy as np
 from cornell_harness.scenes.export.ply import write_ply
 from cornell_harness.scenes.materials import Dielectric, Diffuse, Mirror
 from cornell_harness.scenes.model import Mesh, Scene, Sphere, one_line
-from cornell_harness.scenes.spectra import Spectrum
+from cornell_harness.scenes.spectra import Spectrum, observer, written_samples
 from cornell_harness.scenes.transforms import unit_frame
 
 NAME = "mitsuba"
@@ -55,13 +60,19 @@ MAPPING = (
                                                                          "`sphere` (`center`, `radius`)"),
     ("emitter side", "front side only (counter-clockwise winding)", "`area` emitter (`rgb` `radiance`): emits on "
                                                                     "the face normal's side only"),
+    ("emitted radiance", "`radiance`, linear sRGB; or a spectrum L", "`radiance` as given; in a spectral export "
+                                                                      "every emitter's values times "
+                                                                      "1 / (MI_CIE_Y_NORMALIZATION · Σȳ) "
+                                                                      "≈ 0.99900, which puts the spectral "
+                                                                      "film's ∫ȳ normalisation on "
+                                                                      "colour-science's Σȳ"),
     ("two-sidedness", "diffuse and mirror reflect on the front side only; dielectric both sides",
      "`diffuse` and `conductor` are one-sided (black from behind); `dielectric` both sides"),
     ("mirror", "constant specular reflectance R", "`conductor` with `material` none (Fresnel factor 1) and "
                                                   "`specular_reflectance` R"),
     ("colour", "RGB values (linear sRGB); a spectral scene's sampled spectra",
-     "`rgb`; spectra as `irregular` spectrum plugins, for a `*_spectral` variant (the adapter's `spectral` "
-     "setting)"),
+     "`rgb`; spectra as `irregular` spectrum plugins, for a `*_spectral` variant (`mitsuba -m llvm_ad_spectral`, "
+     "which `cbox export` prints; an RGB variant stops at `IrregularSpectrum::eval(): not implemented`)"),
     ("IOR", "`int_ior` inside, `ext_ior` outside, absolute", "`dielectric` `int_ior`, `ext_ior`"),
     ("filter", "box: each pixel the mean over its own square", "`hdrfilm` (rgb, float32) with `rfilter` box"),
     ("depth", "`max_depth` path segments, -1 unbounded", "`path` `max_depth`, the same number (our convention "
@@ -74,6 +85,19 @@ DEFAULT_SPP = 64
 DEFAULT_SEED = 0
 #: Mitsuba's spectral variants sample wavelengths in this range (``MI_CIE_MIN``, ``MI_CIE_MAX``), nm.
 SPECTRAL_RANGE_NM = (360.0, 830.0)
+#: Mitsuba 3.9.1's ``MI_CIE_Y_NORMALIZATION`` (1 / 106.7503, its float32 ∫ȳ): its spectral film multiplies XYZ by
+#: it (``tests/renderers/test_mitsuba_spectral.py`` checks it against the installed Mitsuba's).
+MI_CIE_Y_NORMALIZATION = 0.009367658735689113
+#: The variant a spectral export is rendered with, and the one to use without LLVM.
+SPECTRAL_VARIANTS = ("llvm_ad_spectral", "scalar_spectral")
+
+
+def spectral_scale() -> float:
+    """The factor that puts a spectral variant's image on :func:`cornell_harness.scenes.spectra.emission_rgb`'s
+    scale: Mitsuba's film multiplies by :data:`MI_CIE_Y_NORMALIZATION`, colour-science's projection divides by
+    Σȳ (``CIE_TABLE_NOTE`` in ``src/cornell_harness/renderers/mitsuba3.py``). Images are linear in the emitted
+    radiance, so it is folded into every emitter's (:func:`emitter_dict`)."""
+    return float(1.0 / (MI_CIE_Y_NORMALIZATION * observer()[1][:, 1].sum()))
 
 
 @dataclass(frozen=True)
@@ -93,22 +117,21 @@ class Var:
     tag: str
 
 
-def spectrum_dict(spectrum: Spectrum) -> dict:
-    """A sampled spectrum as Mitsuba's ``irregular`` plugin: the same samples, so the same linear interpolation and
-    zero outside them; ``extrapolation = "constant"`` adds the end values at the ends of :data:`SPECTRAL_RANGE_NM`."""
-    w, v = list(spectrum.wavelengths_nm), list(spectrum.values)
-    if spectrum.extrapolation == "constant":
-        lo, hi = SPECTRAL_RANGE_NM
-        if w[0] > lo:
-            w, v = [lo] + w, [v[0]] + v
-        if w[-1] < hi:
-            w, v = w + [hi], v + [v[-1]]
+def spectrum_dict(spectrum: Spectrum, scale: float = 1.0) -> dict:
+    """A sampled spectrum (times ``scale``) as Mitsuba's ``irregular`` plugin: the same samples, so the same linear
+    interpolation and zero outside them; ``extrapolation = "constant"`` adds the end values at the ends of
+    :data:`SPECTRAL_RANGE_NM` (:func:`cornell_harness.scenes.spectra.written_samples`)."""
+    w, v = written_samples(spectrum, *SPECTRAL_RANGE_NM)
+    if scale != 1.0:
+        v = [x * scale for x in v]
     return {"type": "irregular", "wavelengths": ", ".join(map(_num, w)), "values": ", ".join(map(_num, v))}
 
 
-def colour_dict(rgb, spectrum: Spectrum | None = None) -> dict:
-    """A colour: the spectrum where there is one (spectral variants), else the RGB value."""
-    return spectrum_dict(spectrum) if spectrum is not None else {"type": "rgb", "value": list(rgb)}
+def colour_dict(rgb, spectrum: Spectrum | None = None, scale: float = 1.0) -> dict:
+    """A colour (times ``scale``): the spectrum where there is one (spectral variants), else the RGB value."""
+    if spectrum is not None:
+        return spectrum_dict(spectrum, scale)
+    return {"type": "rgb", "value": [float(c) * scale for c in rgb] if scale != 1.0 else list(rgb)}
 
 
 def bsdf_dict(material, spectra: dict[str, Spectrum] | None = None) -> dict:
@@ -126,23 +149,29 @@ def bsdf_dict(material, spectra: dict[str, Spectrum] | None = None) -> dict:
     raise ValueError(f"material {material.name!r}: {type(material).__name__} has no Mitsuba translation")
 
 
-def emitter_dict(radiance, spectrum: Spectrum | None = None) -> dict:
-    """A one-sided area emitter of constant ``radiance`` (linear sRGB), or of the emission ``spectrum``."""
-    return {"type": "area", "radiance": colour_dict(radiance, spectrum)}
+def emitter_dict(radiance, spectrum: Spectrum | None = None, scale: float = 1.0) -> dict:
+    """A one-sided area emitter of constant ``radiance`` (linear sRGB), or of the emission ``spectrum``, times
+    ``scale`` (:func:`spectral_scale` in a spectral variant)."""
+    return {"type": "area", "radiance": colour_dict(radiance, spectrum, scale)}
 
 
 def has_spectra(scene: Scene) -> bool:
     """Whether the scene gives any material or emitter as a spectrum (then a spectral variant renders those)."""
-    sp = scene.spectral
-    return sp is not None and bool(sp.emitters or any(sp.materials.values()))
+    return scene.spectral is not None and scene.spectral.used
+
+
+def render_command(scene: Scene, main: Path) -> str:
+    """The ``mitsuba`` command that renders the exported ``main`` file; a spectral export names its variant."""
+    variant = (f"-m {SPECTRAL_VARIANTS[0]} " if has_spectra(scene) else "")
+    tail = f"   (without LLVM: -m {SPECTRAL_VARIANTS[1]})" if variant else ""
+    return f"mitsuba {variant}{main} -o out.exr -D spp={DEFAULT_SPP} -D seed={DEFAULT_SEED}{tail}"
 
 
 def material_spectra(scene: Scene, spectral: bool) -> dict[str, dict[str, Spectrum]]:
     """Each material's spectral fields ({material: {field: spectrum}}), none unless ``spectral``."""
-    sp = scene.spectral
-    if not spectral or sp is None:
+    if not spectral or scene.spectral is None:
         return {}
-    return {m: {f: sp.spectra[name] for f, name in fields.items()} for m, fields in sp.materials.items()}
+    return {m: scene.spectral.fields(m) for m in scene.spectral.materials}
 
 
 def emission_spectrum(scene: Scene, mesh: Mesh, spectral: bool) -> Spectrum | None:
@@ -212,6 +241,7 @@ def write(scene: Scene, folder: Path, spectral: bool | None = None) -> Path:
     # Ids and file names from our names made safe: Mitsuba substitutes `$name` in any attribute.
     bsdf_ids = {name: f"bsdf{i}-{_slug(name)}" for i, name in enumerate(scene.materials)}
     spectra = material_spectra(scene, spectral)
+    scale = spectral_scale() if spectral else 1.0
     d |= {bsdf_ids[name]: bsdf_dict(m, spectra.get(name)) for name, m in scene.materials.items()}
     for i, s in enumerate(scene.spheres):
         d[f"sphere_{i}"] = sphere_dict(scene, s) | {"bsdf": {"type": "ref", "id": bsdf_ids[s.material]}}
@@ -221,10 +251,11 @@ def write(scene: Scene, folder: Path, spectral: bool | None = None) -> Path:
         d[f"mesh_{i}"] = {"type": "ply", "filename": ply, "face_normals": True,
                           "bsdf": {"type": "ref", "id": bsdf_ids[m.material]}}
         if m.is_emitter:
-            d[f"mesh_{i}"]["emitter"] = emitter_dict(m.radiance, emission_spectrum(scene, m, spectral))
+            d[f"mesh_{i}"]["emitter"] = emitter_dict(m.radiance, emission_spectrum(scene, m, spectral), scale)
     defaults = {"spp": DEFAULT_SPP, "seed": DEFAULT_SEED, "resx": scene.camera.width, "resy": scene.camera.height}
     path = folder / "scene.xml"
-    variant = "; spectra: render with a *_spectral variant (mitsuba -m llvm_ad_spectral)" if spectral else ""
+    variant = (f"; spectra: render with a *_spectral variant (mitsuba -m {SPECTRAL_VARIANTS[0]}); emitters "
+               f"scaled by {scale!r} for its film's normalisation" if spectral else "")
     path.write_text(to_xml(d, defaults, f"{scene.name} ({scene.content_hash()}), exported by cornell-harness{variant}"),
                     encoding="utf-8")
     return path

@@ -7,6 +7,13 @@ the file back and checks each name and type against that table. pbrt-v4 is not i
 the file is checked, not rendered. How each aspect of a scene is written, and where pbrt-v4 differs
 from our model (two-sided BSDFs, a mirror's Fresnel, spectral colour), is :data:`MAPPING`.
 
+A scene with spectra (``Scene.spectral``) is written with the sampled spectra themselves: ``"spectrum
+reflectance" [ λ v ... ]`` and ``"spectrum L" [ λ v ... ]`` (:func:`spectrum_values`), the light with the
+``"float scale"`` (:func:`light_scale`) that undoes pbrt-v4's photometric normalisation of ``L``
+(``lights.cpp``, ``DiffuseAreaLight::Create``: ``scale /= SpectrumToPhotometric(L)``), so that its ``rgb``
+film's XYZ of the light, ∫ L x̄ dλ with no normalisation of its own, is our
+:func:`cornell_harness.scenes.spectra.emission_rgb`'s ``Σ L x̄ / Σ ȳ``.
+
 Numbers are written as Python's shortest round-trip text of the scene's float64 values (pbrt-v4
 reads them with ``strtod``, then stores float32). The sample count can be changed with
 ``pbrt --spp N``, the seed with ``pbrt --seed S`` (the file names none, so the sampler takes it).
@@ -21,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from cornell_harness.scenes.materials import Dielectric, Diffuse, Mirror
-from cornell_harness.scenes.model import Scene, one_line
+from cornell_harness.scenes.model import Mesh, Scene, one_line
+from cornell_harness.scenes.spectra import Spectrum, luminance, written_samples
 
 NAME = "pbrt-v4"
 FEATURES = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
@@ -34,6 +42,12 @@ DEFAULT_SPP = 64
 UNBOUNDED_MAXDEPTH = 2**31 - 2
 #: pbrt-v4 clamps a conductor's ``reflectance`` to this (materials.h, ConductorMaterial::GetBxDF).
 CONDUCTOR_MAX_REFLECTANCE = 0.9999
+#: pbrt-v4 samples wavelengths in [Lambda_min, Lambda_max] (util/spectrum.h), nm.
+LAMBDA_RANGE_NM = (360.0, 830.0)
+#: How far beyond a spectrum's last sample its explicit zero is written (``extrapolation = "zero"``), nm: pbrt-v4's
+#: inline spectra are zero outside their samples already, but its spectrum files are extended with their end
+#: values. The ramp this adds to a spectrum is an integral of (end value) · ZERO_STEP_NM / 2: 1e-6 of a flat one.
+ZERO_STEP_NM = 1e-3
 
 
 def maxdepth(max_depth: int) -> int:
@@ -96,9 +110,16 @@ MAPPING = (
                                                      "(D65) normalised to luminance 1, which the `rgb` film's "
                                                      "default `cie1931` sensor (iso 100, exposure 1) maps back "
                                                      "to the same RGB"),
-    ("colour", "linear-sRGB RGB products", "spectral: pbrt-v4 turns each RGB reflectance and emission into a "
-                                           "spectrum; a product of spectra is not the product of their RGBs, "
-                                           "so reflected colours differ slightly from an RGB renderer's"),
+    ("spectral emitted radiance", "a spectrum L (`[spectra]`), whose colour is M · Σ L x̄ / Σ ȳ",
+     "`\"spectrum L\" [ λ v ... ]` with `\"float scale\"` Y = Σ L ȳ / Σ ȳ: pbrt-v4 divides L by Σ L ȳ "
+     "(`DiffuseAreaLight::Create`, `scale /= SpectrumToPhotometric(L)`, at 1 nm from 360 to 830 nm) and its "
+     "`cie1931` sensor takes ∫ L x̄ without dividing by ∫ ȳ"),
+    ("colour", "linear-sRGB RGB products; a spectral scene's sampled spectra",
+     "RGB scenes: pbrt-v4 turns each RGB reflectance and emission into a spectrum (Jakob and Hanika's "
+     "sigmoid fit; emission times D65); a product of spectra is not the product of their RGBs, so reflected "
+     "colours differ from an RGB renderer's (ΔE00 below). Spectral scenes: `\"spectrum reflectance\" "
+     "[ λ v ... ]`, the scene's samples; `extrapolation` \"zero\" written as a zero sample "
+     f"{ZERO_STEP_NM:g} nm beyond each non-zero end, \"constant\" as the end values at 360 and 830 nm"),
     ("two-sidedness", "diffuse and mirror reflect on the front side only (black from behind); dielectric "
                       "both sides", "pbrt-v4's `diffuse` and `conductor` reflect on both sides and have no "
                                     "one-sided form: written two-sided, not refused. The image differs only "
@@ -137,12 +158,40 @@ def _ints(values) -> str:
     return "[ " + " ".join(str(int(v)) for v in np.ravel(values)) + " ]"
 
 
-def material_lines(material) -> list[str]:
-    """The ``Material`` directive of a scene material."""
+def spectrum_values(spectrum: Spectrum) -> str:
+    """A sampled spectrum as pbrt-v4's inline ``"spectrum"`` value ``[ λ v λ v ... ]``, its extrapolation written
+    out (:func:`cornell_harness.scenes.spectra.written_samples`, :data:`ZERO_STEP_NM`)."""
+    w, v = written_samples(spectrum, *LAMBDA_RANGE_NM, zero_step=ZERO_STEP_NM)
+    return _nums([x for pair in zip(w, v) for x in pair])
+
+
+def light_scale(emission: Spectrum) -> float:
+    """The ``"float scale"`` of a ``"spectrum L"``: its luminance Y = Σ L ȳ / Σ ȳ. pbrt-v4 emits
+    scale · L / Σ L ȳ (``SpectrumToPhotometric``, a sum at 1 nm over 360-830 nm) and its film's XYZ is the
+    integral of that times x̄ȳz̄, so the light seen directly has XYZ Σ L x̄ / Σ ȳ, that of
+    :func:`cornell_harness.scenes.spectra.emission_rgb`."""
+    return luminance(emission)
+
+
+def _colour(kind: str, rgb, spectrum: Spectrum | None) -> str:
+    return f'"spectrum {kind}" {spectrum_values(spectrum)}' if spectrum is not None else f'"rgb {kind}" {_nums(rgb)}'
+
+
+def emitter_line(scene: Scene, mesh: Mesh) -> str:
+    """The ``AreaLightSource`` of an emitting mesh: RGB, or its emission spectrum with :func:`light_scale`."""
+    spectrum = scene.spectral.emission(mesh.name) if scene.spectral is not None else None
+    if spectrum is None:
+        return f'AreaLightSource "diffuse" "rgb L" {_nums(mesh.radiance)}'
+    return f'AreaLightSource "diffuse" "spectrum L" {spectrum_values(spectrum)} "float scale" [ {_num(light_scale(spectrum))} ]'
+
+
+def material_lines(material, spectra: dict[str, Spectrum] | None = None) -> list[str]:
+    """The ``Material`` directive of a scene material; ``spectra`` maps a field (``reflectance``) to its spectrum."""
+    spectrum = (spectra or {}).get("reflectance")
     if isinstance(material, Diffuse):
-        return [f'Material "diffuse" "rgb reflectance" {_nums(material.reflectance)}']
+        return [f'Material "diffuse" {_colour("reflectance", material.reflectance, spectrum)}']
     if isinstance(material, Mirror):
-        return [f'Material "conductor" "rgb reflectance" {_nums(material.reflectance)}']
+        return [f'Material "conductor" {_colour("reflectance", material.reflectance, spectrum)}']
     if isinstance(material, Dielectric):
         return [f'Material "dielectric" "float eta" [ {_num(material.eta)} ]']
     raise ValueError(f"material {material.name!r}: {type(material).__name__} has no pbrt-v4 translation")
@@ -151,6 +200,7 @@ def material_lines(material) -> list[str]:
 def scene_text(scene: Scene, image: str = "scene.exr") -> str:
     """The whole ``scene.pbrt``: options, camera, then the world."""
     cam = scene.camera
+    spectra = {m: scene.spectral.fields(m) for m in scene.materials} if scene.spectral is not None else {}
     lines = [
         f"# {one_line(scene.name)} ({scene.content_hash()}), exported by cornell-harness for pbrt-v4",
         f"# render: pbrt scene.pbrt [--spp N] [--seed S]   (writes {image})",
@@ -167,14 +217,14 @@ def scene_text(scene: Scene, image: str = "scene.exr") -> str:
     ]
     for m in scene.meshes:
         lines += ["", f"# mesh {one_line(m.name)}", "AttributeBegin"]
-        lines += ["    " + line for line in material_lines(scene.materials[m.material])]
+        lines += ["    " + line for line in material_lines(scene.materials[m.material], spectra.get(m.material))]
         if m.is_emitter:
-            lines.append(f'    AreaLightSource "diffuse" "rgb L" {_nums(m.radiance)}')
+            lines.append("    " + emitter_line(scene, m))
         lines += [f'    Shape "trianglemesh" "point3 P" {_nums(m.vertices)}',
                   f'        "integer indices" {_ints(m.triangles)}', "AttributeEnd"]
     for s in scene.spheres:
         lines += ["", f"# sphere {one_line(s.name)}", "AttributeBegin", "    Translate " + " ".join(_num(c) for c in s.center)]
-        lines += ["    " + line for line in material_lines(scene.materials[s.material])]
+        lines += ["    " + line for line in material_lines(scene.materials[s.material], spectra.get(s.material))]
         lines += [f'    Shape "sphere" "float radius" [ {_num(s.radius)} ]', "AttributeEnd"]
     return "\n".join(lines) + "\n"
 
