@@ -48,6 +48,8 @@ class RendererEntry:
     ``name`` is the label results carry: the renderer's name plus the settings
     that differ from its defaults (``pathtracer[rr_depth=3]``). ``settings``
     holds every declared setting, validated (:mod:`cornell_harness.adapters.settings`).
+    ``time_limit_s``: each render of it runs in a child process ended at that
+    limit (:func:`cornell_harness.workflows.runner.render_timed`); None, in this one.
     """
 
     name: str
@@ -55,6 +57,7 @@ class RendererEntry:
     renderer: Renderer | None
     reason: str | None  # why it is unavailable; None when available
     settings: dict = field(default_factory=dict)
+    time_limit_s: float | None = None
 
     @property
     def available(self) -> bool:
@@ -64,11 +67,18 @@ class RendererEntry:
         """The same renderer with ``given`` settings (validated; SettingsError if not allowed)."""
         if self.renderer is None:
             # Cannot validate against a renderer that did not load; it will not run anyway.
-            return RendererEntry(self.name, self.spec, None, self.reason, dict(given))
+            return RendererEntry(self.name, self.spec, None, self.reason, dict(given), self.time_limit_s)
         base = self.renderer.name
         values = resolve_settings(self.renderer, {**self.settings, **given}, base)
         defaults = {st.name: st.default for st in declared(self.renderer)}
-        return RendererEntry(label(base, values, defaults), self.spec, self.renderer, self.reason, values)
+        return RendererEntry(label(base, values, defaults), self.spec, self.renderer, self.reason, values,
+                             self.time_limit_s)
+
+    def with_time_limit(self, time_limit_s: float | None) -> "RendererEntry":
+        """The same renderer, each render ended at ``time_limit_s`` (None: the limit it has)."""
+        if time_limit_s is None:
+            return self
+        return RendererEntry(self.name, self.spec, self.renderer, self.reason, self.settings, time_limit_s)
 
 
 def _estimator_problem(value) -> str | None:

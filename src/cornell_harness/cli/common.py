@@ -36,6 +36,7 @@ import typer
 from cornell_harness.adapters.commands import RenderersFileError
 from cornell_harness.adapters.registry import RendererError
 from cornell_harness.adapters.settings import SettingsError
+from cornell_harness.durations import parse_duration
 from cornell_harness.cli.output import QuietOpt, VerboseOpt, close_progress_bars, info
 from cornell_harness.extras import MissingExtraError
 from cornell_harness.gate.config import GateConfigError
@@ -89,6 +90,23 @@ RENDERER_FILES_HELP = ("Renderers file (TOML, repeatable) declaring command-line
 RendererFilesOpt = typer.Option(None, "--renderers", metavar="FILE", callback=_use_renderer_files,
                                 expose_value=False, help=RENDERER_FILES_HELP)
 SeedOpt = typer.Option(0, "--seed", min=0, help="Random seed; the same seed gives the same image.")
+
+
+def time_limit_seconds(value: str | None) -> float | None:
+    """--time-limit's seconds (None without it); a bad duration is a usage error naming the option."""
+    if value is None:
+        return None
+    try:
+        return parse_duration(value)
+    except ValueError as e:
+        raise typer.BadParameter(str(e).replace("time budget", "time limit")) from None
+
+
+TIME_LIMIT_HELP = ("End a render that runs longer than this (e.g. 90s, 10m), with every process it started, and "
+                   "record it as failed, saying so; each render then runs in a child process. Default: none, but "
+                   "a command-line renderer's program has its own limit (its renderers file's time_limit, else "
+                   "60 s plus 10 microseconds per sample).")
+TimeLimitOpt = typer.Option(None, "--time-limit", metavar="DURATION", callback=time_limit_seconds, help=TIME_LIMIT_HELP)
 TitleOpt = typer.Option(None, "--title", help="Title of the report (default: \"Renderer comparison — SCENE\").")
 SetOpt = typer.Option(None, "--set", metavar="KEY=VALUE", help=(
     "Override a value of the scene file (repeatable), by its TOML path: --set render.max_depth=3 --set "

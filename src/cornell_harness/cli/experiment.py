@@ -9,8 +9,9 @@ import typer
 
 from cornell_harness.adapters.api import attribute
 from cornell_harness.adapters.registry import missing_features, resolve
-from cornell_harness.cli.common import (DashboardOpt, RendererFilesOpt, RenderersOpt, SceneOpt, SchedulerOpt, SetOpt, TitleOpt,
-                                WorkersOpt, app, command_line, executor_for, out_folder_option, print_json)
+from cornell_harness.cli.common import (DashboardOpt, RendererFilesOpt, RenderersOpt, SceneOpt, SchedulerOpt, SetOpt,
+                                        TimeLimitOpt, TitleOpt, WorkersOpt, app, command_line, executor_for,
+                                        out_folder_option, print_json)
 from cornell_harness.cli.figures import CropOpt, SeriesLabelOpt, keep_report_options, parse_crops, series_labels_for
 from cornell_harness.cli.output import Progress, info
 from cornell_harness.cli.timing import TimeBasisOpt, time_basis_option, time_repeats_option, warn_contention
@@ -61,6 +62,7 @@ def converge(
     time_basis: str = TimeBasisOpt,
     series_label: Optional[List[str]] = SeriesLabelOpt,
     crop: Optional[List[str]] = CropOpt,
+    time_limit: Optional[str] = TimeLimitOpt,  # seconds (float), by the option's callback
 ) -> None:
     """Convergence experiment: every metric at every spp checkpoint, per renderer and seed.
 
@@ -93,6 +95,7 @@ def converge(
     entries = resolve(renderer)
     if sweep:
         entries = sweep_entries(entries, *parse_sweep(sweep))
+    entries = [e.with_time_limit(time_limit) for e in entries]
     keep_report_options(out, series_labels_for(series_label, [e.name for e in entries]),
                         parse_crops(crop, sc.camera.width, sc.camera.height))
     with executor_for(workers, scheduler, dashboard) as executor:

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
-from typing import List, Optional
+from typing import Iterator, List, Optional
 
 import typer
 
 from cornell_harness.adapters.registry import RendererError, resolve
 from cornell_harness.cli.common import (REFERENCE_RENDERER, DashboardOpt, HomeOpt, SceneOpt, SchedulerOpt, SetOpt,
-                                        WorkersOpt, check_output_folder, executor_for, reference_app)
+                                        TimeLimitOpt, WorkersOpt, check_output_folder, executor_for, fail,
+                                        reference_app)
 from cornell_harness.cli.output import Progress
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.model import Scene
@@ -29,6 +31,7 @@ def reference_build(
     scheduler: Optional[str] = SchedulerOpt,
     dashboard: Optional[str] = DashboardOpt,
     home: Optional[Path] = HomeOpt,
+    time_limit: Optional[str] = TimeLimitOpt,  # seconds (float), by the option's callback
 ) -> None:
     """Render the scene's reference with Mitsuba and store image, variance and provenance.
 
@@ -36,7 +39,7 @@ def reference_build(
     the package's stored references staying read-only. With --set, the derived scene's reference goes to
     derived/<content hash>/ there; the scene's own reference is left as it is. With --workers or --scheduler
     the batches render on a Dask cluster and are combined here in batch order: the same reference as a build
-    in this process.
+    in this process. --time-limit bounds each batch; one past it ends the build, exit 1, nothing stored.
     """
     sc = resolve_scene(scene, overrides)
     if spp % batches:
@@ -47,12 +50,24 @@ def reference_build(
     (entry,) = resolve([REFERENCE_RENDERER])
     if not entry.available:
         raise RendererError(f"renderer {entry.name!r} builds references but is unavailable: {entry.reason}")
-    with executor_for(workers, scheduler, dashboard) as executor, \
+    with executor_for(workers, scheduler, dashboard) as executor, _render_failed(entry.name), \
             Progress(batches + 1, f"reference {sc.name}", "batch", slots=executor.slots) as bar:  # +1: the noise image
         bar.start(f"{spp // batches} spp per batch")
-        ref = build_reference(sc, spp, batches, entry, folder=reference_folder(sc, home), executor=executor,
-                              progress=lambda done, total, label: bar.advance(label))
+        ref = build_reference(sc, spp, batches, entry.with_time_limit(time_limit), folder=reference_folder(sc, home),
+                              executor=executor, progress=lambda done, total, label: bar.advance(label))
     typer.echo(f"wrote {ref.folder} ({spp} spp in {ref.provenance['wall_time_s']:.0f} s, {ref.provenance['renderer_version']})")
+
+
+@contextlib.contextmanager
+def _render_failed(name: str) -> Iterator[None]:
+    """A render of the engine that failed in this process (it raised, or passed --time-limit): one line, exit 1;
+    on a cluster the executor's error says the same."""
+    from cornell_harness.workflows.render import RenderError, RenderTimeout
+
+    try:
+        yield
+    except (RenderTimeout, RenderError) as e:
+        fail(f"{name}: render failed: {e}", 1)
 
 
 def _refuse_shadowed_build(scene: Scene, home: Path | None) -> None:
@@ -103,6 +118,7 @@ def reference_verify(
         "Also write DIR/reference-verify-<scene>.html: the two engines' images, the per-pixel |z| map and the "
         "per-region table.")),
     home: Optional[Path] = HomeOpt,
+    time_limit: Optional[str] = TimeLimitOpt,  # seconds (float), by the option's callback
 ) -> None:
     """Render the scene with a second engine and compare it with the stored reference, region by region.
 
@@ -124,10 +140,10 @@ def reference_verify(
     from cornell_harness.store.references import record_verdict
     from cornell_harness.workflows.reference_verify import verify_reference
 
-    with executor_for(workers, scheduler, dashboard) as executor, \
+    with executor_for(workers, scheduler, dashboard) as executor, _render_failed(entry.name), \
             Progress(batches, f"verify {sc.name} with {entry.name}", "batch", slots=executor.slots) as bar:
         bar.start(f"{spp // batches} spp per batch")
-        result = verify_reference(sc, ref, entry, spp, batches, executor=executor,
+        result = verify_reference(sc, ref, entry.with_time_limit(time_limit), spp, batches, executor=executor,
                                   progress=lambda done, total, label: bar.advance(label))
     a = result.agreement
     typer.echo(f"{sc.name}: reference {ref.provenance.get('renderer_version')} at {ref.spp} spp against "

@@ -10,8 +10,9 @@ import typer
 
 from cornell_harness.adapters.registry import RendererError, missing_features, resolve
 from cornell_harness.adapters.settings import canonical
-from cornell_harness.cli.common import (RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt, TitleOpt, app,
-                                check_output_file, command_line, out_folder_option)
+from cornell_harness.cli.common import (USER_ERRORS, RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt,
+                                        TimeLimitOpt, TitleOpt, app, check_output_file, command_line, fail,
+                                        out_folder_option)
 from cornell_harness.cli.figures import CropOpt, SeriesLabelOpt, keep_report_options, parse_crops, series_labels_for
 from cornell_harness.cli.output import Progress, info
 from cornell_harness.cli.timing import TimeBasisOpt, time_repeats_option, warn_contention
@@ -39,11 +40,14 @@ def render(
     seed: int = SeedOpt,
     out: Path = typer.Option(..., "--out", "-o", help="Output OpenEXR file (float32 linear sRGB); its name must "
                                                       "end in .exr (other formats are refused, not converted)."),
+    time_limit: Optional[str] = TimeLimitOpt,  # seconds (float), by the option's callback
     variance_out: Optional[Path] = typer.Option(None, "--variance-out", help="Also write the per-pixel variance of "
                                                 "the image (of the mean, float32 EXR, per channel) where the renderer "
                                                 "gives one; one line says so where it does not, and no file is written."),
 ) -> None:
-    """Render one scene with one renderer and write the HDR image (and, with --variance-out, its variance)."""
+    """Render one scene with one renderer and write the HDR image (and, with --variance-out, its variance).
+
+    Exit code 1, with one line saying why, if the render fails (the renderer raised, or passed --time-limit)."""
     check_output_file(out)  # before any rendering: .exr, not a folder, writable
     if variance_out is not None:
         check_output_file(variance_out, "--variance-out")
@@ -56,9 +60,14 @@ def render(
         raise RendererError(f"renderer {entry.name!r} is unavailable: {entry.reason}")
     if missing := missing_features(entry.renderer, sc):
         raise RendererError(f"renderer {entry.name!r} does not model {', '.join(missing)}, which {sc.name} uses")
-    from cornell_harness.workflows.render import render_checked
+    from cornell_harness.workflows.runner import render_timed
 
-    result = render_checked(entry, sc, spp, seed)
+    try:
+        result, _ = render_timed(entry.with_time_limit(time_limit), sc, spp, seed)
+    except USER_ERRORS:
+        raise
+    except Exception as e:  # the renderer's failure, not a bug of ours: one line, as compare records it
+        fail(f"renderer {entry.name!r} failed: {type(e).__name__}: {e}", 1)
     meta = {"cbox:renderer": entry.name, "cbox:settings": canonical(entry.settings), SPP_ATTRIBUTE: str(spp),
             "cbox:seed": str(seed), "cbox:scene_hash": sc.content_hash()}
     write_exr(out, result.image, meta)
@@ -90,7 +99,7 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
                  time_budget: Optional[str] = None, target_error: Optional[str] = None, max_spp: int = 4096,
                  sections=(), overrides: Optional[List[str]] = None, title: Optional[str] = None,
                  time_repeats: Optional[int] = None, time_basis: str = "wall", series_label: Optional[List[str]] = None,
-                 crop: Optional[List[str]] = None) -> tuple[int, list, object, object]:
+                 crop: Optional[List[str]] = None, time_limit: float | None = None) -> tuple[int, list, object, object]:
     """``cbox compare``'s body (and each of ``cbox demo``'s comparisons): the options parsed, the comparison run
     (:func:`cornell_harness.workflows.compare.run_comparison`), its folder and report written, its table
     printed; (exit code, run records, scene, reference)."""
@@ -98,7 +107,7 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
     from cornell_harness.workflows import runner
 
     comparison = _comparison(scene, overrides, renderer, spp, seed, time_budget, target_error, max_spp,
-                             time_repeats, time_basis)
+                             time_repeats, time_basis, time_limit)
     sc, ref = comparison.scene, comparison.reference
     keep_report_options(out, series_labels_for(series_label, [e.name for e in comparison.entries]),
                         parse_crops(crop, sc.camera.width, sc.camera.height))
@@ -134,9 +143,10 @@ def _parsed(parse, text: Optional[str], option: str):
 
 
 def _comparison(scene: str, overrides, renderer, spp: int, seed: int, time_budget: Optional[str],
-                target_error: Optional[str], max_spp: int, time_repeats: Optional[int], time_basis: str):
+                target_error: Optional[str], max_spp: int, time_repeats: Optional[int], time_basis: str,
+                time_limit: float | None):
     """The comparison the options ask for (:class:`cornell_harness.workflows.compare.Comparison`): a bad
-    --time-budget or --target-error is a usage error."""
+    --time-budget or --target-error is a usage error; with ``time_limit`` every render is ended at it."""
     from cornell_harness.evaluate.convergence import parse_target
     from cornell_harness.durations import parse_duration
     from cornell_harness.workflows.compare import Comparison, default_time_repeats
@@ -144,7 +154,8 @@ def _comparison(scene: str, overrides, renderer, spp: int, seed: int, time_budge
     budget = _parsed(parse_duration, time_budget, "--time-budget")
     target = _parsed(parse_target, target_error, "--target-error")
     sc = resolve_scene(scene, overrides)
-    return Comparison(sc, load_reference(sc), resolve(renderer), spp, seed, budget, target, max_spp,
+    entries = [e.with_time_limit(time_limit) for e in resolve(renderer)]
+    return Comparison(sc, load_reference(sc), entries, spp, seed, budget, target, max_spp,
                       time_repeats or default_time_repeats(budget, target), time_basis)
 
 
@@ -211,6 +222,7 @@ def compare(
     title: Optional[str] = TitleOpt,
     series_label: Optional[List[str]] = SeriesLabelOpt,
     crop: Optional[List[str]] = CropOpt,
+    time_limit: Optional[str] = TimeLimitOpt,  # seconds (float), by the option's callback
 ) -> None:
     """Render with each renderer, score against the scene's reference, write a report.
 
@@ -221,7 +233,8 @@ def compare(
         raise typer.BadParameter("give --time-budget or --target-error, not both")
     raise typer.Exit(_run_compare(scene, renderer, spp, seed, out, as_json, time_budget, target_error, max_spp,
                                   overrides=overrides, title=title, time_repeats=time_repeats,
-                                  time_basis=time_basis, series_label=series_label, crop=crop)[0])
+                                  time_basis=time_basis, series_label=series_label, crop=crop,
+                                  time_limit=time_limit)[0])
 
 
 #: The scenes of ``cbox demo``: a convergence run on the first, whose report leads; each other one is a

@@ -7,7 +7,8 @@ from typing import List, Optional
 
 import typer
 
-from cornell_harness.cli.common import REFERENCE_RENDERER, RendererFilesOpt, app, command_line, out_folder_option
+from cornell_harness.cli.common import (REFERENCE_RENDERER, RendererFilesOpt, app, command_line, out_folder_option,
+                                        time_limit_seconds)
 from cornell_harness.cli.output import Progress
 
 
@@ -19,6 +20,10 @@ def stress(
     variant: Optional[List[str]] = typer.Option(
         None, "--variant", "-v", help="Variant to run (repeatable); default: all (see src/cornell_harness/stress/variants.py)."),
     out: Path = out_folder_option(Path("out/stress"), "Folder for stress.csv and stress.html."),
+    time_limit: Optional[str] = typer.Option(
+        None, "--time-limit", metavar="DURATION", callback=time_limit_seconds,
+        help="Each render's time bound instead of its variant's own (e.g. 90s, 10m): a render past it is ended, "
+             "with every process it started, and fails the time check."),  # seconds (float), by the callback
 ) -> None:
     """Numerical stability at the extremes: each scene variant with each renderer that models it.
 
@@ -40,7 +45,8 @@ def stress(
             bars[0].start(label)
 
     try:
-        run = run_suite(renderer, variant, out, progress, reference_renderer=REFERENCE_RENDERER)
+        run = run_suite(renderer, variant, out, progress, reference_renderer=REFERENCE_RENDERER,
+                        time_limit_s=time_limit)
     except ValueError as e:
         raise typer.BadParameter(str(e), param_hint="--variant") from None
     finally:

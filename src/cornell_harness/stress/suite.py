@@ -29,6 +29,7 @@ machine. Entry points: :func:`run_stress` (the table), :func:`run_suite`
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -65,7 +66,8 @@ class _Counter:
 
 
 def run_stress(renderer_specs: list[str] | None, variants: list[str] | None = None,
-               progress: Progress | None = None, reference_renderer: str | None = None):
+               progress: Progress | None = None, reference_renderer: str | None = None,
+               time_limit_s: float | None = None):
     """Run the stress variants on the renderers; a pandas DataFrame, one row per (variant, renderer).
 
     ``renderer_specs``: registered names or ``module:Class`` (None: every
@@ -74,7 +76,8 @@ def run_stress(renderer_specs: list[str] | None, variants: list[str] | None = No
     raises ValueError). ``progress(done, total, label)`` is called as the runs
     start (``done`` 0) and after each process ends. ``reference_renderer`` (a registered name or ``module:Class``;
     the CLI's is Mitsuba) renders the variant references; None: they are not
-    rendered and those rows say so. Columns: :data:`~cornell_harness.stress.judge.COLUMNS`; ``status``
+    rendered and those rows say so. ``time_limit_s`` replaces every variant's time bound (the time a render
+    is ended at and judged by). Columns: :data:`~cornell_harness.stress.judge.COLUMNS`; ``status``
     is pass, fail, skipped (unavailable, or does not model a feature) or
     error (the renderer raised, or gave an image of the wrong shape).
     """
@@ -82,7 +85,8 @@ def run_stress(renderer_specs: list[str] | None, variants: list[str] | None = No
 
     from cornell_harness.adapters.registry import resolve
 
-    chosen = select_variants(variants)
+    chosen = [v if time_limit_s is None else dataclasses.replace(v, time_bound_s=time_limit_s)
+              for v in select_variants(variants)]
     entries = resolve(renderer_specs)
     plan = _plan(chosen, entries)
     needs_ref = {v.name for v, _, cells in plan if v.expected == "variant-reference"
@@ -232,8 +236,10 @@ class StressRun:
 
 
 def run_suite(renderer_specs: list[str] | None, variants: list[str] | None, out_dir: Path,
-              progress: Progress | None = None, reference_renderer: str | None = None) -> StressRun:
-    """``cbox stress``: run the suite (``progress`` and ``reference_renderer`` as in :func:`run_stress`) and
+              progress: Progress | None = None, reference_renderer: str | None = None,
+              time_limit_s: float | None = None) -> StressRun:
+    """``cbox stress``: run the suite (``progress``, ``reference_renderer`` and ``time_limit_s`` as in
+    :func:`run_stress`) and
     write ``out_dir/stress.csv`` atomically.
 
     Unknown variant names raise ValueError before anything runs or is
@@ -251,7 +257,7 @@ def run_suite(renderer_specs: list[str] | None, variants: list[str] | None, out_
     out_dir = Path(out_dir)
     date = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     t0 = time.perf_counter()
-    table = run_stress(renderer_specs, variants, progress, reference_renderer)
+    table = run_stress(renderer_specs, variants, progress, reference_renderer, time_limit_s)
     wall = time.perf_counter() - t0
     out_dir.mkdir(parents=True, exist_ok=True)
     with atomic_path(out_dir / "stress.csv") as tmp:

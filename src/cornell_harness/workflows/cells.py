@@ -40,6 +40,7 @@ class Cell:
     seed: int = 0
     spps: tuple[int, ...] = ()
     scene_hash: str = ""
+    time_limit_s: float | None = None  # each render's (RendererEntry.time_limit_s); not what the cell computes
 
     @property
     def key(self) -> str:
@@ -74,7 +75,8 @@ def render_cell_task(cell: Cell, scene: Scene, reference: Reference,
                      entry: RendererEntry | None = None) -> tuple[list[dict], np.ndarray | None]:
     """The task a backend runs for a cell: :func:`render_cell`. In-process the caller's own ``entry`` renders
     it (the same object, its caches warm); on a worker, the cell's spec loaded there."""
-    return render_cell(entry or entry_for(cell.spec, cell.settings), scene, cell.spps, cell.seed, reference)
+    entry = (entry or entry_for(cell.spec, cell.settings)).with_time_limit(cell.time_limit_s)
+    return render_cell(entry, scene, cell.spps, cell.seed, reference)
 
 
 def failed_rows(cell: Cell, entry: RendererEntry, scene: Scene, reason: str) -> list[dict]:

@@ -106,7 +106,8 @@ def run_experiment(
                 continue
             for seed in (seeds[:1] if attribute(entry.renderer, "deterministic") else seeds):
                 name = cell_name(entry.name, seed)
-                whole = Cell(name, entry.spec, dict(entry.settings), seed, tuple(spps), scene.content_hash())
+                whole = Cell(name, entry.spec, dict(entry.settings), seed, tuple(spps), scene.content_hash(),
+                             entry.time_limit_s)
                 timed.setdefault(name, (whole, entry, []))[2].append(len(table.frames))
                 stored, todo = _plan(out, name, scene, spps)
                 if not todo:  # finished before: loaded, never rendered again
@@ -115,7 +116,8 @@ def run_experiment(
                     if on_cell:
                         on_cell(name, True)
                     continue
-                cell = Cell(name, entry.spec, dict(entry.settings), seed, tuple(todo), scene.content_hash())
+                cell = Cell(name, entry.spec, dict(entry.settings), seed, tuple(todo), scene.content_hash(),
+                            entry.time_limit_s)
                 # The same work twice (a renderer named twice) renders once and fills both places.
                 pending.setdefault(cell.key, ([], cell, entry, stored))[0].append(len(table.frames))
                 table.frames.append(None)

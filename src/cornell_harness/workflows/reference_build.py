@@ -32,7 +32,7 @@ from cornell_harness.store.references import (NOISE_FILE, PROVENANCE_FILE, REFER
                                       Reference, reference_folder)
 from cornell_harness.workflows.cells import entry_for
 from cornell_harness.workflows.executor import DaskExecutor, ExecutorError, InProcess, Task, task_key
-from cornell_harness.workflows.render import render_checked
+from cornell_harness.workflows.runner import render_timed
 
 
 def build_reference(
@@ -110,7 +110,8 @@ def render_batches(scene: Scene, entry: RendererEntry, batch_spp: int, seeds: li
     all_seeds = seeds + ([] if extra_seed is None else [extra_seed])
     tasks = [Task(task_key("batch", scene.content_hash(), entry.spec, canonical(entry.settings), batch_spp, seed),
                   f"batch {b + 1}" if b < batches else "noise image", render_batch,
-                  (entry.spec, dict(entry.settings), shared, batch_spp, seed, entry if executor.local else None))
+                  (entry.spec, dict(entry.settings), shared, batch_spp, seed, entry if executor.local else None,
+                   entry.time_limit_s))
              for b, seed in enumerate(all_seeds)]
     index = {t.key: b for b, t in enumerate(tasks)}
     shape = (scene.camera.height, scene.camera.width, 3)
@@ -145,13 +146,14 @@ def render_batches(scene: Scene, entry: RendererEntry, batch_spp: int, seeds: li
     return Batches(mean, m2 / (batches - 1) / batches, extra, wall, info)
 
 
-def render_batch(spec: str, settings: dict, scene: Scene, spp: int, seed: int,
-                 entry: RendererEntry | None = None) -> tuple[np.ndarray, float, dict]:
+def render_batch(spec: str, settings: dict, scene: Scene, spp: int, seed: int, entry: RendererEntry | None = None,
+                 time_limit_s: float | None = None) -> tuple[np.ndarray, float, dict]:
     """One batch, in whatever process runs it: its image (float32), render time and the renderer's info.
-    In-process the caller's ``entry`` renders it; on a worker, ``spec`` with ``settings`` loaded there."""
-    entry = entry or entry_for(spec, settings)
+    In-process the caller's ``entry`` renders it; on a worker, ``spec`` with ``settings`` loaded there. With
+    ``time_limit_s``, in a child process ended at it (RenderTimeout)."""
+    entry = (entry or entry_for(spec, settings)).with_time_limit(time_limit_s)
     t0 = time.perf_counter()
-    result = render_checked(entry, scene, spp, seed)
+    result, _ = render_timed(entry, scene, spp, seed)
     return result.image, time.perf_counter() - t0, dict(result.info)
 
 

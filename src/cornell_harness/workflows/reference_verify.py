@@ -36,7 +36,7 @@ from cornell_harness.store.references import Reference
 from cornell_harness.workflows.cells import entry_for
 from cornell_harness.workflows.executor import DaskExecutor, ExecutorError, InProcess, Task, task_key
 from cornell_harness.workflows.reference_build import render_batches
-from cornell_harness.workflows.render import render_checked
+from cornell_harness.workflows.runner import render_timed
 
 #: First seed of a verification's renders: far from the reference's (``REFERENCE_SEED_BASE`` = 10⁹ up) and from
 #: any user run's, and below 2³¹ for engines that take a signed 32-bit seed.
@@ -61,10 +61,12 @@ class Verification:
 
 
 def render_with_variance(spec: str, settings: dict, scene: Scene, spp: int, seed: int,
-                         entry: RendererEntry | None = None) -> tuple[np.ndarray, np.ndarray | None, float, dict]:
-    """One render through the one render path, with the variance the renderer reports (None if it reports none)."""
-    entry = entry or entry_for(spec, settings)
-    result = render_checked(entry, scene, spp, seed)
+                         entry: RendererEntry | None = None, time_limit_s: float | None = None
+                         ) -> tuple[np.ndarray, np.ndarray | None, float, dict]:
+    """One render through the one render path, with the variance the renderer reports (None if it reports none);
+    with ``time_limit_s``, in a child process ended at it."""
+    entry = (entry or entry_for(spec, settings)).with_time_limit(time_limit_s)
+    result, _ = render_timed(entry, scene, spp, seed)
     return result.image, result.variance, float(result.time_s), dict(result.info)
 
 
@@ -83,7 +85,7 @@ def render_engine(scene: Scene, entry: RendererEntry, spp: int, batches: int,
     task = Task(task_key("verify", scene.content_hash(), entry.spec, canonical(entry.settings), spp, seeds[0]),
                 f"{entry.name} {spp} spp", render_with_variance,
                 (entry.spec, dict(entry.settings), executor.share(scene), spp, seeds[0],
-                 entry if executor.local else None))
+                 entry if executor.local else None, entry.time_limit_s))
     (outcome,) = list(executor.run([task]))
     if outcome.error is not None:
         raise ExecutorError(f"{entry.name} render (seed {seeds[0]}) failed: {outcome.error}")

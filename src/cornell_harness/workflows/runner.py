@@ -179,7 +179,10 @@ CALL_CPU_NOTE = "the whole render call, set-up included (the renderer gives no C
 def render_timed(entry: RendererEntry, scene: Scene, spp: int, seed: int,
                  checkpoints: Sequence[int] = ()) -> tuple[RenderResult, Timing]:
     """:func:`render_checked` measured (:func:`cornell_harness.workflows.timing.measure`): every timed render of the
-    harness (a run, a repeat, a time budget's calibration) is this call; its CPU time is :func:`cpu_time`."""
+    harness (a run, a repeat, a time budget's calibration) is this call; its CPU time is :func:`cpu_time`.
+    An entry with a time limit renders in a child process ended at it (:func:`render_sandboxed`)."""
+    if entry.time_limit_s is not None:
+        return render_sandboxed(entry, scene, spp, seed, checkpoints, entry.time_limit_s)
     return measure(lambda: render_checked(entry, scene, spp, seed, checkpoints))
 
 
@@ -258,18 +261,15 @@ def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: 
             checkpoints: Sequence[int] = (), time_limit_s: float | None = None) -> RunRecord:
     """Render and score one renderer; never raises for the renderer's own failures.
 
-    With ``time_limit_s`` the render runs in a child process (:func:`render_sandboxed`); one that is
-    killed at the limit is recorded as failed with ``info["timed_out"]`` and the time it ran.
+    With ``time_limit_s`` (or the entry's own) the render runs in a child process (:func:`render_sandboxed`);
+    one that is killed at the limit is recorded as failed with ``info["timed_out"]`` and the time it ran.
     """
     rec = RunRecord.new(scene, entry, spp, seed)
     if rec.status != "ok":
         return rec
     try:
         rec.version = str(entry.renderer.version())
-        if time_limit_s is None:
-            result, timing = render_timed(entry, scene, spp, seed, checkpoints)
-        else:
-            result, timing = render_sandboxed(entry, scene, spp, seed, checkpoints, time_limit_s)
+        result, timing = render_timed(entry.with_time_limit(time_limit_s), scene, spp, seed, checkpoints)
     except RenderTimeout as e:
         rec.status, rec.reason, rec.time_s = "failed", str(e), e.time_s
         rec.info = {"timed_out": True}
