@@ -91,7 +91,8 @@ def _wait_for(what: str, ready, proc) -> None:
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
-            raise AssertionError(f"never {what}")
+            said = Path(proc.args[-1]).parent / "stderr.txt"  # every run's --out is in its tmp_path
+            raise AssertionError(f"never {what}: {said.read_text() if said.exists() else ''}")
         time.sleep(0.05)
 
 

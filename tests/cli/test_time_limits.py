@@ -140,3 +140,24 @@ def test_reference_commands_past_their_limit_are_one_line_and_exit_1(tmp_path, c
     assert err.strip().splitlines()[-1].startswith(f"cbox: error: {name}: render failed: killed at its time "
                                                     "limit of"), err
     assert not list(home.rglob("*.exr"))
+
+
+@pytest.mark.parametrize("mode, code", [("ok", 0), ("fail", 1)])
+def test_a_command_render_that_ends_leaves_no_temporary_folder(tmp_path, capsys, tmpdir_watched, mode, code):
+    """Success and failure, in this process and in the sandbox (--time-limit): $TMPDIR is as before."""
+    files = ["--renderers", str(renderers_file(tmp_path, mode, scene_format="mitsuba"))]
+    for limit in ([], ["--time-limit", "60s"]):
+        got, _, _ = cbox(capsys, "compare", "-s", "furnace", *files, "-r", "fake-cli", "--spp", "2", *limit,
+                         "--out", str(tmp_path / "out"))
+        assert got == code
+
+
+def test_the_gates_time_limit_ends_the_program_and_its_folder(tmp_path, capsys, tmpdir_watched):
+    config = tmp_path / "gate.toml"
+    config.write_text('[[expect]]\nscene = "furnace"\nrenderer = "fake-cli"\nspp = 2\nfinite_only = true\n'
+                      'time_limit = "3s"\n')
+    code, out, _ = cbox(capsys, "gate", "--config", str(config), "--renderers", str(_hanging(tmp_path)),
+                        "--out", str(tmp_path / "gate"))
+    assert code == 1
+    assert "time_limit: killed at its time limit of 3 s" in out, out
+    assert len(_pids(tmp_path)) == 2 and all(map(_gone, _pids(tmp_path)))

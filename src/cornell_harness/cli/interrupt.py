@@ -39,6 +39,7 @@ registers itself with :func:`track`): this module imports nothing heavy, so
 
 from __future__ import annotations
 
+import _thread
 import contextlib
 import os
 import signal
@@ -83,6 +84,19 @@ def _on_signal(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt  # a second one, during the first one's clean-up, cuts that short: as the user asks
 
 
+def _unraisable(hook: Any) -> Any:
+    """``sys.unraisablehook`` while a command runs: the KeyboardInterrupt of a signal that came while a callback
+    from C ran (numba compiling through LLVM's object cache) cannot leave it, and Python would print it as
+    "Exception ignored ... Traceback"; instead it is raised again on the main thread, where it can."""
+    def unraisable(info: Any) -> None:
+        if _fired is not None and isinstance(info.exc_value, KeyboardInterrupt):
+            _thread.interrupt_main(signal.SIGINT)  # calls _on_signal again: the first signal's code is kept
+            return
+        hook(info)
+
+    return unraisable
+
+
 def _swap(handler: Any) -> dict | None:
     """Install ``handler`` for every signal of :data:`SIGNALS` and return the ones before; None (nothing done)
     off the main thread, where Python allows no signal handler."""
@@ -114,12 +128,14 @@ def handling() -> Iterator[None]:
     global _fired, _work, _before
     _fired, _work = None, None
     _before = set(processes.descendants(os.getpid()))
-    before = _swap(_on_signal)
+    before, hook = _swap(_on_signal), sys.unraisablehook
+    sys.unraisablehook = _unraisable(hook)
     try:
         yield
     finally:
         end_children()
         _restore(before)
+        sys.unraisablehook = hook
 
 
 def end_children(loose: bool = True) -> None:

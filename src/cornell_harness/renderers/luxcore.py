@@ -40,6 +40,7 @@ from typing import Sequence
 
 import numpy as np
 
+from cornell_harness import processes
 from cornell_harness.adapters.api import Checkpoint, RenderResult, Setting, default_threads, spp_passes
 from cornell_harness.scenes.export import export_scene
 from cornell_harness.scenes.export.luxcore import FEATURES
@@ -66,14 +67,24 @@ def _child_env() -> dict:
     return env
 
 
+def _run_child(argv: list[str], folder: Path, time_limit_s: float | None = None) -> tuple[int, str, str]:
+    """Run the child (:func:`cornell_harness.processes.run`: ended with the command, or at ``time_limit_s``):
+    (exit code, its stdout, the tail of its stderr), both kept in files of ``folder``."""
+    with open(folder / "stdout.txt", "wb") as out, open(folder / "stderr.txt", "wb") as err:
+        code = processes.run(argv, time_limit_s, stdin=subprocess.DEVNULL, stdout=out, stderr=err, env=_child_env())
+    tail = (folder / "stderr.txt").read_text(errors="replace").strip()[-STDERR_TAIL:]
+    return code, (folder / "stdout.txt").read_text(errors="replace"), tail
+
+
 @cache
 def _child_version() -> str:
     code = ("import os, sys, pyluxcore; sys.stdout.write('\\nversion=' + pyluxcore.Version() + '\\n'); "
             "sys.stdout.flush(); os._exit(0)")
-    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    lines = [line for line in run.stdout.splitlines() if line.startswith("version=")]
-    if run.returncode != 0 or not lines:
-        raise RuntimeError(f"pyluxcore.Version() failed: {run.stderr.strip()[-STDERR_TAIL:]}")
+    with tempfile.TemporaryDirectory(prefix="cbox-luxcore-") as tmp:
+        status, stdout, stderr = _run_child([sys.executable, "-c", code], Path(tmp), time_limit_s=120)
+    lines = [line for line in stdout.splitlines() if line.startswith("version=")]
+    if status != 0 or not lines:
+        raise RuntimeError(f"pyluxcore.Version() failed: {stderr}")
     return lines[-1].removeprefix("version=")
 
 
@@ -109,10 +120,9 @@ class LuxCore:
             command = [sys.executable, "-m", "cornell_harness.renderers.luxcore_cli", str(cfg), "--out", str(Path(tmp) / "image.exr"),
                        "--spp", str(spp), "--seed", str(seed), "--threads", str(threads),
                        "--passes", ",".join(map(str, sizes)), "--batch-dir", str(out)]
-            run = subprocess.run(command, capture_output=True, text=True, env=_child_env())
-            if run.returncode != 0:
-                raise RuntimeError(f"LuxCore child exited with status {run.returncode}: "
-                                   f"{run.stderr.strip()[-STDERR_TAIL:]}")
+            status, _, stderr = _run_child(command, Path(tmp))
+            if status != 0:
+                raise RuntimeError(f"LuxCore child exited with status {status}: {stderr}")
             record = json.loads((out / "batches.json").read_text())["batches"]
             means = [np.load(out / f"batch-{k}.npy") for k in range(len(sizes))]
         return self._result(means, record, sizes, spp, seed, checkpoints, threads)
