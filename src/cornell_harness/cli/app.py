@@ -34,8 +34,10 @@ def main(args: list[str] | None = None) -> None:
 
     Typer runs in non-standalone mode so that its usage errors (``--spp 0``)
     come here instead of being drawn as a multi-line box; ``--help`` and a
-    command's own exit code pass through unchanged. A Ctrl-C is one line
-    saying what was kept, and exit code 130 (:mod:`cornell_harness.cli.interrupt`).
+    command's own exit code pass through unchanged. A signal that ends it
+    (Ctrl-C, SIGTERM, SIGHUP) ends every process it started, and is one line
+    saying what was kept, and exit code 128 + its number: 130, 143, 129
+    (:mod:`cornell_harness.cli.interrupt`).
     """
     with interrupt.handling():
         _main(args)

@@ -11,7 +11,7 @@ and SIGHUP (a closed terminal or SSH session) end a command the same way:
 2. the command unwinds: every ``finally`` and ``with`` on the way out runs (the
    experiment's lock, a Dask cluster's close, temporary folders), and results
    already written stay as they were, each complete (they are written atomically);
-3. whatever it started is still there is ended the same way (a Dask worker that
+3. whatever it started that is still there is ended the same way (a Dask worker that
    did not close);
 4. one line says what was kept, and the exit code is 128 + the signal's number,
    what a shell reports for a program the signal ended: 130 (SIGINT), 143
