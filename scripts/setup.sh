@@ -89,6 +89,16 @@ if [[ $have != "$want" && $have != "$sha[all,test]" ]]; then
   fi
   echo "$want" > "$stamp"
 fi
+# --- Blender's bpy (the cycles renderer) ------------------------------------------
+# Not an extra (pyproject.toml says why: it pins numpy<2) but installed with --tests, without its dependencies,
+# so that the cycles tests run: 374 MB to download, 821 MB installed. Its wheels are for Python 3.11 only.
+if [[ -n $TESTS ]] && ! .venv/bin/python -c 'import importlib.util, sys; sys.exit(importlib.util.find_spec("bpy") is None)'; then
+  bpy_install=$(.venv/bin/python -c 'from cornell_harness.extras import COMMANDS; print(COMMANDS["cycles"])')
+  say "installing Blender for the cycles renderer's tests: $bpy_install (374 MB download)"
+  if ! eval ".venv/bin/python -m $bpy_install -q" >>.venv/.cbox-pip.log 2>&1; then
+    say "installing bpy failed (see .venv/.cbox-pip.log; wheels exist for Python 3.11 only): the cycles tests will fail"
+  fi
+fi
 # --- numba kernels -----------------------------------------------------------
 # Compiled once into numba's on-disk cache (__pycache__), so that the first `cbox demo` does not spend its
 # first minute compiling (BENCHMARKS.md: the demo 3:42 cold, 2:43 after this). Again only when the sources

@@ -27,8 +27,9 @@ def _hide(monkeypatch, *modules: str) -> None:
 
 def test_every_extra_is_pyprojects_and_all_holds_them_all():
     optional = PYPROJECT["project"]["optional-dependencies"]
-    assert set(extras.MODULES) | {"all", "test"} == set(optional)
-    assert optional["all"] == [f"cornell-harness[{','.join(extras.MODULES)}]"]
+    listed = [extra for extra in extras.MODULES if extra not in extras.COMMANDS]
+    assert set(listed) | {"all", "test"} == set(optional)
+    assert optional["all"] == [f"cornell-harness[{','.join(listed)}]"]
     assert not any(dep.startswith(("numba", "mitsuba", "pyluxcore", "dask", "embreex", "pyoidn", "pyrender"))
                    for dep in PYPROJECT["project"]["dependencies"])
 
@@ -45,6 +46,17 @@ def test_a_renderer_whose_extra_is_missing_is_unavailable_with_its_pip_line(monk
     assert not luxcore.available and luxcore.reason == "pyluxcore not installed: pip install 'cornell-harness[luxcore]'"
     assert not denoised.available and denoised.reason.endswith("pip install 'cornell-harness[oidn]'")
     assert "cornell-harness[" not in (mitsuba.reason or "")  # its own extra is there
+
+
+def test_cycles_without_bpy_names_the_command_that_installs_it(monkeypatch):
+    """bpy is no pyproject extra (it pins numpy<2): its line is its own pip command, without dependencies."""
+    from cornell_harness.renderers.cycles import Cycles
+
+    _hide(monkeypatch, "bpy")
+    assert extras.renderer_problem("cycles") == "bpy not installed: pip install --no-deps 'bpy==5.0.1'"
+    assert Cycles().unavailable_reason() == extras.renderer_problem("cycles")
+    assert extras.install_line(["luxcore", "cycles"]) == ("pip install 'cornell-harness[luxcore]' && "
+                                                          "pip install --no-deps 'bpy==5.0.1'")
 
 
 def test_cbox_renderers_lists_it_so(monkeypatch, capsys):

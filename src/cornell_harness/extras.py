@@ -3,8 +3,9 @@
 
 The core install scores images (scenes, export, command-line renderers, the metrics, the gate, reports, the
 stored references, the CLI); an extra adds renderers or a backend (pyproject.toml's
-``[project.optional-dependencies]``, whose lists this module's :data:`MODULES` must name). Whether an extra is
-installed is asked of the import system (``importlib.util.find_spec``), without importing anything.
+``[project.optional-dependencies]``, whose lists this module's :data:`MODULES` must name, but for the extras
+:data:`COMMANDS` installs with a command of their own). Whether an extra is installed is asked of the import
+system (``importlib.util.find_spec``), without importing anything.
 """
 
 from __future__ import annotations
@@ -24,7 +25,15 @@ MODULES: dict[str, tuple[str, ...]] = {
     "dask": ("dask", "distributed"),
     "gltf": ("pygltflib",),
     "usd": ("pxr",),
+    "cycles": ("bpy",),
 }
+
+#: Extras that are not pyproject's, each with the command that installs it. ``bpy`` 5.0.1 (Blender, for the
+#: ``cycles`` renderer) requires numpy<2 and the core numpy>=2, so pip cannot resolve it as an extra; Blender
+#: runs only in the renderer's child process, where it works on NumPy 2
+#: (:mod:`cornell_harness.renderers.cycles_cli`), so it is installed without its dependencies (it needs none
+#: of them there).
+COMMANDS: dict[str, str] = {"cycles": "pip install --no-deps 'bpy==5.0.1'"}
 
 #: The extras each of our registered renderers (pyproject.toml's ``cbox.renderers`` entry points) runs on.
 RENDERERS: dict[str, tuple[str, ...]] = {
@@ -34,6 +43,7 @@ RENDERERS: dict[str, tuple[str, ...]] = {
     "pyrender": ("raster",),
     "pathtracer+oidn": ("ours", "oidn"),
     "mitsuba+oidn": ("mitsuba", "oidn"),
+    "cycles": ("cycles",),
 }
 
 #: The export formats (cornell_harness.scenes.export) that need an extra to be written.
@@ -48,8 +58,12 @@ class MissingExtraError(RuntimeError):
 
 
 def install_line(extras: Iterable[str]) -> str:
-    """The command that installs ``extras``: ``pip install 'cornell-harness[luxcore]'``."""
-    return f"pip install '{DISTRIBUTION}[{','.join(extras)}]'"
+    """The command that installs ``extras``: ``pip install 'cornell-harness[luxcore]'`` (and, joined by
+    ``&&``, the :data:`COMMANDS` of those pip cannot install as extras)."""
+    extras = list(extras)
+    listed = [extra for extra in extras if extra not in COMMANDS]
+    lines = [f"pip install '{DISTRIBUTION}[{','.join(listed)}]'"] if listed else []
+    return " && ".join(lines + [COMMANDS[extra] for extra in extras if extra in COMMANDS])
 
 
 def missing_modules(extras: Iterable[str]) -> list[str]:
