@@ -106,9 +106,9 @@ def gate(
     else:
         verdict = (f"failed: {failed} check(s)" if failed else f"inconclusive: {open_} check(s)" if open_
                    else "passed")
-        typer.echo(f"gate {verdict}" + (f" ({skipped} skipped)" if skipped else ""))
         if note := no_bound_note(outcomes):
             typer.echo(note)
+        typer.echo(f"gate {verdict}" + (f" ({skipped} skipped)" if skipped else ""))
     raise typer.Exit(code)
 
 
