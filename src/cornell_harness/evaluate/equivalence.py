@@ -35,6 +35,10 @@ import numpy as np
 
 PASS, FAIL, INCONCLUSIVE = "pass", "fail", "inconclusive"
 VERDICTS = (PASS, FAIL, INCONCLUSIVE)
+#: The whole image's default margin of relative bias: an energy error of 1% across the image is one to see.
+DEFAULT_IMAGE_MARGIN = 0.01
+#: A named region's default margin: regions are small (a caustic, a shadow), their means noisier.
+DEFAULT_REGION_MARGIN = 0.05
 
 
 def inside(low, high, margin) -> np.ndarray:

@@ -145,5 +145,6 @@ def percent(x: float) -> str:
 
 
 def interval_text(name: str, estimate: float, low: float, high: float) -> str:
-    """``glass-shadow: bias −0.4% [−6.1%, +5.3%]``."""
-    return f"{name}: bias {percent(estimate)} [{percent(low)}, {percent(high)}]"
+    """``glass-shadow: bias −0.4% [−6.1%, +5.3%]``; without a name, ``−0.4% [−6.1%, +5.3%]``."""
+    shown = f"{percent(estimate)} [{percent(low)}, {percent(high)}]"
+    return f"{name}: bias {shown}" if name else shown

@@ -11,7 +11,8 @@ Fieller interval from both variances (:mod:`cornell_harness.evaluate.relative_bi
 config's ``alpha`` by Šidák's correction over regions × channels. It passes when every interval lies inside its
 ±margin (:mod:`cornell_harness.evaluate.equivalence`), and is *inconclusive* otherwise; a bias that is
 significant fails the agreement test as before. A margin is a number or one per channel [R, G, B]; a region
-the table does not name has its kind's default (:data:`DEFAULT_IMAGE_MARGIN`, :data:`DEFAULT_REGION_MARGIN`).
+the table does not name has its kind's default (:data:`~cornell_harness.evaluate.equivalence.DEFAULT_IMAGE_MARGIN`,
+1%; :data:`~cornell_harness.evaluate.equivalence.DEFAULT_REGION_MARGIN`, 5%).
 
 ``inconclusive = "pass"`` turns an inconclusive verdict into a pass (exit 0, JUnit a pass): the pass then again
 means only "no significant bias", and bounds nothing. It is for a gate that must stay green while its budgets
@@ -27,16 +28,13 @@ import numpy as np
 
 from cornell_harness.evaluate import metrics, noise
 from cornell_harness.evaluate.agreement import CHANNELS, sidak_level
-from cornell_harness.evaluate.equivalence import INCONCLUSIVE, PASS, inside, resolving_half_width
+from cornell_harness.evaluate.equivalence import (DEFAULT_IMAGE_MARGIN, DEFAULT_REGION_MARGIN, INCONCLUSIVE, PASS,
+                                                  inside, resolving_half_width)
 from cornell_harness.evaluate.registry import REGION_PREFIX
 from cornell_harness.evaluate.relative_bias import (BiasIntervals, critical_z, interval_text, region_sums,
                                                     relative_bias, spp_for_half_width)
 from cornell_harness.suggest import closest
 
-#: The whole image's default margin: an energy error of 1% across the image is one to see.
-DEFAULT_IMAGE_MARGIN = 0.01
-#: A named region's default margin: regions are small (a caustic, a shadow), their means noisier.
-DEFAULT_REGION_MARGIN = 0.05
 #: The whole image's key in a ``margin`` table.
 IMAGE_KEY = "image"
 #: How an inconclusive verdict counts: ``fail`` (exit 3, a JUnit failure "inconclusive") or ``pass``.

@@ -80,7 +80,7 @@ def bias_table_html(t) -> str:
     for i in range(len(t.regions)):
         cells = []
         for c in range(3):
-            text = interval_text("", float(b.estimate[i, c]), float(b.low[i, c]), float(b.high[i, c]))[2:]
+            text = interval_text("", float(b.estimate[i, c]), float(b.low[i, c]), float(b.high[i, c]))
             if t.margins is not None:
                 text += f" (±{100 * t.margins[i, c]:g}%: {t.verdicts[i, c]})"
             cells.append(f"<td>{escape(text)}</td>")
