@@ -10,8 +10,9 @@ from typing import List, Optional
 
 import typer
 
-from cornell_harness.cli.common import (EXIT_INCONCLUSIVE, RENDERER_FILES_HELP, USER_ERRORS, DashboardOpt, SchedulerOpt, WorkersOpt, app,
-                                command_line, executor_for, out_folder_option, print_json)
+from cornell_harness.cli.common import (EXIT_INCONCLUSIVE, RENDERER_FILES_HELP, USER_ERRORS, DashboardOpt,
+                                        SchedulerOpt, WorkersOpt, app, command_line, executor_for, out_folder_option,
+                                        print_json)
 from cornell_harness.cli.output import Progress, info
 from cornell_harness.cli.run import write_compare_outputs
 from cornell_harness.reports.ci import no_bound_note
@@ -118,7 +119,8 @@ def _verdict(cfg, outcomes, failed: int) -> dict:
 
     from cornell_harness.evaluate.equivalence import combine
 
-    return {"passed": not failed, "verdict": combine([o.verdict for o in outcomes]), "failed_checks": failed,
+    verdict = combine([o.verdict for o in outcomes])
+    return {"passed": verdict == "pass", "verdict": verdict, "failed_checks": failed,
             "config": cfg.path, "alpha": cfg.alpha,
             "expectations": [{"name": o.expectation.name, "scene": o.expectation.scene,
                               "renderer": o.expectation.renderer, "passed": o.passed, "verdict": o.verdict,

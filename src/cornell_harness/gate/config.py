@@ -15,6 +15,7 @@ A gate config (TOML) lists expectations::
     spp = 256                         # budget: spp, or time = "10s" (spp is then calibrated)
     seed = 0                          # fixed: the same commit gives the same verdict
     unbiased = true                   # agreement, variance and outlier tests against the reference (below)
+    margin = { image = 0.005 }        # optional: pass / fail / inconclusive on bias intervals (gate/margins.py)
     tile = 16
     slope = [-0.55, -0.45]            # optional: RMSE-vs-spp slope over checkpoints spp/64 .. spp
     max = { delta_e2000_mean = 3.0 }  # optional budgets on any harness metric ...
