@@ -6,6 +6,8 @@ harness but its result type, exactly as a third-party package would.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from cornell_harness.adapters.api import RenderResult
@@ -150,6 +152,27 @@ class ScaledMitsubaNoise(FlatGrey):
 class Biased1Percent(ScaledMitsubaNoise):
     name = "biased-1pct"
     SCALE = 0.99
+
+
+class RegionScaledNoise(ScaledMitsubaNoise):
+    """The reference plus its own model's noise, with one named region (REGION) times REGION_SCALE: a bias
+    confined to a region, as a correct renderer with one wrong light path has. SCALE_ENV, when set in the
+    environment, replaces REGION_SCALE (for a command-line test)."""
+
+    name = "region-scaled-noise"
+    features = ALL | {"sphere", "mirror", "dielectric"}
+    REGION, REGION_SCALE = "glass-shadow", 1.10
+    SCALE_ENV = "CBOX_TEST_REGION_SCALE"
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        from cornell_harness.evaluate.regions import region_masks
+
+        result = super().render(scene, spp, seed, checkpoints)
+        scale = float(os.environ.get(self.SCALE_ENV, self.REGION_SCALE))
+        mask = region_masks(scene)[self.REGION]
+        result.image[mask] *= scale
+        result.variance[mask] *= scale * scale
+        return result
 
 
 class BrokenPixels(FlatGrey):

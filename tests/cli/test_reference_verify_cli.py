@@ -32,16 +32,19 @@ def test_mitsuba_at_other_seeds_agrees_and_the_verdict_is_recorded_and_listed(us
     assert f"user store: {user_store} (from $CBOX_HOME)" == before.stdout.splitlines()[0]
     assert "recorded (user store)" not in before.stdout
     proc = _cbox("reference", "verify", "--scene", "cornell-box", "--engine", "mitsuba", "--spp", "64",
-                 "--batches", "4", "--report", str(tmp_path / "rep"))
+                 "--batches", "4", "--margin", "back-edge=0.5", "--report", str(tmp_path / "rep"))
     assert proc.returncode == 0, proc.stderr + proc.stdout
     for region in ("whole image", "walls", "boxes", "floor", "light", "back-edge"):
         assert f"\n  {region} " in proc.stdout, region
-    assert "the engines agree" in proc.stdout and "χ²" in proc.stdout and "per-pixel z: sd" in proc.stdout
+    assert "the engines agree within the margins" in proc.stdout and "χ²" in proc.stdout
+    assert "per-pixel z: sd" in proc.stdout and "detectable (power 0.8)" in proc.stdout
     recorded = user_store / "references" / "cornell-box" / VERDICTS_FILE
     assert f"recorded in {recorded} under mitsuba" in proc.stdout
     rec = json.loads(recorded.read_text())["mitsuba"]
     assert rec["passed"] and rec["spp"] == 64 and rec["batches"] == 4 and len(rec["regions"]) == 6
     assert rec["command"].endswith("--report " + str(tmp_path / "rep"))
+    assert rec["verdict"] == "pass" and rec["regions"]["back-edge"]["margin"] == [0.5] * 3
+    assert (tmp_path / "rep" / "reference-verify-cornell-box-variance.exr").exists()
     assert rec["reference_digest"].startswith("sha256:")
     assert _package_files() == stored  # the package's reference untouched
     page = (tmp_path / "rep" / "reference-verify-cornell-box.html").read_text()
@@ -92,3 +95,28 @@ def test_help_explains_each_option():
     for option in ("--scene", "--engine", "--spp", "--batches", "--workers", "--record", "--report", "--set", "--home"):
         assert option in proc.stdout, option
     assert "Šidák" in proc.stdout and "Exits 1" in proc.stdout
+
+
+def test_an_unresolved_region_is_inconclusive_exit_3_with_its_power(user_store, tmp_path):
+    """The reference plus its own noise at 64 spp: no difference is significant, but the 144-pixel back edge's
+    interval reaches past the default 5% margin; its image and variance are kept as EXR beside the report."""
+    from cornell_harness.store.exr import read_exr
+
+    proc = _cbox("reference", "verify", "--scene", "cornell-box", "--engine", "tests.user_renderers:ScaledMitsubaNoise",
+                 "--spp", "64", "--batches", "1", "--no-record", "--report", str(tmp_path / "rep"))
+    assert proc.returncode == 3, proc.stderr + proc.stdout
+    rows = {line.split()[0]: line for line in proc.stdout.splitlines() if line.startswith("  ")}
+    assert rows["back-edge"].rstrip().endswith("±5%     inconclusive") and rows["walls"].rstrip().endswith("pass")
+    assert "INCONCLUSIVE: no significant difference" in proc.stdout and "(back-edge)" in proc.stdout
+    assert "remark:" not in proc.stdout  # the noise model's own variance: z sd 1
+    image = read_exr(tmp_path / "rep" / "reference-verify-cornell-box-image.exr")
+    assert image.shape == (256, 256, 3)
+    wide = _cbox("reference", "verify", "--scene", "cornell-box", "--engine", "tests.user_renderers:ScaledMitsubaNoise",
+                 "--spp", "64", "--batches", "1", "--no-record", "--margin", "0.2")
+    assert wide.returncode == 0 and "the engines agree within the margins" in wide.stdout
+
+
+def test_a_bad_margin_is_exit_2():
+    for bad, words in (("caustic=0.1", "has no region 'caustic'"), ("0", "(0, 1]"), ("floor=x", "(0, 1]")):
+        proc = _cbox("reference", "verify", "--scene", "cornell-box", "--engine", "mitsuba", "--margin", bad)
+        assert proc.returncode == 2 and words in proc.stderr, proc.stderr

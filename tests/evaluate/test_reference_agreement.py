@@ -109,3 +109,25 @@ def test_summary_is_strict_json_and_the_table_has_a_row_per_region():
     assert s["passed"] and s["tests"] == 9 and list(s["regions"]) == [WHOLE_IMAGE, "left", "right"]
     lines = a.table()
     assert len(lines) == 4 and lines[0].startswith("region") and lines[2].startswith("left")
+
+
+def test_three_verdicts_fail_exactly_where_the_z_test_rejects():
+    """Over seeds of clean and 1%/3%-biased pairs: a region-channel fails the three-way verdict exactly where its
+    z-test rejects (its Fieller interval excludes 0 at the same level), passes only inside its margin."""
+    from cornell_harness.evaluate.reference_agreement import expected_pixel_z_sd
+
+    rng = np.random.default_rng(7)
+    seen = set()
+    for bias in (None, 1.01, 1.03) * 4:
+        a = reference_agreement(*_pair(rng, bias=bias), _masks())
+        margins = a.margins({"image": 0.02, "left": 0.002})
+        v = a.verdicts(margins)
+        rejects = np.array([r.p < a.level for r in a.regions])
+        assert ((v == "fail") == rejects).all()
+        b = a.bias()
+        inside = (b.low >= -margins) & (b.high <= margins)
+        assert ((v == "pass") == (inside & ~rejects)).all()
+        seen |= set(v.ravel().tolist())
+    assert seen == {"pass", "fail", "inconclusive"}
+    assert a.margins({})[0].tolist() == [0.01] * 3 and a.margins({})[1].tolist() == [0.05] * 3
+    assert expected_pixel_z_sd(16) == pytest.approx(1.074, abs=1e-3) and expected_pixel_z_sd(1) == 1.0

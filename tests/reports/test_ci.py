@@ -15,7 +15,8 @@ LONG = "cornell-box-caustics/pathtracer[sampler=\"independent\",max_depth=12]@10
 
 def _outcome(name: str, *checks: Check, status: str = "ok") -> SimpleNamespace:
     record = SimpleNamespace(time_s=1.5, renderer="pathtracer", status=status, spp=1024, seed=0)
-    return SimpleNamespace(expectation=SimpleNamespace(name=name), record=record, checks=list(checks))
+    return SimpleNamespace(expectation=SimpleNamespace(name=name, unbiased=False, margins=None), record=record,
+                           checks=list(checks))
 
 
 def _outcomes() -> list[SimpleNamespace]:

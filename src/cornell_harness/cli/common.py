@@ -49,6 +49,9 @@ from cornell_harness.workflows.executor import ExecutorError
 
 #: The harness's reference renderer: references are built with it, and the stress suite's variant references.
 REFERENCE_RENDERER = "mitsuba"
+#: The exit code of a check that is neither shown to hold nor to fail (``cbox gate`` with a margin, ``cbox
+#: reference verify``): an interval straddles its margin, and more samples would resolve it.
+EXIT_INCONCLUSIVE = 3
 
 app = typer.Typer(
     help="Validation harness for renderers on the Cornell box: render, score against a trusted reference, report."

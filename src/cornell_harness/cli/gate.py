@@ -10,10 +10,12 @@ from typing import List, Optional
 
 import typer
 
-from cornell_harness.cli.common import (RENDERER_FILES_HELP, USER_ERRORS, DashboardOpt, SchedulerOpt, WorkersOpt, app,
-                                command_line, executor_for, out_folder_option, print_json)
+from cornell_harness.cli.common import (EXIT_INCONCLUSIVE, RENDERER_FILES_HELP, USER_ERRORS, DashboardOpt,
+                                        SchedulerOpt, WorkersOpt, app, command_line, executor_for, out_folder_option,
+                                        print_json)
 from cornell_harness.cli.output import Progress, info
 from cornell_harness.cli.run import write_compare_outputs
+from cornell_harness.reports.ci import no_bound_note
 from cornell_harness.gate.config import GateConfigError, load_config
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.store.atomic import write_text_atomic
@@ -92,18 +94,22 @@ def gate(
     except USER_ERRORS as e:
         _write_ci_files([], 0.0, out, junit, markdown, config_error=str(e))
         raise
-    code = 1 if any(not c.passed for o in outcomes for c in o.checks) else 0
+    failed = sum(c.failed for o in outcomes for c in o.checks)
+    open_ = sum(c.inconclusive and not c.passed for o in outcomes for c in o.checks)
+    code = 1 if failed else EXIT_INCONCLUSIVE if open_ else 0
     if update_baseline:
-        code = max(code, _update_baseline(cfg, outcomes, force))
+        code = _update_baseline(cfg, outcomes, force) or code
     _write_ci_files(outcomes, cfg.alpha, out, junit, markdown)
     _write_reports(outcomes, cfg.alpha, out, overrides)
-    failed = sum(not c.passed for o in outcomes for c in o.checks)
     skipped = sum(c.skipped for o in outcomes for c in o.checks)
     if as_json:
         print_json(_verdict(cfg, outcomes, failed))
     else:
-        typer.echo(f"gate {'passed' if not failed else f'failed: {failed} check(s)'}"
-                   + (f" ({skipped} skipped)" if skipped else ""))
+        verdict = (f"failed: {failed} check(s)" if failed else f"inconclusive: {open_} check(s)" if open_
+                   else "passed")
+        if note := no_bound_note(outcomes):
+            typer.echo(note)
+        typer.echo(f"gate {verdict}" + (f" ({skipped} skipped)" if skipped else ""))
     raise typer.Exit(code)
 
 
@@ -111,10 +117,15 @@ def _verdict(cfg, outcomes, failed: int) -> dict:
     """``cbox gate --json``: the verdict, then each expectation with its checks and its run."""
     from cornell_harness.workflows.runner import json_record
 
-    return {"passed": not failed, "failed_checks": failed, "config": cfg.path, "alpha": cfg.alpha,
+    from cornell_harness.evaluate.equivalence import combine
+
+    verdict = combine([o.verdict for o in outcomes])
+    return {"passed": verdict == "pass", "verdict": verdict, "failed_checks": failed,
+            "config": cfg.path, "alpha": cfg.alpha,
             "expectations": [{"name": o.expectation.name, "scene": o.expectation.scene,
-                              "renderer": o.expectation.renderer, "passed": o.passed,
+                              "renderer": o.expectation.renderer, "passed": o.passed, "verdict": o.verdict,
                               "checks": [{"name": c.name, "passed": c.passed, "error": c.error, "skipped": c.skipped,
+                                          "inconclusive": c.inconclusive,
                                           "message": c.message, "value": c.value, "limit": c.limit,
                                           "traceback": c.traceback or None} for c in o.checks],
                               "run": json_record(o.record)} for o in outcomes]}

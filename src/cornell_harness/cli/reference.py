@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 from pathlib import Path
 from typing import Iterator, List, Optional
 
 import typer
 
 from cornell_harness.adapters.registry import RendererError, resolve
-from cornell_harness.cli.common import (REFERENCE_RENDERER, DashboardOpt, HomeOpt, SceneOpt, SchedulerOpt, SetOpt,
+from cornell_harness.cli.common import (EXIT_INCONCLUSIVE, REFERENCE_RENDERER, DashboardOpt, HomeOpt, SceneOpt, SchedulerOpt, SetOpt,
                                         TimeLimitOpt, WorkersOpt, check_output_folder, executor_for, fail,
                                         reference_app)
 from cornell_harness.cli.output import Progress
@@ -116,7 +117,12 @@ def reference_verify(
         "under its engine (default), or only print it. The reference's own files are never written.")),
     report: Optional[Path] = typer.Option(None, "--report", metavar="DIR", help=(
         "Also write DIR/reference-verify-<scene>.html: the two engines' images, the per-pixel |z| map and the "
-        "per-region table.")),
+        "per-region tables; and the engine's image and variance of its mean beside it as "
+        "reference-verify-<scene>-image.exr and -variance.exr.")),
+    margin: Optional[List[str]] = typer.Option(None, "--margin", metavar="[REGION=]VALUE", help=(
+        "The smallest relative bias that matters (repeatable): VALUE for every region and the whole image, or "
+        "REGION=VALUE for one (image=VALUE: the whole image). Default: 0.01 for the whole image, 0.05 for a "
+        "region.")),
     home: Optional[Path] = HomeOpt,
     time_limit: Optional[str] = TimeLimitOpt,  # seconds (float), by the option's callback
 ) -> None:
@@ -124,15 +130,19 @@ def reference_verify(
 
     Per region (the scene's named regions and the whole image) and channel: the two means, their difference
     and z from both variances (a region mean's variance is the sum of its pixels' variances / n²); χ² over
-    the regions; the spread of the per-pixel z. Exits 1 when any region-channel p is below the Šidák-corrected
-    level at family-wise false-alarm rate 0.01 (the engines disagree beyond noise), 0 otherwise. `cbox scenes`
-    shows the recorded verdicts; docs/references.md has the stored references' verdicts and what they found.
+    the regions; the spread of the per-pixel z; the relative bias with its interval (simultaneous at 0.99),
+    the smallest bias the test detects with power 0.8, and the margin. Exits 1 when any region-channel p is
+    below the Šidák-corrected level at family-wise false-alarm rate 0.01 (the engines disagree beyond noise),
+    3 when none is but an interval reaches past its margin (inconclusive: more spp would resolve it), 0 when
+    every interval lies inside its margin. `cbox scenes` shows the recorded verdicts; docs/references.md has
+    the stored references' verdicts and what they found.
     """
     if spp % batches:
         raise typer.BadParameter(f"--spp ({spp}) must be a multiple of --batches ({batches})")
     if report is not None:
         check_output_folder(report, "--report")
     sc = resolve_scene(scene, overrides)
+    margins = _margins(margin or [], sc)
     ref = load_reference(sc, home=home)  # refused (with the build command) before anything renders
     (entry,) = resolve([engine])
     if not entry.available:
@@ -144,16 +154,18 @@ def reference_verify(
             Progress(batches, f"verify {sc.name} with {entry.name}", "batch", slots=executor.slots) as bar:
         bar.start(f"{spp // batches} spp per batch")
         result = verify_reference(sc, ref, entry.with_time_limit(time_limit), spp, batches, executor=executor,
-                                  progress=lambda done, total, label: bar.advance(label))
+                                  progress=lambda done, total, label: bar.advance(label), margins=margins)
     a = result.agreement
     typer.echo(f"{sc.name}: reference {ref.provenance.get('renderer_version')} at {ref.spp} spp against "
                f"{result.record['engine']} {result.record['engine_version']} at {spp} spp "
                f"({result.record['wall_time_s']:.0f} s)")
-    for line in a.table():
-        typer.echo("  " + line)
+    for line in a.table() + [""] + a.power_table(result.margins):
+        typer.echo("  " + line if line else "")
     typer.echo(f"per-pixel z: sd {a.pixel_z_sd:.3f}, robust spread {a.pixel_z_spread:.3f}, "
                f"{a.pixel_z_tail:.2%} beyond |z| 3 (0.27% for normal z; reported, not judged)")
-    typer.echo(a.message())
+    if remark := _spread_remark(a.pixel_z_sd, batches):
+        typer.echo(remark)
+    typer.echo(a.verdict_message(result.margins))
     if record:
         path = record_verdict(ref.folder, result.record, home)
         typer.echo(f"recorded in {path} under {result.record['engine']}")
@@ -162,4 +174,37 @@ def reference_verify(
 
         path = write_verify_page(report, sc, ref, result)
         typer.echo(f"wrote {path}")
-    raise typer.Exit(0 if a.passed else 1)
+    raise typer.Exit({"pass": 0, "fail": 1}.get(result.verdict, EXIT_INCONCLUSIVE))
+
+
+def _margins(given: list[str], scene: Scene) -> dict[str, float]:
+    """``--margin`` as {region: value} (``image``: the whole image); a bad one is a usage error (exit 2)."""
+    out: dict[str, float] = {}
+    for text in given:
+        region, _, value = text.rpartition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = math.nan
+        if not 0 < number <= 1:
+            raise typer.BadParameter(f"{text!r}: expected [REGION=]VALUE with VALUE a relative bias in (0, 1]",
+                                     param_hint="--margin")
+        if region and region != "image" and region not in scene.regions:
+            raise typer.BadParameter(f"{text!r}: scene {scene.name!r} has no region {region!r}; its regions: "
+                                     f"{', '.join(scene.regions) or '(none)'}", param_hint="--margin")
+        for name in [region] if region else ["image", *scene.regions]:
+            out[name] = number
+    return out
+
+
+def _spread_remark(sd: float, batches: int) -> str | None:
+    """A remark when the per-pixel z sd is far from what its batches make it (Student-t), else None."""
+    from cornell_harness.evaluate.reference_agreement import PIXEL_Z_SD_FACTOR, expected_pixel_z_sd
+
+    expected = expected_pixel_z_sd(batches)
+    if not (math.isfinite(sd) and math.isfinite(expected)) or 1 / PIXEL_Z_SD_FACTOR <= sd / expected <= PIXEL_Z_SD_FACTOR:
+        return None
+    return (f"remark: the per-pixel z sd {sd:.2f} is far from the {expected:.2f} expected for "
+            f"{batches} batch(es): the variances {'understate' if sd > expected else 'overstate'} the pixels' "
+            "spread (with few spp per batch in a scene of rare bright paths, a batch's variance misses the paths "
+            "it did not sample); the regions' z use the same variances, so weigh their verdicts with that")

@@ -34,6 +34,16 @@ images, each with its per-pixel variance of the mean:
   right; reported, not judged: a variance estimated from a few batches makes z
   a Student-type ratio with heavier tails, and skewed pixels (caustics) widen
   it without any bias (see :mod:`cornell_harness.evaluate.variance_check`).
+  Its expectation with a variance from B batches is the t distribution's
+  sd, √((B − 1)/(B − 3)) (:func:`expected_pixel_z_sd`); a spread far from it
+  is remarked on, since the regions' z use the same variances.
+- **Power and margins**: per region and channel, the relative bias with its
+  Fieller interval at the tests' level (:meth:`ReferenceAgreement.bias`,
+  :mod:`cornell_harness.evaluate.relative_bias`), the smallest bias the test
+  detects with power 1 − β, β = :data:`DETECTION_BETA`
+  (:meth:`ReferenceAgreement.detectable`), and three verdicts against margins
+  (:meth:`ReferenceAgreement.verdicts`, :mod:`cornell_harness.evaluate.equivalence`):
+  "the engines agree" is then said only where every interval lies inside its margin.
 
 A pixel-channel with no variance on either side and no difference (black
 background, a dark room) is 0/0 and says nothing: z = 0; a difference with no
@@ -52,6 +62,9 @@ from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm
 
 from cornell_harness.evaluate.agreement import CHANNELS, sidak_level
+from cornell_harness.evaluate.equivalence import (DEFAULT_IMAGE_MARGIN, DEFAULT_REGION_MARGIN, FAIL, INCONCLUSIVE,
+                                                  PASS, combine, interval_verdicts)
+from cornell_harness.evaluate.relative_bias import BiasIntervals, detectable_bias, interval_text, relative_bias
 from cornell_harness.evaluate.variance_check import Q3
 
 #: Family-wise false-alarm rate of a verification: two agreeing engines fail it at most this often.
@@ -60,6 +73,20 @@ FAMILY_ALPHA = 0.01
 WHOLE_IMAGE = "whole image"
 #: |z| beyond which a pixel counts in the reported tail fraction (0.27% for a standard normal).
 PIXEL_Z_TAIL = 3.0
+#: The miss rate at which the detectable bias is stated: a bias that large is detected with power 1 − β = 0.8.
+DETECTION_BETA = 0.2
+#: A per-pixel z sd more than this factor from its expectation is remarked on.
+PIXEL_Z_SD_FACTOR = 1.25
+
+
+def expected_pixel_z_sd(batches: int) -> float:
+    """The sd of the per-pixel z when the other image's variance is estimated from ``batches`` independent renders
+    and dominates: z is then Student-t with batches − 1 degrees of freedom, sd √(ν / (ν − 2)) (1.07 for 16
+    batches); 1 for the engine's own variance (``batches`` = 1) or many batches; ∞ below 4 batches."""
+    if batches <= 1:
+        return 1.0
+    nu = batches - 1
+    return math.sqrt(nu / (nu - 2)) if nu > 2 else math.inf
 
 
 @dataclass
@@ -73,6 +100,8 @@ class RegionAgreement:
     z: np.ndarray  # (3,) (other − reference) / √(V_ref + V_other)
     p: np.ndarray  # (3,) two-sided
     pixel_z_sd: float  # standard deviation of the per-pixel z inside the region (nan if none usable)
+    variance_reference: np.ndarray | None = None  # (3,) the variance of the reference's region mean
+    variance_other: np.ndarray | None = None  # (3,) and of the other's
 
     @property
     def difference(self) -> np.ndarray:
@@ -124,12 +153,77 @@ class ReferenceAgreement:
     def max_abs_z(self) -> float:
         return max((r.max_abs_z for r in self.regions), default=0.0)
 
+    def bias(self) -> BiasIntervals:
+        """Per region and channel (regions, 3): the relative bias other / reference − 1 with its Fieller interval
+        at the tests' Šidák level (simultaneous at 1 − α). An interval excludes 0 exactly where the region's
+        z-test rejects: both ask whether (other − reference)² > z² (V_other + V_ref)."""
+        x, vx, y, vy = (np.array([getattr(r, a) for r in self.regions]) for a in
+                        ("mean_other", "variance_other", "mean_reference", "variance_reference"))
+        return relative_bias(x, vx, y, vy, self.level)
+
+    def detectable(self, beta: float = DETECTION_BETA) -> np.ndarray:
+        """Per region and channel, the smallest relative bias its test detects with power 1 − ``beta``
+        (:func:`~cornell_harness.evaluate.relative_bias.detectable_bias`, at the standard error of no bias)."""
+        vx, y, vy = (np.array([getattr(r, a) for r in self.regions]) for a in
+                     ("variance_other", "mean_reference", "variance_reference"))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            se = np.where(vx + vy > 0, np.sqrt(vx + vy) / np.abs(y), 0.0)
+        return detectable_bias(se, self.level, beta)
+
+    def verdicts(self, margins: np.ndarray) -> np.ndarray:
+        """Per region and channel against ``margins`` (regions, 3): fail (the z-test rejects), pass (the interval
+        inside ±margin) or inconclusive (:func:`~cornell_harness.evaluate.equivalence.interval_verdicts`)."""
+        b = self.bias()
+        out = interval_verdicts(b.low, b.high, margins)
+        failed = np.array([[r.p[c] < self.level for c in range(3)] for r in self.regions])
+        return np.where(failed, FAIL, np.where(out == FAIL, INCONCLUSIVE, out))
+
+    def margins(self, given: Mapping[str, float] | None = None) -> np.ndarray:
+        """(regions, 3) margins: ``given`` by region name (:data:`WHOLE_IMAGE` or ``image`` for the whole image),
+        else the default of the region's kind (:mod:`cornell_harness.evaluate.equivalence`)."""
+        given = dict(given or {})
+        if "image" in given:
+            given.setdefault(WHOLE_IMAGE, given.pop("image"))
+        return np.array([[given.get(r.name, DEFAULT_IMAGE_MARGIN if r.name == WHOLE_IMAGE else DEFAULT_REGION_MARGIN)]
+                         * 3 for r in self.regions], np.float64)
+
+    def power_table(self, margins: np.ndarray, beta: float = DETECTION_BETA) -> list[str]:
+        """Per region as text lines: its bias interval (the channel reaching furthest past its margin), the bias
+        its test detects with power 1 − ``beta`` (the largest over channels), the margin and the verdict."""
+        b, det, verdicts = self.bias(), self.detectable(beta), self.verdicts(margins)
+        rows = [("region", f"bias [{1 - self.alpha:g} simultaneous interval]", f"detectable (power {1 - beta:g})",
+                 "margin", "verdict")]
+        for i, r in enumerate(self.regions):
+            c = int(np.argmax(np.maximum(np.abs(b.low[i]), np.abs(b.high[i])) / margins[i]))
+            rows.append((r.name, interval_text("", float(b.estimate[i, c]), float(b.low[i, c]),
+                                               float(b.high[i, c])) + f" ({CHANNELS[c]})",
+                         f"{100 * float(det[i].max()):.2g}%", f"±{100 * float(margins[i, c]):g}%",
+                         combine(verdicts[i])))
+        widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+        return ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
+
+    def verdict(self, margins: np.ndarray) -> str:
+        """pass, fail or inconclusive over every region and channel against ``margins``."""
+        return combine(self.verdicts(margins))
+
+    def verdict_message(self, margins: np.ndarray) -> str:
+        """The verdict in words: agree within the margins, DISAGREE, or INCONCLUSIVE naming the open regions."""
+        verdict = self.verdict(margins)
+        if verdict == FAIL:
+            return self.message()
+        if verdict == PASS:
+            return f"the engines agree within the margins (every interval inside): {self.message()}"
+        open_ = [r.name for r, v in zip(self.regions, self.verdicts(margins)) if combine(v) != PASS]
+        return (f"INCONCLUSIVE: {self.message()}; but {len(open_)} region(s) are not resolved to their margins "
+                f"({', '.join(open_)}): their intervals reach past them; more spp (or batches), or wider margins, "
+                "resolve them")
+
     def message(self) -> str:
         head = (f"{len(self.regions)} region{'s' if len(self.regions) != 1 else ''} × 3 channels = {self.tests} tests at family-wise α = {self.alpha:g} "
                 f"(Šidák per-test level {self.level:.3g}); max |z| {self.max_abs_z:.2f}, "
                 f"χ² {self.chi2:.1f} on {self.dof} dof (p {self.chi2_p:.3g})")
         if self.passed:
-            return f"the engines agree: smallest p = {self.p_min:.3g} ≥ {self.level:.3g}; {head}"
+            return f"no significant difference: smallest p = {self.p_min:.3g} ≥ {self.level:.3g}; {head}"
         worst = "; ".join(f"{name} {ch}: z = {z:.2f}, p = {p:.2g}" for name, ch, z, p in self.failures[:3])
         return f"the engines DISAGREE in {len(self.failures)} of {self.tests} tests ({worst}); {head}"
 
@@ -146,10 +240,24 @@ class ReferenceAgreement:
         widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
         return ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
 
-    def summary(self) -> dict:
-        """Plain, JSON-safe data of the verdict (what a reference's provenance records)."""
+    def summary(self, margins: np.ndarray | None = None) -> dict:
+        """Plain, JSON-safe data of the verdict (what a reference's provenance records); with ``margins``, the
+        three-way verdict and per region its bias interval, detectable bias and margin too."""
         def num(x: float, digits: int = 4) -> float | None:
             return float(f"{x:.{digits}g}") if math.isfinite(x) else None
+        out = self._summary(num)
+        if margins is not None:
+            b, det = self.bias(), self.detectable()
+            out["verdict"] = self.verdict(margins)
+            out["detection_beta"] = DETECTION_BETA
+            for i, r in enumerate(self.regions):
+                out["regions"][r.name].update(
+                    bias=[num(v, 3) for v in b.estimate[i]], bias_low=[num(v, 3) for v in b.low[i]],
+                    bias_high=[num(v, 3) for v in b.high[i]], detectable=[num(v, 3) for v in det[i]],
+                    margin=[num(v, 3) for v in margins[i]])
+        return out
+
+    def _summary(self, num) -> dict:
         return {
             "passed": self.passed, "alpha": self.alpha, "tests": self.tests, "level": num(self.level),
             "max_abs_z": num(self.max_abs_z), "p_min": num(self.p_min), "chi2": num(self.chi2), "dof": self.dof,
@@ -227,7 +335,7 @@ def reference_agreement(reference: np.ndarray, reference_variance: np.ndarray, o
         m_other, v_other = region_mean(other, var_other, mask)
         z = z_scores(m_other - m_ref, v_ref + v_other)
         sd = pixel_z_stats(z_pix[mask], usable[mask])[0]
-        regions.append(RegionAgreement(name, n, m_ref, m_other, z, two_sided_p(z), sd))
+        regions.append(RegionAgreement(name, n, m_ref, m_other, z, two_sided_p(z), sd, v_ref, v_other))
     tests = 3 * len(regions)
     zs = np.concatenate([r.z for r in regions]) if regions else np.zeros(0)
     chi2 = float(np.sum(np.where(np.isnan(zs), np.inf, zs) ** 2))  # a NaN test counts as infinitely far

@@ -16,9 +16,11 @@ from typing import Mapping
 import numpy as np
 
 from cornell_harness.evaluate import agreement, bias_extrapolation, convergence, metrics, outliers, variance_check
+from cornell_harness.evaluate.equivalence import FAIL, INCONCLUSIVE, PASS, interval_verdicts, resolving_half_width
 from cornell_harness.evaluate.registry import HIGHER_IS_BETTER
 from cornell_harness.evaluate.score import lookup, metric_value
 from cornell_harness.gate.config import Consistency, Expectation, GateConfig
+from cornell_harness.gate.margins import BiasTable, bias_table, equivalence_message
 from cornell_harness.store.references import Reference
 from cornell_harness.workflows import runner
 
@@ -36,11 +38,22 @@ class Check:
     # verdict is unchanged, but JUnit says <skipped/> and the summaries "skipped", never "pass".
     skipped: bool = False
     traceback: str = ""  # a crashed render's traceback (the sandbox child's own), for the log, JUnit and report
+    # Neither shown to hold nor to fail (an interval straddles its margin): not passed, but no failure either
+    # (exit 3); passed as well where the expectation says inconclusive = "pass".
+    inconclusive: bool = False
 
     @property
     def word(self) -> str:
-        """``pass``, ``skipped``, ``FAIL`` or ``ERROR``: the result as every output names it."""
+        """``pass``, ``skipped``, ``FAIL``, ``ERROR``, ``INCONCLUSIVE`` (or ``inconclusive``, counted as a pass):
+        the result as every output names it."""
+        if self.inconclusive:
+            return "inconclusive" if self.passed else "INCONCLUSIVE"
         return "skipped" if self.skipped else "pass" if self.passed else "ERROR" if self.error else "FAIL"
+
+    @property
+    def failed(self) -> bool:
+        """Failed, not merely inconclusive."""
+        return not self.passed and not self.inconclusive
 
 
 @dataclass
@@ -51,10 +64,16 @@ class Outcome:
     record: runner.RunRecord
     checks: list[Check]
     agreement: agreement.Agreement | None = None
+    bias: BiasTable | None = None  # an unbiased expectation's relative-bias intervals
 
     @property
     def passed(self) -> bool:
         return all(c.passed for c in self.checks)
+
+    @property
+    def verdict(self) -> str:
+        """``fail`` (a check failed), ``inconclusive`` (none failed, one is inconclusive) or ``pass``."""
+        return FAIL if any(c.failed for c in self.checks) else INCONCLUSIVE if not self.passed else PASS
 
 
 def recorded_metric(rec: runner.RunRecord, key: str) -> float | None:
@@ -187,13 +206,29 @@ def _bias_limit_checks(exp: Expectation, errors: Mapping[str, np.ndarray] | str 
         k, effort = r.seeds, f"{'/'.join(b.setting) or 'spp'} {', '.join(map(str, b.efforts))}"
         # Against 0 the signed t; with a tolerance, how far beyond it the limit lies in standard errors.
         against, t = (f"(|limit| − {tol:.3%}) / se", r.t) if tol else ("t", r.limit.t)
-        out.append(Check(exp.name, f"bias_limit.{m}", r.passed,
-                         f"{m} extrapolated to infinite effort (rate {b.rate:g}, {effort}; {k} seeds): limit "
-                         f"{r.limit.text()} ({1 - level:.4g} t-interval), {against} = {t:+.2f}, critical ±"
-                         f"{r.t_critical:.2f} (level {level:.3g}: α = {alpha:g} Šidák-split over {len(b.metrics)}); "
-                         f"bias at the first effort above the limit {r.coefficient.text()} (95%)",
-                         t, r.t_critical))
+        message = (f"{m} extrapolated to infinite effort (rate {b.rate:g}, {effort}; {k} seeds): limit "
+                   f"{r.limit.text()} ({1 - level:.4g} t-interval), {against} = {t:+.2f}, critical ±"
+                   f"{r.t_critical:.2f} (level {level:.3g}: α = {alpha:g} Šidák-split over {len(b.metrics)}); "
+                   f"bias at the first effort above the limit {r.coefficient.text()} (95%)")
+        margin = b.margin.get(m)
+        if margin is None or not r.passed:  # no margin: pass or fail; beyond the tolerance: fail either way
+            out.append(Check(exp.name, f"bias_limit.{m}", r.passed, message, t, r.t_critical))
+            continue
+        verdict = str(interval_verdicts(r.limit.low, r.limit.high, margin, tol))
+        out.append(_three_way(exp, f"bias_limit.{m}", verdict == PASS,
+                              f"{message}; {_limit_resolution(r, margin, tol, verdict)}", t, r.t_critical))
     return out
+
+
+def _limit_resolution(r: bias_extrapolation.LimitTest, margin: float, tol: float, verdict: str) -> str:
+    """A bias limit's interval against its margin: inside, or straddling it and about how many seeds would
+    resolve it (the interval's half-width falls as 1/√seeds)."""
+    if verdict == PASS:
+        return f"inside the margin ±{margin:.3%}"
+    half, target = (r.limit.high - r.limit.low) / 2, float(resolving_half_width(r.limit.mean, margin, tol))
+    more = (f"about {math.ceil(r.seeds * (half / target) ** 2)} seeds would resolve it"
+            if target > 0 and math.isfinite(half) else "no number of seeds resolves it")
+    return f"inconclusive: the interval straddles the margin ±{margin:.3%} ({more})"
 
 
 #: The statistical tests of an ``unbiased`` expectation; they share its family-wise ``alpha`` (Šidák).
@@ -208,6 +243,20 @@ def statistical_alpha(alpha: float) -> float:
 def _alpha_note(alpha: float) -> str:
     return (f" [α = {alpha:g} per expectation, Šidák-split over {', '.join(STATISTICAL_TESTS)}: "
             f"{statistical_alpha(alpha):.3g} each]")
+
+
+def _equivalence_check(exp: Expectation, table: BiasTable) -> Check:
+    """Every region's bias interval inside its margin (pass), or not (inconclusive; a significant bias is the
+    agreement test's failure)."""
+    ok = not table.unresolved
+    return _three_way(exp, "equivalence", ok, equivalence_message(table), len(table.unresolved), 0)
+
+
+def _three_way(exp: Expectation, name: str, ok: bool, message: str, value, limit) -> Check:
+    """A check that passes or is inconclusive (counted as a pass where the expectation says so)."""
+    if ok:
+        return Check(exp.name, name, True, message, value, limit)
+    return Check(exp.name, name, exp.inconclusive == "pass", message, value, limit, inconclusive=True)
 
 
 def _variance_check(exp: Expectation, rec: runner.RunRecord, clean: np.ndarray, ref: Reference,
@@ -254,7 +303,7 @@ def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateC
     checks = [Check(exp.name, "finite", bad == 0,
                     "no NaN or Inf pixel" if bad == 0 else
                     f"{m['nan_count']} NaN and {m['inf_count']} Inf pixels" + _first_bad_pixel(rec.image), bad, 0)]
-    agr = None
+    agr = table = None
     if exp.unbiased:
         # The renderer's own variance floored at the noise model (as the outlier test does: render_agreement).
         clean = metrics.zero_broken_pixels(rec.image)
@@ -265,6 +314,9 @@ def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateC
                             agr.p_min, agr.level))
         checks.append(_variance_check(exp, rec, clean, ref, cfg.alpha))
         checks.append(_outlier_check(exp, rec, clean, ref, cfg.alpha))
+        table = bias_table(rec.image, rec.variance, rec.spp, ref, masks, cfg.alpha, exp.margins)
+        if exp.margins is not None:
+            checks.append(_equivalence_check(exp, table))
     checks += _budget_checks(exp, rec)
     if exp.slope:
         checks.append(_slope_check(exp, rec, ref))
@@ -274,7 +326,7 @@ def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateC
     if exp.bias_limit is not None:
         checks += _bias_limit_checks(exp, bias, cfg.alpha)
     checks += _regression_checks(exp, m, baseline, cfg)
-    return Outcome(exp, rec, checks, agr)
+    return Outcome(exp, rec, checks, agr, table if exp.unbiased else None)
 
 
 def _first_bad_pixel(image) -> str:

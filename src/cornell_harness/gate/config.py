@@ -15,6 +15,7 @@ A gate config (TOML) lists expectations::
     spp = 256                         # budget: spp, or time = "10s" (spp is then calibrated)
     seed = 0                          # fixed: the same commit gives the same verdict
     unbiased = true                   # agreement, variance and outlier tests against the reference (below)
+    margin = { image = 0.005 }        # optional: pass / fail / inconclusive on bias intervals (gate/margins.py)
     tile = 16
     slope = [-0.55, -0.45]            # optional: RMSE-vs-spp slope over checkpoints spp/64 .. spp
     max = { delta_e2000_mean = 3.0 }  # optional budgets on any harness metric ...
@@ -126,6 +127,7 @@ from pathlib import Path
 
 from cornell_harness.evaluate.registry import (HIGHER_IS_BETTER, IMAGE_METRICS, REGION_CHECK_METRICS, bound_problem,
                                                region_metric)
+from cornell_harness.gate.margins import MarginProblem, Margins, parse_margins
 from cornell_harness.schemas.reader import FormatProblem, check, read_toml
 from cornell_harness.suggest import closest
 from cornell_harness.durations import parse_duration
@@ -176,6 +178,7 @@ class BiasLimit:
     spp: int = 16  # with ``setting``: the spp of every render
     metrics: tuple[str, ...] = (BIAS_LIMIT_METRIC,)
     tolerance: dict = field(default_factory=dict)  # metric -> |limit| allowed (default 0)
+    margin: dict = field(default_factory=dict)  # metric -> equivalence margin: three verdicts where one is set
 
     def seed_list(self, seed: int) -> list[int]:
         """The seeds of an expectation at ``seed``: k·seed .. k·seed + k − 1 (disjoint sets for distinct seeds)."""
@@ -200,6 +203,8 @@ class Expectation:
     time_limit_s: float = DEFAULT_TIME_LIMIT_S
     consistency: Consistency | None = None
     bias_limit: BiasLimit | None = None
+    margins: Margins | None = None  # an unbiased expectation's margins (gate.margins): three verdicts
+    inconclusive: str = "fail"  # how an inconclusive verdict counts: "fail" (exit 3) or "pass"
 
     def region_metrics(self) -> list[tuple[str, str]]:
         """(field, ``region.<region>.<metric>``) of every region metric it names: the gate checks the regions."""
@@ -301,6 +306,10 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
     unbiased, settings = t.get("unbiased", False), t.get("settings", {})
     consistency = _consistency(path, t, w, spp)
     bias_limit = _bias_limit(path, t, w)
+    try:
+        margins = parse_margins(t, bool(bias_limit and bias_limit.margin))
+    except MarginProblem as e:
+        raise GateConfigError(path, f"{w}{e.field}", e.message) from None
     if not (unbiased or slope or any(budgets.values()) or consistency or bias_limit or t.get("finite_only", False)):
         raise GateConfigError(path, f"expect[{i}]", "no accuracy check: give unbiased = true, a budget (max, min, "
                               "abs_max), a slope or a consistency check; or finite_only = true to check only for "
@@ -310,7 +319,8 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
     name = t.get("name") or f"{t['scene']}/{t['renderer']}{shown}@{budget}"
     return Expectation(name, t["scene"], t["renderer"], spp, time_s, t.get("seed", 0), unbiased, t.get("tile", 16),
                        slope, budgets["max"], budgets["min"], budgets["abs_max"], settings,
-                       _duration(path, t, "time_limit", w, time_limit), consistency, bias_limit)
+                       _duration(path, t, "time_limit", w, time_limit), consistency, bias_limit, margins,
+                       t.get("inconclusive", "fail"))
 
 
 def _check_budgets(path: Path, w: str, budgets: dict[str, dict[str, float]]) -> None:
@@ -349,10 +359,16 @@ def _bias_limit(path: Path, t: dict, w: str) -> BiasLimit | None:
                                   f"error: {BIAS_LIMIT_METRIC!r} or 'region.<region>.{BIAS_LIMIT_METRIC}'")
     if len(set(metrics)) != len(metrics):
         raise GateConfigError(path, f"{where}metrics", "a metric is named twice")
-    tolerance = b.get("tolerance", {})
+    tolerance, margin = b.get("tolerance", {}), b.get("margin", {})
     _check_names(path, tolerance, metrics, f"{where}tolerance.", "metric (not in metrics)")
+    _check_names(path, margin, metrics, f"{where}margin.", "metric (not in metrics)")
+    for key, value in margin.items():
+        if value <= tolerance.get(key, 0.0):
+            raise GateConfigError(path, f"{where}margin.{key}", f"{value:g} must be above its tolerance "
+                                  f"({tolerance.get(key, 0.0):g}): no interval could pass and not fail")
     return BiasLimit(tuple(efforts), tuple(setting), float(b.get("rate", 1.0)), b.get("seeds", 8), b.get("spp", 16),
-                     tuple(metrics), {k: float(v) for k, v in tolerance.items()})
+                     tuple(metrics), {k: float(v) for k, v in tolerance.items()},
+                     {k: float(v) for k, v in margin.items()})
 
 
 def _consistency(path: Path, t: dict, w: str, spp: int | None) -> Consistency | None:

@@ -52,6 +52,10 @@ def _check_regions(cfg: GateConfig, i: int, exp: Expectation, scene) -> None:
         if region not in scene.regions:
             raise GateConfigError(cfg.path, f"expect[{i}].{field}", f"scene {scene.name!r} has no region "
                                   f"{region!r}; its regions: {', '.join(scene.regions) or '(none)'}")
+    for region in exp.margins.regions() if exp.margins else ():
+        if region not in scene.regions:
+            raise GateConfigError(cfg.path, f"expect[{i}].margin.region.{region}", f"scene {scene.name!r} has no "
+                                  f"region {region!r}; its regions: {', '.join(scene.regions) or '(none)'}")
 
 
 def _check_estimator(cfg: GateConfig, i: int, exp: Expectation, entry: RendererEntry) -> None:
@@ -301,7 +305,7 @@ def load_baseline(cfg: GateConfig) -> dict:
 def baseline_refusal(outcomes: Sequence[Outcome]) -> str | None:
     """Why this run must not become the baseline (a check other than a baseline check failed), or None."""
     bad = [f"{o.expectation.name} {c.name}" for o in outcomes for c in o.checks
-           if not c.passed and not c.name.startswith("baseline.")]
+           if c.failed and not c.name.startswith("baseline.")]
     if bad:
         return f"{len(bad)} check(s) failed ({', '.join(bad[:3])}{', ...' if len(bad) > 3 else ''})"
     return None

@@ -6,8 +6,10 @@ view always has something to show. In JUnit a check that ran and failed is a
 rendered, is an ``<error>`` (with the renderer's traceback as its body; a
 crash's is on its ``render`` case, never a pass); a check
 that was not made (a renderer that reports no variance has none to check) is
-``<skipped/>``, never a pass. Times are honest: each expectation's render is
-timed once, on a test case of its own (``render``); its checks take no time.
+``<skipped/>``, never a pass. An inconclusive check (an interval straddles its margin: neither pass nor
+fail) is a ``<failure message="inconclusive">`` with its message as the body, or, where the expectation says
+``inconclusive = "pass"``, a pass whose output starts with "inconclusive". Times are honest: each expectation's
+render is timed once, on a test case of its own (``render``); its checks take no time.
 """
 
 from __future__ import annotations
@@ -58,6 +60,11 @@ def _result(case: ET.Element, c: Check, counts: dict[str, int]) -> None:
     if c.skipped:
         counts["skipped"] += 1
         ET.SubElement(case, "skipped", message=c.message)
+    elif c.inconclusive and not c.passed:
+        counts["failures"] += 1
+        ET.SubElement(case, "failure", message="inconclusive").text = c.message
+    elif c.inconclusive:
+        ET.SubElement(case, "system-out").text = f"inconclusive (counted as a pass: inconclusive = \"pass\"): {c.message}"
     elif c.passed:
         ET.SubElement(case, "system-out").text = c.message
     elif c.error:
@@ -118,17 +125,34 @@ def markdown_summary(outcomes: Sequence[Outcome], alpha: float, config_error: st
     if config_error is not None:
         return f"## cbox gate: ❌ **config error**\n\n`{config_error}`\n\nNothing was rendered.\n"
     rows = [(o.expectation.name, c) for o in outcomes for c in o.checks]
-    failed = [(n, c) for n, c in rows if not c.passed]
+    failed = [(n, c) for n, c in rows if c.failed]
+    open_ = [(n, c) for n, c in rows if c.inconclusive and not c.passed]
     skipped = [(n, c) for n, c in rows if c.skipped]
     rest = skipped + [(n, c) for n, c in rows if c.passed and not c.skipped]
-    verdict = "✅ **gate passed**" if not failed else f"❌ **gate failed**: {len(failed)} check(s)"
+    verdict = (f"❌ **gate failed**: {len(failed)} check(s)" if failed else
+               f"⚠️ **gate inconclusive**: {len(open_)} check(s)" if open_ else "✅ **gate passed**")
     lines = [f"## cbox gate: {verdict}", "",
              f"{len(rows)} checks of {len(outcomes)} expectation(s): {len(failed)} failed, "
-             f"{len(rows) - len(failed) - len(skipped)} passed, {len(skipped)} skipped. Agreement tests at "
+             + (f"{len(open_)} inconclusive, " if open_ else "")
+             + f"{len(rest) - len(skipped)} passed, {len(skipped)} skipped. Agreement tests at "
              f"family-wise α = {alpha:g} (Šidák over tiles, named regions, the whole image and channels).", ""]
+    if note := no_bound_note(outcomes):
+        lines += [note, ""]
     if failed:
         lines += ["### Failed", "", *_table(failed), ""]
+    if open_:
+        lines += ["### Inconclusive", "", *_table(open_), ""]
     if rest:
         lines += [f"<details><summary>{len(rest) - len(skipped)} passed, {len(skipped)} skipped</summary>", "",
                   *_table(rest), "", "</details>"]
     return "\n".join(lines) + "\n"
+
+
+def no_bound_note(outcomes: Sequence[Outcome]) -> str | None:
+    """One line for a run whose unbiased expectations state no margin: their passes bound no bias."""
+    bare = [o.expectation.name for o in outcomes if o.expectation.unbiased and o.expectation.margins is None]
+    if not bare:
+        return None
+    return (f"Note: {len(bare)} unbiased expectation(s) state no margin, so their passes carry no bound: a pass "
+            "says only that no bias was significant at their spp. A margin = { image = 0.01, "
+            "\"region.<region>\" = 0.05 } bounds it (docs/gate-detection.md, \"Margins and three verdicts\").")

@@ -1,7 +1,8 @@
 """The gate's section of the HTML report: verdicts, where the image disagrees, and the p-values.
 
-For each expectation: its checks (pass, skipped, FAIL or ERROR, and by how much; a crash's traceback folded
-under its message); for an
+For each expectation: its verdict (pass, fail or inconclusive), its checks (pass, skipped, FAIL, ERROR or
+INCONCLUSIVE, and by how much; a crash's traceback folded under its message); for an unbiased one, the
+relative-bias interval of every region and channel; for an
 agreement test, a map of |z| per tile (magma, 0..6, failing tiles boxed in
 white) and a histogram of the tile p-values, which is flat for a renderer
 that agrees with the reference and piles up at 0 where it does not.
@@ -13,6 +14,8 @@ from html import escape
 
 import numpy as np
 
+from cornell_harness.evaluate.relative_bias import interval_text
+from cornell_harness.reports.ci import no_bound_note
 from cornell_harness.reports.images import apply_colormap, png_data_uri
 
 Z_MAX = 6.0
@@ -61,32 +64,60 @@ def p_histogram_svg(p: np.ndarray, level: float, width: int = 320, height: int =
 
 def _check_row(c) -> str:
     """One check's row: its result as JUnit has it (pass, skipped, FAIL, ERROR), a crash's traceback folded in."""
-    css = "skipped" if c.skipped else "pass" if c.passed else "fail"
+    css = "skipped" if c.skipped else "fail" if c.inconclusive else "pass" if c.passed else "fail"
     tb = (f'<details class="traceback"><summary>traceback</summary><pre>{escape(c.traceback.rstrip())}</pre>'
           f'</details>' if c.traceback else "")
     return (f'<tr class="{css}"><td>{escape(c.name)}</td><td>{escape(c.word)}</td>'
             f'<td>{escape(c.message)}{tb}</td></tr>')
 
 
+def bias_table_html(t) -> str:
+    """An expectation's relative-bias intervals per region and channel (a
+    :class:`~cornell_harness.gate.margins.BiasTable`), with margins and verdicts where it states them."""
+    b = t.intervals
+    head = "<th>region</th><th>pixels</th>" + "".join(f"<th>{ch}</th>" for ch in "RGB")
+    rows = []
+    for i in range(len(t.regions)):
+        cells = []
+        for c in range(3):
+            text = interval_text("", float(b.estimate[i, c]), float(b.low[i, c]), float(b.high[i, c]))
+            if t.margins is not None:
+                text += f" (±{100 * t.margins[i, c]:g}%: {t.verdicts[i, c]})"
+            cells.append(f"<td>{escape(text)}</td>")
+        rows.append(f"<tr><td>{escape(t.label(i))}</td><td>{t.pixels[i]}</td>{''.join(cells)}</tr>")
+    note = ("margins stated: pass inside, inconclusive otherwise" if t.margins is not None else
+            "no margin stated: these intervals bound the bias, the pass does not")
+    return (f'<table class="gate-bias"><caption>relative bias, render / reference − 1, at {t.spp} spp: Fieller '
+            f'intervals simultaneous at {1 - t.alpha:g} ({escape(note)})</caption><thead><tr>{head}</tr></thead>'
+            f'<tbody>{"".join(rows)}</tbody></table>')
+
+
 def gate_section(outcomes, alpha: float) -> str:
     """HTML fragment (escaped) for :func:`cornell_harness.reports.html.write_report`'s ``sections``."""
-    failed = sum(not c.passed for o in outcomes for c in o.checks)
+    failed = sum(c.failed for o in outcomes for c in o.checks)
+    open_ = sum(c.inconclusive and not c.passed for o in outcomes for c in o.checks)
     skipped = sum(c.skipped for o in outcomes for c in o.checks)
     also = f" ({skipped} check(s) skipped)" if skipped else ""
-    verdict = (f'<p class="gate-verdict pass">Gate passed{also}</p>' if not failed else
-               f'<p class="gate-verdict fail">Gate failed: {failed} check(s){also}</p>')
+    verdict = (f'<p class="gate-verdict fail">Gate failed: {failed} check(s){also}</p>' if failed else
+               f'<p class="gate-verdict fail">Gate inconclusive: {open_} check(s){also}</p>' if open_ else
+               f'<p class="gate-verdict pass">Gate passed{also}</p>')
     parts = [verdict, f"<p class=\"note\">Agreement tests: tiled and whole-image z-tests against the reference "
                       f"at family-wise α = {alpha:g} (Šidák). Every expectation also requires zero NaN and Inf "
                       f"pixels.</p>"]
+    if note := no_bound_note(outcomes):
+        parts.append(f'<p class="note">{escape(note)}</p>')
     for o in outcomes:
         e, r = o.expectation, o.record
         rows = "".join(_check_row(c) for c in o.checks)
-        block = [f'<div class="gate-exp"><h3>{escape(e.name)} <span class="badge {"ok" if o.passed else "failed"}">'
-                 f'{"pass" if o.passed else "fail"}</span></h3>'
+        badge = {"pass": "ok"}.get(o.verdict, "failed")
+        block = [f'<div class="gate-exp"><h3>{escape(e.name)} <span class="badge {badge}">'
+                 f'{o.verdict}</span></h3>'
                  f'<p class="note">{escape(r.renderer)} · {r.spp} spp · seed {r.seed}'
                  f'{f" · {r.time_s:.2f} s" if r.time_s else ""}</p>'
                  f'<table class="gate-checks"><thead><tr><th>check</th><th>result</th><th>detail</th></tr></thead>'
                  f'<tbody>{rows}</tbody></table>']
+        if o.bias is not None:
+            block.append(bias_table_html(o.bias))
         a = o.agreement
         if a is not None:
             failing = a.p_tiles < a.level

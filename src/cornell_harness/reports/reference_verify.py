@@ -18,6 +18,7 @@ from cornell_harness.evaluate import metrics
 from cornell_harness.evaluate.agreement import CHANNELS
 from cornell_harness.evaluate.reference_agreement import z_scores
 from cornell_harness.store.atomic import write_text_atomic
+from cornell_harness.store.exr import write_exr
 from cornell_harness.reports.gate import Z_MAX
 from cornell_harness.reports.images import apply_colormap, png_data_uri, to_uint8
 
@@ -46,8 +47,10 @@ def verify_section(scene, reference, verification) -> str:
     """HTML fragment: verdict, the two images and the |z| map, the per-region table."""
     a, rec = verification.agreement, verification.record
     exposure = metrics.display_exposure(reference.image, reference.quantity)
-    verdict = (f'<p class="{"pass" if a.passed else "fail"}"><strong>{"agree" if a.passed else "DISAGREE"}'
-               f'</strong>: {escape(a.message())}</p>')
+    word = {"pass": "agree", "fail": "DISAGREE", "inconclusive": "INCONCLUSIVE"}[verification.verdict]
+    verdict = (f'<p class="{"pass" if word == "agree" else "fail"}"><strong>{word}</strong>: '
+               f'{escape(a.verdict_message(verification.margins))}</p>'
+               f'<pre>{escape(chr(10).join(a.power_table(verification.margins)))}</pre>')
     width = SHOWN_PX
     figures = "".join(
         f'<figure><img width="{width}" alt="{escape(alt)}" src="{src}"><figcaption>{escape(cap)}</figcaption>'
@@ -80,11 +83,16 @@ def verify_section(scene, reference, verification) -> str:
 
 
 def write_verify_page(folder: Path, scene, reference, verification) -> Path:
-    """Write ``folder/reference-verify-<scene>.html`` (atomically); its path."""
+    """Write ``folder/reference-verify-<scene>.html`` (atomically), and beside it the engine's image and its
+    variance of the mean as ``reference-verify-<scene>-image.exr`` and ``-variance.exr``; the page's path."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in scene.name)
     path = folder / f"reference-verify-{safe}.html"
+    meta = {"engine": str(verification.record["engine"]), "spp": str(verification.record["spp"]),
+            "batches": str(verification.record["batches"])}
+    write_exr(folder / f"reference-verify-{safe}-image.exr", verification.image, meta)
+    write_exr(folder / f"reference-verify-{safe}-variance.exr", verification.variance, meta)
     title = f"cbox reference verify: {scene.name} against {verification.record['engine']}"
     write_text_atomic(path, f'<!doctype html>\n<html lang="en"><head><meta charset="utf-8"><title>{escape(title)}'
                             f'</title><style>{_STYLE}</style></head>\n<body>'

@@ -23,7 +23,7 @@ import datetime as _dt
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -58,6 +58,12 @@ class Verification:
     image: np.ndarray  # (H, W, 3) the engine's mean
     variance: np.ndarray  # its variance of the mean
     record: dict  # what :func:`record_verdict` stores
+    margins: np.ndarray | None = None  # (regions, 3) the margins of the three-way verdict
+
+    @property
+    def verdict(self) -> str:
+        """pass, fail or inconclusive against the margins."""
+        return self.agreement.verdict(self.margins)
 
 
 def render_with_variance(spec: str, settings: dict, scene: Scene, spp: int, seed: int,
@@ -101,11 +107,14 @@ def render_engine(scene: Scene, entry: RendererEntry, spp: int, batches: int,
 def verify_reference(scene: Scene, reference: Reference, entry: RendererEntry, spp: int,
                      batches: int = DEFAULT_BATCHES, executor: InProcess | DaskExecutor | None = None,
                      progress: Callable[[int, int, str], None] | None = None,
-                     alpha: float = FAMILY_ALPHA) -> Verification:
+                     alpha: float = FAMILY_ALPHA, margins: Mapping[str, float] | None = None) -> Verification:
     """Render ``scene`` with ``entry`` and judge it against ``reference`` in the scene's regions and the whole
-    image (:func:`~cornell_harness.evaluate.reference_agreement.reference_agreement`). Nothing is written."""
+    image (:func:`~cornell_harness.evaluate.reference_agreement.reference_agreement`), three ways against
+    ``margins`` (relative, by region name or ``image``; the others the defaults of their kind). Nothing is
+    written."""
     image, variance, wall, info, seeds = render_engine(scene, entry, spp, batches, executor, progress)
     agreement = reference_agreement(reference.image, reference.variance, image, variance, region_masks(scene), alpha)
+    margin_array = agreement.margins(margins)
     record = {
         "engine": entry.name,
         "engine_version": entry.renderer.version(),
@@ -117,11 +126,11 @@ def verify_reference(scene: Scene, reference: Reference, entry: RendererEntry, s
         "seeds": [seeds[0], seeds[-1]] if len(seeds) > 1 else seeds,
         "wall_time_s": round(wall, 3),
         "reference_spp": reference.spp,
-        **agreement.summary(),
+        **agreement.summary(margin_array),
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
     }
     if info.get("variant"):
         record["variant"] = info["variant"]
-    return Verification(agreement, image, variance, record)
+    return Verification(agreement, image, variance, record, margin_array)
 
