@@ -9,7 +9,7 @@ import pytest
 
 from benchmarks import markdown_blocks, schema_tables
 from cornell_harness.adapters.api import ESTIMATORS
-from cornell_harness.adapters.commands import NAME
+from cornell_harness.adapters.renderers_file import NAME
 from cornell_harness.gate.config import (DEFAULT_ALPHA, DEFAULT_REGRESSION_MARGIN, DEFAULT_REGRESSION_METRICS,
                                          DEFAULT_TIME_LIMIT_S, BiasLimit, Consistency, Expectation)
 from cornell_harness.schemas.reader import FORMATS, FormatProblem, check, schema

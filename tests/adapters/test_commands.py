@@ -1,4 +1,5 @@
-"""Command-line renderers declared as data (src/cornell_harness/adapters/commands.py), run on fake programs.
+"""Command-line renderers declared as data (src/cornell_harness/adapters/renderers_file.py) and run
+(src/cornell_harness/adapters/commands.py) on fake programs.
 
 The fake program is a Python script written into tmp_path and run with this interpreter; it writes an EXR
 whose every pixel is ``spp + seed / 1000`` (so a test sees which run made which image), and fails, hangs or
@@ -18,7 +19,8 @@ import numpy as np
 import pytest
 
 from cornell_harness.adapters import commands, registry
-from cornell_harness.adapters.commands import CommandRenderer, RenderersFileError, read_file, spec_of
+from cornell_harness.adapters.commands import CommandRenderer
+from cornell_harness.adapters.renderers_file import RenderersFileError, read_file, spec_of
 from cornell_harness.adapters.registry import RendererError, resolve
 from cornell_harness.scenes import export
 from cornell_harness.scenes.library import resolve_scene

@@ -8,7 +8,7 @@ import re
 
 import pytest
 
-from cornell_harness.adapters.commands import RenderersFileError, read_series_labels
+from cornell_harness.adapters.renderers_file import RenderersFileError, read_series_labels
 from cornell_harness.adapters.settings import SettingsError, match_series_labels, parse_series_label, series_key
 from tests.conftest import ROOT, run_cbox
 

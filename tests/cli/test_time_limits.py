@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from cornell_harness.adapters.commands import DEFAULT_LIMIT_PER_SAMPLE_S, DEFAULT_LIMIT_START_S, read_file
+from cornell_harness.adapters.renderers_file import DEFAULT_LIMIT_PER_SAMPLE_S, DEFAULT_LIMIT_START_S, read_file
 from tests.adapters.test_commands import renderers_file
 from tests.conftest import cbox_in_process as cbox
 

@@ -5,7 +5,7 @@ what it may declare, :class:`~cornell_harness.adapters.api.Declarations`) is
 :mod:`cornell_harness.adapters.api`'s. Renderers are found through the entry-point
 group ``cbox.renderers`` (ours are registered in ``pyproject.toml`` the same
 way a third party's would be), or given directly as ``package.module:ClassName``.
-Programs declared in renderers files (:mod:`cornell_harness.adapters.commands`: ``--renderers
+Programs declared in renderers files (:mod:`cornell_harness.adapters.renderers_file`: ``--renderers
 FILE`` through :func:`use_renderer_files`, and ``$CBOX_RENDERERS``) are found
 by their names too; their spec, ``/abs/path/renderers.toml#NAME``, names them
 in any process without either.
@@ -31,7 +31,7 @@ from cornell_harness.scenes.model import Scene
 from cornell_harness.suggest import did_you_mean
 
 ENTRY_POINT_GROUP = "cbox.renderers"
-#: Renderers files (:mod:`cornell_harness.adapters.commands`) whose renderers every command knows by name, as
+#: Renderers files (:mod:`cornell_harness.adapters.renderers_file`) whose renderers every command knows by name, as
 #: ``--renderers`` adds them: paths separated by ``os.pathsep``.
 RENDERERS_VARIABLE = "CBOX_RENDERERS"
 _renderer_files: list[Path] = []  # --renderers of the running command (use_renderer_files)
@@ -183,7 +183,7 @@ def _load_entry_point(ep) -> RendererEntry:
 
 def use_renderer_files(paths: Sequence[Path | str]) -> None:
     """Make the renderers of these files (``--renderers``) known by name, besides ``$CBOX_RENDERERS``'s; each
-    file is read and checked now (:class:`~cornell_harness.adapters.commands.RenderersFileError`), before anything runs.
+    file is read and checked now (:class:`~cornell_harness.adapters.renderers_file.RenderersFileError`), before anything runs.
     An empty list forgets the files given before (and reads nothing)."""
     _renderer_files[:] = [Path(p).resolve() for p in paths]
     if paths:
@@ -202,7 +202,7 @@ def declared_commands() -> dict[str, str]:
     A name declared twice, or that is also a registered renderer's, is a RenderersFileError: ``-r NAME``
     must mean one renderer, and a file must not replace the reference renderer unnoticed.
     """
-    from cornell_harness.adapters.commands import RenderersFileError, read_file
+    from cornell_harness.adapters.renderers_file import RenderersFileError, read_file
 
     out: dict[str, str] = {}
     registered = _entry_points()
@@ -220,7 +220,7 @@ def declared_commands() -> dict[str, str]:
 
 def declared_series_labels() -> dict[str, str]:
     """The ``[series_labels]`` of the renderers files in use, spec → text; a later file's entry wins."""
-    from cornell_harness.adapters.commands import read_series_labels
+    from cornell_harness.adapters.renderers_file import read_series_labels
 
     out: dict[str, str] = {}
     for path in renderer_files():
@@ -255,7 +255,7 @@ def resolve(specs: Sequence[str] | None) -> list[RendererEntry]:
     usage error); a renderer that loads but cannot run here (its
     ``unavailable_reason()``) comes back unavailable, with its reason.
     """
-    from cornell_harness.adapters.commands import is_spec
+    from cornell_harness.adapters.renderers_file import is_spec
 
     eps = _entry_points()
     commands = declared_commands()

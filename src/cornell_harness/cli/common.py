@@ -33,7 +33,7 @@ from typing import Any, Iterator, NoReturn
 import numpy as np
 import typer
 
-from cornell_harness.adapters.commands import RenderersFileError
+from cornell_harness.adapters.renderers_file import RenderersFileError
 from cornell_harness.adapters.registry import RendererError
 from cornell_harness.adapters.settings import SettingsError
 from cornell_harness.durations import parse_duration
