@@ -136,7 +136,9 @@ def test_installed_wheel_builds_and_records_into_the_user_store_never_into_the_p
     assert f"wrote {derived} " in build.stdout
     assert sorted(p.name for p in derived.iterdir()) == ["noise.exr", "provenance.json", "reference.exr",
                                                          "variance.exr"]
-    assert verify.returncode in (0, 1) and "the engines" in verify.stdout, verify.stderr  # a verdict, either way
+    # A verdict, whichever: at 4 spp a region is usually unresolved to its margin (inconclusive, exit 3).
+    assert verify.returncode in (0, 1, 3) and ("the engines" in verify.stdout or "INCONCLUSIVE: " in verify.stdout), \
+        verify.stdout + verify.stderr
     assert f"recorded in {mine / 'verdicts.json'} under mitsuba" in verify.stdout
     assert "mitsuba" in json.loads((mine / "verdicts.json").read_text())
     assert listing.stdout.startswith(f"user store: {home} (from $CBOX_HOME)\n"), listing.stdout
