@@ -23,6 +23,7 @@ from cornell_harness.scenes.model import Camera
 from cornell_harness.store.exr import read_exr
 from cornell_harness.store.references import load_reference
 from cornell_harness.renderers import luxcore as luxcore_module
+from cornell_harness.renderers.batches import batch_plan, child_env
 from cornell_harness.renderers.luxcore import LuxCore
 from tests.conftest import CORNELL, ROOT
 
@@ -213,7 +214,7 @@ def test_checkpoints_are_prefixes_of_the_batches():
     assert [c.spp for c in res.checkpoints] == [8, 32]
     np.testing.assert_array_equal(res.checkpoints[-1].image, res.image)
     assert 0 < res.checkpoints[0].time_s <= res.checkpoints[1].time_s == res.time_s
-    assert res.info["batches"] == len(luxcore_module.batch_plan(32, 4, (8, 32)))
+    assert res.info["batches"] == len(batch_plan(32, 4, (8, 32)))
     # LuxCore's halt misses a batch's spp by a few samples per pixel (more on a film this small), and says so
     lo, hi = res.info["pixel_samples_off"]
     assert lo <= hi and lo >= -4 and res.info["samples"] >= 0.9 * 32 * 16 * 16
@@ -253,7 +254,7 @@ def test_version_is_pyluxcores():
 
 
 def _cli(*args, cwd=None) -> subprocess.CompletedProcess:
-    env = luxcore_module._child_env()
+    env = child_env()
     return subprocess.run([sys.executable, "-m", "cornell_harness.renderers.luxcore_cli", *map(str, args)], capture_output=True,
                           text=True, timeout=300, env=env, cwd=cwd)
 

@@ -6,7 +6,7 @@ temporary folder and rendered by :mod:`cornell_harness.renderers.cycles_cli` in 
 :func:`cornell_harness.processes.run` (so a signal or a time limit ends it with the command): ``bpy`` is
 never imported here (see that module's docstring for why, and for how each material is built).
 
-The render is split into independent batches (:func:`cornell_harness.renderers.luxcore.batch_plan`), batch k
+The render is split into independent batches (:func:`cornell_harness.renderers.batches.batch_plan`), batch k
 with Cycles' seed ``pass_seed(seed, k)`` (31 bits), in one child; the variance of the mean comes from the
 spread of the batch means, as LuxCore's. Each batch is exactly its spp per pixel (adaptive sampling off), so
 a render is reproducible for a given seed and thread count.
@@ -24,7 +24,6 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
-import os
 import subprocess
 import sys
 import tempfile
@@ -35,10 +34,9 @@ from typing import Sequence
 import numpy as np
 
 from cornell_harness import processes
-from cornell_harness.adapters.api import Checkpoint, RenderResult, Setting, default_threads, pass_seed
+from cornell_harness.adapters.api import Checkpoint, RenderResult, default_threads, pass_seed
 from cornell_harness.extras import renderer_problem
-from cornell_harness.renderers.luxcore import BATCHES, STDERR_TAIL, batch_plan
-from cornell_harness.renderers.luxcore_cli import mean_and_variance
+from cornell_harness.renderers.batches import BATCHES_SETTING, STDERR_TAIL, batch_plan, child_env, mean_and_variance
 from cornell_harness.scenes.export.luxcore import sphere_mesh
 from cornell_harness.scenes.materials import Dielectric, Diffuse, Mirror
 from cornell_harness.scenes.model import Scene, SceneError, object_bounds
@@ -105,14 +103,6 @@ def write_plan(scene: Scene, folder: Path, batches: Sequence[tuple[int, int]], t
     return path
 
 
-def _child_env() -> dict:
-    """The child's environment: the folder holding this package first on the path, so it runs the same code."""
-    root = str(Path(__file__).resolve().parents[2])
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
-    return env
-
-
 def run_child(folder: Path, time_limit_s: float | None = None) -> dict:
     """Render the plan in ``folder`` in a child; its ``settings.json`` (RuntimeError, quoting its stderr, if it
     fails)."""
@@ -120,7 +110,7 @@ def run_child(folder: Path, time_limit_s: float | None = None) -> dict:
     with open(log, "wb") as out:
         status = processes.run([sys.executable, "-m", "cornell_harness.renderers.cycles_cli", str(folder)],
                                time_limit_s, stdout=out, stderr=out, stdin=subprocess.DEVNULL,
-                               env=_child_env())
+                               env=child_env())
     if status != 0:
         tail = [line for line in log.read_text(errors="replace").splitlines() if line.startswith("cycles: ")]
         raise RuntimeError(f"Cycles child exited with status {status}: "
@@ -161,10 +151,7 @@ class Cycles:
     features = FEATURES
     quantities = ("radiance",)
     estimator = "unbiased"
-    settings = (
-        Setting("batches", int, BATCHES, "independent batches (each its own seed) the render is split into; "
-                "the variance of the mean comes from their spread", low=2, high=1 << 16),
-    )
+    settings = (BATCHES_SETTING,)
 
     def unavailable_reason(self) -> str | None:
         # Found, never imported: bpy is Blender, and runs only in the child (module docstring).
@@ -177,7 +164,7 @@ class Cycles:
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
-        batches = int((settings or {}).get("batches", BATCHES))
+        batches = int((settings or {}).get("batches", BATCHES_SETTING.default))
         sizes = batch_plan(spp, max(2, batches) if spp >= 2 else 1, checkpoints)
         seeds = [pass_seed(seed, k) & 0x7FFFFFFF for k in range(len(sizes))]  # Cycles' seed is a signed int
         threads = default_threads()

@@ -15,9 +15,9 @@ program as ``cbox-luxcore`` has none of the harness's modules loaded and ends wi
 ``multiprocessing``'s spawn would import the parent's ``__main__`` (``cbox``, pytest) into it and leave
 through a normal exit. Even :meth:`LuxCore.version` asks a child.
 
-The render is split into independent batches (:func:`batch_plan`), batch k seeded with
+The render is split into independent batches (:mod:`cornell_harness.renderers.batches`), batch k seeded with
 ``pass_seed(seed, k)``; checkpoints fall on batch boundaries, and the variance of the mean comes from the
-spread of the batch means (:func:`cornell_harness.renderers.luxcore_cli.mean_and_variance`).
+spread of the batch means.
 
 Not bit-reproducible: LuxCore halts a batch on the film's total sample count, checked while its threads
 run, so each pixel gets about the batch's spp (measured: 15 to 17 samples at 16 spp at 256², with 1 or
@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -41,37 +40,17 @@ from typing import Sequence
 import numpy as np
 
 from cornell_harness import processes
-from cornell_harness.adapters.api import Checkpoint, RenderResult, Setting, default_threads, spp_passes
+from cornell_harness.adapters.api import Checkpoint, RenderResult, default_threads
 from cornell_harness.scenes.export import export_scene
 from cornell_harness.scenes.export.luxcore import FEATURES
 from cornell_harness.scenes.model import Scene
-from cornell_harness.renderers.luxcore_cli import mean_and_variance
-
-#: Default number of independent batches a render is split into (the variance's degrees of freedom).
-BATCHES = 16
-#: Characters of the child's stderr quoted when it fails.
-STDERR_TAIL = 2000
-
-
-def batch_plan(spp: int, batches: int, checkpoints: Sequence[int] = ()) -> list[int]:
-    """The spp of each batch: passes of at most ``ceil(spp / batches)``, with a boundary at every checkpoint
-    (:func:`cornell_harness.adapters.api.spp_passes`: they double from 1, so every power of two is a boundary)."""
-    return list(spp_passes(spp, max(1, -(-spp // batches)), checkpoints))
-
-
-def _child_env() -> dict:
-    """The environment of the child: the folder holding this package first on the path, so it runs the same code."""
-    root = str(Path(__file__).resolve().parents[2])
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
-    return env
-
+from cornell_harness.renderers.batches import BATCHES_SETTING, STDERR_TAIL, batch_plan, child_env, mean_and_variance
 
 def _run_child(argv: list[str], folder: Path, time_limit_s: float | None = None) -> tuple[int, str, str]:
     """Run the child (:func:`cornell_harness.processes.run`: ended with the command, or at ``time_limit_s``):
     (exit code, its stdout, the tail of its stderr), both kept in files of ``folder``."""
     with open(folder / "stdout.txt", "wb") as out, open(folder / "stderr.txt", "wb") as err:
-        code = processes.run(argv, time_limit_s, stdin=subprocess.DEVNULL, stdout=out, stderr=err, env=_child_env())
+        code = processes.run(argv, time_limit_s, stdin=subprocess.DEVNULL, stdout=out, stderr=err, env=child_env())
     tail = (folder / "stderr.txt").read_text(errors="replace").strip()[-STDERR_TAIL:]
     return code, (folder / "stdout.txt").read_text(errors="replace"), tail
 
@@ -95,10 +74,7 @@ class LuxCore:
     features = FEATURES
     quantities = ("radiance",)
     estimator = "unbiased"
-    settings = (
-        Setting("batches", int, BATCHES, "independent batches (each its own seed) the render is split into; "
-                "the variance of the mean comes from their spread", low=2, high=1 << 16),
-    )
+    settings = (BATCHES_SETTING,)
 
     def unavailable_reason(self) -> str | None:
         # Found, never imported: pyluxcore in this process would abort it (see the module docstring).
@@ -111,7 +87,7 @@ class LuxCore:
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
                settings: dict | None = None) -> RenderResult:
-        batches = int((settings or {}).get("batches", BATCHES))
+        batches = int((settings or {}).get("batches", BATCHES_SETTING.default))
         sizes = batch_plan(spp, max(2, batches) if spp >= 2 else 1, checkpoints)
         threads = default_threads()
         with tempfile.TemporaryDirectory(prefix="cbox-luxcore-") as tmp:

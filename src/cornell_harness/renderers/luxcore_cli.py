@@ -30,6 +30,7 @@ import numpy as np
 
 from cornell_harness.adapters.api import default_threads, pass_seed
 from cornell_harness.extras import install_line
+from cornell_harness.renderers.batches import mean_and_variance
 
 #: Exit status of a usage or input error (one line on stderr).
 USAGE_ERROR = 2
@@ -76,22 +77,6 @@ def batch_sizes(spp: int, batches: int, passes: str | None) -> list[int]:
     if not 1 <= batches <= spp:
         raise ValueError(f"--batches: expected 1 to --spp ({spp}), got {batches}")
     return [spp // batches + (k < spp % batches) for k in range(batches)]
-
-
-def mean_and_variance(means: list[np.ndarray], sizes: list[int]) -> tuple[np.ndarray, np.ndarray | None]:
-    """The spp-weighted mean of batch means and the variance of that mean (None from one batch).
-
-    With batch k's mean m_k over n_k samples and N = Σ n_k, s² = Σ n_k (m_k − m̄)² / (B − 1) is an
-    unbiased estimate of the per-sample variance σ² (E Σ n_k (m_k − m̄)² = B σ² − σ²), so s²/N
-    estimates the variance of m̄.
-    """
-    n = np.asarray(sizes, dtype=np.float64)[:, None, None, None]
-    m = np.stack(means).astype(np.float64)
-    mean = (n * m).sum(axis=0) / n.sum()
-    if len(means) < 2:
-        return mean, None
-    s2 = (n * (m - mean) ** 2).sum(axis=0) / (len(means) - 1)
-    return mean, s2 / n.sum()
 
 
 def write_exr(path: str, image: np.ndarray) -> None:
