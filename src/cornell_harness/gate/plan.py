@@ -13,9 +13,10 @@ z·m / (z + z_{1−β/2}), and :func:`~cornell_harness.evaluate.relative_bias.sp
 where the reference's variance alone is wider than that, no spp reaches it. β = 0.2, as ``reference verify``'s
 detectable bias uses. The power is per region and channel: the expectation passes when every interval does, so
 with several regions near their planned spp its chance is lower; the largest region's spp leaves the others
-with more. The standard errors are taken at the pilot's estimate, as the gate's intervals are. An expectation without a ``margin`` table is planned with the default margins
-(:mod:`cornell_harness.gate.margins`). The time is the pilot's, scaled by the spp ratio (set-up included, so
-an over-estimate for a renderer with a long set-up).
+with more. The standard errors are taken at the pilot's estimate, as the gate's intervals are. An expectation
+without a ``margin`` table is planned with the default margins (:mod:`cornell_harness.gate.margins`). The time
+is the pilot's, scaled by the spp ratio (set-up included, so an over-estimate for a renderer with a long
+set-up).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from cornell_harness.gate.run import resolve_all
 from cornell_harness.workflows import runner
 from cornell_harness.workflows.compare import spp_for_time_budget
 
-#: The false-pass rate the plan allows an unbiased render, per region and channel (power 1 − β).
+#: The chance the plan leaves an unbiased render of not passing (inconclusive), per region and channel.
 BETA = 0.2
 #: The pilot's spp is the configured spp over this (at least 1).
 PILOT_FRACTION = 16
