@@ -56,6 +56,15 @@ def gate(
     as_json: bool = typer.Option(False, "--json", help="Print the verdict on stdout as one JSON object (each "
                                                        "expectation with its checks and its run) instead of the "
                                                        "PASS/FAIL lines."),
+    plan: bool = typer.Option(False, "--plan", help="Render a short pilot per unbiased expectation (its spp / "
+                                                    "16, one seed) and print, per region, about the spp and time "
+                                                    "that resolve its margin with power 0.8, and the expectations "
+                                                    "whose budget cannot (or whose reference's variance forbids "
+                                                    "it); writes nothing. Exit 0, or 2 for a bad config. With "
+                                                    "--set, the derived scenes'."),
+    pilot_spp: Optional[int] = typer.Option(None, "--pilot-spp", min=1, help="With --plan: the pilot's spp "
+                                                                             "(default: each expectation's spp / "
+                                                                             "16)."),
     workers: Optional[int] = WorkersOpt,
     scheduler: Optional[str] = SchedulerOpt,
     dashboard: Optional[str] = DashboardOpt,
@@ -74,6 +83,9 @@ def gate(
     worker; the checks run here). JUnit and Markdown are written for every
     run, a config error included.
     """
+    if plan or pilot_spp is not None:
+        _plan(config, renderer_files, pilot_spp, overrides or (), plan, update_baseline or as_json)
+        return
     if overrides and update_baseline:
         raise typer.BadParameter("--update-baseline records the config's own scenes; not with --set", param_hint="--set")
     try:
@@ -111,6 +123,23 @@ def gate(
             typer.echo(note)
         typer.echo(f"gate {verdict}" + (f" ({skipped} skipped)" if skipped else ""))
     raise typer.Exit(code)
+
+
+def _plan(config: Path, renderer_files, pilot_spp: int | None, scene_overrides, plan: bool, other: bool) -> None:
+    """``cbox gate --plan``: the pilots' plan, printed (config errors propagate: exit 2)."""
+    if not plan:
+        raise typer.BadParameter("goes with --plan", param_hint="--pilot-spp")
+    if other:
+        raise typer.BadParameter("--plan renders pilots only: not with --update-baseline or --json",
+                                 param_hint="--plan")
+    from cornell_harness.gate.plan import plan_gate, plan_lines
+
+    if renderer_files:
+        from cornell_harness.adapters.registry import use_renderer_files
+
+        use_renderer_files(renderer_files)
+    for line in plan_lines(plan_gate(load_config(config), pilot=pilot_spp, scene_overrides=scene_overrides)):
+        typer.echo(line)
 
 
 def _verdict(cfg, outcomes, failed: int) -> dict:

@@ -132,6 +132,14 @@ def _check_bias_settings(cfg: GateConfig, i: int, exp: Expectation, entry: Rende
                 raise GateConfigError(cfg.path, f"expect[{i}].bias_limit.setting", str(e)) from None
 
 
+def resolve_all(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
+                scene_overrides: Sequence[str] = ()) -> list[tuple]:
+    """(scene, reference, renderer, smaller-budget renderer or None) of every expectation, in order; a config
+    error (GateConfigError, naming the field) before anything renders."""
+    stored: dict = {}
+    return [_resolve(cfg, i, exp, overrides, stored, scene_overrides) for i, exp in enumerate(cfg.expectations)]
+
+
 @dataclass(frozen=True)
 class GateJob:
     """One expectation's renders as plain data for whichever process renders them: the renderer as its spec
@@ -239,8 +247,7 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
         raise ValueError("renderer overrides are objects of this process: run them with the in-process executor")
     baseline = load_baseline(cfg) if not scene_overrides else {}
     metrics, seeds = baseline.get("expectations", {}), baseline.get("seeds", {})
-    stored: dict = {}
-    resolved = [_resolve(cfg, i, exp, overrides, stored, scene_overrides) for i, exp in enumerate(cfg.expectations)]
+    resolved = resolve_all(cfg, overrides, scene_overrides)
     shared: dict = {}  # scene name -> the executor's handles on its scene and reference, sent once
     tasks = []
     for i, (exp, (scene, ref, entry, small)) in enumerate(zip(cfg.expectations, resolved)):
