@@ -195,9 +195,9 @@ def _declaration(path: Path, name: str, t: dict) -> Declaration:
         if groups != 1:
             raise bad("time", f"the regex has {groups} groups; give exactly one, the seconds")
     try:
-        limit = parse_duration(t["time_limit"]) if "time_limit" in t else None
+        limit = parse_duration(t["time_limit"], "duration") if "time_limit" in t else None
     except ValueError as e:
-        raise bad("time_limit", str(e).replace("time budget", "duration")) from None
+        raise bad("time_limit", str(e)) from None
     return Declaration(name, path, tuple(command), fmt, frozenset(models), quantity, t.get("estimator", ESTIMATORS[0]),
                        variance, timing, limit)
 

@@ -100,9 +100,9 @@ def time_limit_seconds(value: str | None) -> float | None:
     if value is None:
         return None
     try:
-        return parse_duration(value)
+        return parse_duration(value, "time limit")
     except ValueError as e:
-        raise typer.BadParameter(str(e).replace("time budget", "time limit")) from None
+        raise typer.BadParameter(str(e)) from None
 
 
 TIME_LIMIT_HELP = ("End a render that runs longer than this (e.g. 90s, 10m), with every process it started, and "
