@@ -19,6 +19,7 @@ import pytest
 
 from cornell_harness import processes
 from tests.conftest import ROOT
+from tests.live_processes import group
 
 SEEDS = 3
 #: Seconds a held process is given to reach its point or to end, at most: guards against a hang only.
@@ -172,20 +173,7 @@ def test_a_signal_on_local_workers_closes_the_cluster(tmp_path, signum, code, wo
                                              "to resume", rest
     assert "Traceback" not in rest, rest
     deadline = time.monotonic() + 30  # the workers' nannies end with their scheduler
-    while (left := _group(proc.pid) + [p for p in tree if Path(f"/proc/{p}").exists()]) and \
+    while (left := group(proc.pid) + [p for p in tree if Path(f"/proc/{p}").exists()]) and \
             time.monotonic() < deadline:
         time.sleep(0.2)
     assert not left, left
-
-
-def _group(pgid: int) -> list[str]:
-    """The live processes of process group ``pgid`` (by /proc), zombies left out."""
-    found = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[2]) == pgid and fields[0] != "Z":
-            found.append(stat.parent.name)
-    return found

@@ -25,6 +25,7 @@ import pytest
 from cornell_harness import processes
 from tests.adapters.test_commands import renderers_file
 from tests.conftest import ROOT
+from tests.live_processes import alive, group, logged_pids
 
 #: The signals, the exit code each gives and the word of the line.
 SIGNALS = {"SIGTERM": (signal.SIGTERM, 143, "terminated"), "SIGINT": (signal.SIGINT, 130, "interrupted"),
@@ -46,30 +47,6 @@ def _argv(command: str, renderer: str, files: list[str], tmp_path: Path, busy: b
         return ["compare", "--scene", scene, *files, "-r", renderer, "--spp", spp, "--out", str(tmp_path / "out")]
     return ["converge", "--scene", scene, *files, "-r", renderer, "--spp", f"1,{spp}", "--seeds", "2",
             "--out", str(tmp_path / "exp")]
-
-
-def _pids(log: Path) -> list[int]:
-    return [int(line.split()[-1]) for line in log.read_text().splitlines()] if log.exists() else []
-
-
-def _alive(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
-    except (OSError, IndexError):
-        return False
-
-
-def _group(pgid: int) -> list[int]:
-    """The live processes of process group ``pgid``."""
-    found = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[2]) == pgid and fields[0] not in ("Z", "X"):
-            found.append(int(stat.parent.name))
-    return found
 
 
 def _cpu_s(*pids: int) -> float:
@@ -119,13 +96,13 @@ def test_a_signal_ends_the_command_and_every_process_it_started(tmp_path, comman
         started = _cpu_s(proc.pid, *processes.descendants(proc.pid))
         _wait_for("rendered", lambda: _cpu_s(proc.pid, *processes.descendants(proc.pid)) > started + 1.5, proc)
     else:
-        _wait_for("started the program and its child", lambda: len(_pids(log)) >= 2, proc)
+        _wait_for("started the program and its child", lambda: len(logged_pids(log)) >= 2, proc)
     tree = processes.descendants(proc.pid)  # in-process, the path tracer has none
     assert tree or (busy and command != "gate")
     proc.send_signal(signum)
     signalled = time.monotonic()
     deadline = signalled + ENDED_WITHIN_S
-    while (left := [p for p in [proc.pid, *tree, *_pids(log), *_group(proc.pid)] if _alive(p)]) and \
+    while (left := [p for p in [proc.pid, *tree, *logged_pids(log), *group(proc.pid)] if alive(p)]) and \
             time.monotonic() < deadline:
         time.sleep(0.05)
     ended_s = time.monotonic() - signalled

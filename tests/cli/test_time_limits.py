@@ -19,6 +19,7 @@ import pytest
 from cornell_harness.adapters.renderers_file import DEFAULT_LIMIT_PER_SAMPLE_S, DEFAULT_LIMIT_START_S, read_file
 from tests.adapters.test_commands import renderers_file
 from tests.conftest import cbox_in_process as cbox
+from tests.live_processes import alive, logged_pids
 
 
 @pytest.fixture
@@ -30,18 +31,6 @@ def tmpdir_watched(tmp_path, monkeypatch):
     monkeypatch.setattr(tempfile, "tempdir", str(tmp))
     yield tmp
     assert sorted(p.name for p in tmp.iterdir() if p.name.startswith("cbox-")) == []
-
-
-def _pids(tmp_path: Path) -> list[int]:
-    log = tmp_path / "runs.log"
-    return [int(line.split()[-1]) for line in log.read_text().splitlines()] if log.exists() else []
-
-
-def _gone(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] in ("Z", "X")
-    except OSError:
-        return True
 
 
 def _hanging(tmp_path: Path, extra: str = "") -> Path:
@@ -63,7 +52,8 @@ def test_time_limit_ends_a_hanging_program_and_records_the_failure(tmp_path, cap
     (rec,) = records
     assert rec["status"] == "failed" and rec["reason"].startswith("killed at its time limit of 3 s"), rec
     assert rec["time_s"] >= 3.0
-    assert len(_pids(tmp_path)) == 2 and all(map(_gone, _pids(tmp_path)))  # the program and its child
+    pids = logged_pids(tmp_path / "runs.log")
+    assert len(pids) == 2 and not any(map(alive, pids))  # the program and its child
 
 
 def test_the_programs_own_limit_from_its_renderers_file(tmp_path, capsys, tmpdir_watched):
@@ -76,7 +66,7 @@ def test_the_programs_own_limit_from_its_renderers_file(tmp_path, capsys, tmpdir
     (rec,) = [json.loads(line) for line in out.splitlines()]
     assert "fake-cli at 4 spp: killed at its time limit of 1 s" in rec["reason"], rec
     assert "the renderers file's time_limit sets it" in rec["reason"]
-    assert all(map(_gone, _pids(tmp_path)))
+    assert not any(map(alive, logged_pids(tmp_path / "runs.log")))
 
 
 def test_the_default_limit_grows_with_the_samples(tmp_path):
@@ -160,4 +150,5 @@ def test_the_gates_time_limit_ends_the_program_and_its_folder(tmp_path, capsys, 
                         "--out", str(tmp_path / "gate"))
     assert code == 1
     assert "time_limit: killed at its time limit of 3 s" in out, out
-    assert len(_pids(tmp_path)) == 2 and all(map(_gone, _pids(tmp_path)))
+    pids = logged_pids(tmp_path / "runs.log")
+    assert len(pids) == 2 and not any(map(alive, pids))
