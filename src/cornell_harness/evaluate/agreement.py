@@ -45,8 +45,10 @@ CHANNELS = "RGB"
 
 
 def sidak_level(alpha: float, tests: int) -> float:
-    """Per-test level that keeps the family-wise false-alarm rate at ``alpha`` over ``tests`` independent tests."""
-    return 1.0 - (1.0 - alpha) ** (1.0 / max(tests, 1))
+    """Per-test level that keeps the family-wise false-alarm rate at ``alpha`` over ``tests`` independent tests:
+    1 − (1 − alpha)^(1/tests), computed through log1p and expm1 so that a tiny ``alpha`` (an early sequential
+    look spends 1e-30) does not round to a level of 0."""
+    return float(-math.expm1(math.log1p(-alpha) / max(tests, 1)))
 
 
 def tile_sums(a: np.ndarray, tile: int) -> np.ndarray:
