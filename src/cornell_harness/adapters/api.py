@@ -258,6 +258,12 @@ class Declarations:
     approximations: tuple[str, ...] = ()
     #: A setting value that asks the harness for an oracle fitted to the stored reference (:class:`ReferenceFit`).
     reference_fit: ReferenceFit | None = None
+    #: True for a renderer whose ``render`` takes ``stop=``: a function called with each :class:`Checkpoint` as
+    #: it is made, in spp order; when it returns True the render ends there and returns that checkpoint's image
+    #: (with its variance where it gives one) as its result, at that checkpoint's spp. A sequential gate
+    #: (:mod:`cornell_harness.gate.sequential`) stops so at its first verdict; a renderer that cannot stop renders
+    #: its whole budget, and the gate takes its looks from the checkpoints afterwards.
+    stops_early: bool = False
 
 
 #: The declarations of a renderer that declares nothing.

@@ -318,23 +318,24 @@ class AORenderer(ToolkitRenderer):
 
     name = "ao"
     estimator = "unbiased"
+    stops_early = True
     quantities = ("ambient_occlusion",)
     settings = (sampler_setting("the camera rays and their occlusion rays (one sequence per pixel)", "pmj02",
                                 batches=False),)
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
-               settings: dict | None = None) -> RenderResult:
+               settings: dict | None = None, stop=None) -> RenderResult:
         if scene.quantity != "ambient_occlusion" or scene.ambient_occlusion is None:
             # The runner never gets here (cornell_harness.adapters.registry.missing_features); a direct call might.
             raise ValueError(f"{scene.name}: the ao renderer computes ambient occlusion, and this scene's "
                              f"quantity is {scene.quantity}")
         geom, setup_s = warmed_geometry(scene, lambda g: trace_ao(g, scene, 0, 1, 1, independent(0)))
         result = render_image(scene, spp, seed, lambda *unit: trace_ao(geom, scene, *unit), checkpoints,
-                              self.threads, sampler=with_defaults(self.settings, settings)["sampler"])
+                              self.threads, sampler=with_defaults(self.settings, settings)["sampler"], stop=stop)
         if result.variance is not None and result.info.get("batches", 1) > 1:  # independent: Bernoulli already
             # A pixel at the miss value whose samples all agree saw nothing (an occluded surface point reads
             # the miss value 0 only inside a closed pocket): exact, variance 0, whatever its neighbours.
             exact = (result.image == scene.ambient_occlusion.miss_value) & (result.variance == 0)
-            result.variance = pooled_variance(result.image, result.variance, spp, exact).astype(np.float32)
+            result.variance = pooled_variance(result.image, result.variance, result.spp, exact).astype(np.float32)
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
         return result

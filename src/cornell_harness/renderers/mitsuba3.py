@@ -204,12 +204,13 @@ def scene_dict(scene: Scene, spp: int, sampler: str = "independent", aovs: bool 
     return d
 
 
-def run_passes(spp: int, seed: int, per_pass: int, checkpoints: Sequence[int], sums, image, aovs=None):
+def run_passes(spp: int, seed: int, per_pass: int, checkpoints: Sequence[int], sums, image, aovs=None, stop=None):
     """Accumulate ``sums(n, pass_seed)`` (a tuple of per-pixel sums over n samples) over the passes of a render.
 
     Returns (sums over all spp, ``image(sums, spp)``, checkpoints, wall seconds spent in ``sums``, CPU seconds
-    spent in ``sums``, Mitsuba's threads included); a checkpoint's image is ``image(sums so far, done)``, its
-    auxiliary images ``aovs(sums so far, done)`` (none if None).
+    spent in ``sums``, Mitsuba's threads included, the spp rendered); a checkpoint's image is
+    ``image(sums so far, done)``, its auxiliary images ``aovs(sums so far, done)`` (none if None). When
+    ``stop`` (``stops_early``) returns True for a checkpoint, the render ends there: its spp is the checkpoint's.
     """
     acc, done, elapsed, cpu, shots = None, 0, 0.0, 0.0, []
     for k, n in enumerate(spp_passes(spp, per_pass, checkpoints)):
@@ -221,10 +222,12 @@ def run_passes(spp: int, seed: int, per_pass: int, checkpoints: Sequence[int], s
         done += n
         if done in checkpoints and done < spp:
             shots.append(Checkpoint(done, image(acc, done), elapsed, aovs(acc, done) if aovs else {}, cpu))
+            if stop is not None and stop(shots[-1]):
+                return acc, shots[-1].image, shots, elapsed, cpu, done
     final = image(acc, spp)
     if spp in checkpoints:
         shots.append(Checkpoint(spp, final, elapsed, aovs(acc, spp) if aovs else {}, cpu))
-    return acc, final, shots, elapsed, cpu
+    return acc, final, shots, elapsed, cpu, spp
 
 
 #: The kernels this process has compiled (or loaded from Dr.Jit's cache), by (scene content hash, what else
@@ -256,6 +259,7 @@ class Mitsuba3:
     quantities = ("radiance", "ambient_occlusion")
     approximations: tuple[str, ...] = ()
     aovs = AOVS
+    stops_early = True
     settings = (Setting("spectral", str, "auto", "auto: a scene with spectra renders them with the spectral variant "
                         "(llvm_ad_spectral, else scalar_spectral), any other scene with the RGB one; rgb: always "
                         "the RGB variant, on the scene's RGB projection (its rgb_convention)",
@@ -278,7 +282,7 @@ class Mitsuba3:
         return f"{mi.__version__} ({_select_variant('rgb')[0]})"  # a spectral run's variant: info["variant"]
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
-               aovs: Sequence[str] = (), settings: dict | None = None) -> RenderResult:
+               aovs: Sequence[str] = (), settings: dict | None = None, stop=None) -> RenderResult:
         spectral = (settings or {}).get("spectral", "auto") == "auto" and has_spectra(scene)
         variant, note = _use_variant("spectral" if spectral else "rgb")
         import mitsuba as mi
@@ -296,7 +300,7 @@ class Mitsuba3:
             raise ValueError(f"AOVs are for radiance images; scene {scene.name!r} is {scene.quantity}")
         mi_scene = mi.load_dict(scene_dict(scene, per_pass, aovs=bool(aovs), spectral=spectral))
         if scene.quantity == "ambient_occlusion":
-            return self._render_ao(mi_scene, scene, spp, seed, checkpoints, per_pass, info, clock)
+            return self._render_ao(mi_scene, scene, spp, seed, checkpoints, per_pass, info, clock, stop)
 
         if spectral:  # folded into the emitters (scene_dict)
             info["spectral_scale"] = round(spectral_scale(), 9)
@@ -310,14 +314,14 @@ class Mitsuba3:
         def aux(acc, n: int) -> dict:
             return {name: (acc[0][..., 3 + 3 * j:6 + 3 * j] / n).astype(np.float32) for j, name in enumerate(AOVS)}
 
-        acc, image, shots, elapsed, cpu = run_passes(spp, seed, per_pass, checkpoints, sums,
-                                                     lambda acc, n: (acc[0][..., :3] / n).astype(np.float32),
-                                                     aux if aovs else None)
+        acc, image, shots, elapsed, cpu, spp = run_passes(spp, seed, per_pass, checkpoints, sums,
+                                                          lambda acc, n: (acc[0][..., :3] / n).astype(np.float32),
+                                                          aux if aovs else None, stop)
         return RenderResult(image, elapsed, spp, seed, shots, info, aovs=aux(acc, spp) if aovs else {},
                             cpu_time_s=cpu)
 
     def _render_ao(self, mi_scene, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int], per_pass: int,
-                   info: dict, clock: Stopwatch) -> RenderResult:
+                   info: dict, clock: Stopwatch, stop=None) -> RenderResult:
         """Ambient occlusion (:mod:`cornell_harness.renderers.mitsuba_ao`): grey image and the variance of its mean."""
         if info["variant"] == "scalar_rgb":
             raise RuntimeError(f"ambient occlusion needs Mitsuba's llvm_ad_rgb variant: {info['variant_note']}")
@@ -330,8 +334,8 @@ class Mitsuba3:
         _warm_up((scene.content_hash(), "ao", info["variant"]), sums)
         info["setup_s"] = round(clock.wall(), 3)
 
-        (s1, s2), image, shots, elapsed, cpu = run_passes(
+        (s1, s2), image, shots, elapsed, cpu, spp = run_passes(
             spp, seed, per_pass, checkpoints, sums,
-            lambda acc, n: mitsuba_ao.mean_and_variance(acc[0], acc[1], n, shape)[0])
+            lambda acc, n: mitsuba_ao.mean_and_variance(acc[0], acc[1], n, shape)[0], stop=stop)
         variance = mitsuba_ao.mean_and_variance(s1, s2, spp, shape)[1]
         return RenderResult(image, elapsed, spp, seed, shots, info, variance, cpu_time_s=cpu)

@@ -282,6 +282,7 @@ class PathTracer(ToolkitRenderer):
 
     name = "pathtracer"
     aovs = AOVS
+    stops_early = True
     settings = (Setting("rr_depth", int, RR_DEPTH, "path vertex from which Russian roulette may end a path",
                         low=1, high=1000), SAMPLER_SETTING, VARIANCE_SETTING,
                 Setting("spectral", str, "rgb", "rgb: render the scene's RGB values; hero: render a spectral scene's "
@@ -289,7 +290,7 @@ class PathTracer(ToolkitRenderer):
                         "same linear sRGB (refuses RGB-only materials and emitters)", choices=SPECTRAL_MODES))
 
     def render(self, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
-               settings: dict | None = None, aovs: Sequence[str] = ()) -> RenderResult:
+               settings: dict | None = None, aovs: Sequence[str] = (), stop=None) -> RenderResult:
         s = with_defaults(self.settings, settings)
         rr_depth, sampler = s["rr_depth"], s["sampler"]
         if unknown := set(aovs) - set(AOVS):
@@ -307,7 +308,7 @@ class PathTracer(ToolkitRenderer):
             def trace(*unit):
                 return trace_paths(geom, scene, *unit, rr_depth, bool(aovs))
         result = render_image(scene, spp, seed, trace, checkpoints, self.threads, info, sampler, aovs,
-                              variance=s["variance"] == "batches")
+                              variance=s["variance"] == "batches", stop=stop)
         result.info.update(rays=geom.rays, setup_s=round(setup_s, 3))
         return result
 

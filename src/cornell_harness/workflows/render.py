@@ -6,7 +6,7 @@ a time-limited render must not spend its budget loading SciPy.
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -35,24 +35,30 @@ class RenderTimeout(RuntimeError):
         self.time_s = time_s
 
 
-def render_checked(entry: RendererEntry, scene: Scene, spp: int, seed: int,
-                   checkpoints: Sequence[int] = ()) -> RenderResult:
+def render_checked(entry: RendererEntry, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
+                   stop: Callable[[Checkpoint], bool] | None = None) -> RenderResult:
     """``entry``'s render with its settings, its image, variance and checkpoints checked; may raise.
 
     A renderer that declares settings gets every one of them, validated, typed and with its default filled in
     (whatever ``entry`` was built with); one that declares none keeps the plain signature. This is the only
-    place settings are resolved for a render: renderers never validate them again.
+    place settings are resolved for a render: renderers never validate them again. ``stop`` goes to a renderer
+    that declares ``stops_early`` (:class:`cornell_harness.adapters.api.Declarations`); it may then return a
+    result at one of ``checkpoints`` below ``spp``.
     """
     kwargs = {}
     if checkpoints:
         kwargs["checkpoints"] = list(checkpoints)
     if declared(entry.renderer):
         kwargs["settings"] = resolve_settings(entry.renderer, entry.settings)
+    if stop is not None and attribute(entry.renderer, "stops_early"):
+        kwargs["stop"] = stop
     fit = attribute(entry.renderer, "reference_fit")
     if fit is not None and kwargs.get("settings", {}).get(fit.setting) == fit.value:
         result = _fitted_render(entry.renderer, fit, scene, spp, seed, kwargs)
     else:
         result = entry.renderer.render(scene, spp, seed, **kwargs)
+    if "stop" in kwargs and result.spp != spp and result.spp not in checkpoints:
+        raise RenderError(f"stopped early at {result.spp} spp, which is not one of its checkpoints")
     expected = (scene.camera.height, scene.camera.width, 3)
     result.image = _checked_image(result.image, expected, "an image")
     if result.variance is not None:

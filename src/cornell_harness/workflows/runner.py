@@ -28,7 +28,7 @@ import json
 import math
 import traceback
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -176,14 +176,15 @@ class RunRecord:
 CALL_CPU_NOTE = "the whole render call, set-up included (the renderer gives no CPU time of its render proper)"
 
 
-def render_timed(entry: RendererEntry, scene: Scene, spp: int, seed: int,
-                 checkpoints: Sequence[int] = ()) -> tuple[RenderResult, Timing]:
+def render_timed(entry: RendererEntry, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int] = (),
+                 stop: Callable[[Checkpoint], bool] | None = None) -> tuple[RenderResult, Timing]:
     """:func:`render_checked` measured (:func:`cornell_harness.workflows.timing.measure`): every timed render of the
     harness (a run, a repeat, a time budget's calibration) is this call; its CPU time is :func:`cpu_time`.
-    An entry with a time limit renders in a child process ended at it (:func:`render_sandboxed`)."""
+    An entry with a time limit renders in a child process ended at it (:func:`render_sandboxed`). ``stop`` may end
+    the render at a checkpoint (:func:`cornell_harness.workflows.render.render_checked`)."""
     if entry.time_limit_s is not None:
-        return render_sandboxed(entry, scene, spp, seed, checkpoints, entry.time_limit_s)
-    return measure(lambda: render_checked(entry, scene, spp, seed, checkpoints))
+        return render_sandboxed(entry, scene, spp, seed, checkpoints, entry.time_limit_s, stop)
+    return measure(lambda: render_checked(entry, scene, spp, seed, checkpoints, stop))
 
 
 def cpu_time(result: RenderResult, timing: Timing) -> float:
@@ -239,50 +240,54 @@ def json_record(rec: "RunRecord") -> dict:
 
 
 def render_sandboxed(entry: RendererEntry, scene: Scene, spp: int, seed: int, checkpoints: Sequence[int],
-                     time_limit_s: float) -> tuple[RenderResult, Timing]:
+                     time_limit_s: float, stop: Callable[[Checkpoint], bool] | None = None
+                     ) -> tuple[RenderResult, Timing]:
     """:func:`render_checked` in a child process that is killed after ``time_limit_s`` (a hang cannot stall CI),
     with the child's measure of the call (:func:`cornell_harness.workflows.timing.measure`).
 
     Raises :class:`RenderTimeout` (carrying the time) when it is killed, RenderError for anything else
     that went wrong there.
     """
-    out = run_sandboxed(entry.spec, [(scene, spp, seed, list(checkpoints))], time_limit_s,
+    out = run_sandboxed(entry.spec, [(scene, spp, seed, list(checkpoints), stop)], time_limit_s,
                         settings=dict(entry.settings))
     if out.ended == "timeout":
         raise RenderTimeout(f"killed at its time limit of {time_limit_s:g} s (ran {out.time_s:.1f} s)", out.time_s)
     if (why := out.problem()) is not None:
         raise RenderError(why, out.traceback)
     shots = [Checkpoint(s, image, t, cpu_time_s=cpu) for s, image, t, cpu in out.checkpoints[0]]
-    return (RenderResult(out.images[0], out.render_times[0], spp, seed, shots, out.infos[0], out.variances[0],
+    return (RenderResult(out.images[0], out.render_times[0], out.spps[0], seed, shots, out.infos[0], out.variances[0],
                          cpu_time_s=out.cpu_times[0]), out.timings[0])
 
 
 def run_one(entry: RendererEntry, scene: Scene, spp: int, seed: int, reference: Reference | None,
-            checkpoints: Sequence[int] = (), time_limit_s: float | None = None) -> RunRecord:
+            checkpoints: Sequence[int] = (), time_limit_s: float | None = None,
+            stop: Callable[[Checkpoint], bool] | None = None) -> RunRecord:
     """Render and score one renderer; never raises for the renderer's own failures.
 
     With ``time_limit_s`` (or the entry's own) the render runs in a child process (:func:`render_sandboxed`);
     one that is killed at the limit is recorded as failed with ``info["timed_out"]`` and the time it ran.
+    A render that ``stop`` ended early is recorded at the spp it reached.
     """
     rec = RunRecord.new(scene, entry, spp, seed)
     if rec.status != "ok":
         return rec
     try:
         rec.version = str(entry.renderer.version())
-        result, timing = render_timed(entry.with_time_limit(time_limit_s), scene, spp, seed, checkpoints)
+        result, timing = render_timed(entry.with_time_limit(time_limit_s), scene, spp, seed, checkpoints, stop)
     except RenderTimeout as e:
         rec.status, rec.reason, rec.time_s = "failed", str(e), e.time_s
         rec.info = {"timed_out": True}
         return rec
     except Exception as e:  # any renderer bug must be reported, not crash the run
         return rec.failed(e)
+    rec.spp = int(result.spp) if stop is not None else spp
     rec.time_s, rec.info, rec.image = float(result.time_s), dict(result.info), result.image
     rec.variance, rec.checkpoints = result.variance, list(result.checkpoints)
     rec.timed(result, timing)
     if reference is None:
         rec.metrics = metrics.invalid_pixel_counts(result.image)
     else:
-        rec.metrics, rec.regions = score(scene, result.image, reference, spp, result.variance)
+        rec.metrics, rec.regions = score(scene, result.image, reference, rec.spp, result.variance)
     return rec
 
 

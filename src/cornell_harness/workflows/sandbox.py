@@ -89,6 +89,7 @@ class SandboxOutcome:
     shapes: list = dataclasses.field(default_factory=list)  # (H, W, 3) each render was asked for
     infos: list = dataclasses.field(default_factory=list)  # each render's RenderResult.info
     checkpoints: list = dataclasses.field(default_factory=list)  # each render's [(spp, image, time_s, cpu), ...]
+    spps: list = dataclasses.field(default_factory=list)  # each render's spp (below the asked one: stopped early)
 
     def problem(self) -> str | None:
         """Why the images cannot be used (None: they can)."""
@@ -102,9 +103,10 @@ class SandboxOutcome:
 
 def run_sandboxed(spec: str, renders: Sequence[tuple], time_bound_s: float, rss_bound_mb: float = math.inf,
                   settings: dict | None = None) -> SandboxOutcome:
-    """Render ``renders`` ((scene, spp, seed) or (scene, spp, seed, checkpoints), in order) with ``spec``
-    and its ``settings`` in a fresh process, within the bounds. Each render goes through
-    :func:`cornell_harness.workflows.render.render_checked`, the harness's one render path."""
+    """Render ``renders`` ((scene, spp, seed), (scene, spp, seed, checkpoints) or (scene, spp, seed, checkpoints,
+    stop), in order) with ``spec`` and its ``settings`` in a fresh process, within the bounds. Each render goes
+    through :func:`cornell_harness.workflows.render.render_checked`, the harness's one render path; a ``stop``
+    rule (picklable) travels with its render and runs in the child."""
     renders = list(renders)
     with tempfile.TemporaryDirectory(prefix="cbox-sandbox-") as tmp:
         folder = Path(tmp)
@@ -207,6 +209,7 @@ def _read_outcome(folder: Path, watched: _Watched, time_bound_s: float, rss_boun
             outcome.variances.append(z["variance"] if "variance" in z.files else None)
             outcome.checkpoints.append([(spp, z[f"checkpoint-{spp}"], t, cpu)
                                         for spp, t, cpu in r.get("checkpoints", [])])
+        outcome.spps.append(int(r["spp"]))
         outcome.render_times.append(float(r["time_s"]))
         outcome.cpu_times.append(r.get("cpu_time_s"))
         outcome.timings.append(Timing(**r["timing"]))
@@ -223,7 +226,7 @@ def _read_outcome(folder: Path, watched: _Watched, time_bound_s: float, rss_boun
 
 
 def _render_job(spec: str, settings: dict, folder: Path, result: dict) -> None:
-    """Render every (scene, spp, seed[, checkpoints]) of ``folder/renders.pkl`` with ``spec``, each to
+    """Render every (scene, spp, seed[, checkpoints[, stop]]) of ``folder/renders.pkl`` with ``spec``, each to
     ``render-<i>.npz``."""
     from cornell_harness.adapters.registry import resolve
     from cornell_harness.workflows.render import render_checked
@@ -241,14 +244,15 @@ def _render_job(spec: str, settings: dict, folder: Path, result: dict) -> None:
     with open(folder / "renders.pkl", "rb") as f:
         renders = pickle.load(f)
     for i, (scene, spp, seed, *rest) in enumerate(renders):
-        res, timed = measure(lambda: render_checked(entry, scene, spp, seed, rest[0] if rest else ()))
+        checkpoints, stop = (list(rest) + [(), None])[:2]
+        res, timed = measure(lambda: render_checked(entry, scene, spp, seed, checkpoints, stop))
         arrays = {"image": np.asarray(res.image)}
         if res.variance is not None:
             arrays["variance"] = np.asarray(res.variance)
         arrays.update({f"checkpoint-{c.spp}": np.asarray(c.image) for c in res.checkpoints})
         np.savez(folder / f"render-{i}.npz", **arrays)
         info = json.loads(json.dumps(dict(res.info), default=str))  # what JSON cannot hold, as text
-        result["renders"].append({"time_s": float(res.time_s), "info": info, "cpu_time_s": _number(res.cpu_time_s),
+        result["renders"].append({"spp": int(res.spp), "time_s": float(res.time_s), "info": info, "cpu_time_s": _number(res.cpu_time_s),
                                   "timing": timed.as_dict(),
                                   "checkpoints": [(c.spp, float(c.time_s), _number(c.cpu_time_s))
                                                   for c in res.checkpoints]})

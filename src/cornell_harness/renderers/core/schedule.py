@@ -61,19 +61,25 @@ def run_units(jobs: Iterable[J], work_fn: Callable[[J], R], reduce_fn: Callable[
 
     Reductions run on the calling thread; at most ``2·threads`` jobs are in
     flight (submitted, not yet reduced), so a slow reduction throttles the
-    producers instead of piling up results. An exception in a job is
-    raised here, at its turn.
+    producers instead of piling up results. An exception in a job, or in a
+    reduction (a render stopped early), is raised here at its turn, and the
+    jobs not yet started are cancelled.
     """
     with ThreadPoolExecutor(max_workers=threads) as pool:
         pending: deque = deque()
-        for job in jobs:
-            pending.append((job, pool.submit(work_fn, job)))
-            if len(pending) >= 2 * threads:
+        try:
+            for job in jobs:
+                pending.append((job, pool.submit(work_fn, job)))
+                if len(pending) >= 2 * threads:
+                    done, fut = pending.popleft()
+                    reduce_fn(done, fut.result())
+            while pending:
                 done, fut = pending.popleft()
                 reduce_fn(done, fut.result())
-        while pending:
-            done, fut = pending.popleft()
-            reduce_fn(done, fut.result())
+        except BaseException:
+            for _, fut in pending:
+                fut.cancel()
+            raise
 
 
 class Unit(NamedTuple):
@@ -98,6 +104,10 @@ def pass_units(passes: Sequence[int], pixels: int, threads: int) -> Iterator[Uni
             yield Unit(k, first, min(first + size, total), first + size >= total)
 
 
+class _Stopped(Exception):
+    """Raised by a reduction when the render's ``stop`` rule ends it at the checkpoint just made."""
+
+
 def render_image(
     scene: Scene,
     spp: int,
@@ -109,6 +119,7 @@ def render_image(
     sampler: str = "independent",
     aovs: Sequence[str] = (),
     variance: bool = True,
+    stop: Callable[[Checkpoint], bool] | None = None,
 ) -> RenderResult:
     """Run ``trace`` over every (pixel, sample) and average into an image, with its variance and checkpoints.
 
@@ -117,6 +128,8 @@ def render_image(
     it is one randomisation and the result reports no variance. With
     ``aovs`` (names, :data:`cornell_harness.adapters.api.AOVS`), ``trace`` returns
     (estimates, aux) and the result and its checkpoints carry those images.
+    ``stop`` (the ``stops_early`` declaration, :class:`cornell_harness.adapters.api.Declarations`) sees each
+    checkpoint as it is made; when it returns True the render ends there, with that checkpoint's spp.
     """
     if spp < 1:
         raise ValueError(f"spp must be >= 1, got {spp}")
@@ -143,12 +156,18 @@ def render_image(
             done += passes[unit.index]
             if done in checkpoints and done < spp:
                 shots.append(film.checkpoint(done, *clock.read()))
+                if stop is not None and stop(shots[-1]):
+                    raise _Stopped
 
-    run_units(pass_units(passes, film.pixels, threads), work, reduce, threads)
+    stopped = False
+    try:
+        run_units(pass_units(passes, film.pixels, threads), work, reduce, threads)
+    except _Stopped:
+        spp, stopped = done, True
     elapsed, cpu = clock.read()
     image = film.image(spp)
     aux = film.aovs(spp)
-    if spp in checkpoints:
+    if spp in checkpoints and not stopped:
         shots.append(Checkpoint(spp, image, elapsed, aux, cpu))
     meta = {"threads": threads, "sampler": sampler, **({"batches": batches} if batches > 1 else {}), **(info or {})}
     return RenderResult(image, elapsed, spp, seed, shots, meta, film.variance(spp), aux, cpu)
