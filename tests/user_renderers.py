@@ -175,6 +175,61 @@ class RegionScaledNoise(ScaledMitsubaNoise):
         return result
 
 
+class ProgressiveNoise(ScaledMitsubaNoise):
+    """The reference plus its own model's noise, rendered progressively: each pass (doubling, cut at the
+    checkpoints) adds independent noise, so a checkpoint is the mean so far, as a real progressive renderer's.
+    It ``stops_early``: ``stop`` sees each checkpoint and may end the render there. REGION (None: the whole
+    image) is scaled by 1 + BIAS (BIAS_ENV, when set in the environment, replaces it). ``samples`` counts the
+    samples per pixel rendered, over all calls, so a test can see what a stop saved."""
+
+    name = "progressive-noise"
+    features = ALL | {"sphere", "mirror", "dielectric"}
+    stops_early = True
+    REGION, BIAS, BIAS_ENV = None, 0.0, "CBOX_TEST_BIAS"
+    samples = 0
+
+    def render(self, scene, spp, seed, checkpoints=(), stop=None):
+        from cornell_harness.adapters.api import Checkpoint, spp_passes
+        from cornell_harness.evaluate.regions import region_masks
+        from cornell_harness.store.references import load_reference
+
+        ref = load_reference(scene)
+        scale = np.ones(ref.image.shape[:2])
+        bias = float(os.environ.get(self.BIAS_ENV, self.BIAS))
+        scale[region_masks(scene)[self.REGION] if self.REGION else slice(None)] += bias
+        rng = np.random.default_rng(seed)
+        total, done, shots = np.zeros(ref.image.shape), 0, []
+        sd = np.sqrt(ref.variance.astype(np.float64) * ref.spp)  # one sample's spread
+        for n in spp_passes(spp, spp, checkpoints):
+            total += n * ref.image + np.sqrt(n) * sd * rng.standard_normal(ref.image.shape)
+            done += n
+            type(self).samples += n
+            image = (total / done * scale[..., None]).astype(np.float32)
+            if done in checkpoints:
+                shots.append(Checkpoint(done, image, 0.01 * done, cpu_time_s=0.01 * done))
+                if stop is not None and done < spp and stop(shots[-1]):
+                    break
+        var = (sd ** 2 / done * scale[..., None] ** 2).astype(np.float32)
+        return RenderResult(image, 0.01 * done, done, seed, shots, variance=var, cpu_time_s=0.01 * done)
+
+
+class RegionProgressiveNoise(ProgressiveNoise):
+    """:class:`ProgressiveNoise` with ``glass-shadow`` biased by 10% (the caustic scene's hardest region)."""
+
+    name = "region-progressive-noise"
+    REGION, BIAS = "glass-shadow", 0.10
+
+
+class StopsNever(ProgressiveNoise):
+    """:class:`ProgressiveNoise` that cannot stop early (declares nothing): renders its whole budget."""
+
+    name = "stops-never"
+    stops_early = False
+
+    def render(self, scene, spp, seed, checkpoints=()):
+        return super().render(scene, spp, seed, checkpoints)
+
+
 class BrokenPixels(FlatGrey):
     """Grey with one NaN, one +Inf and one negative pixel: what ``cbox stress`` must catch."""
 

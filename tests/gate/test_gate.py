@@ -131,8 +131,8 @@ def test_budgets_at_the_ends_of_their_range_are_taken(tmp_path):
 
 
 @pytest.mark.parametrize("text, line", [
-    ('[[expect]]\nscene = "cornell-box"\nrenderer = "x"\n', 'expect[0].spp: give exactly one budget: spp = N or '
-                                                             'time = "10s"'),
+    ('[[expect]]\nscene = "cornell-box"\nrenderer = "x"\n', 'expect[0].spp: give exactly one budget: spp = N, '
+                                                             'time = "10s" or max_spp = N (sequential)'),
     # used to render, pass every check, then crash writing the JUnit file (exit 1, nothing written)
     ('[[expect]]\nname = 3\nscene = "cornell-box"\nrenderer = "pathtracer"\nspp = 1\nfinite_only = true\n',
      "expect[0].name: expected a string, got int"),

@@ -215,7 +215,7 @@ def _bias_limit_checks(exp: Expectation, errors: Mapping[str, np.ndarray] | str 
             out.append(Check(exp.name, f"bias_limit.{m}", r.passed, message, t, r.t_critical))
             continue
         verdict = str(interval_verdicts(r.limit.low, r.limit.high, margin, tol))
-        out.append(_three_way(exp, f"bias_limit.{m}", verdict == PASS,
+        out.append(three_way(exp, f"bias_limit.{m}", verdict == PASS,
                               f"{message}; {_limit_resolution(r, margin, tol, verdict)}", t, r.t_critical))
     return out
 
@@ -249,10 +249,10 @@ def _equivalence_check(exp: Expectation, table: BiasTable) -> Check:
     """Every region's bias interval inside its margin (pass), or not (inconclusive; a significant bias is the
     agreement test's failure)."""
     ok = not table.unresolved
-    return _three_way(exp, "equivalence", ok, equivalence_message(table), len(table.unresolved), 0)
+    return three_way(exp, "equivalence", ok, equivalence_message(table), len(table.unresolved), 0)
 
 
-def _three_way(exp: Expectation, name: str, ok: bool, message: str, value, limit) -> Check:
+def three_way(exp: Expectation, name: str, ok: bool, message: str, value, limit) -> Check:
     """A check that passes or is inconclusive (counted as a pass where the expectation says so)."""
     if ok:
         return Check(exp.name, name, True, message, value, limit)

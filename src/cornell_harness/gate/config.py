@@ -12,7 +12,7 @@ A gate config (TOML) lists expectations::
     [[expect]]
     scene = "cornell-box"             # stored name or path
     renderer = "pathtracer"           # registered name or package.module:Class
-    spp = 256                         # budget: spp, or time = "10s" (spp is then calibrated)
+    spp = 256                         # budget: spp, or time = "10s" (spp is then calibrated), or max_spp
     seed = 0                          # fixed: the same commit gives the same verdict
     unbiased = true                   # agreement, variance and outlier tests against the reference (below)
     margin = { image = 0.005 }        # optional: pass / fail / inconclusive on bias intervals (gate/margins.py)
@@ -27,97 +27,45 @@ A gate config (TOML) lists expectations::
     time_limit = "10m"                # optional: kill the render after this long (default: time_limit above)
     finite_only = true                # only to allow an expectation with no accuracy check (see below)
 
-The config is strict: its format is ``src/cornell_harness/schemas/gate.schema.json``
-(every key with its type, default and range, in ``docs/formats.md``), checked by
-:mod:`cornell_harness.schemas.reader`. An unknown key at any level, or an unknown metric in a
-budget or in ``regression_metrics``, is a config error (exit 2) with a
-did-you-mean, before anything renders; a misspelt key must never turn a
-gate green. A budget outside its metric's range, or a ``min`` above its
-``max``, is a config error too. An expectation must check accuracy (``unbiased``, a budget, a
-slope or ``consistency``) unless it says ``finite_only = true``.
+A *sequential* expectation gives ``max_spp = N`` (and optionally ``first_spp``, default N // 16) in place of
+``spp``: with ``unbiased = true`` and a ``margin`` it looks at spp doubling from ``first_spp`` up to
+``max_spp`` and stops at the first look with a verdict, its error rates spent over the looks
+(:mod:`cornell_harness.gate.sequential`; the config's ``beta`` and ``spending``).
 
-A budget may name a region's metric as a quoted key,
-``"region.<region>.<metric>"`` with ``<metric>`` one of
-:data:`cornell_harness.evaluate.registry.REGION_CHECK_METRICS`; the metric
-part is checked here, the region against the scene's ``[regions.*]`` when
-the gate resolves the scene (:mod:`cornell_harness.gate.run`), before anything
-renders. Baseline regression checks stay image-wide.
+The config is strict (``src/cornell_harness/schemas/gate.schema.json``, every key in ``docs/formats.md``): an
+unknown key or metric is a config error (exit 2) with a did-you-mean before anything renders, so a misspelt key
+never turns a gate green; so is a budget outside its metric's range, or a ``min`` above its ``max``. An
+expectation must check accuracy (``unbiased``, a budget, a slope or ``consistency``) unless it says
+``finite_only = true``. A budget may name a region's metric, ``"region.<region>.<metric>"``
+(:data:`cornell_harness.evaluate.registry.REGION_CHECK_METRICS`); the region is checked against the scene's
+when the gate resolves it (:mod:`cornell_harness.gate.run`). Baseline regression checks stay image-wide.
 
-``unbiased = true`` runs three statistical tests against the reference:
-``agreement`` (tiled z-tests, :mod:`cornell_harness.evaluate.agreement`),
-``variance`` (the variance the renderer reports must match the spread of
-its residuals, :mod:`cornell_harness.evaluate.variance_check`; skipped, a JUnit
-``<skipped/>`` and not a failure, when it reports none, since the other two then use the reference
-renderer's noise model) and ``outliers`` (one z-test per pixel,
-:mod:`cornell_harness.evaluate.outliers`). ``alpha`` is the family-wise
-false-alarm rate per expectation: the three share it by Šidák's
-correction, each at level 1 − (1 − alpha)^(1/3) (0.00334 for
-alpha = 0.01), so a correct renderer fails any of them with probability at
-most ``alpha``. The three assume an unbiased estimator: ``unbiased = true``
-for a renderer that declares ``estimator = "consistent"`` or ``"biased"``
-(:func:`cornell_harness.adapters.registry.estimator_of`) is a config error.
+``unbiased = true`` runs three statistical tests against the reference: ``agreement`` (tiled z-tests,
+:mod:`cornell_harness.evaluate.agreement`), ``variance`` (the renderer's own variance against its residuals,
+:mod:`cornell_harness.evaluate.variance_check`; skipped, not failed, without one, the other two then using the
+reference renderer's noise model) and ``outliers`` (a z-test per pixel, :mod:`cornell_harness.evaluate.outliers`).
+``alpha`` is their family-wise false-alarm rate, Šidák-shared: each at 1 − (1 − alpha)^(1/3). They assume an
+unbiased estimator: ``unbiased = true`` for a renderer that declares ``estimator = "consistent"`` or
+``"biased"`` is a config error.
 
-``consistency`` is what a consistent renderer (photon mapping, SPPM: biased,
-with an error that goes to 0 as its budget grows) is checked with instead:
-its error must fall with its budget. One of two forms::
+``consistency`` is what a consistent renderer (photon mapping, SPPM: biased, its error going to 0 as its
+budget grows) is checked with instead: ``slope = [lo, hi]``, the log-log slope of ``metric`` (default ``mse``;
+an error that falls, :data:`CONSISTENCY_METRICS`, or a region's) against spp over the render's own checkpoints
+from ``from_spp`` (default spp // 16), or ``max_ratio = r`` with ``smaller = { spp = N, <setting> = value }``, a
+second render at a smaller budget whose error must be at least 1/r times the full render's. SPPM with radius
+reduction α = 2/3 has an MSE rate of iterations^(-2/3) (Knaus & Zwicker 2011), so its band sits around −2/3.
 
-    consistency = { metric = "mse", slope = [-0.9, -0.4], from_spp = 16 }
-    consistency = { metric = "region.caustic.rel_mse", max_ratio = 0.6,
-                    smaller = { spp = 16, global_photons = 50000 } }
+``bias_limit`` tests a consistent renderer's error in the limit of infinite effort against 0 across seeds
+(:mod:`cornell_harness.evaluate.bias_extrapolation`): each of ``seeds`` seeds (k·seed .. k·seed + k − 1) is
+rendered at every effort (the named ``setting`` set to each, at ``spp``; without ``setting`` the efforts are
+spp checkpoints), each seed's signed mean errors fitted as b∞ + c·(E/E₀)^(−rate) (Richardson extrapolation) and
+the limits t-tested against 0 at ``alpha``, Šidák over ``metrics``; ``tolerance`` allows a limit up to ±x and
+``margin`` gives it three verdicts. docs/gate-detection.md, "Biased renderers", has the derivation and the
+measured rates.
 
-- ``slope = [lo, hi]``: the log-log least-squares slope of ``metric``
-  against spp over the render's own checkpoints, from ``from_spp``
-  (default spp // 16, at least 1) doubling up to spp, must lie in the band:
-  for a progressive renderer that returns every checkpoint from one render
-  (SPPM, where spp counts iterations).
-- ``max_ratio = r`` with ``smaller = { spp = N, <setting> = value, ... }``:
-  a second render of the same renderer and seed at a smaller budget (its
-  spp and/or settings replaced; settings are validated like ``settings``)
-  must have an error at least 1/r times the full render's:
-  metric(full) ≤ r · metric(smaller). For photon mapping, whose error at
-  fixed photon counts does not fall with spp, the budget is its photon
-  counts.
-
-``metric`` (default ``mse``) is an image metric where lower is better
-(:data:`CONSISTENCY_METRICS`) or a region's, ``region.<region>.<metric>``;
-a signed one (``mean_radiance_rel_error``, ``mean_z``) is taken by
-magnitude. The band or ratio is the renderer's to choose from its
-convergence rate, widened for one seed's noise: e.g. SPPM with radius
-reduction α = 2/3 has an asymptotic MSE rate of iterations^(-2/3)
-(Knaus & Zwicker 2011, "Progressive photon mapping: a probabilistic
-approach"; Kaplanyan & Dachsbacher 2013, "Adaptive progressive photon
-mapping"), so its MSE slope settles near -2/3 once the checkpoints are
-past the start, where bias and variance still trade.
-
-``bias_limit`` tests a consistent renderer's error in the limit of infinite
-effort against 0, across seeds (:mod:`cornell_harness.evaluate.bias_extrapolation`)::
-
-    bias_limit = { efforts = [62500, 250000], setting = ["global_photons", "caustic_photons"],
-                   rate = 1, seeds = 8, spp = 16,
-                   metrics = ["mean_radiance_rel_error", "region.caustic.mean_radiance_rel_error"] }
-
-Each of ``seeds`` seeds (k·seed .. k·seed + k − 1, so the seed sets of
-different ``seed``s are disjoint) is rendered at every effort: with
-``setting``, the named settings set to each effort in turn at ``spp``
-(default 16); without it, the efforts are spps, checkpoints of one render
-(SPPM's iterations). Per seed, each metric's error is fitted as
-b∞ + c·(E/E₀)^(−rate) (Richardson extrapolation with the estimator's known
-rate) and the seeds' b∞ are t-tested against 0 at the expectation's ``alpha``,
-Šidák-split over ``metrics``: one check ``bias_limit.<metric>`` each. The
-metrics are signed mean errors: ``mean_radiance_rel_error``, image-wide or a
-region's (default: image-wide only). ``tolerance = { <metric> = x }`` allows
-a limit up to ±x (default 0): the check then fails only a limit whose
-t-interval lies wholly beyond it, for where the efforts a gate affords have
-not reached the asymptotic rate (measure the clean renderer's limit first).
-
-Every expectation also checks that the image has no NaN and no Inf pixel.
-Baseline checks compare runs at the seed the baseline was recorded with
-only (a metric's spread between seeds can exceed any useful margin); an
-expectation the baseline cannot be compared with (another seed, no record
-of it, scenes derived with ``--set``) has one skipped ``baseline`` check
-that says why.
-Each check becomes one JUnit test case; the Markdown summary and the HTML
-report say which expectation failed, by how much, and where in the image.
+Every expectation also checks that the image has no NaN and no Inf pixel. Baseline checks compare runs at the
+baseline's own seed only (a metric's spread between seeds can exceed any useful margin); one that cannot be
+compared (another seed, no record, scenes derived with ``--set``) has one skipped ``baseline`` check saying why.
 """
 
 from __future__ import annotations
@@ -125,6 +73,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cornell_harness.evaluate.sequential import SPENDING
 from cornell_harness.evaluate.registry import (HIGHER_IS_BETTER, IMAGE_METRICS, REGION_CHECK_METRICS, bound_problem,
                                                region_metric)
 from cornell_harness.gate.margins import MarginProblem, Margins, parse_margins
@@ -138,6 +87,8 @@ DEFAULT_REGRESSION_MARGIN = 0.05
 DEFAULT_REGRESSION_METRICS = ("delta_e2000_mean", "rel_mse_trimmed", "ssim")
 #: Default wall-time limit of one expectation's render: generous, it only has to stop a hang.
 DEFAULT_TIME_LIMIT_S = 1800.0
+#: A sequential expectation's default false-pass rate at its margin, over all its looks.
+DEFAULT_BETA = 0.05
 #: The signed error a bias limit extrapolates, image-wide or as a region's ``region.<region>.<metric>``.
 BIAS_LIMIT_METRIC = "mean_radiance_rel_error"
 #: Image metrics a consistency check may follow: errors, which fall towards 0 (not PSNR or SSIM).
@@ -205,6 +156,17 @@ class Expectation:
     bias_limit: BiasLimit | None = None
     margins: Margins | None = None  # an unbiased expectation's margins (gate.margins): three verdicts
     inconclusive: str = "fail"  # how an inconclusive verdict counts: "fail" (exit 3) or "pass"
+    max_spp: int | None = None  # sequential: looks at spp doubling from first_spp up to max_spp (gate.sequential)
+    first_spp: int | None = None
+
+    def looks(self) -> list[int]:
+        """A sequential expectation's looks: first_spp (default max_spp // 16), doubling, up to max_spp."""
+        first = self.first_spp or max(1, self.max_spp // 16)
+        out, s = [], first
+        while s < self.max_spp:
+            out.append(s)
+            s *= 2
+        return out + [self.max_spp]
 
     def region_metrics(self) -> list[tuple[str, str]]:
         """(field, ``region.<region>.<metric>``) of every region metric it names: the gate checks the regions."""
@@ -225,6 +187,8 @@ class GateConfig:
     baseline: Path | None = None
     regression_margin: float = DEFAULT_REGRESSION_MARGIN
     regression_metrics: tuple[str, ...] = DEFAULT_REGRESSION_METRICS
+    beta: float = DEFAULT_BETA
+    spending: str = SPENDING[0]
 
 
 def _check_names(path: Path, names, allowed, where: str, what: str = "metric") -> None:
@@ -288,13 +252,15 @@ def load_config(path: str | Path) -> GateConfig:
             raise GateConfigError(path, f"expect[{i}].name", f"two expectations are named {name!r}; give one a name")
     return GateConfig(path, float(doc.get("alpha", DEFAULT_ALPHA)), exps,
                       path.parent / baseline if baseline else None,
-                      float(doc.get("regression_margin", DEFAULT_REGRESSION_MARGIN)), tuple(reg))
+                      float(doc.get("regression_margin", DEFAULT_REGRESSION_MARGIN)), tuple(reg),
+                      float(doc.get("beta", DEFAULT_BETA)), doc.get("spending", SPENDING[0]))
 
 
 def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expectation:
     w = f"expect[{i}]."
-    if ("spp" in t) == ("time" in t):
-        raise GateConfigError(path, f"{w}spp", "give exactly one budget: spp = N or time = \"10s\"")
+    if sum(k in t for k in ("spp", "time", "max_spp")) != 1:
+        raise GateConfigError(path, f"{w}spp", "give exactly one budget: spp = N, time = \"10s\" or max_spp = N "
+                              "(sequential)")
     spp = t.get("spp")
     time_s = _duration(path, t, "time", w, None)
     slope = _band(path, t["slope"], f"{w}slope") if "slope" in t else None
@@ -314,13 +280,37 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
         raise GateConfigError(path, f"expect[{i}]", "no accuracy check: give unbiased = true, a budget (max, min, "
                               "abs_max), a slope or a consistency check; or finite_only = true to check only for "
                               "NaN and Inf")
-    budget = f"{spp}spp" if spp else f"{time_s:g}s"
+    _check_sequential(path, t, w)
+    budget = f"{spp}spp" if spp else f"max{t['max_spp']}spp" if "max_spp" in t else f"{time_s:g}s"
     shown = f"[{','.join(f'{k}={v}' for k, v in sorted(settings.items()))}]" if settings else ""
     name = t.get("name") or f"{t['scene']}/{t['renderer']}{shown}@{budget}"
     return Expectation(name, t["scene"], t["renderer"], spp, time_s, t.get("seed", 0), unbiased, t.get("tile", 16),
                        slope, budgets["max"], budgets["min"], budgets["abs_max"], settings,
                        _duration(path, t, "time_limit", w, time_limit), consistency, bias_limit, margins,
-                       t.get("inconclusive", "fail"))
+                       t.get("inconclusive", "fail"), t.get("max_spp"), t.get("first_spp"))
+
+
+#: What a sequential expectation cannot have: checks of a render at one fixed spp.
+_FIXED_SPP_CHECKS = ("slope", "max", "min", "abs_max", "consistency", "bias_limit")
+
+
+def _check_sequential(path: Path, t: dict, w: str) -> None:
+    """``max_spp`` goes with ``unbiased = true`` and a ``margin`` (its pass is equivalence), not with checks
+    made at one fixed spp; ``first_spp`` goes with it, below it."""
+    if "max_spp" not in t:
+        if "first_spp" in t:
+            raise GateConfigError(path, f"{w}first_spp", "goes with max_spp (a sequential expectation)")
+        return
+    if not t.get("unbiased", False) or "margin" not in t:
+        raise GateConfigError(path, f"{w}max_spp", "a sequential expectation needs unbiased = true and a margin "
+                              "table: it stops at the first look whose bias intervals fail or lie inside the margins")
+    for key in _FIXED_SPP_CHECKS:
+        if key in t:
+            raise GateConfigError(path, f"{w}{key}", "goes with spp, not max_spp: a sequential expectation stops at "
+                                  "a spp of its own, and this check is made at one fixed spp")
+    if t.get("first_spp", 1) >= t["max_spp"]:
+        raise GateConfigError(path, f"{w}first_spp", f"must be below max_spp ({t['max_spp']}): a sequential "
+                              "expectation needs two looks")
 
 
 def _check_budgets(path: Path, w: str, budgets: dict[str, dict[str, float]]) -> None:

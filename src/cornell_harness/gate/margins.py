@@ -146,18 +146,24 @@ def _power_of_two(n: float) -> int:
     return int(2 ** math.ceil(math.log2(max(n, 1.0))))
 
 
-def bias_table(image, variance, spp: int, ref, masks, alpha: float, margins: Margins | None) -> BiasTable:
+def bias_table(image, variance, spp: int, ref, masks, alpha: float, margins: Margins | None,
+               level: float | None = None) -> BiasTable:
     """The relative bias of the render against the reference ``ref`` (a Reference) over the whole image and
     each of ``masks``, per channel, with Fieller intervals simultaneous at ``alpha`` (Šidák over regions ×
     channels), from the render's ``variance`` floored at the reference's noise model (as the agreement test's,
     :func:`cornell_harness.evaluate.agreement.render_agreement`) and the reference's; with ``margins``, each
-    one's verdict and what would resolve it."""
+    one's verdict and what would resolve it. ``level`` sets each interval's two-sided level instead (a
+    sequential look's share of β, :mod:`cornell_harness.gate.sequential`); ``alpha`` then is what they cover
+    together, by Šidák."""
     model = noise.render_variance(ref.variance, ref.spp, spp)
     var = model if variance is None else np.maximum(variance, model)
     names, x, vx = region_sums(metrics.zero_broken_pixels(image), var, masks or {})
     _, y, vy = region_sums(ref.image, ref.variance, masks or {})
     pixels = [int(np.prod(ref.image.shape[:2]))] + [int(np.count_nonzero(masks[n])) for n in names[1:]]
-    level = sidak_level(alpha, x.size)
+    if level is None:
+        level = sidak_level(alpha, x.size)
+    else:
+        alpha = 1.0 - (1.0 - level) ** x.size
     b = relative_bias(x, vx, y, vy, level)
     if margins is None:
         return BiasTable(names, pixels, b, alpha, spp)
@@ -176,8 +182,8 @@ def equivalence_message(t: BiasTable) -> str:
     """The ``equivalence`` check's message: every region's interval, the unresolved ones first with what would
     resolve them."""
     level = t.intervals.level
-    head = (f"{len(t.regions)} region(s) × 3 channels, Fieller intervals simultaneous at {1 - t.alpha:g} (Šidák: "
-            f"{1 - level:.4g} each)")
+    head = (f"{len(t.regions)} region(s) × 3 channels, Fieller intervals simultaneous at {1 - t.alpha:.6g} (Šidák: "
+            f"each at level {level:.3g})")
     bad = t.unresolved
     if not bad:
         return f"every bias interval inside its margin at {t.spp} spp ({head}): " + "; ".join(

@@ -25,6 +25,7 @@ from cornell_harness.evaluate.registry import region_metric
 from cornell_harness.evaluate.score import metric_value
 from cornell_harness.gate.checks import Outcome, doubling, evaluate
 from cornell_harness.gate.config import Expectation, GateConfig, GateConfigError
+from cornell_harness.gate.sequential import Design, StopRule, design, evaluate_sequential
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.model import SceneError
 from cornell_harness.store.atomic import json_safe, write_json_atomic
@@ -151,6 +152,7 @@ class GateJob:
     smaller_settings: dict | None
     seed: int
     time_limit_s: float | None
+    design: Design | None = None  # a sequential expectation's looks and levels (gate.sequential)
 
 
 def render_bias_efforts(job: GateJob, scene, ref, entry: RendererEntry) -> dict[str, np.ndarray] | str:
@@ -209,11 +211,16 @@ def render_expectation(job: GateJob, scene, ref, entry: RendererEntry | None = N
     entry = entry or entry_for(job.spec, job.settings)
     if small is None and job.smaller_settings is not None:
         small = entry_for(job.spec, job.smaller_settings)
-    spp = exp.spp
-    if spp is None:
-        spp = spp_for_time_budget(entry, scene, exp.time_s, seed) if entry.available else 1
-    rec = runner.run_one(entry, scene, spp, seed, ref, checkpoints=_checkpoints(exp, spp),
-                         time_limit_s=job.time_limit_s)
+    spp, stop = exp.spp, None
+    if job.design is not None:  # sequential: one render to max_spp, its looks as checkpoints, stopped at a verdict
+        spp, checkpoints = exp.max_spp, exp.looks()
+        stop = StopRule(job.design, ref, region_masks(scene), exp.tile, exp.margins)
+    else:
+        if spp is None:
+            spp = spp_for_time_budget(entry, scene, exp.time_s, seed) if entry.available else 1
+        checkpoints = _checkpoints(exp, spp)
+    rec = runner.run_one(entry, scene, spp, seed, ref, checkpoints=checkpoints, time_limit_s=job.time_limit_s,
+                         stop=stop)
     smaller = None
     if small is not None and rec.status == "ok":  # the same renderer and seed at the smaller budget
         smaller = runner.run_one(small, scene, exp.consistency.smaller_spp or spp, seed, ref,
@@ -254,7 +261,7 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
         seed = exp.seed + seed_offset
         limit = exp.time_limit_s if sandbox and exp.renderer not in (overrides or {}) else None
         job = GateJob(exp, entry.spec, dict(entry.settings), None if small is None else dict(small.settings),
-                      seed, limit)
+                      seed, limit, design(exp, cfg) if exp.max_spp else None)
         if exp.scene not in shared:
             shared[exp.scene] = executor.share(scene), executor.share(ref)
         local = (entry, small) if executor.local else (None, None)
@@ -274,7 +281,10 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
             rec.status, rec.reason = "failed", f"not rendered: {result.error}"
         masks = region_masks(scene) if exp.region_metrics() or exp.unbiased else None  # regions are agreement tests
         base = _baseline_of(cfg, exp, rec, metrics, seeds, bool(scene_overrides))
-        outcomes[i] = evaluate(exp, rec, ref, cfg, base, smaller, masks, bias)
+        if exp.max_spp:
+            outcomes[i] = evaluate_sequential(exp, rec, ref, cfg, masks)
+        else:
+            outcomes[i] = evaluate(exp, rec, ref, cfg, base, smaller, masks, bias)
         if on_done:
             on_done(outcomes[i])
         if on_start and (following := next((j for j in range(len(tasks)) if outcomes[j] is None), None)) is not None:
