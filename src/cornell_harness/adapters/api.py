@@ -258,6 +258,9 @@ class Declarations:
     approximations: tuple[str, ...] = ()
     #: A setting value that asks the harness for an oracle fitted to the stored reference (:class:`ReferenceFit`).
     reference_fit: ReferenceFit | None = None
+    #: The published sources of its method, one short citation each (authors, year, title): shown with the
+    #: renderer in the docs' reference of renderers.
+    citations: tuple[str, ...] = ()
 
 
 #: The declarations of a renderer that declares nothing.
