@@ -4,7 +4,7 @@
 # Safe to run again: it only installs what is missing or changed.
 #
 #   scripts/setup.sh                 # what `cbox demo` needs
-#   scripts/setup.sh --tests         # plus the test tools: pytest, Playwright, Debian's chromium, pdflatex
+#   scripts/setup.sh --tests         # plus the test tools: pytest, Playwright, Debian's chromium, pdflatex, MkDocs
 #   CBOX_NO_APT=1 scripts/setup.sh   # never call apt-get (renderers needing
 #                                    # missing libraries then report themselves unavailable)
 set -euo pipefail
@@ -69,14 +69,15 @@ PY=${PYTHON:-python3}
 [[ -x .venv/bin/python ]] || { say "creating .venv"; "$PY" -m venv .venv; }
 
 # Reinstall only when the dependency list (or the --tests choice) changed. Every extra (pyproject.toml's
-# [all]: our renderers, Mitsuba, LuxCore, pyrender, OIDN, Dask), so that `cbox demo` has every renderer.
-extras="[all]"; [[ -n $TESTS ]] && extras="[all,test]"
+# [all]: our renderers, Mitsuba, LuxCore, pyrender, OIDN, Dask), so that `cbox demo` has every renderer; with
+# --tests also the test tools and the docs site's (tests/test_docs_site.py builds it).
+extras="[all]"; [[ -n $TESTS ]] && extras="[all,test,docs]"
 stamp=.venv/.cbox-installed
 sha=$(sha256sum pyproject.toml | cut -d' ' -f1)
 want="$sha$extras"
 have=$(cat "$stamp" 2>/dev/null || true)
 # A test install is a superset of the plain one: it satisfies both.
-if [[ $have != "$want" && $have != "$sha[all,test]" ]]; then
+if [[ $have != "$want" && $have != "$sha[all,test,docs]" ]]; then
   say "installing Python packages into .venv (first run takes a minute)"
   # pip's and setuptools' own chatter (build-backend warnings) goes to a log shown only if something fails,
   # so this script prints only its own lines.

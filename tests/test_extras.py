@@ -28,7 +28,7 @@ def _hide(monkeypatch, *modules: str) -> None:
 def test_every_extra_is_pyprojects_and_all_holds_them_all():
     optional = PYPROJECT["project"]["optional-dependencies"]
     listed = [extra for extra in extras.MODULES if extra not in extras.COMMANDS]
-    assert set(listed) | {"all", "test"} == set(optional)
+    assert set(listed) | {"all", "test", "docs"} == set(optional)
     assert optional["all"] == [f"cornell-harness[{','.join(listed)}]"]
     assert not any(dep.startswith(("numba", "mitsuba", "pyluxcore", "dask", "embreex", "pyoidn", "pyrender"))
                    for dep in PYPROJECT["project"]["dependencies"])

@@ -264,6 +264,9 @@ class Declarations:
     #: (:mod:`cornell_harness.gate.sequential`) stops so at its first verdict; a renderer that cannot stop renders
     #: its whole budget, and the gate takes its looks from the checkpoints afterwards.
     stops_early: bool = False
+    #: The published sources of its method, one short citation each (authors, year, title): shown with the
+    #: renderer in the docs' reference of renderers.
+    citations: tuple[str, ...] = ()
 
 
 #: The declarations of a renderer that declares nothing.

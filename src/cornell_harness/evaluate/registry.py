@@ -39,11 +39,25 @@ class Metric:
     colour: bool = False  # radiance images only (a colour difference, HDR-FLIP); an AO image is one scalar
     cheap: bool = False  # a per-image metric of a few passes over the pixels: a check computes it unasked
     values: tuple[float, float] = ANY  # the closed range it lies in: a threshold outside it is meaningless
+    citation: str = ""  # the published source of its definition; "" for a plain count, mean or bookkeeping column
 
 
 def _m(key, label, definition, better=None, axis=None, slope=None, per_image=True, colour=False,
-       cheap=False, values=NON_NEGATIVE) -> Metric:
-    return Metric(key, label, definition, better, axis, slope, per_image, colour, cheap, values)
+       cheap=False, values=NON_NEGATIVE, cite="") -> Metric:
+    return Metric(key, label, definition, better, axis, slope, per_image, colour, cheap, values, cite)
+
+
+#: Sources cited by several metrics.
+_VEACH = "Veach 1997, \"Robust Monte Carlo Methods for Light Transport Simulation\" (PhD thesis), §2.4"
+_ROUSSELLE = "Rousselle, Knaus and Zwicker 2011 (SIGGRAPH Asia): relMSE with ε = 0.01"
+_DISPLAY = "display encoding: Reinhard et al. 2002 (exposure), IEC 61966-2-1 (sRGB)"
+_SSIM = ("Wang, Bovik, Sheikh and Simoncelli 2004, \"Image quality assessment: from error visibility to "
+         "structural similarity\"")
+_JND = "Sharma 2003, \"Digital Color Imaging Handbook\"; Mahy et al. 1994: ΔE₀₀ 2.3 is just noticeable"
+_FLIP = ("Andersson, Nilsson, Shirley and Akenine-Möller 2021, \"Visualizing Errors in Rendered High Dynamic "
+         "Range Images\"")
+_CIEDE2000 = ("Sharma, Wu and Dalal 2005, \"The CIEDE2000 color-difference formula: implementation notes, "
+              "supplementary test data, and mathematical observations\"")
 
 
 _TABLE = (
@@ -57,25 +71,27 @@ _TABLE = (
     _m("seeds", "seeds", "number of seeds (independent runs) the medians are over", per_image=False),
     _m("time_s", "time (s)", "wall time to reach this spp (median over seeds)", "low", per_image=False),
     _m("rmse", "RMSE", "root-mean-square error on linear radiance", "low", "RMSE (linear radiance)", -0.5,
-       cheap=True),
-    _m("mse", "MSE", "mean squared error on linear radiance", "low", "MSE", -1.0, cheap=True),
+       cheap=True, cite=_VEACH),
+    _m("mse", "MSE", "mean squared error on linear radiance", "low", "MSE", -1.0, cheap=True, cite=_VEACH),
     _m("rel_mse", "relMSE", "mean of (img−ref)²/(ref²+0.01) on linear radiance", "low", "relMSE", -1.0,
-       cheap=True),
+       cheap=True, cite=_ROUSSELLE),
     _m("rel_mse_trimmed", "relMSE trim.", "relMSE without the worst pixels (fireflies)", "low",
-       "relMSE (trimmed)", -1.0),
-    _m("psnr", "PSNR (dB)", "PSNR of the display-encoded images", "high"),
-    _m("ssim", "SSIM", "mean SSIM of the display-encoded images", "high", values=(-1.0, 1.0)),
-    _m("delta_e2000_mean", "ΔE mean", "mean CIEDE2000", "low", "mean ΔE₀₀", -0.5, colour=True),
+       "relMSE (trimmed)", -1.0, cite=_ROUSSELLE),
+    _m("psnr", "PSNR (dB)", "PSNR of the display-encoded images", "high", cite=_DISPLAY),
+    _m("ssim", "SSIM", "mean SSIM of the display-encoded images", "high", values=(-1.0, 1.0), cite=_SSIM),
+    _m("delta_e2000_mean", "ΔE mean", "mean CIEDE2000", "low", "mean ΔE₀₀", -0.5, colour=True,
+       cite=_CIEDE2000),
     _m("delta_e2000_p95", "ΔE p95", "95th percentile of CIEDE2000", "low", "ΔE₀₀ 95th percentile", -0.5,
-       colour=True),
-    _m("delta_e2000_max", "ΔE max", "maximum CIEDE2000", "low", colour=True),
+       colour=True, cite=_CIEDE2000),
+    _m("delta_e2000_max", "ΔE max", "maximum CIEDE2000", "low", colour=True, cite=_CIEDE2000),
     _m("delta_e2000_frac_gt_2_3", "ΔE > 2.3", "fraction of pixels above the just-noticeable difference", "low",
-       colour=True, values=UNIT),
+       colour=True, values=UNIT, cite=_JND),
     # Radiance only: HDR-FLIP re-exposes the image over a range of stops from the reference; an AO image
     # is a fraction shown as it is (exposure 1), which those exposures would brighten.
     _m("flip_mean", "FLIP mean", "mean HDR-FLIP on linear radiance (Andersson et al. 2021): how visible the "
        "difference is when flipping between the images, worst over exposures from the reference's brightest "
-       "to its median pixel; 0 none, 1 the largest", "low", "mean HDR-FLIP", colour=True, values=UNIT),
+       "to its median pixel; 0 none, 1 the largest", "low", "mean HDR-FLIP", colour=True, values=UNIT,
+       cite=_FLIP),
     _m("mean_radiance_r", "mean R", "mean radiance of the red channel (broken pixels skipped)", cheap=True,
        values=ANY),
     _m("mean_radiance_g", "mean G", "mean radiance of the green channel (broken pixels skipped)", cheap=True,
@@ -93,11 +109,12 @@ _TABLE = (
     _m("noise_mean_radiance_z", "mean rad. z",
        "z-score of the mean-radiance difference given the noise; |z| > 3 points at bias", values=ANY),
     _m("efficiency", "efficiency", "1/(MSE·time) at the highest spp: higher is better; unchanged by more time "
-       "for an unbiased renderer", "high", per_image=False),
+       "for an unbiased renderer", "high", per_image=False,
+       cite=_VEACH + "; Pharr, Jakob and Humphreys 2023, pbrt-v4, §2.1.4"),
     _m("slope_rmse_spp", "slope RMSE/spp", "log-log slope of RMSE against spp, mean over seeds ± 95% CI; "
-       "−0.5 for an unbiased renderer, towards 0 once bias dominates", per_image=False, values=ANY),
+       "−0.5 for an unbiased renderer, towards 0 once bias dominates", per_image=False, values=ANY, cite=_VEACH),
     _m("slope_rmse_time", "slope RMSE/time", "log-log slope of RMSE against wall time, mean over seeds ± 95% CI",
-       per_image=False, values=ANY),
+       per_image=False, values=ANY, cite=_VEACH),
     _m("bias2", "bias²", "squared bias, mean over pixels and channels (from several seeds' images)", "low",
        per_image=False),
     _m("variance", "variance", "between-seed variance, mean over pixels and channels", "low", per_image=False),

@@ -187,6 +187,10 @@ class AOAmbient(ToolkitRenderer):
     """Direct light plus ρ·La·AO (module docstring): Embree, batched queries, multithreaded, biased."""
 
     name = "ambient"
+    citations = (
+        'Cohen, Chen, Wallace and Greenberg 1988, "A Progressive Refinement Approach to Fast Radiosity Image '
+        'Generation" (SIGGRAPH), §4',
+        'Pharr, Jakob and Humphreys 2023, "Physically Based Rendering", 4th ed. (pbrt-v4), AOIntegrator')
     estimator = "biased"
     approximations = ("indirect light is one constant ambient radiance per channel, shadowed by short-range "
                       "ambient occlusion: biased, it does not converge to the reference",)

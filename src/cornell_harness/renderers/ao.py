@@ -317,6 +317,8 @@ class AORenderer(ToolkitRenderer):
     """Our ambient occlusion renderer (Embree, batched queries, multithreaded): the scene's AO, unbiased."""
 
     name = "ao"
+    citations = (
+        'Pharr, Jakob and Humphreys 2023, "Physically Based Rendering", 4th ed. (pbrt-v4), AOIntegrator',)
     estimator = "unbiased"
     stops_early = True
     quantities = ("ambient_occlusion",)

@@ -148,6 +148,8 @@ class Cycles:
     """Blender Cycles (CPU), through a scene built with ``bpy`` in a child process."""
 
     name = "cycles"
+    citations = (
+        "Blender 5.0's Cycles, https://www.cycles-renderer.org",)
     features = FEATURES
     quantities = ("radiance",)
     estimator = "unbiased"

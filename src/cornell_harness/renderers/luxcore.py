@@ -71,6 +71,8 @@ class LuxCore:
     """LuxCoreRender's PATHCPU path tracer, through an exported LuxCore SDL scene, in a child process."""
 
     name = "luxcore"
+    citations = (
+        "LuxCoreRender 2.11, https://luxcorerender.org",)
     features = FEATURES
     quantities = ("radiance",)
     estimator = "unbiased"

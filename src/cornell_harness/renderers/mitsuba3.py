@@ -255,6 +255,9 @@ class Mitsuba3:
     """Mitsuba 3 path tracer (``path`` integrator); ambient occlusion by :mod:`cornell_harness.renderers.mitsuba_ao`."""
 
     name = "mitsuba"
+    citations = (
+        'Jakob et al. 2022, "Mitsuba 3 renderer", https://mitsuba-renderer.org',
+        'Veach 1997, "Robust Monte Carlo Methods for Light Transport Simulation" (PhD thesis), §9.2')
     features = mitsuba_plugins.FEATURES  # what the translation into Mitsuba's plugins expresses
     quantities = ("radiance", "ambient_occlusion")
     approximations: tuple[str, ...] = ()

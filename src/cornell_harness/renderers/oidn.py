@@ -150,6 +150,7 @@ class Denoised:
 
     estimator = "biased"
     quantities = ("radiance",)
+    citations = ('Áfra 2024, "Intel Open Image Denoise", https://www.openimagedenoise.org',)
 
     def __init__(self, base, threads: int | None = None):
         self.base = base
@@ -159,6 +160,7 @@ class Denoised:
         self.approximations = tuple(base.approximations) + (
             "denoised by Intel Open Image Denoise (a learned filter): biased, no per-pixel variance",)
         self.settings = attribute(base, "settings") + OWN_SETTINGS
+        self.citations = attribute(base, "citations") + Denoised.citations
 
     def unavailable_reason(self) -> str | None:
         if not set(AOVS) <= set(attribute(self.base, "aovs")):

@@ -281,6 +281,10 @@ class PathTracer(ToolkitRenderer):
     """Our path tracer (Embree, vectorised wavefront, multithreaded)."""
 
     name = "pathtracer"
+    citations = (
+        'Veach 1997, "Robust Monte Carlo Methods for Light Transport Simulation" (PhD thesis), §9.2',
+        'Pharr, Jakob and Humphreys 2023, "Physically Based Rendering", 4th ed. (pbrt-v4), §13.4',
+        'Wilkie et al. 2014, "Hero Wavelength Spectral Sampling" (EGSR)')
     aovs = AOVS
     stops_early = True
     settings = (Setting("rr_depth", int, RR_DEPTH, "path vertex from which Russian roulette may end a path",

@@ -83,6 +83,10 @@ class PhotonMapper(ToolkitRenderer):
     """Our photon mapper (Jensen's two passes on Embree and cKDTree, multithreaded)."""
 
     name = "photonmap"
+    citations = (
+        'Jensen 1996, "Global Illumination using Photon Maps" (EGWR)',
+        'Jensen 2001, "Realistic Image Synthesis Using Photon Mapping", ch. 9',
+        'Christensen 1999, "Faster Photon Map Global Illumination" (JGT)')
     estimator = "consistent"
     approximations = ("caustics and indirect light are photon density estimates: blurred over the lookup "
                       "radius (biased), consistent as photons grow",)

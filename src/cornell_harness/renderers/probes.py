@@ -80,6 +80,10 @@ class IrradianceProbes(ToolkitRenderer):
     """DDGI irradiance probes on Embree (module docstring): multithreaded, biased."""
 
     name = "probes"
+    citations = (
+        'Majercik, Guertin, Nowrouzezahrai and McGuire 2019, "Dynamic Diffuse Global Illumination with '
+        'Ray-Traced Irradiance Fields" (JCGT 8(2))',
+        "NVIDIA RTXGI SDK (its defaults)")
     estimator = "biased"
     approximations = ("indirect light is interpolated from a grid of irradiance probes (DDGI): blurred "
                       "between probes, visibility by a Chebyshev bound, RTXGI's energy heuristics; biased",

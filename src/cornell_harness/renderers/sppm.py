@@ -99,6 +99,10 @@ class SPPM(ToolkitRenderer):
     """Our SPPM renderer (progressive: one checkpoint per power-of-two iteration count, from one run)."""
 
     name = "sppm"
+    citations = (
+        'Hachisuka and Jensen 2009, "Stochastic Progressive Photon Mapping" (SIGGRAPH Asia)',
+        'Knaus and Zwicker 2011, "Progressive Photon Mapping: A Probabilistic Approach" (ACM TOG)',
+        'Pharr, Jakob and Humphreys 2023, "Physically Based Rendering", 4th ed. (pbrt-v4), SPPMIntegrator')
     estimator = "consistent"
     approximations = ("indirect light and caustics are density estimates over shrinking radii: biased at any "
                       "finite iteration count, consistent",)

@@ -320,6 +320,11 @@ class SSAO(ToolkitRenderer):
     """Screen-space ambient occlusion: Crytek's sphere, the normal hemisphere, or GTAO (module docstring)."""
 
     name = "ssao"
+    citations = (
+        'Mittring 2007, "Finding Next Gen: CryEngine 2" (SIGGRAPH course)',
+        'Chapman 2013, "SSAO Tutorial"; de Vries, LearnOpenGL, "SSAO"',
+        'Jimenez, Wu, Pesce and Jarabo 2016, "Practical Realtime Strategies for Accurate Indirect Occlusion" '
+        '(ATVI-TR-16-01)')
     quantities = ("ambient_occlusion",)
     estimator = "biased"
     deterministic = True

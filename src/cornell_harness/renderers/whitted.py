@@ -378,6 +378,11 @@ class Whitted(ToolkitRenderer):
     """Whitted-style recursive ray tracing (module docstring): Embree, wavefront per depth, multithreaded."""
 
     name = "whitted"
+    citations = (
+        'Whitted 1980, "An Improved Illumination Model for Shaded Display" (CACM 23(6))',
+        'Cohen, Chen, Wallace and Greenberg 1988, "A Progressive Refinement Approach to Fast Radiosity Image '
+        'Generation" (SIGGRAPH), §4',
+        'Pharr, Jakob and Humphreys 2023, "Physically Based Rendering", 4th ed. (pbrt-v4), WhittedIntegrator')
     estimator = "biased"
     approximations = ("no diffuse interreflection: indirect light is an ambient term (none, Cohen et al.'s "
                       "constant, or that constant shadowed by AO)",

@@ -266,6 +266,9 @@ class Pyrender:
     """pyrender rasteriser: emission plus shadowed direct light, no indirect light."""
 
     name = "pyrender"
+    citations = (
+        "pyrender2, a maintained fork of pyrender 0.1.45 (OpenGL rasterisation)",
+        'Williams 1978, "Casting Curved Shadows on Curved Surfaces" (SIGGRAPH): shadow maps')
     deterministic = True  # no sampling: the seed changes nothing
     estimator = "biased"  # direct light only, shadow maps: it does not converge to the reference
     features = frozenset({"triangle_mesh", "diffuse", "area_light", "pinhole_camera", "box_filter"})
