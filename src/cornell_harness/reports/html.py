@@ -373,7 +373,7 @@ def write_report(
     of its images in ``images/`` (:func:`cornell_harness.reports.image_figure.write_image_figure`).
     ``figures=False`` writes the page alone (a few seconds quicker: converting
     every chart to PDF and 300 dpi PNG takes that).
-    With a summary, ``summary.csv`` and ``summary.tex`` are written beside ``path`` too
+    With a summary, ``summary.csv``, ``summary.tex`` and ``summary-wide.tex`` are written beside ``path`` too
     (:func:`cornell_harness.reports.summary_files.write_summary_files`), unless ``summary_files=False`` (a merged report
     writes every experiment's itself).
     """
