@@ -40,8 +40,8 @@ FIGURE_DPI = 110
 
 
 def markdown_table(summary_csv: Path, summary: pd.DataFrame) -> list[str]:
-    """The readable summary's decisive columns (those of ``summary.tex``, but a column no renderer has a value
-    in), each value with its 95% interval."""
+    """The readable summary's decisive columns but those no renderer has a value in (as ``summary-wide.tex``
+    holds them, where its width allows), each value with its 95% interval."""
     from cornell_harness.reports.summary_columns import decisive_columns, spec
 
     readable = pd.read_csv(summary_csv)
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     lines = markdown_table(out / "summary.csv", pd.read_parquet(out / "summary.parquet"))
     lines += ["", f"`cbox {shlex.join(COMMAND)} --out {args.out}` ({time.strftime('%Y-%m-%d')}); in brackets "
                   "the 95% intervals over the 2 seeds; a column no renderer reached (a time to a target) is left "
-                  "out here, `summary.tex` keeps it."]
+                  "out, as in `summary.tex`."]
     print(f"took {took / 60:.1f} min (a rerun resumes the folder: nothing finished renders again)", file=sys.stderr)
     body = "\n".join(lines)
     print(body, flush=True)

@@ -203,6 +203,21 @@ def test_write_report_writes_the_image_figure(tmp_path):
     assert ">Alpha<" in svg and ">beta-photons<" in svg
 
 
+def test_row_labels_say_the_spp_seed_and_time_of_each_image(tmp_path):
+    """The image shown is the first seed's at its highest spp: its label says so, with that run's time."""
+    case = rf.make_case(32, 32, names=("alpha-tracer", "beta-photons"), spps=(4, 16), seeds=(1, 2),
+                        not_run=False, with_summary=False)
+    case["images"] = {n: case["raw"][n, 1, 16] for n in ("alpha-tracer", "beta-photons")}
+    rf.write_case(tmp_path / "report.html", case, figures=True)
+    svg = ET.parse(tmp_path / "figures" / "images.svg").getroot()
+    rows = {g.get("data-row"): [(t.text, t.get("class")) for t in g.iter(SVG + "text")]
+            for g in _by_class(svg, "g", "row-label")}
+    # time = cost per spp × spp × (1 + 0.05 × seed) (tests/report_fixtures.py): 0.010 × 16 × 1.05, 0.004 × 16 × 1.05
+    assert rows["alpha-tracer"] == [("alpha-tracer", None), ("16 spp, seed 1, 0.168 s wall", "tick")]
+    assert rows["beta-photons"] == [("beta-photons", None), ("16 spp, seed 1, 0.0672 s wall", "tick")]
+    assert rows["reference"] == [("reference", None), (f"{case['reference'].spp} spp", "tick")]
+
+
 def test_crop_legend_names_each_crop_in_its_colour(written, case, tmp_path):
     crops = fig.choose_crops(case["scene"], (N, N))
     legend = _by_class(written["svg"], "g", "crop-legend")

@@ -128,8 +128,8 @@ def test_file_written_atomically_into_new_folders(report):
     path = report["path"]
     assert isinstance(path, Path) and path.is_file() and path.name == "report.html"
     # no temp file left behind, beside the report, among its figures or its images' PNGs
-    assert sorted(p.name for p in path.parent.iterdir()) == ["figures", "images", "report.html", "summary.csv",
-                                                             "summary.tex"]
+    assert sorted(p.name for p in path.parent.iterdir()) == ["figures", "images", "report.html", "summary-wide.tex",
+                                                             "summary.csv", "summary.tex"]
     assert not [p.name for p in (path.parent / "figures").iterdir() if p.name.startswith(".")]
     assert not [p.name for p in (path.parent / "images").iterdir() if p.name.startswith(".")]
     assert report["text"].lstrip().lower().startswith("<!doctype html>")

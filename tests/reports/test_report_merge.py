@@ -104,7 +104,8 @@ def test_same_scene_merges_into_one_table_with_a_section_each(experiments, tmp_p
     assert list(zip(readable["experiment"], readable["renderer"])) == [
         ("sweep-a", "seeded-noise"), ("sweep-b", "seeded-noise"), ("sweep-b", "flat-grey")]
     tex = (out / "summary.tex").read_text()
-    assert tex.count("\\begin{tabular}{l") == 2 and "\\textbf{sweep-a}" in tex and "\\textbf{sweep-b}" in tex
+    assert tex.count("\\begin{tabular}{l") == tex.count("\\begin{table}[") == 2
+    assert "\\caption{\\textbf{sweep-a}." in tex and "\\caption{\\textbf{sweep-b}." in tex
 
 
 def test_different_scenes_each_get_a_section(experiments, tmp_path, capsys):

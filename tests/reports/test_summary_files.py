@@ -1,8 +1,10 @@
-"""summary.csv (readable) and summary.tex (a booktabs table) from an experiment's summary (src/cornell_harness/reports/summary_files.py).
+"""summary.csv (readable) and summary.tex / summary-wide.tex (booktabs table floats) from an experiment's summary
+(src/cornell_harness/reports/summary_files.py).
 
 The summary is :func:`cornell_harness.evaluate.summary.summary_table`'s on the synthetic runs of tests/report_fixtures.py:
-every figure with its 95% bounds, four times to a target. summary.tex is parsed (balanced braces, cells per row,
-the best value per column in bold, escaped names) and, where ``pdflatex`` is installed, compiled.
+every figure with its 95% bounds, four times to a target. The TeX is parsed (balanced braces, cells per row,
+a clearly best value per column in bold, escaped names) and, where ``pdflatex`` is installed, compiled; whether it
+fits a two-column page: tests/reports/test_summary_tex_fits.py.
 """
 
 from __future__ import annotations
@@ -16,7 +18,8 @@ import pandas as pd
 import pytest
 
 from cornell_harness.evaluate.summary import summary_table
-from cornell_harness.reports.summary_columns import best_rows, decisive_columns, spec
+from cornell_harness.reports import latex
+from cornell_harness.reports.summary_columns import best_rows, clear_best_rows, decisive_columns, spec
 from cornell_harness.reports.summary_files import readable_summary, write_summary_files
 from tests import report_fixtures as rf
 
@@ -36,7 +39,7 @@ def summary():
 def written(summary, tmp_path_factory):
     folder = tmp_path_factory.mktemp("summary")
     paths = write_summary_files(folder, [(None, summary)], LABELS)
-    assert [p.name for p in paths] == ["summary.csv", "summary.tex"]
+    assert [p.name for p in paths] == ["summary.csv", "summary.tex", "summary-wide.tex"]
     return folder
 
 
@@ -105,35 +108,68 @@ def _table(tex: str) -> tuple[list[str], list[list[str]]]:
     return [h.strip() for h in header], [[c.strip() for c in r] for r in rows]
 
 
-def test_tex_is_booktabs_with_a_cell_per_column(written):
-    tex = (written / "summary.tex").read_text(encoding="utf-8")
-    _top_level(tex.split("\n", 4)[-1], "\0")  # braces balanced in the whole table
+@pytest.mark.parametrize("name, float_env", [("summary.tex", "table"), ("summary-wide.tex", "table*")])
+def test_tex_is_a_booktabs_float_with_a_cell_per_column(written, name, float_env):
+    tex = (written / name).read_text(encoding="utf-8")
+    _top_level(tex.split("\n", 3)[-1], "\0")  # braces balanced in the whole table
     assert tex.count("\\toprule") == tex.count("\\midrule") == tex.count("\\bottomrule") == 1
+    assert f"\\begin{{{float_env}}}[tbp]" in tex and tex.rstrip().endswith(f"\\end{{{float_env}}}")
     header, rows = _table(tex)
     assert len(rows) == 3 and all(len(r) == len(header) for r in rows), (header, rows)
     assert 1 < len(header) <= 9  # a renderer column and at most 8 figures
     assert re.search(r"\\begin\{tabular\}\{l(r+)\}", tex).group(1) == "r" * (len(header) - 1)
-    assert "time to\\\\mean $\\Delta E_{00}$ $\\le 1$ (s)" in tex and "efficiency\\\\1/(MSE$\\cdot$s)" in tex
+    assert "efficiency\\\\1/(MSE$\\cdot$s)" in tex
 
 
-def test_tex_escapes_names(written):
+def test_the_wide_table_has_more_figures_with_their_headers(written):
+    narrow, _ = _table((written / "summary.tex").read_text(encoding="utf-8"))
+    wide, _ = _table((written / "summary-wide.tex").read_text(encoding="utf-8"))
+    assert len(wide) > len(narrow) >= 3
+    assert "{\\begin{tabular}[b]{@{}c@{}}time to\\\\mean $\\Delta E_{00}$\\\\$\\le 2$ (s)\\end{tabular}}" in wide
+
+
+def test_tex_escapes_names_and_wraps_long_ones(written):
     _, rows = _table((written / "summary.tex").read_text(encoding="utf-8"))
-    assert rows[0][0] == (r"pathtracer{[}sampler={\ttfamily\char34}independent{\ttfamily\char34}{]} \& 5\% \#1\_x")
+    assert rows[0][0] == (r"{\begin{tabular}[t]{@{}l@{}}pathtracer{[} \\ sampler= \\ "
+                          r"{\ttfamily\char34}independent{\ttfamily\char34}{]} \\ \& 5\% \#1\_x\end{tabular}}")
     assert [r[0] for r in rows[1:]] == ["beta-photons", "gamma-raster"]
 
 
-def test_tex_bolds_the_best_value_of_each_column_with_a_direction(summary, written):
-    keys = decisive_columns(list(summary.columns))
-    assert keys[0] == "slope_rmse_spp" and "efficiency" in keys and len(keys) == 8
-    _, rows = _table((written / "summary.tex").read_text(encoding="utf-8"))
+def test_tex_bolds_a_best_value_only_where_its_interval_overlaps_no_other(summary, written):
+    tex = (written / "summary-wide.tex").read_text(encoding="utf-8")
+    header, rows = _table(tex)
+    keys = [k for k in decisive_columns(list(summary.columns)) if latex.header_cell(spec(k).tex) in header]
+    assert keys[0] == "slope_rmse_spp" and "efficiency" in keys and len(keys) == len(header) - 1
     directed = 0
     for j, key in enumerate(keys, start=1):
         bold = {i for i, r in enumerate(rows) if "\\textbf" in r[j]}
-        assert bold == best_rows(list(summary[key]), spec(key).better), key
+        assert bold == clear_best_rows(list(summary[key]), list(summary[key + "_low"]), list(summary[key + "_high"]),
+                                       spec(key).better), key
+        assert bold <= best_rows(list(summary[key]), spec(key).better), key
         directed += spec(key).better is not None
-        if spec(key).better is not None and np.isfinite(summary[key]).any():
-            assert bold, key
-    assert directed >= 5
+    assert directed >= 3
+    assert "Bold: a column's best value where its 95\\% interval overlaps no other renderer's." in tex
+
+
+def test_clear_best_needs_an_interval_apart_from_every_other():
+    assert clear_best_rows([1.0, 2.0, 3.0], [0.5, 1.5, 2.0], [1.4, 2.5, 4.0], "low") == {0}
+    assert clear_best_rows([1.0, 2.0, 3.0], [0.5, 1.5, 2.0], [1.6, 2.5, 4.0], "low") == set()  # meets the next
+    assert clear_best_rows([1.0, 2.0, 9.0], [0.5, 1.5, 0.9], [1.4, 2.5, 20.0], "low") == set()  # a wide third
+    assert clear_best_rows([1.0, 2.0, None], [0.5, 1.5, None], [1.4, 2.5, None], "low") == {0}  # no value: no say
+    assert clear_best_rows([3.0, 2.0], [None, None], [None, None], "high") == {0}  # no intervals: the points
+    assert clear_best_rows([2.0, 2.0], [2.0, 2.0], [2.0, 2.0], "high") == set()  # a tie
+    assert clear_best_rows([2.0], [1.0], [3.0], "high") == set()  # nothing to be better than
+    assert clear_best_rows([1.0, 5.0], [0.9, 4.0], [1.1, 6.0], None) == set()  # no direction
+
+
+def test_a_column_no_row_has_a_value_of_is_left_out(summary, tmp_path):
+    s = summary.copy()
+    s["efficiency"] = np.nan
+    write_summary_files(tmp_path, [(None, s)])
+    for name in ("summary.tex", "summary-wide.tex"):
+        header, rows = _table((tmp_path / name).read_text(encoding="utf-8"))
+        assert not [h for h in header if "efficiency" in h] and all(len(r) == len(header) for r in rows)
+    assert "efficiency, 1/(MSE·s)" in pd.read_csv(tmp_path / "summary.csv").columns  # the CSV keeps every column
 
 
 def test_tex_intervals_are_shown(written):
@@ -154,8 +190,9 @@ def test_decisive_columns_keep_the_first_in_priority_when_too_many():
                            "texlive-latex-recommended)")
 def test_tex_compiles_with_pdflatex(written, tmp_path):
     doc = tmp_path / "paper.tex"
-    doc.write_text("\\documentclass{article}\n\\usepackage{booktabs}\n\\begin{document}\n"
-                   f"\\input{{{(written / 'summary.tex').as_posix()}}}\n\\end{{document}}\n", encoding="utf-8")
+    doc.write_text("\\documentclass{article}\n\\usepackage{booktabs}\n\\usepackage{graphicx}\n\\begin{document}\n"
+                   f"\\input{{{(written / 'summary.tex').as_posix()}}}\n"
+                   f"\\input{{{(written / 'summary-wide.tex').as_posix()}}}\n\\end{{document}}\n", encoding="utf-8")
     proc = subprocess.run(["pdflatex", "-interaction=nonstopmode", "-halt-on-error", "-no-shell-escape", doc.name],
                           cwd=tmp_path, capture_output=True, text=True, timeout=120)
     log = (tmp_path / "paper.log").read_text(errors="replace") if (tmp_path / "paper.log").exists() else ""

@@ -40,7 +40,8 @@ def converge(
     seeds: int = typer.Option(4, "--seeds", min=1, help="Number of seeds (0 .. N-1); bias and variance need 2 or more."),
     out: Path = out_folder_option(Path("out/converge"), "Experiment folder: results.parquet, "
                                                                       "summary.parquet, summary.csv, summary.tex, "
-                                                                      "report.html, cells/, images/."),
+                                                                      "summary-wide.tex, report.html, cells/, "
+                                                                      "images/."),
     target: Optional[List[str]] = typer.Option(
         None, "--target", help="Target error for the time-to-target figure, METRIC=VALUE (repeatable), the "
                                "metric image-wide or in a region of the scene (region.caustic.rel_mse=0.01); "

@@ -42,7 +42,7 @@ from cornell_harness.store.atomic import write_text_atomic
 from cornell_harness.reports import plots
 from cornell_harness.reports.charts import SINGLE_SPP_NOTE, bias_variance_chart, chart_figures, page_charts
 from cornell_harness.reports.figures import WrittenFigures, write_figures
-from cornell_harness.reports.image_figure import write_image_figure
+from cornell_harness.reports.image_figure import image_captions, write_image_figure
 from cornell_harness.reports.images import JND
 from cornell_harness.reports.print_tables import print_tables
 from cornell_harness.reports.regions import bias_variance_table, region_section
@@ -249,7 +249,8 @@ def _context(
     bias_variance = bias_variance_chart(summary, names, colors, labels=shown)
     run_seeds = provenance.get("seeds") or []
     error_arrays: dict = {}  # the viewer's error maps, reused by the image figure
-    viewer, viewer_notes = image_viewer(ref_img, exposure, images, names, colors, runs, run_seeds, error_arrays)
+    viewer, viewer_notes = image_viewer(ref_img, exposure, images, names, colors, runs, run_seeds, error_arrays,
+                                        time_column)
     for entry in viewer.get("renderers", ()):
         entry["label"] = shown.get(entry["name"], entry["name"])
     ref_prov = dict(reference.provenance or {})
@@ -293,7 +294,8 @@ def _context(
         "region_bias_variance": Markup(bias_variance_table(summary, scene, colors) or ""),
         "viewer": viewer,
         "image_figure": {"reference_image": ref_img, "exposure": exposure, "maps": error_arrays,
-                         "images": {n: images[n] for n in names if n in images}},
+                         "images": {n: images[n] for n in names if n in images},
+                         "captions": image_captions(viewer, ref_prov.get("spp"), time_column)},
         "viewer_json": _json_for_script(viewer),
         "viewer_notes": viewer_notes,
         "legends": viewer_legends(),
@@ -373,7 +375,7 @@ def write_report(
     of its images in ``images/`` (:func:`cornell_harness.reports.image_figure.write_image_figure`).
     ``figures=False`` writes the page alone (a few seconds quicker: converting
     every chart to PDF and 300 dpi PNG takes that).
-    With a summary, ``summary.csv`` and ``summary.tex`` are written beside ``path`` too
+    With a summary, ``summary.csv``, ``summary.tex`` and ``summary-wide.tex`` are written beside ``path`` too
     (:func:`cornell_harness.reports.summary_files.write_summary_files`), unless ``summary_files=False`` (a merged report
     writes every experiment's itself).
     """

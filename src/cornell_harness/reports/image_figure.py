@@ -1,7 +1,7 @@
 """The paper's image grid: ``OUT/figures/images.{svg,pdf,png}``, and each of its images as a PNG in ``OUT/images/``.
 
 One row per image (the reference first, then each renderer, labelled with its
-display name), columns {tonemapped image, ΔE₀₀ map, FLIP map}, in the manner of
+display name and, in a smaller line, the spp, seed and time of the run the image is), columns {tonemapped image, ΔE₀₀ map, FLIP map}, in the manner of
 the pbrt-v4 and SeeSharp papers' comparison figures. The pixels are the
 report's own: the image as :func:`cornell_harness.evaluate.metrics.display_encode`
 shows it at the report's exposure, and the false-colour maps of
@@ -253,10 +253,26 @@ def _crop_legend(crops: Sequence[Crop], x: float, y: float) -> list[str]:
     return parts + ["</g>"]
 
 
+def image_captions(viewer: Mapping, reference_spp, time_column: str = "time_s") -> dict[str, str]:
+    """Row name -> what its image is: "64 spp, seed 0, 3.41 s wall" from the viewer's entries
+    (:func:`cornell_harness.reports.viewer.image_viewer`), the reference's spp; parts unknown are left out."""
+    clock = "CPU" if time_column == "cpu_time_s" else "wall"
+    out = {"reference": f"{int(reference_spp)} spp"} if reference_spp is not None else {}
+    for e in viewer.get("renderers", ()):
+        parts = [f"{e['spp']} spp" if e.get("spp") is not None else "",
+                 f"seed {e['seed']}" if e.get("seed") is not None else "",
+                 f"{e['time_s']:.3g} s {clock}" if e.get("time_s") is not None else ""]
+        out[e["name"]] = ", ".join(p for p in parts if p)
+    return {k: v for k, v in out.items() if v}
+
+
 def figure_svg(rows: Sequence[tuple[str, list]], crops: Sequence[Crop], columns: Sequence[int],
-               labels: Mapping[str, str], uris: Mapping | None = None) -> str:
+               labels: Mapping[str, str], uris: Mapping | None = None, captions: Mapping[str, str] | None = None
+               ) -> str:
     """The grid as a standalone SVG document. ``rows``: :func:`image_rows`'s; ``columns``: indices into
-    :data:`COLUMNS` shown; ``labels``: row name -> display text; ``uris``: :func:`encoded`'s, if at hand."""
+    :data:`COLUMNS` shown; ``labels``: row name -> display text; ``uris``: :func:`encoded`'s, if at hand;
+    ``captions``: row name -> its spp, seed and time (:func:`image_captions`), a smaller line under the name."""
+    captions = captions or {}
     uris = encoded(rows, crops, columns) if uris is None else uris
     img_h, img_w = rows[0][1][0].shape[:2]
     cell_h = _CELL * img_h / img_w
@@ -264,7 +280,7 @@ def figure_svg(rows: Sequence[tuple[str, list]], crops: Sequence[Crop], columns:
     inset_h, insets = _inset_layout(crops)
     row_h = cell_h + (_INSET_GAP + inset_h if crops else 0.0)
     wrapped = {name: _wrap(labels.get(name, name), row_h) for name, _ in rows}
-    label_w = _LINE * max(len(lines) for lines in wrapped.values()) + 6
+    label_w = _LINE * max(len(lines) + (name in captions) for name, lines in wrapped.items()) + 6
     left = _MARGIN + label_w
     col_x = [left + j * (_CELL + _GAP) for j in range(len(columns))]
     width = col_x[-1] + _CELL + _MARGIN
@@ -272,12 +288,13 @@ def figure_svg(rows: Sequence[tuple[str, list]], crops: Sequence[Crop], columns:
             f"{escape(COLUMNS[c][1])}</text>" for x, c in zip(col_x, columns)]
     y = _MARGIN + _HEADER
     for name, pixels in rows:
-        lines = wrapped[name]
+        lines = [(line, "") for line in wrapped[name]] + ([(captions[name], ' class="tick"')]
+                                                          if name in captions else [])
         cx = _MARGIN + label_w / 2 - _LINE * (len(lines) - 1) / 2 + 4
         cy = y + row_h / 2
         body.append(f'<g class="row-label" data-row="{escape(name)}">' + "".join(
-            f'<text transform="translate({cx + k * _LINE:.2f},{cy:.2f}) rotate(-90)" text-anchor="middle">'
-            f"{escape(line)}</text>" for k, line in enumerate(lines)) + "</g>")
+            f'<text transform="translate({cx + k * _LINE:.2f},{cy:.2f}) rotate(-90)" text-anchor="middle"{cls}>'
+            f"{escape(line)}</text>" for k, (line, cls) in enumerate(lines)) + "</g>")
         if name == "reference" and len(columns) > 1:  # the legend of the crops, where the maps would be
             body += _crop_legend(crops, col_x[1], y)
         for x, c in zip(col_x, columns):
@@ -331,14 +348,16 @@ def _remove_figure(folder: Path, keep: set[str]) -> None:
 
 def write_image_figure(report_dir, *, scene, reference_image, images: Mapping[str, np.ndarray], exposure: float,
                        series_labels: Mapping[str, str] | None = None, crops: Sequence[Sequence[int]] | None = None,
-                       maps: Mapping[str, Mapping] | None = None) -> dict:
+                       maps: Mapping[str, Mapping] | None = None, captions: Mapping[str, str] | None = None
+                       ) -> dict:
     """Write ``figures/images.{svg,pdf,png}`` and ``images/*.png`` under ``report_dir``, atomically; return what
     was written, paths relative to ``report_dir``: ``{"figure": [(format, path)], "pngs": [path]}``
     (empty lists without images to show).
 
     ``images``: renderer -> linear image of the reference's shape; ``exposure``: the report's display exposure;
     ``series_labels``: recorded name -> display text of the rows; ``crops``: (x, y, w, h) rectangles that
-    replace the scene's regions; ``maps``: error maps already computed by renderer (the viewer's), reused.
+    replace the scene's regions; ``maps``: error maps already computed by renderer (the viewer's), reused;
+    ``captions``: row name -> the spp, seed and time of its image (:func:`image_captions`).
     Raises ValueError for a crop outside the image; never for a missing converter.
     """
     report_dir = Path(report_dir)
@@ -359,7 +378,7 @@ def write_image_figure(report_dir, *, scene, reference_image, images: Mapping[st
         pngs.append(path)
     _stale(folder, {Path(p).name for p in pngs}, {file_stem(name) for name, _ in rows})
 
-    svg = figure_svg(rows, chosen, shown, dict(series_labels or {}), uris=uris)
+    svg = figure_svg(rows, chosen, shown, dict(series_labels or {}), uris=uris, captions=captions)
     cairosvg, why_not = figures._converter()  # looked up through the module: tests replace it there
     done, failed = write_svg_pdf_png(report_dir / FIGURES_DIR, STEM, svg, cairosvg)
     _remove_figure(report_dir / FIGURES_DIR, set(done))

@@ -21,11 +21,18 @@ not ``37.4``; ``0.000 ± 0.010`` for a slope of 6e-16). The interval is written
 
 A value outside the fixed range shares its exponent with its interval:
 ``(1.23 ± 0.05) × 10^{5}``.
+
+A table drops into a paper as a float (:func:`table_float`): ``table`` for one
+column of a two-column page, ``table*`` for the full text width. Its layout is
+chosen to fit those widths in a standard two-column ``article``; in a narrower
+document the float shrinks the table to the line width (``\\resizebox``, from
+``graphicx``) rather than letting it run into the margin, and says so in the log.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from typing import Sequence
 
 #: Characters special to LaTeX (or set wrongly in the default OT1 encoding) → what prints them as themselves.
@@ -127,6 +134,59 @@ def header_cell(tex: str) -> str:
     if "\\\\" not in tex:
         return tex
     return f"{{\\begin{{tabular}}[b]{{@{{}}c@{{}}}}{tex}\\end{{tabular}}}}"
+
+
+_SCRIPTS = re.compile(r"\^\{([^{}]*)\}(?:_\{([^{}]*)\})?")
+
+
+def approx_width(tex: str, font_pt: float) -> float:
+    """A generous estimate, in pt, of how wide one line of ``tex`` (a cell of this module's) sets at ``font_pt``:
+    half an em a character, a command as one character, a superscript over a subscript as the wider of the
+    two at script size, bold a tenth wider. Enough to lay out a table for a width; the float's guard catches the rest."""
+    bold = 1.1 if tex.startswith("\\textbf") else 1.0
+    tex = tex.replace("\\textbf{\\boldmath", "").replace("{\\ttfamily\\char34}", '"')
+    scripts = sum(0.75 * max(len(m.group(1)), len(m.group(2) or "")) for m in _SCRIPTS.finditer(tex))
+    plain = re.sub(r"\\[a-zA-Z]+\s?", "x", _SCRIPTS.sub("", tex))
+    plain = re.sub(r"[{}$]|\\(?=[^a-zA-Z])", "", plain)
+    return 0.55 * font_pt * bold * (len(plain) + scripts)
+
+
+def break_lines(text: str, width: int) -> list[str]:
+    """``text`` in lines of at most about ``width`` characters, broken only after a space or one of ``[,=+-_/`` (a
+    renderer's name and its settings); a piece longer than ``width`` stays whole."""
+    pieces, start = [], 0
+    for i, ch in enumerate(text):
+        if ch in " [,=+-_/" and i + 1 < len(text):
+            pieces.append(text[start:i + 1])
+            start = i + 1
+    pieces.append(text[start:])
+    lines = [""]
+    for piece in pieces:
+        if lines[-1] and len(lines[-1]) + len(piece.rstrip()) > width:
+            lines.append("")
+        lines[-1] += piece
+    return [line.rstrip() for line in lines]
+
+
+def stacked_cell(lines: Sequence[str], align: str = "t") -> str:
+    """Cells (already LaTeX) stacked in one cell, a braced one-column tabular aligned at its top (``t``) or
+    bottom (``b``) line; one line as it is."""
+    if len(lines) == 1:
+        return lines[0]
+    body = " \\\\ ".join(lines)
+    return f"{{\\begin{{tabular}}[{align}]{{@{{}}l@{{}}}}{body}\\end{{tabular}}}}"
+
+
+def table_float(tabular_tex: str, caption: str, label: str, wide: bool, size: str = "footnotesize") -> str:
+    """``tabular_tex`` as a ``table`` (``wide``: ``table*``) float with ``caption`` above it and ``label``, set in
+    ``size`` with narrow column gaps; scaled down to the line width only where it would not fit (see the
+    module)."""
+    env = "table*" if wide else "table"
+    return (f"\\begin{{{env}}}[tbp]\n\\centering\n\\caption{{{caption}}}\\label{{{label}}}\n"
+            f"\\{size}\\setlength{{\\tabcolsep}}{{3pt}}\n\\sbox0{{%\n{tabular_tex}}}%\n"
+            f"\\ifdim\\wd0>\\linewidth\\typeout{{cbox: table {label} scaled down to the line width}}%\n"
+            "\\resizebox{\\linewidth}{!}{\\usebox0}\\else\\usebox0\\fi\n"
+            f"\\end{{{env}}}\n")
 
 
 def tabular(header: Sequence[str], rows: Sequence[Sequence[str]], align: str) -> str:

@@ -11,7 +11,7 @@ settings) compare directly. Renderer names already carry their settings
 experiment's label (:func:`distinct_names`). Every chart is also a file in
 ``OUT/figures/``, a section's named after its experiment's label. Every
 experiment's summary is in ``OUT/summary.csv`` (an ``experiment`` column) and
-``OUT/summary.tex`` (one table per experiment).
+``OUT/summary.tex`` and ``OUT/summary-wide.tex`` (one table per experiment).
 """
 
 from __future__ import annotations

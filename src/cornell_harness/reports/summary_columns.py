@@ -8,7 +8,8 @@ as ``time_to_delta_e2000_mean_le_1``; here it becomes "time to mean ΔE00 ≤ 1
 (s)". Also which columns are decisive (:func:`decisive_columns`, the order of
 :data:`cornell_harness.reports.tables.TABLE_GROUPS`: convergence slope, time to a target,
 efficiency, the equal-quality and equal-time figures, bias share) and the best
-value of a column (:func:`best_rows`).
+value of a column (:func:`best_rows`), and whether it is clearly best (:func:`clear_best_rows`: its 95%
+interval overlaps no other's).
 
 Directions: the registry's (:mod:`cornell_harness.evaluate.registry`) where it has
 one; a time to a target and the time at the highest spp (equal quality) are
@@ -21,7 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, Collection, Sequence
 
 from cornell_harness.evaluate import registry
 from cornell_harness.reports.latex import escape
@@ -98,8 +99,8 @@ def spec(key: str) -> Spec:
     if (parsed := parse_time_to(key)) is not None:
         metric, op, value = parsed
         text, tex = _metric_names(metric)
-        return Spec(f"time to {text} {_TEXT_OPS[op]} {value:g} (s)", f"time to\\\\{tex} ${_TEX_OPS[op]} {value:g}$ (s)",
-                    "low")
+        return Spec(f"time to {text} {_TEXT_OPS[op]} {value:g} (s)",
+                    f"time to\\\\{tex}\\\\${_TEX_OPS[op]} {value:g}$ (s)", "low")
     if key in registry.METRICS:  # a metric of the final image (compare-image's summary)
         text, tex = _metric_names(key)
         return Spec(text, tex, registry.METRICS[key].better)
@@ -128,10 +129,11 @@ def is_bound(key: str, columns: Sequence[str]) -> bool:
     return False
 
 
-def decisive_columns(columns: Sequence[str], max_columns: int = 8) -> list[str]:
-    """The decisive figures among ``columns`` (a summary's), at most ``max_columns``, in table order
-    (:data:`DECISIVE`); when more are present, those first in :data:`_PRIORITY` are kept."""
-    present = [c for c in columns if not is_bound(c, columns)]
+def decisive_columns(columns: Sequence[str], max_columns: int = 8, empty: Collection[str] = ()) -> list[str]:
+    """The decisive figures among ``columns`` (a summary's) but those ``empty`` (no row has a value), at most
+    ``max_columns``, in table order (:data:`DECISIVE`); when more are present, those first in
+    :data:`_PRIORITY` are kept."""
+    present = [c for c in columns if not is_bound(c, columns) and c not in empty]
     ordered = [c for p in DECISIVE for c in present if _matches(c, p)]
     kept = [c for p in _PRIORITY for c in ordered if _matches(c, p)][:max_columns]
     return [c for c in ordered if c in kept]
@@ -151,3 +153,26 @@ def best_rows(values: Sequence[Any], better: str | None) -> set[int]:
         return set()
     best = (min if better == "low" else max)(v for _, v in finite)
     return {i for i, v in finite if v == best}
+
+
+def clear_best_rows(values: Sequence[Any], lows: Sequence[Any], highs: Sequence[Any], better: str | None) -> set[int]:
+    """The row of the one best value (:func:`best_rows`) where its 95% interval ``[low, high]`` overlaps the
+    interval of no other row with a value (a value without an interval counts as the point it is); none for
+    a tie, a single row, or a best that the others' intervals do not rule out being beaten."""
+    best = best_rows(values, better)
+    if len(best) != 1 or len(values) < 2:
+        return set()
+
+    def interval(j: int) -> tuple[float, float]:
+        if _finite(lows[j]) and _finite(highs[j]):
+            return float(lows[j]), float(highs[j])
+        return float(values[j]), float(values[j])
+
+    (i,) = best
+    lo, hi = interval(i)
+    for j, v in enumerate(values):
+        if j != i and _finite(v):
+            other_lo, other_hi = interval(j)
+            if lo <= other_hi and other_lo <= hi:
+                return set()
+    return best

@@ -35,15 +35,22 @@ from cornell_harness.reports.images import (
 )
 from cornell_harness.reports.tables import column_or_nan, ok_runs
 
-def _first_seed_image_run(runs: pd.DataFrame, name: str, seeds: Sequence) -> tuple[Any, Any]:
+def _first_seed_image_run(runs: pd.DataFrame, name: str, seeds: Sequence,
+                          time_column: str = "time_s") -> tuple[Any, Any, Any]:
+    """(spp, seed, time in s) of the run whose image is shown: the first seed's highest spp; None where unknown."""
     ok = ok_runs(runs)
     g = ok[ok["renderer"].astype(str) == name]
     if not len(g):
-        return None, None
+        return None, None, None
     seed_vals = [s for s in column_or_nan(g, "seed").dropna().tolist()]
     seed = next((s for s in seeds if s in seed_vals), min(seed_vals) if seed_vals else None)
     gs = g[column_or_nan(g, "seed") == seed] if seed is not None else g
-    return (int(gs["spp"].max()) if len(gs) else None), (int(seed) if seed is not None else None)
+    if not len(gs):
+        return None, (int(seed) if seed is not None else None), None
+    top = gs[gs["spp"] == gs["spp"].max()]
+    times = pd.to_numeric(column_or_nan(top, time_column), errors="coerce").dropna()
+    return (int(gs["spp"].max()), (int(seed) if seed is not None else None),
+            _clean(float(times.iloc[0])) if len(times) else None)
 
 
 def _clean(v: float) -> float | None:
@@ -51,9 +58,10 @@ def _clean(v: float) -> float | None:
 
 
 def image_viewer(reference: np.ndarray, exposure: float, images: Mapping, names, colors, runs,
-                 seeds, maps_out: dict | None = None) -> tuple[dict, list]:
-    """The image viewer's data (the reference, each renderer's image and error maps) and its notes; each
-    renderer's error maps also go into ``maps_out`` (by name) when given, for the image figure to reuse."""
+                 seeds, maps_out: dict | None = None, time_column: str = "time_s") -> tuple[dict, list]:
+    """The image viewer's data (the reference, each renderer's image with the spp, seed and time (by
+    ``time_column``) of its run, and its error maps) and its notes; each renderer's error maps also go into
+    ``maps_out`` (by name) when given, for the image figure to reuse."""
     h, w = reference.shape[:2]
     entries, notes = [], []
     for name in names:
@@ -67,12 +75,13 @@ def image_viewer(reference: np.ndarray, exposure: float, images: Mapping, names,
         maps = error_maps(img, reference, exposure)
         if maps_out is not None:
             maps_out[name] = maps
-        spp, seed = _first_seed_image_run(runs, name, seeds)
+        spp, seed, seconds = _first_seed_image_run(runs, name, seeds, time_column)
         entries.append({
             "name": name,
             "color": colors[name],
             "spp": spp,
             "seed": seed,
+            "time_s": seconds,
             "img": f16_base64(img),
             "de": f16_base64(maps["de"]),
             "relmse": f16_base64(np.log10(np.maximum(maps["relmse"], 1e-12))),

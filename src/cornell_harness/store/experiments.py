@@ -14,7 +14,7 @@ An experiment folder ``DIR`` holds
 - ``results.parquet``: all rows, a tidy table with one row per (scene,
   renderer, settings, seed, spp), rewritten after each cell;
 - ``summary.parquet``: the derived figures per renderer (raw names, full precision);
-- ``report.html``, ``summary.csv``, ``summary.tex``: the report, and the summary for people
+- ``report.html``, ``summary.csv``, ``summary.tex``, ``summary-wide.tex``: the report, and the summary for people
   (readable headers and units) and for papers (a LaTeX table), written with it (:mod:`cornell_harness.reports.summary_files`);
 - ``report-options.json``: how the report names series and crops images (``--series-label``, ``--crop``),
   kept so that ``cbox report`` draws it the same way again.
