@@ -36,6 +36,8 @@ def test_sidak_level():
     assert agreement.sidak_level(0.01, 1) == pytest.approx(0.01)
     lvl = agreement.sidak_level(0.01, 771)
     assert 1 - (1 - lvl) ** 771 == pytest.approx(0.01)
+    # An early sequential look's family-wise level: the naive 1 - (1 - a)^(1/n) rounds it to 0.
+    assert agreement.sidak_level(1e-30, 786) == pytest.approx(1e-30 / 786, rel=1e-9)
 
 
 def test_agreement_false_alarm_rate_is_alpha():
