@@ -69,12 +69,16 @@ def gate(
     scheduler: Optional[str] = SchedulerOpt,
     dashboard: Optional[str] = DashboardOpt,
 ) -> None:
-    """CI quality gate: exit 0 if every expectation holds, 1 if one fails, 2 for a bad config or input.
+    """CI quality gate: exit 0 if every expectation holds, 1 if one fails, 2 for a bad config or input,
+    3 if none fails and one is inconclusive (a bias interval straddles its margin).
 
     Unbiased renderers are tested for statistical agreement with the reference
     (z-tests on tiles, the scene's named regions and the whole image), for a
     reported variance that matches their residuals, and for single outlier
-    pixels (family-wise false-alarm rate alpha over the three); others against metric
+    pixels (family-wise false-alarm rate alpha over the three); with margins, every
+    region's bias interval must lie inside its margin to pass. An expectation with
+    max_spp is sequential: it looks at doubling spp and stops at the first verdict
+    (docs/gate-detection.md, "Sequential stopping"). Others against metric
     budgets (image-wide or per named region) and, for consistent renderers
     (photon mapping, SPPM), a check that their error falls as the budget grows;
     all must have zero NaN/Inf pixels; optionally, convergence slopes

@@ -69,11 +69,12 @@ class Design:
     spending: str
 
     def note(self, k: int, stopped: bool) -> str:
-        """``look 3 of 5 (256 of 1024 spp; obrien-fleming spending, agreement at 1.2e-05, intervals at ...)``."""
+        """``sequential: stopped at look 3 of 5 (256 of 1024 spp; obrien-fleming spending ...: agreement at
+        level 4.4e-09, each bias interval at level 0.0011)``."""
         how = "stopped at" if stopped else "verdict at"
         return (f"sequential: {how} look {k + 1} of {len(self.spps)} ({self.spps[k]} of {self.spps[-1]} spp; "
                 f"{self.spending} spending of α = {self.alpha:g} and β = {self.beta:g}: agreement at level "
-                f"{self.fail_levels[k]:.3g}, bias intervals at {1 - self.pass_levels[k]:.4g} each)")
+                f"{self.fail_levels[k]:.3g}, each bias interval at level {self.pass_levels[k]:.3g})")
 
 
 def design(exp: Expectation, cfg: GateConfig) -> Design:
