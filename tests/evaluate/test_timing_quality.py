@@ -65,3 +65,12 @@ def test_rows_without_the_foreign_figure_keep_the_load_and_calibration_verdict()
     q = timing_quality(rows, cores=2)
     assert q.contended == 1  # the load of the first; the third's slow kernel is overruled by its foreign figure
     assert math.isnan(q.max_foreign) and "load up to 3.0" in q.line()
+
+
+def test_auto_basis_is_cpu_only_where_a_row_was_contended():
+    from cornell_harness.evaluate.timing_quality import auto_basis
+
+    quiet = _rows([1.0, 1.0], [0.020, 0.020]).assign(foreign_cpu=[0.0, 0.1])
+    assert auto_basis(quiet, cores=2) == "wall"
+    assert auto_basis(quiet.assign(foreign_cpu=[0.0, 1.2]), cores=2) == "cpu"
+    assert auto_basis(pd.DataFrame({"status": ["ok"], "time_s": [1.0]}), cores=2) == "wall"  # nothing known

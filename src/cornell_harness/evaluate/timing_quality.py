@@ -112,6 +112,12 @@ def contended_rows(runs: pd.DataFrame, cores: int) -> np.ndarray:
     return np.where(np.isfinite(foreign), busy_foreign, busy_load | busy_cal)
 
 
+def auto_basis(runs: pd.DataFrame, cores: int) -> str:
+    """``--time-basis auto``: "cpu" where any timed row of ``runs`` was contended (wall time is then inflated by
+    other work, CPU time is not), else "wall"."""
+    return "cpu" if timing_quality(runs, cores).contended else "wall"
+
+
 def timing_quality(runs: pd.DataFrame, cores: int) -> TimingQuality:
     """The verdict on the timed rows of ``runs`` (an experiment's results table) on a machine of ``cores``."""
     if "status" in runs:

@@ -168,7 +168,7 @@ class RunRecord:
             self.info["cpu_time_of"] = CALL_CPU_NOTE
         setup = result.info.get("setup_s")
         self.setup_s = float(setup) if isinstance(setup, (int, float)) else None
-        self.threads = _threads_of(result.info)
+        self.threads = threads_of(result.info)
         self.load_before, self.load_after = timing.load_before, timing.load_after
         self.calibration_s, self.foreign_cpu = timing.calibration_s, timing.foreign_cpu
         return self
@@ -198,7 +198,7 @@ def _rounded(value: float | None, digits: int) -> float | None:
     return None if value is None else round(float(value), digits)
 
 
-def _threads_of(info: dict) -> int | None:
+def threads_of(info: dict) -> int | None:
     """The threads a render ran on: what the renderer says (``info["threads"]``), else the share it was given."""
     given = info.get("threads")
     if isinstance(given, int) and not isinstance(given, bool) and given > 0:
