@@ -23,14 +23,12 @@ from __future__ import annotations
 import json
 import os
 import statistics
-import subprocess
-import sys
-import time
 
 import pytest
 
 from cornell_harness.adapters.api import machine_cores
 from cornell_harness.adapters.registry import resolve
+from tests.burners import outside_burners
 from tests.conftest import cbox_in_process as cbox
 
 #: How far the busy CPU-time ratio may stray from the quiet one (issue 30).
@@ -47,21 +45,6 @@ def _compare(capsys, out) -> tuple[dict, str]:
     rows = {r["renderer"]: r for r in map(json.loads, filter(str.strip, stdout.splitlines()))}
     assert set(rows) == set(RENDERERS) and all(r["status"] == "ok" for r in rows.values()), rows
     return rows, stderr
-
-
-def _burners(n: int) -> list[subprocess.Popen]:
-    """``n`` CPU-burning processes, returned once each is running its loop."""
-    procs = [subprocess.Popen([sys.executable, "-c", "while 1: pass"]) for _ in range(n)]
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline and not all(_cpu_ticks(p.pid) >= 2 for p in procs):
-        time.sleep(0.02)
-    return procs
-
-
-def _cpu_ticks(pid: int) -> int:
-    with open(f"/proc/{pid}/stat") as f:
-        fields = f.read().rpartition(")")[2].split()
-    return int(fields[11]) + int(fields[12])
 
 
 def _cpu_times(runs: list) -> dict[str, list[float]]:
@@ -84,13 +67,8 @@ def test_burners_beside_a_compare_are_warned_of_and_cpu_time_ratio_holds(tmp_pat
     quiet, busy = [], []
     for k in range(ROUNDS):
         quiet.append(_compare(capsys, tmp_path / f"quiet{k}"))
-        procs = _burners(max(2, cores))  # more runnable threads than cores, on any machine
-        try:
+        with outside_burners(max(2, cores), tmp_path):  # more runnable threads than cores, on any machine
             busy.append(_compare(capsys, tmp_path / f"busy{k}"))
-        finally:
-            for p in procs:
-                p.kill()
-                p.wait()
     for rows, stderr in busy:
         assert "warning: the machine was busy while timing" in stderr, stderr
         assert all(r["load_after"] > cores for r in rows.values()), rows
@@ -100,21 +78,18 @@ def test_burners_beside_a_compare_are_warned_of_and_cpu_time_ratio_holds(tmp_pat
 
 @pytest.mark.skipif(not os.path.exists("/proc/stat"), reason="the load is read from Linux's /proc/stat")
 def test_a_compare_beside_burners_warns_and_records_the_load(tmp_path, capsys):
-    """The default set's share of the above (a few seconds): the warning and ``load_after`` beside burners,
-    with cheap test renderers. More burners than cores keep the load above the cores whatever else runs, so
-    this verdict does not depend on the machine's own load; the CPU-time ratio is the slow test's."""
+    """The default set's share of the above (a few seconds): the warning, ``load_after`` and ``foreign_cpu``
+    beside burners outside the command's process tree (another command's work: the CLI runs in this process,
+    its root), with cheap test renderers. Twice as many burners as cores take most of the machine whatever else
+    runs, so this verdict does not depend on the machine's own load; the CPU-time ratio is the slow test's."""
     cores = machine_cores()
-    procs = _burners(cores + 1)
-    try:
+    with outside_burners(2 * cores, tmp_path):
         code, stdout, stderr = cbox(capsys, "compare", "--scene", "furnace", "-r", "tests.user_renderers:SeededNoise",
                                     "-r", "tests.user_renderers:FlatGrey", "--spp", "4", "--json",
-                                    "--out", str(tmp_path))
-    finally:
-        for p in procs:
-            p.kill()
-            p.wait()
+                                    "--out", str(tmp_path / "out"))
     assert code == 0, stderr
     rows = [json.loads(line) for line in stdout.splitlines() if line.strip()]
     assert len(rows) == 2 and all(r["load_after"] > cores and r["load_before"] > cores for r in rows), rows
+    assert all(r["foreign_cpu"] > 0.5 for r in rows), rows
     warnings = [line for line in stderr.splitlines() if line.startswith("warning: the machine was busy")]
     assert len(warnings) == 1 and "2 of 2 timed renders contended" in warnings[0], stderr

@@ -27,8 +27,9 @@ def log(tmp_path, monkeypatch):
 def test_time_budget_prints_each_renderers_spp_and_time_with_an_interval(tmp_path, capsys, log):
     """The Done-when of issue 30 on renderers with exact clocks: 3 interleaved calibration rounds (the
     default) buy 28 spp at the median clock, with the rounds' spread as its interval; the final render is
-    timed 3 times, its median and interval printed beside it."""
-    code, out, err = cbox(capsys, "compare", "-s", "furnace", *JITTERY, "--time-budget", "2s",
+    timed 3 times, its median and interval printed beside it. In wall seconds, as asked (auto would follow the
+    machine's load)."""
+    code, out, err = cbox(capsys, "compare", "-s", "furnace", *JITTERY, "--time-budget", "2s", "--time-basis", "wall",
                           "--out", str(tmp_path / "out"))
     assert code == 0, err
     rows = {m.group(1): m.groups()[1:] for m in re.finditer(
@@ -46,7 +47,7 @@ def test_time_budget_prints_each_renderers_spp_and_time_with_an_interval(tmp_pat
 
 def test_json_rows_carry_the_repeats_and_the_spp_interval(tmp_path, capsys, log):
     code, out, err = cbox(capsys, "compare", "-s", "furnace", *JITTERY[:2], "--time-budget", "2s",
-                          "--time-repeats", "2", "--json", "--out", str(tmp_path))
+                          "--time-basis", "wall", "--time-repeats", "2", "--json", "--out", str(tmp_path))
     assert code == 0, err
     (row,) = [json.loads(line) for line in out.splitlines()]
     assert row["time_repeats"] == 2 and len(row["time_samples_s"]) == 2  # a list: no JSON inside a string
@@ -71,7 +72,7 @@ def test_plain_compare_times_once_unless_asked(tmp_path, capsys, log):
 @pytest.mark.parametrize("command", [["compare", "-s", "furnace"], ["converge", "-s", "furnace", "--spp", "1"]])
 @pytest.mark.parametrize("option, value, words", [("--time-repeats", "0", "give 1 or more"),
                                                   ("--time-repeats", "-2", "give 1 or more"),
-                                                  ("--time-basis", "cpus", "give wall or cpu (did you mean 'cpu'?)")])
+                                                  ("--time-basis", "cpus", "give wall or cpu or auto (did you mean 'cpu'?)")])
 def test_bad_timing_options_are_refused_before_anything_runs(tmp_path, capsys, log, command, option, value, words):
     code, out, err = cbox(capsys, *command, *JITTERY[:2], option, value, "--out", str(tmp_path / "x"))
     assert code == 2 and len(err.strip().splitlines()) == 1 and option in err and words in err, err
@@ -106,7 +107,15 @@ def test_compare_table_shows_cpu_time_with_the_cpu_basis():
     assert cpu[1].split() == ["a", "ok", "28", "[21,", "37]", "2", "[1.5,", "2.5]", "3.9", "[3.5,", "4.2]"]
     assert cpu[2].split() == ["b", "unavailable", "64", "NaN", "NaN"]
     assert "cpu_time_s: median of 3 timings [95% interval]" in cpu
+    assert cpu[-1] == "time basis: cpu, times in CPU seconds (cpu_time_s)"
     assert "cpu_time_s" not in compare_table(rows)
+    budget = [{**r, "info_time_budget_s": 10.0} for r in rows]
+    assert compare_table(budget, "cpu", auto=True).splitlines()[-1] == (
+        "time basis: cpu, the budget and times in CPU seconds (cpu_time_s) (--time-basis auto: other processes took "
+        "cores from the calibration renders)")
+    assert compare_table(budget, "wall", auto=True).splitlines()[-1] == (
+        "time basis: wall, the budget and times in wall seconds (time_s) (--time-basis auto: no other work beside "
+        "the calibration renders)")
 
 
 def test_target_error_retimes_the_render_that_reached_it(tmp_path, capsys, log):

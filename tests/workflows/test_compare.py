@@ -145,6 +145,21 @@ def test_cpu_basis_spends_the_budget_in_cpu_seconds(scene, monkeypatch):
     assert fallback.basis == "cpu" and fallback.spp > 3 * wall.spp
 
 
+@pytest.mark.parametrize("foreign, basis, spp", [(0.0, "wall", 28), (2.0, "cpu", 56)])
+def test_auto_basis_is_cpu_when_other_work_took_cores_during_calibration(scene, monkeypatch, foreign, basis, spp):
+    """--time-basis auto: the calibration renders' foreign CPU decides, every renderer alike. 2 cores of other
+    processes' CPU beside a render of one thread on 2 cores (2 + 1 > 2.5) is contention: the budget becomes
+    CPU seconds (twice the samples here: CPU per sample is half the wall); none leaves it in wall seconds."""
+    entries = resolve(["tests.user_renderers:Jittery", "tests.user_renderers:FlatGrey"])
+    monkeypatch.setattr(runner, "render_checked", _fake_render(PER_SPP, PER_SPP / 2))
+    monkeypatch.setattr(runner, "threads_of", lambda info: 1)
+    monkeypatch.setattr(cmp, "machine_cores", lambda: 2)
+    monkeypatch.setattr(runner, "measure", lambda call: ((r := call()), Timing(r.time_s, r.cpu_time_s, 1.0, 1.0,
+                                                                                0.02, foreign)))
+    choices = cmp.calibrate_time_budget(entries, scene, 2.0, 0, repeats=2, basis="auto")
+    assert [(c.spp, c.basis) for c in choices] == [(spp, basis)] * 2
+
+
 def test_repeats_carry_cpu_time_when_the_render_path_records_it(scene, monkeypatch):
     (entry,) = resolve(["tests.user_renderers:Jittery"])
     rec = runner.run_one(entry, scene, 16, 0, None)

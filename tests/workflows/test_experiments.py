@@ -109,7 +109,7 @@ def test_equal_time_mode_reports_spp_and_respects_the_budget(tmp_path):
     (2 - 0.25) / (1/16) = 28 spp, 2.0 s. The real renderers' wall times are not bounded: calibration and final
     render see different loads on a shared machine (a 1-4 s bound on them flipped under two CPU burners)."""
     proc = run_cbox("compare", "--scene", "cornell-box", "--renderer", "pathtracer", "--renderer", "mitsuba",
-                    "--renderer", "tests.user_renderers:Clocked", "--time-budget", "2s", "--json",
+                    "--renderer", "tests.user_renderers:Clocked", "--time-budget", "2s", "--time-basis", "wall", "--json",
                     "--out", str(tmp_path), env_path=ROOT)
     assert proc.returncode == 0, proc.stderr
     recs = {r["renderer"]: r for r in map(json.loads, proc.stdout.splitlines())}

@@ -109,7 +109,7 @@ def test_measure_records_the_call_and_the_machine_around_it(monkeypatch):
     assert value == "image" and order == ["cal", "load", "call", "load", "cal"]
     assert (t.load_before, t.load_after, t.calibration_s) == (2.0, 3.5, 0.020)
     assert 0.1 <= t.cpu_s and 0.1 <= t.wall_s < 30
-    assert set(t.as_dict()) == {"wall_s", "cpu_s", "load_before", "load_after", "calibration_s"}
+    assert set(t.as_dict()) == {"wall_s", "cpu_s", "load_before", "load_after", "calibration_s", "foreign_cpu"}
 
 
 def test_stopwatch_counts_a_waited_for_childs_cpu():

@@ -18,6 +18,7 @@ from cornell_harness.cli import interrupt
 
 with interrupt.starting():  # a Ctrl-C during these imports (seconds): one line and exit 130, no traceback
     from cornell_harness.adapters.registry import use_renderer_files
+    from cornell_harness.workflows.foreign_cpu import mark_command_root
     # Importing a command module registers its commands, in this order in `cbox --help` (so not sorted).
     from cornell_harness.cli import listing, run, compare_image, experiment, gate, stress, reference, export  # isort: skip
     from cornell_harness.cli.common import (PATH_ERRORS, USER_ERRORS, ClickException, NoArgsIsHelpError, UsageError,
@@ -48,6 +49,7 @@ def _main(args: list[str] | None) -> None:
     use_renderer_files(())  # until --renderers gives some (as above)
     cut = False  # a KeyboardInterrupt reached here
     keep_freed_memory()  # a program's choice, made here rather than in a library a user may import
+    mark_command_root()  # every process this command starts is its own work, not the machine's load on it
     try:
         check_environment()
         rv = command_tree().main(args=args, prog_name="cbox", standalone_mode=False)

@@ -15,7 +15,7 @@ from cornell_harness.cli.common import (USER_ERRORS, RendererFilesOpt, Renderers
                                         out_folder_option)
 from cornell_harness.cli.figures import CropOpt, SeriesLabelOpt, keep_report_options, parse_crops, series_labels_for
 from cornell_harness.cli.output import Progress, info
-from cornell_harness.cli.timing import TimeBasisOpt, time_repeats_option, warn_contention
+from cornell_harness.cli.timing import CompareTimeBasisOpt, time_repeats_option, warn_contention
 from cornell_harness.extras import require_a_renderer
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.store.exr import write_exr
@@ -121,9 +121,9 @@ def _run_compare(scene: str, renderer: Optional[List[str]], spp: int, seed: int,
     bar.close()
     warn_contention(runner.rows_frame(records))
     report = write_compare_outputs(out, sc, ref, records, command_line(), sections=sections, title=title,
-                                   time_basis=time_basis, time_repeats=comparison.repeats)
+                                   time_basis=comparison.time_basis, time_repeats=comparison.repeats)
     if not as_json:
-        typer.echo(compare_table([r.row() for r in records], time_basis))
+        typer.echo(compare_table([r.row() for r in records], comparison.time_basis, time_basis == "auto"))
         for r in records:
             if r.status != "ok":
                 typer.echo(f"{r.renderer}: {r.status}: {r.reason}")
@@ -159,10 +159,11 @@ def _comparison(scene: str, overrides, renderer, spp: int, seed: int, time_budge
                       time_repeats or default_time_repeats(budget, target), time_basis)
 
 
-def compare_table(rows: list[dict], time_basis: str = "wall") -> str:
+def compare_table(rows: list[dict], time_basis: str = "wall", auto: bool = False) -> str:
     """The table ``cbox compare`` prints: per renderer its status, spp, time and scores; an spp chosen for a
     time budget and a time taken more than once show their 95% intervals, ``412 [380, 440]``, with a line
-    saying what they are. With the cpu ``time_basis``, CPU time (``cpu_time_s``) beside wall time."""
+    saying what they are; and a line naming the ``time_basis`` used (chosen by ``--time-basis auto`` when
+    ``auto``). With the cpu basis, CPU time (``cpu_time_s``) beside wall time."""
     import pandas as pd
 
     frame = pd.DataFrame(rows)
@@ -180,7 +181,17 @@ def compare_table(rows: list[dict], time_basis: str = "wall") -> str:
             shown[col] = [_with_interval(t, lo, hi, "{:.3g}") for t, lo, hi in
                           zip(frame[col], frame[f"{col}_low"], frame[f"{col}_high"])]
             notes.append(f"{col}: median of {int(frame['time_repeats'].max())} timings [95% interval]")
+    notes.append(_basis_note(time_basis, auto, "info_time_budget_s" in frame))
     return shown.to_string(index=False) + "".join(f"\n{n}" for n in notes)
+
+
+def _basis_note(time_basis: str, auto: bool, budget: bool) -> str:
+    """The table's line naming the clock: ``time basis: cpu, the budget and times in CPU seconds (...)``."""
+    clock = "CPU seconds (cpu_time_s)" if time_basis == "cpu" else "wall seconds (time_s)"
+    renders = "calibration renders" if budget else "timed renders"
+    why = "" if not auto else (f" (--time-basis auto: other processes took cores from the {renders})"
+                               if time_basis == "cpu" else f" (--time-basis auto: no other work beside the {renders})")
+    return f"time basis: {time_basis}, {'the budget and ' if budget else ''}times in {clock}{why}"
 
 
 def _with_interval(value, low, high, fmt: str) -> str:
@@ -207,7 +218,7 @@ def compare(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON record per run on stdout."),
     time_budget: Optional[str] = typer.Option(
         None, "--time-budget", help="Equal-time mode: every renderer gets this time (e.g. 10s, 2m; wall seconds, "
-                                    "CPU seconds with --time-basis cpu); its spp is chosen from two short "
+                                    "CPU seconds with --time-basis cpu, or auto on a busy machine); its spp is chosen from two short "
                                     "calibration renders (1 and 4 spp), --time-repeats rounds of them "
                                     "interleaved over the renderers, and reported with a 95% interval "
                                     "(info_spp_low/high). Overrides --spp."),
@@ -218,7 +229,7 @@ def compare(
                                      "render timed --time-repeats times)."),
     max_spp: int = typer.Option(4096, "--max-spp", min=1, help="Upper spp limit of --target-error."),
     time_repeats: Optional[int] = time_repeats_option("default 3 with --time-budget or --target-error, else 1"),
-    time_basis: str = TimeBasisOpt,
+    time_basis: str = CompareTimeBasisOpt,
     title: Optional[str] = TitleOpt,
     series_label: Optional[List[str]] = SeriesLabelOpt,
     crop: Optional[List[str]] = CropOpt,

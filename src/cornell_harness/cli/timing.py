@@ -28,25 +28,30 @@ def time_repeats_option(default: str) -> Any:
 
 
 def _time_bases() -> tuple[str, ...]:
-    from cornell_harness.evaluate.timing_stats import TIME_BASES
+    from cornell_harness.evaluate.timing_stats import TIME_BASIS_CHOICES
 
-    return tuple(TIME_BASES)
+    return TIME_BASIS_CHOICES
 
 
 _checked_basis = choice_callback("--time-basis", _time_bases)
 
 
 def time_basis_option(default: str | None, help: str) -> Any:
-    """``--time-basis wall|cpu`` (checked as it is parsed), with ``default`` and ``help``."""
-    return typer.Option(default, "--time-basis", metavar="wall|cpu", callback=_checked_basis, help=help)
+    """``--time-basis wall|cpu|auto`` (checked as it is parsed), with ``default`` and ``help``."""
+    return typer.Option(default, "--time-basis", metavar="|".join(_time_bases()), callback=_checked_basis, help=help)
 
 
-#: ``--time-basis`` of the commands that run renders (default wall).
-TimeBasisOpt = time_basis_option("wall", (
-    "The clock time-derived figures read (time to error, efficiency, slopes against time, equal time): wall "
-    "(time_s, default) or cpu (cpu_time_s: the process's CPU time, all threads; not inflated by other "
-    "processes on a busy machine). With --time-budget, cpu makes the budget CPU seconds. Recorded in "
-    "experiment.json: cbox report redraws with it."))
+_BASES_HELP = ("The clock time-derived figures read (time to error, efficiency, slopes against time, equal time): "
+               "wall (time_s), cpu (cpu_time_s: the process's CPU time, all threads; not inflated by other "
+               "processes on a busy machine) or auto (cpu where other processes took cores from the timed renders, "
+               "else wall).")
+#: ``--time-basis`` of ``cbox converge`` (default wall).
+TimeBasisOpt = time_basis_option("wall", _BASES_HELP + " Default wall. Recorded in experiment.json: cbox report "
+                                 "redraws with it.")
+#: ``--time-basis`` of ``cbox compare`` (default auto: an equal-time budget on a shared machine is CPU seconds).
+CompareTimeBasisOpt = time_basis_option("auto", _BASES_HELP + " Default auto: with --time-budget, decided by the "
+                                        "calibration renders, and the budget is CPU seconds when cpu. The table "
+                                        "says which was used; experiment.json records it.")
 
 
 def warn_contention(runs) -> None:

@@ -45,6 +45,9 @@ LEVEL = 0.95
 #: equal time) read, and the results column that holds it. Wall by default; CPU time is not inflated by
 #: other processes' load (docs/timing.md says when to prefer it).
 TIME_BASES = {"wall": "time_s", "cpu": "cpu_time_s"}
+#: What ``--time-basis`` takes: a clock of :data:`TIME_BASES`, or ``auto``: cpu where the timings were taken on a
+#: machine busy with other work, else wall (:func:`cornell_harness.evaluate.timing_quality.auto_basis`).
+TIME_BASIS_CHOICES = (*TIME_BASES, "auto")
 
 
 def median_interval(samples: Sequence[float], level: float = LEVEL) -> tuple[float, float, float]:

@@ -117,7 +117,7 @@ def gate_section(outcomes, alpha: float) -> str:
                  f'<table class="gate-checks"><thead><tr><th>check</th><th>result</th><th>detail</th></tr></thead>'
                  f'<tbody>{rows}</tbody></table>']
         if o.bias is not None:
-            block.append(bias_table_html(o.bias))
+            block.append(f'<div class="table-wrap">{bias_table_html(o.bias)}</div>')  # many regions: scrolls
         a = o.agreement
         if a is not None:
             failing = a.p_tiles < a.level

@@ -1,7 +1,7 @@
 """The report's timing-quality badge: whether an experiment's times were taken on a quiet machine.
 
-The verdict is :func:`cornell_harness.evaluate.timing_quality.timing_quality`'s (load beside the renders' threads,
-calibration kernel slowdown): **good**, **contended** (some render competed for the cores: its wall time
+The verdict is :func:`cornell_harness.evaluate.timing_quality.timing_quality`'s (other processes' CPU beside the
+renders' threads; without that figure, load and calibration kernel slowdown): **good**, **contended** (some render competed for the cores: its wall time
 is inflated) or **unknown** (results written before the load and calibration figures were recorded). The
 figures behind it are the badge's text and tooltip. The machine's cores are those of the machine the
 report is built on (:func:`cornell_harness.adapters.api.machine_cores`) unless given: experiment.json does not

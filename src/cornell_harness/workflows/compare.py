@@ -13,9 +13,10 @@ from typing import Callable, Sequence
 import numpy as np
 import pandas as pd
 
-from cornell_harness.adapters.api import attribute
+from cornell_harness.adapters.api import attribute, machine_cores
 from cornell_harness.adapters.registry import RendererEntry, missing_features
 from cornell_harness.evaluate import timing_stats
+from cornell_harness.evaluate.timing_quality import auto_basis
 from cornell_harness.scenes.model import Scene
 from cornell_harness.store.atomic import atomic_path, json_safe, write_json_atomic
 from cornell_harness.store.experiments import (CONFIG_FILE, RESULTS_FILE, ExperimentError, cell_name, experiment_lock,
@@ -84,11 +85,15 @@ def calibrate_time_budget(entries: Sequence[RendererEntry], scene: Scene, budget
     ...), so that a change of load during calibration hits every renderer alike.
 
     ``basis`` "cpu" spends the budget in process CPU seconds (:func:`cornell_harness.workflows.runner.cpu_time`: the
-    render proper's, or the whole call's for a renderer that measures none). The calibration renders are not
+    render proper's, or the whole call's for a renderer that measures none); "auto" spends it in CPU seconds
+    where any calibration render was contended (:func:`cornell_harness.evaluate.timing_quality.auto_basis`:
+    other processes took cores the render's threads needed), else in wall seconds, every renderer alike; each
+    choice's ``basis`` says which. The calibration renders are not
     counted in the budget; the final render's own time is what is reported. ``on_render(label)`` follows each
     calibration render (progress).
     """
     timings: list[list[tuple[float, float]] | Exception] = [[] for _ in entries]
+    machine: list[dict] = []  # each calibration render's figures, for the auto basis
     for round_ in range(repeats):
         for i, entry in enumerate(entries):
             if isinstance(timings[i], Exception):
@@ -97,10 +102,13 @@ def calibrate_time_budget(entries: Sequence[RendererEntry], scene: Scene, budget
                 for spp in (1, 4):
                     result, timing = runner.render_timed(entry, scene, spp, seed)
                     timings[i].append((float(result.time_s), runner.cpu_time(result, timing)))
+                    machine.append({**timing.as_dict(), "threads": runner.threads_of(result.info)})
                     if on_render:
                         on_render(f"{entry.name} calibration {spp} spp, round {round_ + 1}/{repeats}")
             except Exception as e:  # recorded as the renderer's failure by the caller; the others go on
                 timings[i] = e
+    if basis == "auto":
+        basis = auto_basis(pd.DataFrame(machine), machine_cores()) if machine else "wall"
     out: list[BudgetChoice | Exception] = []
     for t in timings:
         if isinstance(t, Exception):
@@ -203,7 +211,7 @@ class Comparison:
     target: tuple[str, float] | None = None
     max_spp: int = 4096
     repeats: int = 1
-    time_basis: str = "wall"
+    time_basis: str = "wall"  # or cpu, or auto: resolved to one of them by run_comparison
 
     @property
     def runnable(self) -> list[bool]:
@@ -236,12 +244,17 @@ def run_comparison(c: Comparison, on_start: Callable[[str], None] | None = None,
     interleaved over the renderers too (:func:`retime`). ``on_start(label)`` comes before each renderer's
     renders, ``on_render(label)`` after each render (progress), ``on_record(record)`` as each record is
     scored, before the repeats retime it.
+
+    A ``c.time_basis`` of "auto" is resolved in ``c``: with a budget, as its calibration chose; without one,
+    from the final renders' timing quality (:func:`cornell_harness.evaluate.timing_quality.auto_basis`).
     """
     runnable = c.runnable
     if c.budget_s and on_start:
         on_start("the time budget's calibration renders")
-    choices = iter(calibrate_time_budget([e for e, ok in zip(c.entries, runnable) if ok], c.scene, c.budget_s,
-                                         c.seed, c.repeats, c.time_basis, on_render=on_render) if c.budget_s else ())
+    chosen = calibrate_time_budget([e for e, ok in zip(c.entries, runnable) if ok], c.scene, c.budget_s,
+                                   c.seed, c.repeats, c.time_basis, on_render=on_render) if c.budget_s else []
+    c.time_basis = next((ch.basis for ch in chosen if isinstance(ch, BudgetChoice)), c.time_basis)
+    choices = iter(chosen)
     records = []
     for entry, ok in zip(c.entries, runnable):
         if on_start:
@@ -254,6 +267,8 @@ def run_comparison(c: Comparison, on_start: Callable[[str], None] | None = None,
         if on_record:
             on_record(rec)
     retime(c.entries, records, c.scene, c.repeats, on_render=on_render)
+    if c.time_basis == "auto":
+        c.time_basis = auto_basis(runner.rows_frame(records), machine_cores())
     return records
 
 

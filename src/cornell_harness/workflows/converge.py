@@ -21,10 +21,11 @@ from typing import Callable, Sequence
 import numpy as np
 import pandas as pd
 
-from cornell_harness.adapters.api import attribute
+from cornell_harness.adapters.api import attribute, machine_cores
 from cornell_harness.adapters.registry import RendererEntry
 from cornell_harness.evaluate import convergence, timing_stats
 from cornell_harness.evaluate.summary import ExperimentResults, summary_table
+from cornell_harness.evaluate.timing_quality import auto_basis
 from cornell_harness.scenes.model import Scene
 from cornell_harness.store.atomic import atomic_path
 from cornell_harness.store.experiments import (RESULTS_FILE, SUMMARY_FILE, cell_name, experiment_lock, final_images,
@@ -324,11 +325,13 @@ def experiment_results(out: Path, scene: Scene, reference: Reference,
     there as ``summary.parquet`` (not when nothing ran; raw names, full precision): every experiment's is
     written here (the readable ``summary.csv`` and ``summary.tex`` are the report's).
 
-    ``time_basis`` (wall or cpu; default: the one experiment.json records, else wall) is the clock the
+    ``time_basis`` (wall, cpu or auto; default: the one experiment.json records, else wall) is the clock the
     summary's time-derived figures read; the returned config holds the one used. Results without that
     column (CPU times of an older run) get it as NaN, with a warning: never wall time passed off as CPU."""
     config, runs = load_results(out)
     basis = time_basis or config.get("time_basis", "wall")
+    if basis == "auto":  # cpu where these timings were contended
+        basis = auto_basis(runs, machine_cores())
     config = {**config, "time_basis": basis}
     column = timing_stats.TIME_BASES[basis]
     if basis != "wall" and (column not in runs or not runs[column].notna().any()):  # no CPU times: NaN, said

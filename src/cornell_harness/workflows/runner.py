@@ -17,8 +17,8 @@ the render proper as the renderer measured it (:class:`cornell_harness.adapters.
 or, for a renderer that gives none, that of the whole render call, set-up
 included (the row's ``info_cpu_time_of`` then says so); ``setup_s`` the set-up
 the renderer reports (``info["setup_s"]``: scene build, compilation, warm-up);
-``threads`` the threads it rendered on; ``load_before``/``load_after`` and
-``calibration_s``. Every checkpoint row of one render carries the render's
+``threads`` the threads it rendered on; ``load_before``/``load_after``,
+``calibration_s`` and ``foreign_cpu``. Every checkpoint row of one render carries the render's
 figures, and its own ``cpu_time_s`` where the renderer gave one.
 """
 
@@ -79,6 +79,7 @@ class RunRecord:
     load_before: float | None = None
     load_after: float | None = None
     calibration_s: float | None = None
+    foreign_cpu: float | None = None
     approximations: tuple[str, ...] = ()
     info: dict = field(default_factory=dict)
     metrics: dict = field(default_factory=dict)
@@ -145,6 +146,7 @@ class RunRecord:
             "load_before": _rounded(self.load_before, 3),
             "load_after": _rounded(self.load_after, 3),
             "calibration_s": _rounded(self.calibration_s, 5),
+            "foreign_cpu": _rounded(self.foreign_cpu, 3),
         }
         if self.agreement is not None:
             out.update(agreement=self.agreement, agreement_p_min=_rounded(self.agreement_p_min, 6))
@@ -166,9 +168,9 @@ class RunRecord:
             self.info["cpu_time_of"] = CALL_CPU_NOTE
         setup = result.info.get("setup_s")
         self.setup_s = float(setup) if isinstance(setup, (int, float)) else None
-        self.threads = _threads_of(result.info)
+        self.threads = threads_of(result.info)
         self.load_before, self.load_after = timing.load_before, timing.load_after
-        self.calibration_s = timing.calibration_s
+        self.calibration_s, self.foreign_cpu = timing.calibration_s, timing.foreign_cpu
         return self
 
 
@@ -197,7 +199,7 @@ def _rounded(value: float | None, digits: int) -> float | None:
     return None if value is None else round(float(value), digits)
 
 
-def _threads_of(info: dict) -> int | None:
+def threads_of(info: dict) -> int | None:
     """The threads a render ran on: what the renderer says (``info["threads"]``), else the share it was given."""
     given = info.get("threads")
     if isinstance(given, int) and not isinstance(given, bool) and given > 0:
@@ -318,7 +320,8 @@ def run_checkpoints(entry: RendererEntry, scene: Scene, spps: Sequence[int], see
         # The cell's machine figures on every row; the CPU time of the checkpoint where the renderer gave one.
         rec = RunRecord.new(scene, entry, spp, seed, version=top.version, time_s=float(t), info=dict(top.info),
                             cpu_time_s=cpu, setup_s=top.setup_s, threads=top.threads, load_before=top.load_before,
-                            load_after=top.load_after, calibration_s=top.calibration_s)
+                            load_after=top.load_after, calibration_s=top.calibration_s,
+                            foreign_cpu=top.foreign_cpu)
         # Only the highest-spp image comes with the renderer's own variance.
         rec.image = image
         rec.metrics, rec.regions = score(scene, image, reference, spp, top.variance if spp == top.spp else None)

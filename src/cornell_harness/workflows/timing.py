@@ -6,6 +6,12 @@ machine and returns :class:`Timing`, which becomes the results columns of
 :data:`cornell_harness.evaluate.timing_quality.TIMING_COLUMNS` (the verdict on them
 lives there):
 
+- **foreign CPU** (:mod:`cornell_harness.workflows.foreign_cpu`): the cores'
+  worth of CPU that processes outside the command's own process tree used
+  while the render was measured. The verdict reads it where it is known,
+  because it alone tells the command's own work (its workers, children,
+  thread pools) from other work; the load and the calibration kernel below
+  cannot, and are kept as figures, and as the verdict where it is not known.
 - **load** (:func:`machine_load`): the runnable threads on the machine now,
   the measuring thread included, read from ``procs_running`` in
   ``/proc/stat`` (proc(5): "number of processes in runnable state", i.e.
@@ -54,6 +60,7 @@ from dataclasses import asdict, dataclass
 from typing import Callable, TypeVar
 
 from cornell_harness.adapters.api import Stopwatch
+from cornell_harness.workflows.foreign_cpu import cpu_snapshot, foreign_cores
 
 #: Readings of ``procs_running`` averaged into one load figure, and the seconds between two.
 LOAD_SAMPLES = 5
@@ -151,6 +158,7 @@ class Timing:
     load_before: float
     load_after: float
     calibration_s: float  # the faster of the kernel's timings just before and just after
+    foreign_cpu: float = math.nan  # cores' worth of CPU other processes used meanwhile (foreign_cpu.py)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -160,9 +168,13 @@ def measure(call: Callable[[], T]) -> tuple[T, Timing]:
     """``call()`` between two readings of the machine: its value and its :class:`Timing`.
 
     Order: calibration, load, the call, load, calibration, so that each load reading is the one nearest
-    the call; each side after :func:`settle`, so that the readings are of the machine, not of this process. An exception in ``call`` propagates (nothing is recorded for a failed render).
+    the call; each side after :func:`settle`, so that the readings are of the machine, not of this process.
+    The CPU other processes used (:mod:`cornell_harness.workflows.foreign_cpu`) is read over all of it, the
+    calibration kernels included: a longer interval than a short render's, whose few ticks the counters'
+    rounding would swamp. An exception in ``call`` propagates (nothing is recorded for a failed render).
     """
     settle()
+    start = cpu_snapshot(start=True)
     cal_before = calibration_seconds()
     load_before = machine_load()
     watch = Stopwatch()
@@ -171,4 +183,5 @@ def measure(call: Callable[[], T]) -> tuple[T, Timing]:
     settle()
     load_after = machine_load()
     cal_after = calibration_seconds()
-    return value, Timing(wall, cpu, load_before, load_after, min(cal_before, cal_after))
+    foreign = foreign_cores(start, cpu_snapshot(start=False))
+    return value, Timing(wall, cpu, load_before, load_after, min(cal_before, cal_after), foreign)

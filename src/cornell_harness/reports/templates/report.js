@@ -28,6 +28,17 @@
   } catch (e) { /* storage refused: follow the system */ }
   var toggle = document.getElementById('theme-toggle');
   if (toggle) toggle.addEventListener('click', function () { setTheme(currentTheme() === 'dark' ? 'light' : 'dark'); });
+
+  // ---------------------------------------------------------------- navigation bar
+  // Anchors land below the sticky bar (report.css's scroll-margin-top uses --nav-h): its height, kept current as
+  // it wraps to more lines or fewer when the window changes.
+  var nav = document.querySelector('nav.toc');
+  function keepNavHeight() { root.style.setProperty('--nav-h', nav.getBoundingClientRect().height + 'px'); }
+  if (nav) {
+    keepNavHeight();
+    if (window.ResizeObserver) new ResizeObserver(keepNavHeight).observe(nav);
+    else window.addEventListener('resize', keepNavHeight);
+  }
   if (prefersDark && prefersDark.addEventListener) prefersDark.addEventListener('change', labelToggle);
   labelToggle();
 
