@@ -7,6 +7,8 @@ rotation of -90°), the same estimate the charts place their text by; the browse
 
 from __future__ import annotations
 
+import math
+import random
 import re
 import xml.etree.ElementTree as ET
 
@@ -53,7 +55,7 @@ def _texts(svg: str) -> tuple[list[dict], tuple[float, float]]:
             x, y = float(el.get("x")), float(el.get("y"))
             x0 = x - {"start": 0, "middle": width / 2, "end": width}[anchor]
             box = (x0, y - ASCENT * font, x0 + width, y + down)
-        out.append({"cls": cls, "text": "".join(lines), "lines": lines, "box": box})
+        out.append({"cls": cls, "text": "".join(lines), "lines": lines, "box": box, "name": el.get("data-renderer")})
     return out, (w, h)
 
 
@@ -157,6 +159,36 @@ def test_scatter_tags_never_meet(layout, spread):
         assert px <= t["box"][0] and t["box"][2] <= px + pw and py <= t["box"][1] and t["box"][3] <= py + ph
 
 
+@LAYOUTS
+def test_crowded_scatter_tags_meet_nothing_and_sit_by_their_own_point(layout):
+    """Twelve renderers' points packed close (a fixed seed): no tag meets another tag or any point's marker, and
+    each tag is nearer its own point's marker than any other's by a margin, so it cannot be read as another's.
+    A tag left out is still in its point's tooltip."""
+    rng = random.Random(7)
+    points = [plots.Point(f"r{i}", plots.color_for(i), 10 ** rng.uniform(0, 0.3), 10 ** rng.uniform(0, 0.25),
+                          tip=f"r{i} {s} spp", tag=str(s)) for i in range(12) for s in (1, 4, 16, 64)]
+    svg = plots.scatter_svg(points, uid="s", xlabel="t", ylabel="e", layout=layout)
+    texts = _check_layout(svg)
+    tags = [t for t in texts if t["cls"] == "point-tag"]
+    root = ET.fromstring(svg)
+    dots = [{"name": el.get("data-renderer"), "c": (float(el.get("cx")), float(el.get("cy"))), "r": float(el.get("r")),
+             "tip": "".join(el.itertext())} for el in root.iter() if el.get("class", "").startswith("point ")
+            or el.get("class") == "point"]
+    assert len(dots) == 48 and 8 <= len(tags) < 48  # crowded: some tags go to their tooltips
+
+    def gap(box, dot):
+        (x, y), r = dot["c"], dot["r"]
+        return math.hypot(max(box[0] - x, 0, x - box[2]), max(box[1] - y, 0, y - box[3])) - r
+
+    for t in tags:
+        assert all(gap(t["box"], d) >= 1 for d in dots), t  # covers no marker
+        own = [d for d in dots if d["name"] == t["name"] and d["tip"].startswith(f"{t['name']} {t['text']} spp")]
+        assert len(own) == 1
+        assert all(gap(t["box"], d) >= gap(t["box"], own[0]) + plots.OWN_MARGIN for d in dots
+                   if d is not own[0] and math.dist(d["c"], own[0]["c"]) > own[0]["r"]), t
+    assert all(" spp" in d["tip"] for d in dots)
+
+
 def test_place_tags_tries_each_side_then_drops():
     area = (0.0, 0.0, 200.0, 200.0)
     spots = plots.place_tags([(100, 100), (100, 100), (100, 100), (100, 100), (100, 100), (100, 100), (100, 100)],
@@ -170,23 +202,87 @@ def test_place_tags_tries_each_side_then_drops():
     assert plots.place_tags([(50, 50)], [3.6], [""], area, 10.0) == [(0.0, 0.0, "")]
 
 
+def _shapes(svg: str) -> tuple[dict[str, list], list[dict]]:
+    """The bar chart's drawn boxes by renderer (bars, error bars, "≈ 0" marks) and each bar's x extent."""
+    root = ET.fromstring(svg)
+    font = float(root.get("font-size"))
+    boxes: dict[str, list] = {}
+    rects = []
+    for el in root.iter():
+        cls, name = el.get("class", ""), el.get("data-renderer")
+        if cls == "bar":
+            x, y, w, h = (float(el.get(k)) for k in ("x", "y", "width", "height"))
+            boxes.setdefault(name, []).append((x, y, x + w, y + h))
+            rects.append({"name": name, "kind": el.get("data-kind"), "x0": x, "x1": x + w})
+        elif cls == "whisker":
+            nums = [float(v) for v in re.findall(r"[-\d.]+", el.get("d"))]
+            xs, ys = nums[0::2], nums[1::2]
+            boxes.setdefault(name, []).append((min(xs), min(ys), max(xs), max(ys)))
+        elif cls == "bar-missing":
+            x, y = float(el.get("x")), float(el.get("y"))
+            w = text_width(el.text, font)
+            boxes.setdefault(name, []).append((x - w / 2, y - ASCENT * font, x + w / 2, y + DESCENT * font))
+    return boxes, rects
+
+
+def _notes_by_own_bars(svg: str, groups, near: bool = True) -> None:
+    """Each group's note mark: whole, over its own bias² bar within a bar's width, above its group's highest
+    box (``near``: just above), and clear of every other group's bars, error bars and marks."""
+    texts = _check_layout(svg)
+    marks = {t["name"]: t for t in texts if t["cls"] == "bar-note"}
+    assert sorted(t["text"] for t in marks.values()) == sorted(g.note for g in groups if g.note)
+    boxes, rects = _shapes(svg)
+    font = float(ET.fromstring(svg).get("font-size"))
+    for name, t in marks.items():
+        bar = next((r for r in rects if r["name"] == name and r["kind"] == "bias²"), None)
+        x0, y0, x1, y1 = t["box"]
+        centre = (x0 + x1) / 2
+        if bar is not None:  # a bar's width (its drawn width and the gap of 2 beside it)
+            width = bar["x1"] - bar["x0"] + 2
+            assert abs(centre - (bar["x0"] + bar["x1"]) / 2) <= width, (name, t, bar)
+        own_top = min(b[1] for b in boxes[name])
+        assert y1 <= own_top and (not near or own_top - y1 <= 2 * LINE * font + 5), (name, t["box"], own_top)
+        for other, bs in boxes.items():
+            if other != name:
+                assert not any(overlaps(t["box"], b) for b in bs), (name, other)
+
+
+def _bar_groups(names, short: bool = True):
+    return [bars.BarGroup(n, [1e-3 * (i + 1) if i % 3 else -1e-5, 2e-3],
+                          ("n.s." if short else "bias not significant") if i % 2 else f"{10 * i} %",
+                          [5e-4, 1e-3], [2e-3, 3e-3]) for i, n in enumerate(names)]
+
+
 @LAYOUTS
 @pytest.mark.parametrize("names", [LONG, ["alpha", "beta", "gamma", "delta", "epsilon"],
                                    ["ambient-occlusion", "mitsuba", "pathtracer", "sppm", "bdpt", "photon-mapper"]])
-def test_bar_names_and_notes_whole_and_apart(layout, names):
-    groups = [bars.BarGroup(n, [1e-3 * (i + 1) if i % 3 else -1e-5, 2e-3], "bias not significant" if i % 2 else
-                             f"bias {10 * i} %", [5e-4, 1e-3], [2e-3, 3e-3]) for i, n in enumerate(names)]
+def test_bar_names_whole_and_notes_by_their_bars(layout, names):
+    groups = _bar_groups(names)
     svg = bars.bars_svg(groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")), uid="b", ylabel="m",
-                         layout=layout)
+                         layout=layout, note_key=["n %: bias² share", "n.s.: bias not significant"])
     texts = _check_layout(svg)
     assert [t["text"] for t in texts if t["cls"] == "tick x"] == names
-    assert [t["text"] for t in texts if t["cls"] == "bar-note"] == [g.note for g in groups]
-    root = ET.fromstring(svg)
-    plot = [el for el in root.iter() if _local(el.tag) == "rect" and el.get("class") == "axis"][0]
-    top = float(plot.get("y"))
-    for t in texts:
-        if t["cls"] == "bar-note":  # above the plot, over the plot's width
-            assert t["box"][3] <= top
+    legend = [t["text"] for t in texts if t["cls"] == "legend-label"]
+    assert legend[-2:] == ["n %: bias² share", "n.s.: bias not significant"]  # what the marks mean
+    _notes_by_own_bars(svg, groups)
+
+
+@LAYOUTS
+@pytest.mark.parametrize("short", [True, False])
+def test_crowded_bar_notes_stay_by_their_bars(layout, short):
+    """Sixteen groups, every one noted, with bars up to the top of the plot: wider marks than a group's share
+    stand upright; each still sits over its own bars, none meets another text or another group's bars. Long
+    notes (taller upright than the plot's room) may go above the plot, still over their own bars."""
+    names = [f"renderer-{i}" for i in range(16)]
+    groups = _bar_groups(names, short)
+    for i, g in enumerate(groups):
+        g.values[1] = 10.0 ** (-(i % 4))  # tall and short neighbours
+        g.note = g.note or "n.s."
+    groups[1].note_tip = "bias not significant (its 95% interval reaches 0)"
+    svg = bars.bars_svg(groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")), uid="b", ylabel="m",
+                         layout=layout)
+    _notes_by_own_bars(svg, groups, near=short)
+    assert "<title>renderer-1: bias not significant (its 95% interval reaches 0)</title>" in svg  # said in full
 
 
 def test_bar_names_turn_vertical_only_when_they_do_not_wrap():
@@ -198,15 +294,16 @@ def test_bar_names_turn_vertical_only_when_they_do_not_wrap():
     assert depth >= max(text_width(line, font) for ls in lines for line in ls)
 
 
-def test_notes_take_rows_only_when_they_would_meet():
-    font = 10.0
-    notes, height = bars.note_rows(["bias 1 %", "bias 2 %"], [50, 150], (0, 200), font)
-    assert notes[0][1] == notes[1][1] and height == pytest.approx(LINE * font + 6)  # one row
-    notes, height = bars.note_rows(["bias not significant"] * 3, [30, 60, 90], (0, 120), font)
-    assert len({n[1] for n in notes}) == 3 or any(len(n[2]) == 2 for n in notes)
-    xs = [(n[0] - max(text_width(line, font) for line in n[2]) / 2, n[0] + max(text_width(line, font)
-                                                                              for line in n[2]) / 2) for n in notes]
-    for i in range(3):
-        for j in range(i + 1, 3):
-            same_row = notes[i][1] == notes[j][1]
-            assert not same_row or xs[i][1] <= xs[j][0] or xs[j][1] <= xs[i][0]
+def test_place_notes_lifts_a_mark_off_a_neighbour_and_over_the_top_edge():
+    font, top = 10.0, 50.0
+    # group 1's mark would sit on group 0's error bar, which reaches over it: lifted a row at a time until free
+    drawn = [[(40.0, 60.0, 46.0, 200.0)], [(52.0, 150.0, 60.0, 200.0)]]
+    spots = bars.place_notes(["", "n.s."], [43.0, 56.0], drawn, top, font)
+    assert spots[0] is None
+    box = spots[1]
+    assert box[3] <= 150 - 3 and not overlaps(box, drawn[0][0], 1.0) and box[1] > 60 - LINE * font - 12
+    # a group reaching the plot's top edge: its mark goes above the edge, not across it
+    (box,) = bars.place_notes(["n.s."], [43.0], [[(40.0, top + 2, 46.0, 200.0)]], top, font)
+    assert box[3] < top  # above the edge, clear of it
+    (box,) = bars.place_notes(["100 %"], [43.0], [[(40.0, 120.0, 46.0, 200.0)]], top, font, upright=True)
+    assert box[2] - box[0] == pytest.approx((ASCENT + DESCENT) * font) and box[3] - box[1] == text_width("100 %", font)

@@ -487,7 +487,8 @@ def test_bias_variance_bars(report, case):
     assert bars == expected
     for n in OK_NAMES:
         if summ.loc[n, "bias2_fraction"] == summ.loc[n, "bias2_fraction"]:
-            assert f"bias {100 * summ.loc[n, 'bias2_fraction']:.0f} %" in svg
+            pct = f"{100 * summ.loc[n, 'bias2_fraction']:.0f} %"
+            assert f">{pct}<title>" in svg and f"bias {pct}" in svg  # the mark over the bars, its tooltip
     assert ">bias²<" in svg and ">variance<" in svg  # legend
 
 

@@ -155,7 +155,8 @@ def text_lines(lines: list[str], x: float, font: float) -> str:
 @dataclass
 class Axes:
     """A log-log plot area of ``layout``'s size, its frame and its legend (``entries``: (kind, colour, label);
-    kind is 'line', 'dash', 'band', 'whisker', 'dot', 'ring' or 'rect').
+    kind is 'line', 'dash', 'band', 'whisker', 'dot', 'ring', 'rect', or 'note': a line of text with no mark,
+    such as what the notes on a chart mean).
 
     Text is never cut: the left margin holds the widest y tick label, a legend at the right is as wide as its
     longest label needs (the figure growing), wrapped where a label is longer still; a legend below wraps and
@@ -322,10 +323,10 @@ class Axes:
                     f'<line class="legend-mark frontier-mark" x1="{num(x0)}" y1="{num(y)}" x2="{x1}" y2="{num(y)}" '
                     f'stroke="{color}" stroke-width="6" stroke-opacity="0.45" stroke-linecap="round"/>'
                 )
-            else:
+            elif kind == "dot":
                 self.parts.append(
                     f'<circle class="legend-mark" cx="{num(x0 + 11)}" cy="{num(y)}" r="4" fill="{color}"/>')
-            tx = x0 + LEGEND_TEXT_X
+            tx = x0 + (LEGEND_TEXT_X if kind != "note" else 0)  # a line of text alone starts where marks do
             self.parts.append(
                 f'<text class="legend-label" x="{num(tx)}" y="{num(y + 4)}">'
                 f"{text_lines(lines, tx, self.layout.font)}</text>"

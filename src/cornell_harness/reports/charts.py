@@ -226,12 +226,22 @@ def bias_variance_chart(summary, names, colors, prefix: str = "", labels=None) -
             continue
         frac = r.get("bias2_fraction")
         significant = bias_significant(r.get("bias2_fraction_low"))
-        note = ("bias not significant" if significant is False else
-                f"bias {100 * float(frac):.0f} %" if is_finite(frac) else "")
+        # a short mark over the renderer's bars; the tooltip says it in full, the legend what marks mean
+        note, tip = (("n.s.", "bias not significant (its 95% interval reaches 0)") if significant is False else
+                     (f"{100 * float(frac):.0f} %", f"bias {100 * float(frac):.0f} % of bias² + variance")
+                     if is_finite(frac) else ("", ""))
         bounds = [[float(r.get(f"{k}_{end}", math.nan)) for k in ("bias2", "variance")] for end in ("low", "high")]
-        groups.append(bars.BarGroup(name, [b2, var], note, *bounds, label=(labels or {}).get(name, name)))
+        groups.append(bars.BarGroup(name, [b2, var], note, *bounds, label=(labels or {}).get(name, name),
+                                    note_tip=tip))
     if not groups:
         return None
+    key = [text for text, used in ((NOTE_SHARE, any(g.note.endswith("%") for g in groups)),
+                                   (NOTE_NS, any(g.note == "n.s." for g in groups))) if used]
     return Figure(_prefixed(prefix, "bias-variance"), partial(
         bars.bars_svg, groups, (("bias²", "#e69f00"), ("variance", "#56b4e9")),
-        uid=_prefixed(prefix, "bias-variance"), ylabel="mean over pixels and channels"))
+        uid=_prefixed(prefix, "bias-variance"), ylabel="mean over pixels and channels", note_key=key))
+
+
+#: The bias/variance chart's legend lines for its marks over the bars.
+NOTE_SHARE = "n %: bias² share"
+NOTE_NS = "n.s.: bias not significant"

@@ -267,9 +267,10 @@ def scatter_svg(
 def place_tags(centres: Sequence[tuple[float, float]], radius: Sequence[float], tags: Sequence[str],
                area: Box, font: float) -> list[tuple[float, float, str]]:
     """Where each point's tag goes: (x, y, text-anchor) of its baseline, the first of right-up, right-down,
-    left-up, left-down, above and below whose estimated box (:func:`cornell_harness.reports.axes.text_box`) lies in ``area``
-    and meets no tag placed before it and no point; ``(0, 0, "")`` for an empty tag, one with no room (its
-    point's tooltip still says it) or one that a point under this one already shows."""
+    left-up, left-down, above and below whose estimated box (:func:`cornell_harness.reports.axes.text_box`) lies in ``area``,
+    meets no tag placed before it and no point, and is plainly nearer its own point than any other
+    (:func:`_own`); ``(0, 0, "")`` for an empty tag, one with no room (its point's tooltip still says it) or
+    one that a point under this one already shows."""
     dots = [(cx - r, cy - r, cx + r, cy + r) for (cx, cy), r in zip(centres, radius)]
     placed: list[Box] = []
     told: list[tuple[float, float, str]] = []  # the points whose tags are placed, and their tags
@@ -288,10 +289,26 @@ def place_tags(centres: Sequence[tuple[float, float]], radius: Sequence[float], 
                 box = text_box(x, y, tag, font, anchor)
                 inside = area[0] + 1 <= box[0] and box[2] <= area[2] - 1 and area[1] + 1 <= box[1] \
                     and box[3] <= area[3] - 1
-                if inside and not any(overlaps(box, b, gap=1) for b in placed + dots):
+                if inside and not any(overlaps(box, b, gap=1) for b in placed + dots) and _own(box, cx, cy, r, centres,
+                                                                                        radius):
                     placed.append(box)
                     told.append((cx, cy, tag))
                     spot = (x, y, anchor)
                     break
         out.append(spot)
     return out
+
+
+#: A tag is this much (viewBox units) nearer its own point's marker than any other point's, so it reads as its.
+OWN_MARGIN = 3.0
+
+
+def _own(box: Box, cx: float, cy: float, r: float, centres: Sequence[tuple[float, float]],
+         radius: Sequence[float]) -> bool:
+    """Whether ``box`` is at least :data:`OWN_MARGIN` nearer the marker at (cx, cy) than every other marker
+    (those under this one, which share its place, aside): a tag between two points would say the wrong one's."""
+    def gap(x: float, y: float, rad: float) -> float:
+        return math.hypot(max(box[0] - x, 0.0, x - box[2]), max(box[1] - y, 0.0, y - box[3])) - rad
+    own = gap(cx, cy, r)
+    return all(gap(x, y, rad) >= own + OWN_MARGIN for (x, y), rad in zip(centres, radius)
+               if math.hypot(x - cx, y - cy) > r)
