@@ -75,7 +75,8 @@ from cornell_harness.evaluate.summary import summary_table
 from cornell_harness.workflows.converge import run_experiment
 from cornell_harness.workflows.spp_list import parse_spp_list
 from cornell_harness.reports.charts import convergence_table
-from cornell_harness.reports.plots import BarGroup, Series, bars_svg, line_plot_svg
+from cornell_harness.reports.bars import BarGroup, bars_svg
+from cornell_harness.reports.plots import Series, line_plot_svg
 
 SCENE = "cornell-box"
 LEAK_SCENE, LEAK_SPP = "two-rooms", 64
