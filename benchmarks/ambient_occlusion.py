@@ -59,6 +59,7 @@ from PIL import Image, ImageDraw, ImageFont
 from scipy.ndimage import binary_dilation
 from scipy.spatial import cKDTree
 
+import figure_manifest
 import markdown_blocks
 from markdown_blocks import bold, minus
 from cornell_harness.adapters.registry import resolve
@@ -371,7 +372,8 @@ def signed(e: np.ndarray, lim: float = ERROR_RANGE) -> np.ndarray:
 def figure(path: Path, panels: list[tuple[str, np.ndarray]], scale: int = 1, legend: bool = True,
            lim: float = ERROR_RANGE, note: str = "", colours: int = 96) -> int:
     """Panels side by side (each titled, enlarged ``scale``× without smoothing), the signed error's colour bar
-    below; written as an optimised PNG of ``colours`` palette entries. Returns its size in bytes."""
+    below; written as an optimised PNG of ``colours`` palette entries, recorded in its folder's manifest
+    (``figure_manifest``). Returns its size in bytes."""
     font = _font(11)
     h, w = panels[0][1].shape[:2]
     W, H, gap, top = w * scale, h * scale, 4, 16
@@ -396,6 +398,7 @@ def figure(path: Path, panels: list[tuple[str, np.ndarray]], scale: int = 1, leg
         d.text((2, y), note, fill="black", font=font)
     path.parent.mkdir(parents=True, exist_ok=True)
     canvas.quantize(colours, dither=Image.Dither.NONE).save(path, optimize=True)
+    figure_manifest.record([path], markdown_blocks.command_line())
     return path.stat().st_size
 
 

@@ -52,6 +52,7 @@ from cornell_harness.evaluate.convergence import time_to_target
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.store.references import load_reference
 from cornell_harness.workflows.spp_list import parse_spp_list
+import figure_manifest
 import markdown_blocks
 from irradiance_probes import COLOURS, PT_COLOUR, bias_figure, experiment, fmt, write_svg
 from cornell_harness.reports.charts import convergence_table
@@ -173,6 +174,7 @@ def side_by_side(scene, ref, path: Path, max_spp: int, size: int = 192) -> None:
         canvas.paste(Image.fromarray(shown).resize((size, size), Image.BILINEAR), (i * (size + 4), 16))
     path.parent.mkdir(parents=True, exist_ok=True)
     canvas.save(path, optimize=True)
+    figure_manifest.record([path], markdown_blocks.command_line())
 
 
 def costs(scene, spp: int, repeats: int) -> dict:

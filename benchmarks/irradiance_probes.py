@@ -58,6 +58,7 @@ import pandas as pd
 from PIL import Image, ImageDraw
 from scipy.ndimage import gaussian_filter
 
+import figure_manifest
 import markdown_blocks
 from markdown_blocks import bold, minus
 from cornell_harness.adapters.registry import resolve, sweep
@@ -74,7 +75,8 @@ from cornell_harness.evaluate.summary import summary_table
 from cornell_harness.workflows.converge import run_experiment
 from cornell_harness.workflows.spp_list import parse_spp_list
 from cornell_harness.reports.charts import convergence_table
-from cornell_harness.reports.plots import BarGroup, Series, bars_svg, line_plot_svg
+from cornell_harness.reports.bars import BarGroup, bars_svg
+from cornell_harness.reports.plots import Series, line_plot_svg
 
 SCENE = "cornell-box"
 LEAK_SCENE, LEAK_SPP = "two-rooms", 64
@@ -129,11 +131,13 @@ def doc_label(name: str, configs: dict, runs, default, grid_names: list[str]) ->
 
 
 def write_svg(path: Path, svg: str) -> None:
-    """A report chart as a standalone file: the SVG namespace, a size, a white page and light styles."""
+    """A report chart as a standalone file: the SVG namespace, a size, a white page and light styles; recorded,
+    with the command running, in its folder's manifest (``figure_manifest``)."""
     head, rest = svg.split(">", 1)
     head = head.replace("<svg ", '<svg xmlns="http://www.w3.org/2000/svg" width="640" height="400" ', 1)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(head + ">" + STYLE + '<rect width="100%" height="100%" fill="#fff"/>' + rest + "\n")
+    figure_manifest.record([path], markdown_blocks.command_line())
 
 
 def experiment(out: Path, scene, ref, entries, spps, seeds, command: str):
@@ -440,6 +444,7 @@ def bias_figure(out: Path, ref, runs, names: dict, path: Path, lim: float = 0.25
            f"blue darker, red lighter, saturating at ±{lim:.0%}", fill="black")
     path.parent.mkdir(parents=True, exist_ok=True)
     canvas.quantize(256, method=Image.Quantize.FASTOCTREE).save(path, optimize=True)
+    figure_manifest.record([path], markdown_blocks.command_line())
 
 
 def light_leak(out: Path, images: Path, seeds, spp: int, command: str) -> list[dict]:
@@ -477,6 +482,7 @@ def light_leak(out: Path, images: Path, seeds, spp: int, command: str) -> list[d
     d.text((2, 2 * (h + 16) + 2), "top: exposed for the lit floor (left room); bottom: 32 times brighter. The right "
            "room is exactly black: what shows there leaked through the wall.", fill="black")
     canvas.save(images / "probes-leak.png", optimize=True)
+    figure_manifest.record([images / "probes-leak.png"], markdown_blocks.command_line())
     return rows
 
 

@@ -67,6 +67,14 @@ def command_line(argv: list[str] | None = None) -> str:
     return " ".join([".venv/bin/python", shlex.quote(str(script))] + [shlex.quote(a) for a in argv[1:]])
 
 
+def script_words(command: str) -> list[str]:
+    """The command's words, ``-m benchmarks.NAME`` read as the script ``benchmarks/NAME.py`` it runs."""
+    words = shlex.split(command)
+    if len(words) > 2 and words[1] == "-m" and words[2].startswith("benchmarks."):
+        words = [words[0], words[2].replace(".", "/") + ".py", *words[3:]]
+    return words
+
+
 def minus(number: str) -> str:
     """A formatted number with the docs' minus sign (U+2212) for Python's leading hyphen (an exponent's stays)."""
     return "\u2212" + number[1:] if number.startswith("-") else number

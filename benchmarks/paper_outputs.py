@@ -28,6 +28,7 @@ from pathlib import Path
 
 import pandas as pd
 
+import figure_manifest
 import markdown_blocks
 
 ROOT = markdown_blocks.ROOT
@@ -77,6 +78,8 @@ def main(argv=None) -> int:
     cairosvg.svg2png(url=str(out / "figures" / "images.svg"), write_to=str(images / "paper-images.png"),
                      dpi=FIGURE_DPI)
     shutil.copyfile(out / "figures" / "convergence-time-rmse.svg", images / "paper-convergence-time-rmse.svg")
+    figure_manifest.record([images / "paper-images.png", images / "paper-convergence-time-rmse.svg"], command,
+                           source=f"cbox {shlex.join(COMMAND)} --out {args.out}")
     shutil.copyfile(out / "summary.tex", ROOT / "docs" / "paper-summary.tex")
     lines = markdown_table(out / "summary.csv", pd.read_parquet(out / "summary.parquet"))
     lines += ["", f"`cbox {shlex.join(COMMAND)} --out {args.out}` ({time.strftime('%Y-%m-%d')}); in brackets "

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+import figure_manifest
 import markdown_blocks
 
 from cornell_harness.evaluate import metrics
@@ -171,6 +172,7 @@ def main() -> None:
         ("per pixel", FIGURE_RANGE, [(label, delta_e2000_linear(img, ref, exposure)) for label, img in panels]),
         (f"{BLOCK}x{BLOCK}-pixel block means", BLOCK_RANGE,
          [(label, delta_e2000_linear(block_means(img), block_means(ref), exposure)) for label, img in panels])])
+    figure_manifest.record([args.figure], markdown_blocks.command_line())
     markdown_blocks.write_blocks(args.markdown, {"spectral.py": text})
 
 

@@ -9,7 +9,9 @@ so they are never in git and cannot go stale. Each is read from the one place th
   ``benchmarks/schema_tables.py``), each with an example file of this repository;
 - ``reference/metrics.md``: the metric registry (:data:`cornell_harness.evaluate.registry.METRICS`);
 - ``reference/renderers.md``: our registered renderers (pyproject's ``cbox.renderers`` entry points), each with its
-  declarations (:func:`cornell_harness.adapters.api.attribute`) and settings.
+  declarations (:func:`cornell_harness.adapters.api.attribute`) and settings;
+- ``gallery.md``: the committed figures, each with the command that made it, and the Whitted and spectral tables
+  (``scripts/gallery.py``; nothing is rendered).
 
 Build the site with ``mkdocs build --strict`` (the ``[docs]`` extra); ``tests/test_docs_site.py`` does.
 """
@@ -34,6 +36,7 @@ from cornell_harness.adapters.api import attribute  # noqa: E402
 from cornell_harness.evaluate.registry import METRICS  # noqa: E402
 from cornell_harness.extras import RENDERERS as RENDERER_EXTRAS, install_line  # noqa: E402
 from cornell_harness.scenes.library import references_root  # noqa: E402
+from scripts.gallery import PAGE as GALLERY, gallery_page  # noqa: E402
 
 #: Each format's reference page, and the file of this repository shown as its example, with what it is.
 FORMAT_PAGES = {
@@ -254,7 +257,7 @@ else:
 def pages() -> dict[str, str]:
     """Every generated page, by its path under ``docs/``."""
     out = {"reference/cli.md": cli_page(), "reference/metrics.md": metrics_page(),
-           "reference/renderers.md": renderers_page()}
+           "reference/renderers.md": renderers_page(), GALLERY: gallery_page()}
     out.update({page: format_page(fmt) for fmt, (page, *_) in FORMAT_PAGES.items()})
     return out
 

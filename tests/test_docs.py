@@ -12,23 +12,15 @@ from __future__ import annotations
 
 import ast
 import re
-import shlex
 from pathlib import Path
 
 import pytest
 
 from benchmarks import markdown_blocks
+from benchmarks.markdown_blocks import script_words
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = sorted((ROOT / "docs").glob("*.md")) + [ROOT / "BENCHMARKS.md", ROOT / "README.md"]
-
-
-def script_words(command: str) -> list[str]:
-    """The command's words, ``-m benchmarks.NAME`` read as the script ``benchmarks/NAME.py`` it runs."""
-    words = shlex.split(command)
-    if len(words) > 2 and words[1] == "-m" and words[2].startswith("benchmarks."):
-        words = [words[0], words[2].replace(".", "/") + ".py", *words[3:]]
-    return words
 
 
 def command_problems(rel: str, name: str | None, command: str, root: Path = ROOT) -> list[str]:

@@ -67,7 +67,7 @@ def test_the_api_page_reads_the_codes_own_conventions(site):
 
 @pytest.mark.parametrize("path", ["reference/cli.md", "reference/metrics.md", "reference/renderers.md",
                                   "reference/scene-format.md", "reference/gate-format.md",
-                                  "reference/renderers-format.md"])
+                                  "reference/renderers-format.md", "gallery.md"])
 def test_a_generated_page_names_only_what_exists(pages, path):
     text = pages[path]
     missing = [p for p in file_paths(text) if not (ROOT / p).exists()]
