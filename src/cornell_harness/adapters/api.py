@@ -25,13 +25,14 @@ from typing import Any, Mapping, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
-from cornell_harness.adapters.seeds import pass_key, pass_seed, spp_passes
+from cornell_harness.adapters.seeds import frame_seed, pass_key, pass_seed, spp_passes
 from cornell_harness.scenes.model import Scene
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
 
 __all__ = ["AOVS", "DECLARATIONS", "ESTIMATORS", "THREADS_VARIABLE", "Checkpoint", "Declarations", "ReferenceFit",
-           "RenderResult", "Renderer", "Setting", "SettingsError", "Stopwatch", "attribute", "default_threads",
-           "machine_cores", "pass_key", "pass_seed", "process_cpu_s", "spp_passes"]
+           "RenderResult", "Renderer", "SequenceResult", "Setting", "SettingsError", "Stopwatch", "attribute",
+           "default_threads",
+           "frame_seed", "machine_cores", "pass_key", "pass_seed", "process_cpu_s", "spp_passes"]
 
 #: Auxiliary images (AOVs) a renderer may return, defined as Intel Open Image Denoise expects them (its
 #: documentation, "RT" filter): the surface seen through each pixel at the first non-delta hit, following
@@ -149,6 +150,16 @@ class RenderResult:
     variance: np.ndarray | None = None
     aovs: dict = field(default_factory=dict)
     cpu_time_s: float | None = None
+
+
+@dataclass
+class SequenceResult:
+    """What a sequence render returns: one :class:`RenderResult` per frame, in frame order (each with its own
+    time and seed), and ``state``, what the renderer carried from frame to frame (its settings of time: a
+    hysteresis, a history length), recorded with the run."""
+
+    frames: list[RenderResult]
+    state: dict = field(default_factory=dict)
 
 
 def process_cpu_s() -> float:

@@ -30,6 +30,20 @@ def pass_key(seed: int, index: int, stream: int = 0) -> np.uint64:
     return np.random.SeedSequence(entropy).generate_state(1, dtype=np.uint64)[0]
 
 
+def frame_seed(seed: int, frame: int) -> int:
+    """The seed of frame ``frame`` of a sequence seeded with ``seed``: 31 bits of ``SeedSequence([seed, frame,
+    FRAME_STREAM])`` (a seed any program's int reads), so the frames of one sequence draw unrelated streams and
+    frame 0 is not the still image's ``seed`` (a stateless renderer renders each frame as a still image with it)."""
+    if seed < 0 or frame < 0:
+        raise ValueError(f"seed and frame must be non-negative, got {seed}, {frame}")
+    state = np.random.SeedSequence([seed, frame, FRAME_STREAM]).generate_state(1, dtype=np.uint64)[0]
+    return int(state & np.uint64(0x7FFFFFFF))
+
+
+#: The stream that tells frame seeds apart from pass keys (:func:`pass_key` streams are a renderer's kinds of pass).
+FRAME_STREAM = 1 << 20
+
+
 def pass_seed(seed: int, index: int) -> int:
     """32-bit seed of pass ``index``: the low word of :func:`pass_key`, for renderers that take 32 bits."""
     return int(pass_key(seed, index) & np.uint64(0xFFFFFFFF))
