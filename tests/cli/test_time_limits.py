@@ -127,7 +127,7 @@ def test_reference_commands_past_their_limit_are_one_line_and_exit_1(tmp_path, c
         name = "slow"
     code, out, err = cbox(capsys, *argv, "--home", str(home))
     assert code == 1, err
-    assert err.strip().splitlines()[-1].startswith(f"cbox: error: {name}: render failed: killed at its time "
+    assert err.strip().splitlines()[-1].startswith(f"cbox: error: renderer {name!r} failed: killed at its time "
                                                     "limit of"), err
     assert not list(home.rglob("*.exr"))
 

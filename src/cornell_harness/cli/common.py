@@ -249,6 +249,26 @@ def fail(message: str, code: int = 2) -> NoReturn:
     sys.exit(code)
 
 
+@contextlib.contextmanager
+def render_failed(name: str) -> Iterator[None]:
+    """A render of renderer ``name`` that failed in this process: one line, ``renderer 'X' failed: why``, exit 1.
+
+    The harness's own render errors (past its time limit, an unusable result, a sandboxed child's failure) say
+    why in their message; any other exception is the renderer's own, named by its type. A user's error
+    (:data:`USER_ERRORS`) and an interrupt go on to their own handlers.
+    """
+    from cornell_harness.workflows.render import RenderError, RenderTimeout
+
+    try:
+        yield
+    except USER_ERRORS:
+        raise
+    except (RenderTimeout, RenderError) as e:
+        fail(f"renderer {name!r} failed: {e}", 1)
+    except Exception as e:  # the renderer's failure, not a bug of ours
+        fail(f"renderer {name!r} failed: {type(e).__name__}: {e}", 1)
+
+
 def check_environment() -> None:
     """Refuse a bad ``$CBOX_THREADS`` up front; renderers read it mid-run, where it would be a failed row."""
     if os.environ.get("CBOX_THREADS"):

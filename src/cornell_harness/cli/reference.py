@@ -2,18 +2,16 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 from pathlib import Path
-from typing import Iterator, List, Optional
+from typing import List, Optional
 
 import typer
 
 from cornell_harness.adapters.registry import RendererError, resolve
 from cornell_harness.cli.common import (EXIT_INCONCLUSIVE, REFERENCE_RENDERER, DashboardOpt, HomeOpt, SceneOpt, SchedulerOpt, SetOpt,
-                                        TimeLimitOpt, WorkersOpt, check_output_folder, executor_for, fail,
-                                        reference_app)
+                                        TimeLimitOpt, WorkersOpt, check_output_folder, executor_for, reference_app, render_failed)
 from cornell_harness.cli.output import Progress
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.model import Scene
@@ -51,24 +49,12 @@ def reference_build(
     (entry,) = resolve([REFERENCE_RENDERER])
     if not entry.available:
         raise RendererError(f"renderer {entry.name!r} builds references but is unavailable: {entry.reason}")
-    with executor_for(workers, scheduler, dashboard) as executor, _render_failed(entry.name), \
+    with executor_for(workers, scheduler, dashboard) as executor, render_failed(entry.name), \
             Progress(batches + 1, f"reference {sc.name}", "batch", slots=executor.slots) as bar:  # +1: the noise image
         bar.start(f"{spp // batches} spp per batch")
         ref = build_reference(sc, spp, batches, entry.with_time_limit(time_limit), folder=reference_folder(sc, home),
                               executor=executor, progress=lambda done, total, label: bar.advance(label))
     typer.echo(f"wrote {ref.folder} ({spp} spp in {ref.provenance['wall_time_s']:.0f} s, {ref.provenance['renderer_version']})")
-
-
-@contextlib.contextmanager
-def _render_failed(name: str) -> Iterator[None]:
-    """A render of the engine that failed in this process (it raised, or passed --time-limit): one line, exit 1;
-    on a cluster the executor's error says the same."""
-    from cornell_harness.workflows.render import RenderError, RenderTimeout
-
-    try:
-        yield
-    except (RenderTimeout, RenderError) as e:
-        fail(f"{name}: render failed: {e}", 1)
 
 
 def _refuse_shadowed_build(scene: Scene, home: Path | None) -> None:
@@ -150,7 +136,7 @@ def reference_verify(
     from cornell_harness.store.references import record_verdict
     from cornell_harness.workflows.reference_verify import verify_reference
 
-    with executor_for(workers, scheduler, dashboard) as executor, _render_failed(entry.name), \
+    with executor_for(workers, scheduler, dashboard) as executor, render_failed(entry.name), \
             Progress(batches, f"verify {sc.name} with {entry.name}", "batch", slots=executor.slots) as bar:
         bar.start(f"{spp // batches} spp per batch")
         result = verify_reference(sc, ref, entry.with_time_limit(time_limit), spp, batches, executor=executor,

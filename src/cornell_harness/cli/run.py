@@ -10,9 +10,8 @@ import typer
 
 from cornell_harness.adapters.registry import RendererError, missing_features, resolve
 from cornell_harness.adapters.settings import canonical
-from cornell_harness.cli.common import (USER_ERRORS, RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt,
-                                        TimeLimitOpt, TitleOpt, app, check_output_file, command_line, fail,
-                                        out_folder_option)
+from cornell_harness.cli.common import (RendererFilesOpt, RenderersOpt, SceneOpt, SeedOpt, SetOpt, SppOpt,
+                                        TimeLimitOpt, TitleOpt, app, check_output_file, command_line, out_folder_option, render_failed)
 from cornell_harness.cli.figures import CropOpt, SeriesLabelOpt, keep_report_options, parse_crops, series_labels_for
 from cornell_harness.cli.output import Progress, info
 from cornell_harness.cli.timing import CompareTimeBasisOpt, time_repeats_option, warn_contention
@@ -62,12 +61,8 @@ def render(
         raise RendererError(f"renderer {entry.name!r} does not model {', '.join(missing)}, which {sc.name} uses")
     from cornell_harness.workflows.runner import render_timed
 
-    try:
+    with render_failed(entry.name):
         result, _ = render_timed(entry.with_time_limit(time_limit), sc, spp, seed)
-    except USER_ERRORS:
-        raise
-    except Exception as e:  # the renderer's failure, not a bug of ours: one line, as compare records it
-        fail(f"renderer {entry.name!r} failed: {type(e).__name__}: {e}", 1)
     meta = {"cbox:renderer": entry.name, "cbox:settings": canonical(entry.settings), SPP_ATTRIBUTE: str(spp),
             "cbox:seed": str(seed), "cbox:scene_hash": sc.content_hash()}
     write_exr(out, result.image, meta)
