@@ -10,11 +10,13 @@ checkpoint falls on a batch boundary (:func:`batch_plan`). Its child runs this p
 from __future__ import annotations
 
 import os
+import subprocess
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
+from cornell_harness import processes
 from cornell_harness.adapters.api import Setting, spp_passes
 
 #: Default number of independent batches a render is split into (the variance's degrees of freedom).
@@ -46,6 +48,16 @@ def mean_and_variance(means: list[np.ndarray], sizes: list[int]) -> tuple[np.nda
         return mean, None
     s2 = (n * (m - mean) ** 2).sum(axis=0) / (len(means) - 1)
     return mean, s2 / n.sum()
+
+
+def run_child_process(argv: list[str], folder: Path, time_limit_s: float | None = None) -> tuple[int, str, str]:
+    """Run an engine's child process (:func:`cornell_harness.processes.run`: ended with the command, or at
+    ``time_limit_s``), with this package's environment (:func:`child_env`): (exit code, its stdout, the last
+    :data:`STDERR_TAIL` characters of its stderr), both kept in files of ``folder``."""
+    with open(folder / "stdout.txt", "wb") as out, open(folder / "stderr.txt", "wb") as err:
+        code = processes.run(argv, time_limit_s, stdin=subprocess.DEVNULL, stdout=out, stderr=err, env=child_env())
+    tail = (folder / "stderr.txt").read_text(errors="replace").strip()[-STDERR_TAIL:]
+    return code, (folder / "stdout.txt").read_text(errors="replace"), tail
 
 
 def child_env() -> dict:

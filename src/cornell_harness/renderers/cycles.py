@@ -36,7 +36,7 @@ import numpy as np
 from cornell_harness import processes
 from cornell_harness.adapters.api import Checkpoint, RenderResult, default_threads, pass_seed
 from cornell_harness.extras import renderer_problem
-from cornell_harness.renderers.batches import BATCHES_SETTING, STDERR_TAIL, batch_plan, child_env, mean_and_variance
+from cornell_harness.renderers.batches import BATCHES_SETTING, batch_plan, mean_and_variance, run_child_process
 from cornell_harness.scenes.export.luxcore import sphere_mesh
 from cornell_harness.scenes.materials import Dielectric, Diffuse, Mirror
 from cornell_harness.scenes.model import Scene, SceneError, object_bounds
@@ -106,15 +106,11 @@ def write_plan(scene: Scene, folder: Path, batches: Sequence[tuple[int, int]], t
 def run_child(folder: Path, time_limit_s: float | None = None) -> dict:
     """Render the plan in ``folder`` in a child; its ``settings.json`` (RuntimeError, quoting its stderr, if it
     fails)."""
-    log = folder / "child.log"
-    with open(log, "wb") as out:
-        status = processes.run([sys.executable, "-m", "cornell_harness.renderers.cycles_cli", str(folder)],
-                               time_limit_s, stdout=out, stderr=out, stdin=subprocess.DEVNULL,
-                               env=child_env())
+    status, _, stderr = run_child_process([sys.executable, "-m", "cornell_harness.renderers.cycles_cli", str(folder)],
+                                          folder, time_limit_s)
     if status != 0:
-        tail = [line for line in log.read_text(errors="replace").splitlines() if line.startswith("cycles: ")]
-        raise RuntimeError(f"Cycles child exited with status {status}: "
-                           f"{(tail[-1] if tail else log.read_text(errors='replace'))[-STDERR_TAIL:]}")
+        said = [line for line in stderr.splitlines() if line.startswith("cycles: ")]  # the child's own last word
+        raise RuntimeError(f"Cycles child exited with status {status}: {said[-1] if said else stderr}")
     return json.loads((folder / "settings.json").read_text())
 
 

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import subprocess
 import sys
 import tempfile
 from functools import cache
@@ -39,28 +38,18 @@ from typing import Sequence
 
 import numpy as np
 
-from cornell_harness import processes
 from cornell_harness.adapters.api import Checkpoint, RenderResult, default_threads
 from cornell_harness.scenes.export import export_scene
 from cornell_harness.scenes.export.luxcore import FEATURES
 from cornell_harness.scenes.model import Scene
-from cornell_harness.renderers.batches import BATCHES_SETTING, STDERR_TAIL, batch_plan, child_env, mean_and_variance
-
-def _run_child(argv: list[str], folder: Path, time_limit_s: float | None = None) -> tuple[int, str, str]:
-    """Run the child (:func:`cornell_harness.processes.run`: ended with the command, or at ``time_limit_s``):
-    (exit code, its stdout, the tail of its stderr), both kept in files of ``folder``."""
-    with open(folder / "stdout.txt", "wb") as out, open(folder / "stderr.txt", "wb") as err:
-        code = processes.run(argv, time_limit_s, stdin=subprocess.DEVNULL, stdout=out, stderr=err, env=child_env())
-    tail = (folder / "stderr.txt").read_text(errors="replace").strip()[-STDERR_TAIL:]
-    return code, (folder / "stdout.txt").read_text(errors="replace"), tail
-
+from cornell_harness.renderers.batches import BATCHES_SETTING, batch_plan, mean_and_variance, run_child_process
 
 @cache
 def _child_version() -> str:
     code = ("import os, sys, pyluxcore; sys.stdout.write('\\nversion=' + pyluxcore.Version() + '\\n'); "
             "sys.stdout.flush(); os._exit(0)")
     with tempfile.TemporaryDirectory(prefix="cbox-luxcore-") as tmp:
-        status, stdout, stderr = _run_child([sys.executable, "-c", code], Path(tmp), time_limit_s=120)
+        status, stdout, stderr = run_child_process([sys.executable, "-c", code], Path(tmp), time_limit_s=120)
     lines = [line for line in stdout.splitlines() if line.startswith("version=")]
     if status != 0 or not lines:
         raise RuntimeError(f"pyluxcore.Version() failed: {stderr}")
@@ -98,7 +87,7 @@ class LuxCore:
             command = [sys.executable, "-m", "cornell_harness.renderers.luxcore_cli", str(cfg), "--out", str(Path(tmp) / "image.exr"),
                        "--spp", str(spp), "--seed", str(seed), "--threads", str(threads),
                        "--passes", ",".join(map(str, sizes)), "--batch-dir", str(out)]
-            status, _, stderr = _run_child(command, Path(tmp))
+            status, _, stderr = run_child_process(command, Path(tmp))
             if status != 0:
                 raise RuntimeError(f"LuxCore child exited with status {status}: {stderr}")
             record = json.loads((out / "batches.json").read_text())["batches"]
