@@ -36,8 +36,6 @@ RUNS = ["mitsuba:16x16", "mitsuba:64x4", "mitsuba:16x64", "mitsuba:16x256", "pat
 RARE_SHARE = 0.95
 MODEL_SHAPE = (96, 96, 3)
 LOGNORMAL_SHAPE = (32, 32, 3)  # every sample drawn: 3072 pixel-channels × 32768 reference samples
-
-
 CACHED: list[str] = []  # the runs read from --cache, named under the table
 
 
@@ -70,7 +68,8 @@ def scene_table(runs: list[str], cache: Path | None) -> list[str]:
     names = list(masks)
     lines = [f"| engine | batches × spp | pixel z sd (t: {expected_pixel_z_sd(16):.2f} at 16, "
              f"{expected_pixel_z_sd(64):.2f} at 64) | robust spread | below −3 | above +3 | regions' χ² p | "
-             + " | ".join(f"below −3 in {n}" for n in names) + " | engine/reference per-sample variance (median beyond \\|z\\| 3) |",
+             + " | ".join(f"below −3 in {n}" for n in names)
+             + " | engine/reference per-sample variance (median beyond \\|z\\| 3) |",
              "| --- " * (8 + len(names)) + "|"]
     for run in runs:
         engine, _, split = run.partition(":")
@@ -142,7 +141,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.part in ("all", part):
             t0 = time.perf_counter()
             lines = make()
-            took = f"{time.perf_counter() - t0:.0f} s" + (f"; read from the cache: {', '.join(CACHED)}" if CACHED else "")
+            took = f"{time.perf_counter() - t0:.0f} s"
+            if CACHED:
+                took += f"; read from the cache: {', '.join(CACHED)}"
             bodies[name] = "\n".join(lines + ["", f"Command: `{command}` ({took})."])
             CACHED.clear()
     if args.markdown:
