@@ -131,3 +131,71 @@ def test_three_verdicts_fail_exactly_where_the_z_test_rejects():
     assert seen == {"pass", "fail", "inconclusive"}
     assert a.margins({})[0].tolist() == [0.01] * 3 and a.margins({})[1].tolist() == [0.05] * 3
     assert expected_pixel_z_sd(16) == pytest.approx(1.074, abs=1e-3) and expected_pixel_z_sd(1) == 1.0
+
+
+def _batch_means(rng, truth, batches, spp, p, bright):
+    """``batches`` means of ``spp`` samples per pixel-channel: an exponential of mean ``truth`` plus, with
+    probability ``p`` per sample, a rare bright path of value ``bright``."""
+    base = truth[..., None] * rng.gamma(spp, 1.0 / spp, (*truth.shape, batches))
+    return base + bright[..., None] * rng.binomial(spp, p, (*truth.shape, batches)) / spp
+
+
+def _rare_path_pair(rng, hits, engine=(16, 16), reference=(256, 128)):
+    """A reference and an engine's render of the same per-sample law, each as (mean, variance of the mean) from its
+    (batches, spp per batch): a rare bright path carries 95% of each pixel's per-sample variance and is drawn
+    ``hits`` times on average in the engine's render. No bias: both images have the same expectation."""
+    truth = 0.2 + 0.6 * rng.random(SHAPE)
+    p = hits / (engine[0] * engine[1])
+    bright = truth * math.sqrt(0.95 / (0.05 * p))  # p · bright² = 19 × the exponential's variance truth²
+    out = []
+    for batches, spp in (reference, engine):
+        x = _batch_means(rng, truth, batches, spp, p, bright)
+        out += [x.mean(-1), x.var(-1, ddof=1) / batches]
+    return out
+
+
+def test_rare_bright_paths_give_a_one_sided_pixel_z_tail_that_the_regions_do_not_have():
+    """The mechanism behind a per-pixel z sd of 2.6 on cornell-box-caustics (docs/references.md): where the
+    engine draws a pixel's rare path about once in its render, most of its pixels have not drawn it, so they are
+    low and their batch variance misses it: a one-sided tail, far past t's, with no bias; the regions' z, which
+    sum many pixels' samples, stay standard normal. 16 batches, as `cbox reference verify`'s default."""
+    rng = np.random.default_rng(8)
+    region_z = []
+    for _ in range(12):
+        a = reference_agreement(*_rare_path_pair(rng, hits=0.5), _masks())
+        assert a.pixel_z_sd > 2.0 and a.pixel_z_below > 0.15 and a.pixel_z_above < 0.005
+        region_z += [z for r in a.regions for z in r.z]
+    assert a.pixel_z_tail == pytest.approx(a.pixel_z_below + a.pixel_z_above)
+    assert float(np.sqrt(np.mean(np.square(region_z)))) == pytest.approx(1.0, abs=0.25)  # 108 region z
+    remark = a.spread_remark(16)
+    assert remark.startswith(f"remark: the per-pixel z sd {a.pixel_z_sd:.2f} is far from the 1.07 expected")
+    assert "one-sided, the engine is the lower image" in remark and "more spp, not more batches" in remark
+    # Many draws per pixel: the batch means are normal again and z is t-like: no remark.
+    near = reference_agreement(*_rare_path_pair(rng, hits=100), _masks())
+    assert near.spread_remark(16) is None and near.pixel_z_sd < 1.25 * 1.074
+
+
+def test_the_spread_remark_tells_a_one_sided_tail_from_a_two_sided_one():
+    rng = np.random.default_rng(9)
+    # The reference with the fewer samples: the tail is above +3, the reference the lower image.
+    ref_m, ref_v, oth_m, oth_v = _rare_path_pair(rng, hits=0.5)
+    swapped = reference_agreement(oth_m, oth_v, ref_m, ref_v, _masks())
+    assert swapped.pixel_z_above > 0.15 and swapped.pixel_z_below < 0.005
+    assert "one-sided, the reference is the lower image" in swapped.spread_remark(16)
+    # Normal noise whose reported variances are a ninth of the truth: z sd 3 on both sides.
+    ref, var_ref, other, var_other = _pair(rng)
+    understated = reference_agreement(ref, var_ref / 9, other, var_other / 9, _masks())
+    assert understated.pixel_z_below == pytest.approx(understated.pixel_z_above, rel=0.2)
+    assert "the variances understate the pixels' spread" in understated.spread_remark(1)
+    overstated = reference_agreement(ref, var_ref * 4, other, var_other * 4, _masks())
+    assert "overstate" in overstated.spread_remark(1) and "one-sided" not in overstated.spread_remark(1)
+    assert reference_agreement(ref, var_ref, other, var_other, _masks()).spread_remark(1) is None
+
+
+def test_pixel_z_sides_count_infinities_on_their_side_and_nan_on_neither():
+    from cornell_harness.evaluate.reference_agreement import pixel_z_stats
+
+    z = np.array([-np.inf, -4.0, 0.5, 5.0, np.nan, 0.0])
+    sd, spread, tail, below, above, count = pixel_z_stats(z, np.ones(6, bool))
+    assert (tail, below, above, count) == (4 / 6, 2 / 6, 1 / 6, 6)
+    assert sd == pytest.approx(math.sqrt((16 + 0.25 + 25) / 4))

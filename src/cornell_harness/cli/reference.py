@@ -148,8 +148,9 @@ def reference_verify(
     for line in a.table() + [""] + a.power_table(result.margins):
         typer.echo("  " + line if line else "")
     typer.echo(f"per-pixel z: sd {a.pixel_z_sd:.3f}, robust spread {a.pixel_z_spread:.3f}, "
-               f"{a.pixel_z_tail:.2%} beyond |z| 3 (0.27% for normal z; reported, not judged)")
-    if remark := _spread_remark(a.pixel_z_sd, batches):
+               f"{a.pixel_z_tail:.2%} beyond |z| 3 ({a.pixel_z_below:.2%} below −3, {a.pixel_z_above:.2%} above +3; "
+               "0.27% for normal z; reported, not judged)")
+    if remark := a.spread_remark(batches):
         typer.echo(remark)
     typer.echo(a.verdict_message(result.margins))
     if record:
@@ -181,16 +182,3 @@ def _margins(given: list[str], scene: Scene) -> dict[str, float]:
         for name in [region] if region else ["image", *scene.regions]:
             out[name] = number
     return out
-
-
-def _spread_remark(sd: float, batches: int) -> str | None:
-    """A remark when the per-pixel z sd is far from what its batches make it (Student-t), else None."""
-    from cornell_harness.evaluate.reference_agreement import PIXEL_Z_SD_FACTOR, expected_pixel_z_sd
-
-    expected = expected_pixel_z_sd(batches)
-    if not (math.isfinite(sd) and math.isfinite(expected)) or 1 / PIXEL_Z_SD_FACTOR <= sd / expected <= PIXEL_Z_SD_FACTOR:
-        return None
-    return (f"remark: the per-pixel z sd {sd:.2f} is far from the {expected:.2f} expected for "
-            f"{batches} batch(es): the variances {'understate' if sd > expected else 'overstate'} the pixels' "
-            "spread (with few spp per batch in a scene of rare bright paths, a batch's variance misses the paths "
-            "it did not sample); the regions' z use the same variances, so weigh their verdicts with that")

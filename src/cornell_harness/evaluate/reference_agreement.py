@@ -29,14 +29,18 @@ images, each with its per-pixel variance of the mean:
   is for reading, not the verdict.
 - **Per-pixel z spread**: z per pixel and channel from the two per-pixel
   variances, its standard deviation, its robust spread ŝ = median|z| / Φ⁻¹(3/4)
-  (:mod:`cornell_harness.evaluate.variance_check`'s) and the fraction |z| > 3
-  (0.27% for standard normal z). Near 1, 1 and 0.27% when both variances are
-  right; reported, not judged: a variance estimated from a few batches makes z
-  a Student-type ratio with heavier tails, and skewed pixels (caustics) widen
-  it without any bias (see :mod:`cornell_harness.evaluate.variance_check`).
-  Its expectation with a variance from B batches is the t distribution's
-  sd, √((B − 1)/(B − 3)) (:func:`expected_pixel_z_sd`); a spread far from it
-  is remarked on, since the regions' z use the same variances.
+  (:mod:`cornell_harness.evaluate.variance_check`'s) and the fractions below −3
+  and above +3 (0.13% each for standard normal z). Reported, not judged. With
+  normal batch means and a variance from B batches z is Student-t, sd
+  √((B − 1)/(B − 3)) (:func:`expected_pixel_z_sd`). A pixel whose light comes
+  partly by rare bright paths (light through glass, a small light seen in a
+  mirror) is not normal at a few hundred spp: the image with fewer samples has
+  not drawn those paths in most such pixels, so it is low there and its batch
+  variance misses what it did not draw; z then has a one-sided tail far beyond
+  t's, with no bias on average, and more spp, not more batches, make it normal
+  (docs/references.md measures it). A region's z sums many pixels' samples and
+  is not skewed this way. :meth:`ReferenceAgreement.spread_remark` says which
+  of the two a spread far from t looks like.
 - **Power and margins**: per region and channel, the relative bias with its
   Fieller interval at the tests' level (:meth:`ReferenceAgreement.bias`,
   :mod:`cornell_harness.evaluate.relative_bias`), the smallest bias the test
@@ -73,6 +77,8 @@ FAMILY_ALPHA = 0.01
 WHOLE_IMAGE = "whole image"
 #: |z| beyond which a pixel counts in the reported tail fraction (0.27% for a standard normal).
 PIXEL_Z_TAIL = 3.0
+#: A tail is one-sided when its smaller side holds less than this share of it (about half for symmetric z).
+ONE_SIDED_SHARE = 0.1
 #: The miss rate at which the detectable bias is stated: a bias that large is detected with power 1 − β = 0.8.
 DETECTION_BETA = 0.2
 #: A per-pixel z sd more than this factor from its expectation is remarked on.
@@ -81,8 +87,10 @@ PIXEL_Z_SD_FACTOR = 1.25
 
 def expected_pixel_z_sd(batches: int) -> float:
     """The sd of the per-pixel z when the other image's variance is estimated from ``batches`` independent renders
-    and dominates: z is then Student-t with batches − 1 degrees of freedom, sd √(ν / (ν − 2)) (1.07 for 16
-    batches); 1 for the engine's own variance (``batches`` = 1) or many batches; ∞ below 4 batches."""
+    and dominates, and the batch means are normal: z is then Student-t with batches − 1 degrees of freedom, sd
+    √(ν / (ν − 2)) (1.07 for 16 batches); 1 for the engine's own variance (``batches`` = 1) or many batches; ∞
+    below 4 batches. Rare bright paths make the batch means far from normal
+    (:meth:`ReferenceAgreement.spread_remark`)."""
     if batches <= 1:
         return 1.0
     nu = batches - 1
@@ -131,7 +139,9 @@ class ReferenceAgreement:
     chi2_p: float
     pixel_z_sd: float  # over the whole image's usable pixel-channels
     pixel_z_spread: float  # robust: median|z| / Φ⁻¹(3/4)
-    pixel_z_tail: float  # fraction of usable pixel-channels with |z| > PIXEL_Z_TAIL
+    pixel_z_tail: float  # fraction of usable pixel-channels with |z| > PIXEL_Z_TAIL (a NaN z counts)
+    pixel_z_below: float  # fraction with z < −PIXEL_Z_TAIL: the engine lower
+    pixel_z_above: float  # fraction with z > PIXEL_Z_TAIL: the engine higher
     pixel_count: int  # usable pixel-channels
 
     @property
@@ -218,6 +228,30 @@ class ReferenceAgreement:
                 f"({', '.join(open_)}): their intervals reach past them; more spp (or batches), or wider margins, "
                 "resolve them")
 
+    def spread_remark(self, batches: int) -> str | None:
+        """A remark when the per-pixel z sd is more than :data:`PIXEL_Z_SD_FACTOR` from the t expectation of
+        ``batches`` (:func:`expected_pixel_z_sd`), saying whether its tail is one-sided (rare paths one image did
+        not draw, or light one lacks) or two-sided (variances that understate or overstate); None when near."""
+        sd, expected = self.pixel_z_sd, expected_pixel_z_sd(batches)
+        if not (math.isfinite(sd) and math.isfinite(expected)):
+            return None
+        if 1 / PIXEL_Z_SD_FACTOR <= sd / expected <= PIXEL_Z_SD_FACTOR:
+            return None
+        low, high = self.pixel_z_below, self.pixel_z_above
+        head = (f"remark: the per-pixel z sd {sd:.2f} is far from the {expected:.2f} expected for {batches} "
+                f"batch(es) of normal batch means; {low:.1%} of pixel-channels lie below −{PIXEL_Z_TAIL:g}, "
+                f"{high:.1%} above +{PIXEL_Z_TAIL:g}")
+        if sd > expected and min(low, high) < ONE_SIDED_SHARE * (low + high):
+            lower, other = ("engine", "reference") if low > high else ("reference", "engine")
+            return (f"{head}: one-sided, the {lower} is the lower image there. Rare bright paths (light through "
+                    f"glass, a small light seen in a mirror) do this where the {lower}'s samples drew them in few "
+                    f"pixels and the {other}'s in many: such a pixel is low, and its batch variance misses what "
+                    "it did not draw (no bias on average; more spp, not more batches, make it normal). So does "
+                    f"light the {lower} lacks. The regions' z sum many pixels' samples and tell the two apart; "
+                    f"their χ² p {self.chi2_p:.2g} says whether they are calibrated (docs/references.md)")
+        return (f"{head}: the variances {'understate' if sd > expected else 'overstate'} the pixels' spread; "
+                "the regions' z use the same variances, so weigh their verdicts with that")
+
     def message(self) -> str:
         head = (f"{len(self.regions)} region{'s' if len(self.regions) != 1 else ''} × 3 channels = {self.tests} tests at family-wise α = {self.alpha:g} "
                 f"(Šidák per-test level {self.level:.3g}); max |z| {self.max_abs_z:.2f}, "
@@ -263,7 +297,9 @@ class ReferenceAgreement:
             "max_abs_z": num(self.max_abs_z), "p_min": num(self.p_min), "chi2": num(self.chi2), "dof": self.dof,
             "chi2_p": num(self.chi2_p),
             "pixel_z": {"sd": num(self.pixel_z_sd), "robust_spread": num(self.pixel_z_spread),
-                        f"fraction_beyond_{PIXEL_Z_TAIL:g}": num(self.pixel_z_tail), "count": self.pixel_count},
+                        f"fraction_beyond_{PIXEL_Z_TAIL:g}": num(self.pixel_z_tail),
+                        f"fraction_below_-{PIXEL_Z_TAIL:g}": num(self.pixel_z_below),
+                        f"fraction_above_{PIXEL_Z_TAIL:g}": num(self.pixel_z_above), "count": self.pixel_count},
             "regions": {r.name: {"pixels": r.pixels, "mean_reference": [num(m, 6) for m in r.mean_reference],
                                  "mean_other": [num(m, 6) for m in r.mean_other],
                                  "z": [num(z, 3) for z in r.z], "p": [num(p, 3) for p in r.p]}
@@ -291,17 +327,20 @@ def two_sided_p(z: np.ndarray) -> np.ndarray:
     return np.nan_to_num(2.0 * norm.sf(np.abs(z)), nan=0.0)
 
 
-def pixel_z_stats(z: np.ndarray, usable: np.ndarray) -> tuple[float, float, float, int]:
-    """(sd, robust spread median|z|/Φ⁻¹(3/4), fraction |z| > PIXEL_Z_TAIL, count) of the usable z.
+def pixel_z_stats(z: np.ndarray, usable: np.ndarray) -> tuple[float, float, float, float, float, int]:
+    """(sd, robust spread median|z|/Φ⁻¹(3/4), fraction |z| > PIXEL_Z_TAIL, fraction z < −PIXEL_Z_TAIL, fraction
+    z > PIXEL_Z_TAIL, count) of the usable z.
 
-    The sd is over the finite z only (an infinite one would make it meaningless; it counts in the tail)."""
+    The sd is over the finite z only (an infinite one would make it meaningless; it counts in the tail, and on
+    its side); a NaN z counts in the tail, on neither side."""
     zs = np.asarray(z, np.float64)[usable]
     if zs.size == 0:
-        return math.nan, math.nan, 0.0, 0
+        return math.nan, math.nan, 0.0, 0.0, 0.0, 0
     absz = np.where(np.isnan(zs), np.inf, np.abs(zs))
     finite = zs[np.isfinite(zs)]
     sd = float(np.sqrt(np.mean(finite**2))) if finite.size else math.nan  # about the known centre 0
-    return sd, float(np.median(absz)) / Q3, float(np.mean(absz > PIXEL_Z_TAIL)), int(zs.size)
+    return (sd, float(np.median(absz)) / Q3, float(np.mean(absz > PIXEL_Z_TAIL)),
+            float(np.mean(zs < -PIXEL_Z_TAIL)), float(np.mean(zs > PIXEL_Z_TAIL)), int(zs.size))
 
 
 def reference_agreement(reference: np.ndarray, reference_variance: np.ndarray, other: np.ndarray,
@@ -340,6 +379,5 @@ def reference_agreement(reference: np.ndarray, reference_variance: np.ndarray, o
     zs = np.concatenate([r.z for r in regions]) if regions else np.zeros(0)
     chi2 = float(np.sum(np.where(np.isnan(zs), np.inf, zs) ** 2))  # a NaN test counts as infinitely far
     chi2_p = float(chi2_dist.sf(chi2, tests)) if tests else 1.0
-    sd, spread, tail, count = pixel_z_stats(z_pix, usable)
-    return ReferenceAgreement(regions, alpha, tests, sidak_level(alpha, tests), chi2, tests, chi2_p, sd, spread,
-                              tail, count)
+    return ReferenceAgreement(regions, alpha, tests, sidak_level(alpha, tests), chi2, tests, chi2_p,
+                              *pixel_z_stats(z_pix, usable))

@@ -75,7 +75,8 @@ def verify_section(scene, reference, verification) -> str:
     note = (f"Per region and channel, z = (engine mean − reference mean) / √(V_ref + V_engine), a region mean's "
             f"variance being the sum of its pixels' variances / n². A test fails below the Šidák per-test level "
             f"{a.level:.3g} ({a.tests} tests, family-wise α = {a.alpha:g}). Per-pixel z: sd {a.pixel_z_sd:.3f}, "
-            f"robust spread {a.pixel_z_spread:.3f}, {a.pixel_z_tail:.2%} beyond |z| 3 (reported, not judged). "
+            f"robust spread {a.pixel_z_spread:.3f}, {a.pixel_z_tail:.2%} beyond |z| 3 ({a.pixel_z_below:.2%} below "
+            f"−3, {a.pixel_z_above:.2%} above +3; reported, not judged). {a.spread_remark(rec['batches']) or ''} "
             f"Command: {rec['command']}")
     return (f"<h2>{escape(scene.name)}: reference against {escape(rec['engine'])}</h2>{verdict}<div>{figures}</div>"
             f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>"
