@@ -18,6 +18,10 @@ Expected: clean runs fail at rate ≤ α (0.01 per expectation), a bias at 1× t
 (0.05), a bias at 2× never passes. The counts over seeds are binomial; the table gives each with its
 Clopper-Pearson 95% upper bound.
 
+With ``--mutants``, the catalogue's path-tracer mutants (tests/mutants/, the gate's power test) replace the
+scalings: each is rendered once (seed 0) on the first case's scene and checked both ways, so the table says
+which verdict each gets and at what cost (the block ``gate_sequential.py#mutants``).
+
 Run (about 25 minutes on an idle 2-core machine)::
 
     .venv/bin/python -m benchmarks.gate_sequential --seeds 20 --markdown docs/gate-detection.md
@@ -53,6 +57,7 @@ from cornell_harness.workflows import runner
 
 ROOT = Path(__file__).resolve().parents[1]
 BLOCK = "gate_sequential.py"  # the block of docs/gate-detection.md this writes (benchmarks/markdown_blocks.py)
+MUTANTS_BLOCK = "gate_sequential.py#mutants"
 #: (renderer, scene): the gate.toml expectations whose margins the cases take.
 CASES = (("pathtracer", "cornell-box"), ("mitsuba", "cornell-box"), ("ao", "cornell-box-ao"))
 MULTIPLES = (0.5, 1.0, 2.0)
@@ -130,6 +135,48 @@ def run_case(renderer: str, scene_name: str, region: str, seeds: int, max_spp: i
     return list(rows.values())
 
 
+def run_mutants(renderer: str, scene_name: str, max_spp: int, tmp: Path) -> list[dict]:
+    """One row per catalogue mutant of ``renderer`` (seed 0): the sequential and the fixed verdict and costs."""
+    from tests.mutants import catalogue, patching
+
+    cfg, seq, fixed = _configs(renderer, scene_name, max_spp, tmp)
+    scene = resolve_scene(scene_name)
+    ref, masks = load_reference(scene), region_masks(scene)
+    rows = []
+    for m in catalogue.MUTANTS:
+        if m.renderer != renderer or m.name in catalogue.ISOLATED:
+            continue
+        t0 = time.perf_counter()
+        rec = runner.run_one(patching.load_mutant(m.name, tmp), scene, max_spp, 0, ref, checkpoints=seq.looks())
+        if rec.status != "ok":
+            rows.append({"mutant": m.name, "seq": "fail", "fixed": "fail", "spp": 0, "cpu": 0.0, "cpu_full": 1.0,
+                         "why": rec.reason})
+            continue
+        s = evaluate_sequential(seq, rec, ref, cfg, masks)
+        f = evaluate(fixed, rec, ref, cfg, None, None, masks)
+        rows.append({"mutant": m.name, "seq": s.verdict, "fixed": f.verdict,
+                     "spp": s.record.info["sequential"]["stop_spp"],
+                     "cpu": s.record.info["sequential"]["cpu_to_verdict_s"], "cpu_full": rec.cpu_time_s, "why": ""})
+        print(f"  {m.name}: {s.verdict} at {rows[-1]['spp']} spp ({time.perf_counter() - t0:.1f} s)", file=sys.stderr)
+    return rows
+
+
+def mutants_markdown(rows: list[dict], case: str, args, cmd: str) -> str:
+    lines = [f"The catalogue's `{case.split('@')[0]}` mutants on `{case.split('@')[1]}`, seed 0, max_spp "
+             f"{args.max_spp}, with that expectation's margins; {platform.machine()}, {time.strftime('%Y-%m-%d')}.",
+             "", "| mutant | sequential | fixed | spp to the sequential verdict | CPU, sequential / fixed |",
+             "|---|---|---|---|---|"]
+    for r in rows:
+        cpu = r["cpu"] / r["cpu_full"] if r["cpu_full"] else float("nan")
+        lines.append(f"| {r['mutant']} | {r['seq']} | {r['fixed']} | {r['spp']} | {cpu:.2f} |")
+    caught = [r for r in rows if r["seq"] != "pass"]
+    mean = statistics.fmean(r["cpu"] / r["cpu_full"] for r in rows if r["cpu_full"])
+    lines += ["", f"Not passed by the sequential gate: {len(caught)} of {len(rows)} (fixed: "
+              f"{sum(r['fixed'] != 'pass' for r in rows)}); mean CPU to its verdict {mean:.2f} of the fixed gate's.",
+              "", f"Command: `{cmd}`", ""]
+    return "\n".join(lines)
+
+
 def _counts(verdicts: list[str]) -> str:
     return " / ".join(str(verdicts.count(v)) for v in ("pass", "inconclusive", "fail"))
 
@@ -165,18 +212,24 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--region", default="back-edge", help="the region the mutants scale (default back-edge)")
     parser.add_argument("--cases", default=",".join(f"{r}@{s}" for r, s in CASES),
                         help="renderer@scene, comma-separated (default: %(default)s)")
-    parser.add_argument("--markdown", help="rewrite this file's gate_sequential.py block")
+    parser.add_argument("--mutants", action="store_true",
+                        help="the catalogue's mutants of the first case's renderer, not the scalings")
+    parser.add_argument("--markdown", help="rewrite this file's gate_sequential.py block (#mutants with --mutants)")
     args = parser.parse_args(argv)
     cmd = markdown_blocks.command_line(argv)
     rows = []
     with tempfile.TemporaryDirectory(prefix="cbox-gate-sequential-") as tmp:
-        for case in args.cases.split(","):
-            renderer, scene = case.split("@")
-            rows += run_case(renderer, scene, args.region, args.seeds, args.max_spp, Path(tmp))
-    text = markdown(rows, args, cmd)
+        if args.mutants:
+            case = args.cases.split(",")[0]
+            text = mutants_markdown(run_mutants(*case.split("@"), args.max_spp, Path(tmp)), case, args, cmd)
+        else:
+            for case in args.cases.split(","):
+                renderer, scene = case.split("@")
+                rows += run_case(renderer, scene, args.region, args.seeds, args.max_spp, Path(tmp))
+            text = markdown(rows, args, cmd)
     print(text)
     if args.markdown:
-        markdown_blocks.write_blocks([Path(args.markdown)], {BLOCK: text}, cmd)
+        markdown_blocks.write_blocks([Path(args.markdown)], {MUTANTS_BLOCK if args.mutants else BLOCK: text}, cmd)
         print(f"wrote {args.markdown}", file=sys.stderr)
     return 0
 

@@ -123,3 +123,10 @@ def test_a_pilot_that_fails_is_listed_with_why(tmp_path):
     (p,) = plan_gate(load_config(_config(tmp_path, body, head="")), sandbox=False)
     assert p.regions == [] and "the pilot did not render" in p.problem and not p.affordable
     assert f"  crash: {p.problem}" in plan_lines([p])
+
+
+def test_a_sequential_expectation_is_planned_against_its_last_look(tmp_path):
+    body = ('[[expect]]\nscene = "cornell-box"\nrenderer = "tests.user_renderers:ScaledMitsubaNoise"\nmax_spp = 64\n'
+            f'unbiased = true\nmargin = {{ {OK} }}\n')
+    (p,) = plan_gate(load_config(_config(tmp_path, body, head="")), sandbox=False)
+    assert p.budget_spp == 64 and p.pilot_spp == 4 and p.regions

@@ -116,7 +116,7 @@ def pilot_spp(budget_spp: int, fraction: int = PILOT_FRACTION) -> int:
 def plan_expectation(exp: Expectation, scene, ref, entry, alpha: float, pilot: int | None = None,
                      time_limit_s: float | None = None, beta: float = BETA) -> ExpectationPlan:
     """Render ``exp``'s pilot (``pilot`` spp, default :func:`pilot_spp` of its budget) and plan it."""
-    budget = exp.spp
+    budget = exp.spp if exp.spp is not None else exp.max_spp  # a sequential expectation: its last look
     if pilot is None:
         full = budget if budget is not None else spp_for_time_budget(entry, scene, exp.time_s, exp.seed)
         pilot = pilot_spp(full)
