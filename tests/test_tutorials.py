@@ -3,8 +3,8 @@ empty folder, with this checkout's ``cbox`` on ``PATH``.
 
 A page is read as a reader follows it: a fenced block with a ``title="FILE"`` is written to FILE (a later block
 of the same title replaces it, as a reader edits the file); each ``$ `` line of a ``console`` block is a command,
-run in one shell so that ``$ echo $?`` after a command shows that command's exit code. A command must exit 0,
-unless the page follows it with ``$ echo $?`` and the code it shows. The tests then check what each page says
+run by bash in that folder. A command must exit 0, unless the page follows it with ``$ echo $?`` and the code
+that shows (a command line is the key: a page repeats none with another code). The tests then check what each page says
 its commands make.
 
 The paper tutorial is marked ``slow`` (``pytest -m slow`` runs it): the other two keep this file's default run
