@@ -1,4 +1,4 @@
-"""The README's paper figure and table, made as a researcher makes them (issue 31).
+"""The paper figure and table of docs/paper-outputs.md, made as a researcher makes them.
 
 Runs the command of issue 31's "Done when" (``cbox converge`` on ``cornell-box-caustics``: the path
 tracer with its default sampler and with ``independent`` samples, and SPPM, at 1-64 spp over 2 seeds, the
@@ -12,7 +12,7 @@ rendered again), then takes from its outputs, unchanged but for the figure's res
 - the decisive columns of the readable ``summary.csv``, the ones ``summary.tex`` holds, as a Markdown table in
   the block ``paper_outputs.py#table`` of each ``--markdown`` file (``benchmarks/markdown_blocks.py``).
 
-Run: ``.venv/bin/python benchmarks/paper_outputs.py --markdown README.md`` (about a minute on 2 cores, numba's
+Run: ``.venv/bin/python benchmarks/paper_outputs.py --markdown docs/paper-outputs.md`` (about a minute on 2 cores, numba's
 caches warm).
 """
 
@@ -36,7 +36,7 @@ BLOCK = "paper_outputs.py#table"
 COMMAND = ["converge", "--scene", "cornell-box-caustics", "-r", "pathtracer", "-r", "pathtracer[sampler=independent]",
            "-r", "sppm", "--spp", "1,4,16,64", "--seeds", "2",
            "--series-label", 'pathtracer[sampler="independent"]=PT (independent)']
-#: The README's figure width in pixels (the figure is 7 in wide).
+#: The docs page's figure width in pixels (the figure is 7 in wide).
 FIGURE_DPI = 110
 
 

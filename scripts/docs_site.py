@@ -204,7 +204,7 @@ def renderers_page() -> str:
              "Every renderer the harness ships, written from what each declares through the renderer API "
              "([Python API](../api.md): `Declarations`); `cbox renderers --settings` prints the same settings. "
              "A setting is given as `-r NAME[setting=value,...]`. A renderer of your own declares the same "
-             "(README, \"Adding your own renderer\").", ""]
+             "([Adding your own renderer](../our-renderers.md#adding-your-own-renderer)).", ""]
     for name, renderer in our_renderers().items():
         lines += [f"## `{name}`", "", _summary(renderer), "",
                   f"Module: `{type(renderer).__module__}`.", "", *_declarations(renderer),

@@ -1,7 +1,7 @@
 """The docs' generated parts are written one way, between markers that name the command writing them; and
 every file and module the docs name exists.
 
-The convention and the writer are ``benchmarks/markdown_blocks.py``. For every marker in ``docs/*.md``,
+The convention and the writer are ``benchmarks/markdown_blocks.py``. For every marker in ``docs/**/*.md``,
 ``BENCHMARKS.md`` and ``README.md``: it parses, begin and end pair up, the command is
 ``.venv/bin/python benchmarks/<script>.py ...`` (or ``.venv/bin/python -m benchmarks.<script> ...``, for a
 script that imports ``tests``) with a script that exists, writes through ``markdown_blocks``
@@ -20,7 +20,7 @@ from benchmarks import markdown_blocks
 from benchmarks.markdown_blocks import script_words
 
 ROOT = Path(__file__).resolve().parent.parent
-PAGES = sorted((ROOT / "docs").glob("*.md")) + [ROOT / "BENCHMARKS.md", ROOT / "README.md"]
+PAGES = sorted((ROOT / "docs").rglob("*.md")) + [ROOT / "BENCHMARKS.md", ROOT / "README.md"]
 
 
 def command_problems(rel: str, name: str | None, command: str, root: Path = ROOT) -> list[str]:
