@@ -8,7 +8,7 @@ buffers: each object's motion between the frames is the translation of its verti
 as animation tracks translate named objects, and the camera of each frame is its own.
 
 A pixel is uncovered when its first hit p at frame i, on object o, moved back by o's translation to p', is not
-what the previous frame's camera sees first along its ray to p' (another object nearer, or p' outside that
+what the previous frame's camera sees first along its ray to p' (another surface nearer, or p' outside that
 frame's image). Pixels that see nothing are never uncovered.
 """
 
@@ -49,10 +49,12 @@ def disocclusion_mask(previous: Scene, current: Scene) -> np.ndarray:
     cam = previous.camera
     origin = np.asarray(cam.position, dtype=np.float64)
     dirs = moved[seen] - origin
-    hit_obj, hit_points = first_hits(previous, dirs)
+    # The same point, whatever object the previous frame names there: where two surfaces meet (a wall's edge on
+    # the floor) either may be the first hit.
+    _, hit_points = first_hits(previous, dirs)
     tol = SAME_POINT * current.extent()
     with np.errstate(invalid="ignore"):  # NaN points (no hit) are not the same point
-        same = (hit_obj == obj[seen]) & (np.linalg.norm(hit_points - moved[seen], axis=1) <= tol)
+        same = np.linalg.norm(hit_points - moved[seen], axis=1) <= tol
     in_view = np.zeros(len(dirs), dtype=bool)
     ahead = dirs @ cam.frame()[2] > 0
     if ahead.any():
