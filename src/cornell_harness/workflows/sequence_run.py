@@ -24,7 +24,7 @@ import numpy as np
 from cornell_harness.adapters.registry import RendererEntry
 from cornell_harness.evaluate import temporal
 from cornell_harness.evaluate.disocclusion import disocclusion_masks
-from cornell_harness.evaluate.registry import IMAGE_METRICS, LAG_METRIC
+from cornell_harness.evaluate.registry import IMAGE_METRICS, LAG_METRIC, TEMPORAL_METRICS
 from cornell_harness.scenes.model import Scene
 from cornell_harness.store.atomic import atomic_path, json_safe, write_json_atomic
 from cornell_harness.store.references import Reference, load_reference
@@ -127,6 +127,26 @@ def sequence_task(entry: RendererEntry, scene: Scene, spp: int, seed: int, refer
         if values:
             row[key] = float(np.mean(values))
     return frame_rows, row, images
+
+
+def sequence_record(entry: RendererEntry, scene: Scene, spp: int, seed: int, references: Sequence[Reference],
+                    time_limit_s: float | None = None) -> runner.RunRecord:
+    """Every frame of ``scene`` rendered and scored as one :class:`~cornell_harness.workflows.runner.RunRecord`
+    (what the gate checks): its metrics the sequence's row's (temporal figures, per-image means over frames), its
+    NaN and Inf counts summed over frames, its image the last frame's."""
+    frames = frame_list(scene)
+    motion = scene_motion(scene, frames, references)
+    frame_rows, row, images = sequence_task(entry, scene, spp, seed, references, motion, time_limit_s)
+    rec = runner.RunRecord.new(scene, entry, spp, seed, version=row.get("version"), time_s=row.get("time_s"))
+    rec.status, rec.reason = row["status"], row["reason"]
+    if rec.status != "ok":
+        rec.info = {"timed_out": True} if "time limit" in str(rec.reason) else {}
+        return rec
+    rec.metrics = {k: row[k] for k in (*IMAGE_METRICS, *TEMPORAL_METRICS) if k in row}
+    for key in ("nan_count", "inf_count", "negative_count"):
+        rec.metrics[key] = int(sum(r.get(key) or 0 for r in frame_rows))
+    rec.image = images[-1]
+    return rec
 
 
 def _sequence_row(rec: runner.RunRecord, motion: SceneMotion) -> dict:
