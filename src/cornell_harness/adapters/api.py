@@ -278,6 +278,11 @@ class Declarations:
     #: The published sources of its method, one short citation each (authors, year, title): shown with the
     #: renderer in the docs' reference of renderers.
     citations: tuple[str, ...] = ()
+    #: True for a renderer that renders a sequence itself: its ``render_sequence(scene, spp, seed, settings=...,
+    #: frames=...)`` returns a :class:`SequenceResult` and carries state from frame to frame (a temporal history,
+    #: probes updated with a hysteresis). Any other renderer renders each frame on its own, as a still image
+    #: with :func:`frame_seed` (:mod:`cornell_harness.workflows.sequence`).
+    sequences: bool = False
 
 
 #: The declarations of a renderer that declares nothing.

@@ -20,14 +20,14 @@ with interrupt.starting():  # a Ctrl-C during these imports (seconds): one line 
     from cornell_harness.adapters.registry import use_renderer_files
     from cornell_harness.workflows.foreign_cpu import mark_command_root
     # Importing a command module registers its commands, in this order in `cbox --help` (so not sorted).
-    from cornell_harness.cli import listing, run, compare_image, experiment, gate, stress, reference, export  # isort: skip
+    from cornell_harness.cli import listing, run, compare_image, experiment, gate, stress, reference, export, sequence  # isort: skip
     from cornell_harness.cli.common import (PATH_ERRORS, USER_ERRORS, ClickException, NoArgsIsHelpError, UsageError,
                                     check_environment, command_tree, fail, usage_message)
     from cornell_harness.cli.output import Verbosity, close_progress_bars, set_verbosity
 
 
 #: The command modules, registered on the app by their import above.
-COMMAND_MODULES = (listing, run, compare_image, experiment, gate, stress, reference, export)
+COMMAND_MODULES = (listing, run, compare_image, experiment, gate, stress, reference, export, sequence)
 
 
 def main(args: list[str] | None = None) -> None:

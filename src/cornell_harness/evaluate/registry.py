@@ -40,11 +40,12 @@ class Metric:
     cheap: bool = False  # a per-image metric of a few passes over the pixels: a check computes it unasked
     values: tuple[float, float] = ANY  # the closed range it lies in: a threshold outside it is meaningless
     citation: str = ""  # the published source of its definition; "" for a plain count, mean or bookkeeping column
+    temporal: bool = False  # a figure of a whole sequence against its per-frame references (a gate may budget it)
 
 
 def _m(key, label, definition, better=None, axis=None, slope=None, per_image=True, colour=False,
-       cheap=False, values=NON_NEGATIVE, cite="") -> Metric:
-    return Metric(key, label, definition, better, axis, slope, per_image, colour, cheap, values, cite)
+       cheap=False, values=NON_NEGATIVE, cite="", temporal=False) -> Metric:
+    return Metric(key, label, definition, better, axis, slope, per_image, colour, cheap, values, cite, temporal)
 
 
 #: Sources cited by several metrics.
@@ -119,6 +120,20 @@ _TABLE = (
        per_image=False),
     _m("variance", "variance", "between-seed variance, mean over pixels and channels", "low", per_image=False),
     _m("bias2_fraction", "bias share", "bias² / (bias² + variance)", per_image=False, values=UNIT),
+    # A sequence (cbox sequence): its frames' rows carry every per-image metric and their frame; a sequence's row
+    # the temporal figures (cornell_harness.evaluate.temporal) and the mean over frames of each per-image metric.
+    _m("frame", "frame", "the frame of an animated scene a row is of (0 first)", per_image=False),
+    _m("flicker", "flicker", "RMS of the frame-to-frame change of the error image (linear radiance): noise "
+       "that is not held from frame to frame, and jumps; compare with flicker_floor", "low", "flicker (RMS)",
+       per_image=False, temporal=True),
+    _m("flicker_floor", "flicker floor", "the flicker of two independent reference-quality sequences, from the "
+       "reference's per-frame variance: sqrt(mean 2·(V_i + V_i−1)); a renderer's flicker cannot go below it",
+       per_image=False),
+    _m("lag", "lag (frames)", "frames after the scene's change (a motion ending, a switch) until the per-frame "
+       "RMSE is back in its steady band (mean ± 2 sd of the last third of the frames) for 3 frames", "low",
+       "lag (frames)", per_image=False, temporal=True),
+    _m("ghosting", "ghosting", "RMSE (linear radiance) over the pixels the motion uncovered (the disocclusion "
+       "masks of the reference's motion), every frame", "low", "ghosting RMSE", per_image=False, temporal=True),
 )
 
 #: Every known column, by key.
@@ -130,6 +145,11 @@ COLOUR_METRICS = frozenset(k for k, m in METRICS.items() if m.colour)
 HIGHER_IS_BETTER = frozenset(k for k, m in METRICS.items() if m.better == "high")
 #: Metrics of one image against the reference: what a gate budget or baseline may name.
 IMAGE_METRICS = tuple(k for k, m in METRICS.items() if m.per_image)
+#: Figures of a whole sequence against its per-frame references (:mod:`cornell_harness.evaluate.temporal`): what
+#: a gate budget on an animated scene may name besides the per-image metrics (then the mean over frames).
+TEMPORAL_METRICS = tuple(k for k, m in METRICS.items() if m.temporal)
+#: The per-frame error :data:`TEMPORAL_METRICS`' lag follows.
+LAG_METRIC = "rmse"
 #: Per-image metrics a check computes unasked (``cbox compare-image`` with thresholds, :func:`check_metrics`): a
 #: pass or two over the pixels each, together under a tenth of one ΔE00 map's cost.
 CHEAP_METRICS = tuple(k for k, m in METRICS.items() if m.cheap)

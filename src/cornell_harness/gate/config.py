@@ -40,6 +40,12 @@ expectation must check accuracy (``unbiased``, a budget, a slope or ``consistenc
 (:data:`cornell_harness.evaluate.registry.REGION_CHECK_METRICS`); the region is checked against the scene's
 when the gate resolves it (:mod:`cornell_harness.gate.run`). Baseline regression checks stay image-wide.
 
+A ``max`` budget on a temporal metric (:data:`cornell_harness.evaluate.registry.TEMPORAL_METRICS`: flicker, lag,
+ghosting) makes the expectation one on an animated scene's frames (:attr:`Expectation.frames`): every frame is
+rendered at ``spp`` and scored against its own reference (:func:`cornell_harness.workflows.sequence_run.sequence_record`),
+its other budgets being means over frames; checks of one still render (``unbiased``, ``slope``, ``consistency``,
+``bias_limit``, a ``time`` or ``max_spp`` budget) and region budgets do not go with it.
+
 ``unbiased = true`` runs three statistical tests against the reference: ``agreement`` (tiled z-tests,
 :mod:`cornell_harness.evaluate.agreement`), ``variance`` (the renderer's own variance against its residuals,
 :mod:`cornell_harness.evaluate.variance_check`; skipped, not failed, without one, the other two then using the
@@ -74,8 +80,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cornell_harness.evaluate.sequential import SPENDING
-from cornell_harness.evaluate.registry import (HIGHER_IS_BETTER, IMAGE_METRICS, REGION_CHECK_METRICS, bound_problem,
-                                               region_metric)
+from cornell_harness.evaluate.registry import (HIGHER_IS_BETTER, IMAGE_METRICS, REGION_CHECK_METRICS, TEMPORAL_METRICS,
+                                               bound_problem, region_metric)
 from cornell_harness.gate.margins import MarginProblem, Margins, parse_margins
 from cornell_harness.schemas.reader import FormatProblem, check, read_toml
 from cornell_harness.suggest import closest
@@ -167,6 +173,12 @@ class Expectation:
             out.append(s)
             s *= 2
         return out + [self.max_spp]
+
+    @property
+    def frames(self) -> bool:
+        """True for an expectation on an animated scene's frames: one that budgets a temporal metric
+        (:data:`cornell_harness.evaluate.registry.TEMPORAL_METRICS`); its other budgets are then means over frames."""
+        return any(k in TEMPORAL_METRICS for k in self.max)
 
     def region_metrics(self) -> list[tuple[str, str]]:
         """(field, ``region.<region>.<metric>``) of every region metric it names: the gate checks the regions."""
@@ -266,7 +278,8 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
     slope = _band(path, t["slope"], f"{w}slope") if "slope" in t else None
     budgets = {}
     for key in ("max", "min", "abs_max"):
-        _check_metrics(path, t.get(key, {}), IMAGE_METRICS, f"{w}{key}.")
+        _check_metrics(path, t.get(key, {}), IMAGE_METRICS + (TEMPORAL_METRICS if key == "max" else ()),
+                       f"{w}{key}.")
         budgets[key] = {k: float(v) for k, v in t.get(key, {}).items()}
     _check_budgets(path, w, budgets)
     unbiased, settings = t.get("unbiased", False), t.get("settings", {})
@@ -281,6 +294,7 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
                               "abs_max), a slope or a consistency check; or finite_only = true to check only for "
                               "NaN and Inf")
     _check_sequential(path, t, w)
+    _check_frames(path, t, w)
     budget = f"{spp}spp" if spp else f"max{t['max_spp']}spp" if "max_spp" in t else f"{time_s:g}s"
     shown = f"[{','.join(f'{k}={v}' for k, v in sorted(settings.items()))}]" if settings else ""
     name = t.get("name") or f"{t['scene']}/{t['renderer']}{shown}@{budget}"
@@ -288,6 +302,25 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
                        slope, budgets["max"], budgets["min"], budgets["abs_max"], settings,
                        _duration(path, t, "time_limit", w, time_limit), consistency, bias_limit, margins,
                        t.get("inconclusive", "fail"), t.get("max_spp"), t.get("first_spp"))
+
+
+#: What an expectation on an animated scene's frames cannot have: checks of one still render.
+_STILL_CHECKS = ("time", "max_spp", "unbiased", "slope", "consistency", "bias_limit")
+
+
+def _check_frames(path: Path, t: dict, w: str) -> None:
+    """A budget on a temporal metric renders the scene's frames (at ``spp``): no check of one still render goes
+    with it, and its budgets are image-wide (a sequence's row has no regions)."""
+    if not any(k in TEMPORAL_METRICS for k in t.get("max", {})):
+        return
+    for key in _STILL_CHECKS:
+        if key in t and t[key] is not False:
+            raise GateConfigError(path, f"{w}{key}", "goes with a still render; a budget on "
+                                  f"{', '.join(TEMPORAL_METRICS)} renders the scene's frames at spp")
+    for kind in ("max", "min", "abs_max"):
+        for key in t.get(kind, {}):
+            if region_metric(key):
+                raise GateConfigError(path, f"{w}{kind}.{key}", "a budget on the frames of a sequence is image-wide")
 
 
 #: What a sequential expectation cannot have: checks of a render at one fixed spp.

@@ -33,6 +33,7 @@ from cornell_harness.store.references import ReferenceError, load_reference
 from cornell_harness.workflows import runner
 from cornell_harness.workflows.cells import entry_for
 from cornell_harness.workflows.compare import spp_for_time_budget
+from cornell_harness.workflows.sequence_run import sequence_record, sequence_references
 from cornell_harness.workflows.executor import DaskExecutor, InProcess, Task, task_key
 from cornell_harness.workflows.render import RenderError, RenderTimeout, render_checked
 from cornell_harness.workflows.sandbox import run_sandboxed
@@ -98,10 +99,12 @@ def _resolve(cfg: GateConfig, i: int, exp: Expectation, overrides: dict[str, Ren
     keeps each scene and reference by name: several expectations share one.
     """
     try:
-        if exp.scene not in stored:
+        key = (exp.scene, exp.frames)  # an expectation on the frames takes each frame's reference
+        if key not in stored:
             scene = resolve_scene(exp.scene, scene_overrides)
-            stored[exp.scene] = scene, load_reference(scene)
-        scene, ref = stored[exp.scene]
+            stored[key] = scene, (sequence_references(scene, range(scene.frame_count)) if exp.frames
+                                  else load_reference(scene))
+        scene, ref = stored[key]
     except SceneError as e:
         # A stored name that does not exist is this field's error; a broken scene file is that file's.
         where = e.message if e.field == "--scene" else str(e)
@@ -209,6 +212,8 @@ def render_expectation(job: GateJob, scene, ref, entry: RendererEntry | None = N
     """
     exp, seed = job.expectation, job.seed
     entry = entry or entry_for(job.spec, job.settings)
+    if exp.frames:  # the animated scene's frames, scored as one record (ref: each frame's reference)
+        return sequence_record(entry, scene, exp.spp, seed, ref, job.time_limit_s), None, None
     if small is None and job.smaller_settings is not None:
         small = entry_for(job.spec, job.smaller_settings)
     spp, stop = exp.spp, None
@@ -255,18 +260,18 @@ def run_gate(cfg: GateConfig, overrides: dict[str, RendererEntry] | None = None,
     baseline = load_baseline(cfg) if not scene_overrides else {}
     metrics, seeds = baseline.get("expectations", {}), baseline.get("seeds", {})
     resolved = resolve_all(cfg, overrides, scene_overrides)
-    shared: dict = {}  # scene name -> the executor's handles on its scene and reference, sent once
+    shared: dict = {}  # (scene name, frames) -> the executor's handles on its scene and reference(s), sent once
     tasks = []
     for i, (exp, (scene, ref, entry, small)) in enumerate(zip(cfg.expectations, resolved)):
         seed = exp.seed + seed_offset
         limit = exp.time_limit_s if sandbox and exp.renderer not in (overrides or {}) else None
         job = GateJob(exp, entry.spec, dict(entry.settings), None if small is None else dict(small.settings),
                       seed, limit, design(exp, cfg) if exp.max_spp else None)
-        if exp.scene not in shared:
-            shared[exp.scene] = executor.share(scene), executor.share(ref)
+        if (exp.scene, exp.frames) not in shared:
+            shared[exp.scene, exp.frames] = executor.share(scene), executor.share(ref)
         local = (entry, small) if executor.local else (None, None)
         tasks.append(Task(task_key("expectation", str(cfg.path), i, repr(exp), seed, limit), exp.name,
-                          render_expectation, (job, *shared[exp.scene], *local)))
+                          render_expectation, (job, *shared[exp.scene, exp.frames], *local)))
     index = {t.key: i for i, t in enumerate(tasks)}
     outcomes: list[Outcome | None] = [None] * len(tasks)
     if on_start and tasks:

@@ -10,7 +10,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from cornell_harness.adapters.api import Checkpoint, ReferenceFit, RenderResult, attribute
+from cornell_harness.adapters.api import (Checkpoint, ReferenceFit, RenderResult, SequenceResult, attribute,
+                                          frame_seed)
 from cornell_harness.adapters.registry import RendererEntry
 from cornell_harness.adapters.settings import declared, resolve_settings
 from cornell_harness.evaluate.reference_fit import fitted_image
@@ -65,6 +66,35 @@ def render_checked(entry: RendererEntry, scene: Scene, spp: int, seed: int, chec
         result.variance = _checked_image(result.variance, expected, "a variance image")
     for c in result.checkpoints:
         c.image = _checked_image(c.image, expected, f"a checkpoint image at {c.spp} spp")
+    return result
+
+
+def render_sequence_checked(entry: RendererEntry, scene: Scene, spp: int, seed: int,
+                            frames: Sequence[int]) -> SequenceResult:
+    """``entry``'s render of ``frames`` of animated ``scene``, every frame checked as :func:`render_checked` checks
+    an image; may raise. The one render path of a sequence, in this process or a sandbox's child.
+
+    A renderer that declares ``sequences`` (:class:`cornell_harness.adapters.api.Declarations`) renders them
+    itself, carrying its state from frame to frame; any other renders each frame on its own, as the still scene
+    ``scene.at_frame(i)`` with seed :func:`~cornell_harness.adapters.api.frame_seed` ``(seed, i)``, through
+    :func:`render_checked`.
+    """
+    frames = list(frames)
+    if not attribute(entry.renderer, "sequences"):
+        return SequenceResult([render_checked(entry, scene.at_frame(i), spp, frame_seed(seed, i)) for i in frames])
+    kwargs = {"settings": resolve_settings(entry.renderer, entry.settings)} if declared(entry.renderer) else {}
+    if not callable(getattr(entry.renderer, "render_sequence", None)):
+        raise RenderError("declares sequences = True but has no render_sequence method")
+    result = entry.renderer.render_sequence(scene, spp, seed, frames=frames, **kwargs)
+    if not isinstance(result, SequenceResult) or len(result.frames) != len(frames):
+        got = len(result.frames) if isinstance(result, SequenceResult) else type(result).__name__
+        raise RenderError(f"render_sequence returned {got} frames, expected a SequenceResult of {len(frames)}")
+    for i, frame in zip(frames, result.frames):
+        cam = scene.at_frame(i).camera
+        expected = (cam.height, cam.width, 3)
+        frame.image = _checked_image(frame.image, expected, f"an image at frame {i}")
+        if frame.variance is not None:
+            frame.variance = _checked_image(frame.variance, expected, f"a variance image at frame {i}")
     return result
 
 

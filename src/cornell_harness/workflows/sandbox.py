@@ -2,7 +2,7 @@
 
 A renderer can hang, leak, crash the interpreter or take the machine's memory;
 none of that may take the harness down or go unmeasured. :func:`run_sandboxed`
-renders a list of (scene, spp, seed) with one renderer in a fresh process
+renders a list of (scene, spp, seed) with one renderer (or one animated scene's frames, :func:`run_sandboxed_sequence`) in a fresh process
 (``python -m cornell_harness.workflows.sandbox --worker FOLDER``) and returns a
 :class:`SandboxOutcome`: how it ended, its wall time, its peak resident
 memory, and the images (with variances and render times) it made::
@@ -90,6 +90,8 @@ class SandboxOutcome:
     infos: list = dataclasses.field(default_factory=list)  # each render's RenderResult.info
     checkpoints: list = dataclasses.field(default_factory=list)  # each render's [(spp, image, time_s, cpu), ...]
     spps: list = dataclasses.field(default_factory=list)  # each render's spp (below the asked one: stopped early)
+    seeds: list = dataclasses.field(default_factory=list)  # each render's seed, as its result gave it
+    state: dict = dataclasses.field(default_factory=dict)  # a sequence's state (SequenceResult.state)
 
     def problem(self) -> str | None:
         """Why the images cannot be used (None: they can)."""
@@ -108,16 +110,34 @@ def run_sandboxed(spec: str, renders: Sequence[tuple], time_bound_s: float, rss_
     through :func:`cornell_harness.workflows.render.render_checked`, the harness's one render path; a ``stop``
     rule (picklable) travels with its render and runs in the child."""
     renders = list(renders)
+    outcome = _run(spec, renders, "renders", time_bound_s, rss_bound_mb, settings)
+    outcome.shapes = [(r[0].camera.height, r[0].camera.width, 3) for r in renders]
+    return outcome
+
+
+def run_sandboxed_sequence(spec: str, scene, spp: int, seed: int, frames: Sequence[int], time_bound_s: float,
+                           rss_bound_mb: float = math.inf, settings: dict | None = None) -> SandboxOutcome:
+    """Render ``frames`` of animated ``scene`` as one job in a fresh process, within the bounds, through
+    :func:`cornell_harness.workflows.render.render_sequence_checked`: a stateful renderer's state lives in the
+    child from the first frame to the last. The outcome has one image (and time, info) per frame, in order, and
+    the renderer's ``state``; ``timings`` holds the whole sequence's one measure, once per frame."""
+    frames = [int(i) for i in frames]
+    outcome = _run(spec, [(scene, spp, seed, frames)], "sequence", time_bound_s, rss_bound_mb, settings)
+    shape = (scene.camera.height, scene.camera.width, 3)
+    outcome.shapes = [shape] * len(outcome.images)
+    return outcome
+
+
+def _run(spec: str, renders: list, kind: str, time_bound_s: float, rss_bound_mb: float,
+         settings: dict | None) -> SandboxOutcome:
     with tempfile.TemporaryDirectory(prefix="cbox-sandbox-") as tmp:
         folder = Path(tmp)
-        (folder / "job.json").write_text(json.dumps({"spec": spec, "settings": settings or {},
+        (folder / "job.json").write_text(json.dumps({"spec": spec, "settings": settings or {}, "kind": kind,
                                                      "sys_path": [p for p in sys.path if p]}))
         with open(folder / "renders.pkl", "wb") as f:
             pickle.dump(renders, f, protocol=pickle.HIGHEST_PROTOCOL)
         watched = _watch_worker(folder, time_bound_s, rss_bound_mb)
-        outcome = _read_outcome(folder, watched, time_bound_s, rss_bound_mb)
-    outcome.shapes = [(r[0].camera.height, r[0].camera.width, 3) for r in renders]
-    return outcome
+        return _read_outcome(folder, watched, time_bound_s, rss_bound_mb)
 
 
 # ----------------------------------------------------------------------------------------
@@ -202,7 +222,7 @@ def _read_outcome(folder: Path, watched: _Watched, time_bound_s: float, rss_boun
                               traceback="\n".join(lines[-STDERR_LINES:]))
     result = json.loads(result_path.read_text())
     outcome = SandboxOutcome("ok", wall, max(peak, float(result.get("vm_hwm_mb") or 0.0)),
-                             version=result.get("version"))
+                             version=result.get("version"), state=result.get("state") or {})
     for i, r in enumerate(result["renders"]):
         with np.load(folder / f"render-{i}.npz") as z:
             outcome.images.append(z["image"])
@@ -210,6 +230,7 @@ def _read_outcome(folder: Path, watched: _Watched, time_bound_s: float, rss_boun
             outcome.checkpoints.append([(spp, z[f"checkpoint-{spp}"], t, cpu)
                                         for spp, t, cpu in r.get("checkpoints", [])])
         outcome.spps.append(int(r["spp"]))
+        outcome.seeds.append(r.get("seed"))
         outcome.render_times.append(float(r["time_s"]))
         outcome.cpu_times.append(r.get("cpu_time_s"))
         outcome.timings.append(Timing(**r["timing"]))
@@ -225,11 +246,11 @@ def _read_outcome(folder: Path, watched: _Watched, time_bound_s: float, rss_boun
 # ----------------------------------------------------------------------------------------
 
 
-def _render_job(spec: str, settings: dict, folder: Path, result: dict) -> None:
+def _render_job(spec: str, settings: dict, kind: str, folder: Path, result: dict) -> None:
     """Render every (scene, spp, seed[, checkpoints[, stop]]) of ``folder/renders.pkl`` with ``spec``, each to
-    ``render-<i>.npz``."""
+    ``render-<i>.npz``; or (``kind`` "sequence") its one (scene, spp, seed, frames), each frame to one."""
     from cornell_harness.adapters.registry import resolve
-    from cornell_harness.workflows.render import render_checked
+    from cornell_harness.workflows.render import render_checked, render_sequence_checked
     from cornell_harness.workflows.timing import measure
 
     (entry,) = resolve([spec])
@@ -243,19 +264,31 @@ def _render_job(spec: str, settings: dict, folder: Path, result: dict) -> None:
         result["version"] = f"unknown ({type(e).__name__})"
     with open(folder / "renders.pkl", "rb") as f:
         renders = pickle.load(f)
+    if kind == "sequence":
+        (scene, spp, seed, frames), = renders
+        seq, timed = measure(lambda: render_sequence_checked(entry, scene, spp, seed, frames))
+        result["state"] = json.loads(json.dumps(dict(seq.state), default=str))
+        for i, res in enumerate(seq.frames):
+            _write_render(folder, i, res, timed, result)
+        return
     for i, (scene, spp, seed, *rest) in enumerate(renders):
         checkpoints, stop = (list(rest) + [(), None])[:2]
         res, timed = measure(lambda: render_checked(entry, scene, spp, seed, checkpoints, stop))
-        arrays = {"image": np.asarray(res.image)}
-        if res.variance is not None:
-            arrays["variance"] = np.asarray(res.variance)
-        arrays.update({f"checkpoint-{c.spp}": np.asarray(c.image) for c in res.checkpoints})
-        np.savez(folder / f"render-{i}.npz", **arrays)
-        info = json.loads(json.dumps(dict(res.info), default=str))  # what JSON cannot hold, as text
-        result["renders"].append({"spp": int(res.spp), "time_s": float(res.time_s), "info": info, "cpu_time_s": _number(res.cpu_time_s),
-                                  "timing": timed.as_dict(),
-                                  "checkpoints": [(c.spp, float(c.time_s), _number(c.cpu_time_s))
-                                                  for c in res.checkpoints]})
+        _write_render(folder, i, res, timed, result)
+
+
+def _write_render(folder: Path, i: int, res, timed, result: dict) -> None:
+    """Render ``i``'s images to ``render-<i>.npz`` and its figures to ``result``."""
+    arrays = {"image": np.asarray(res.image)}
+    if res.variance is not None:
+        arrays["variance"] = np.asarray(res.variance)
+    arrays.update({f"checkpoint-{c.spp}": np.asarray(c.image) for c in res.checkpoints})
+    np.savez(folder / f"render-{i}.npz", **arrays)
+    info = json.loads(json.dumps(dict(res.info), default=str))  # what JSON cannot hold, as text
+    result["renders"].append({"spp": int(res.spp), "seed": int(res.seed), "time_s": float(res.time_s), "info": info,
+                              "cpu_time_s": _number(res.cpu_time_s), "timing": timed.as_dict(),
+                              "checkpoints": [(c.spp, float(c.time_s), _number(c.cpu_time_s))
+                                              for c in res.checkpoints]})
 
 
 def _number(value) -> float | None:
@@ -270,7 +303,7 @@ def _worker_main(folder: Path) -> int:
             sys.path.append(p)
     result: dict = {"version": None, "renders": [], "error": None}
     try:
-        _render_job(job["spec"], job.get("settings", {}), folder, result)
+        _render_job(job["spec"], job.get("settings", {}), job.get("kind", "renders"), folder, result)
     except Exception as e:  # the renderer's failure is the result
         result["error"] = f"{type(e).__name__}: {e}"
         result["traceback"] = traceback.format_exc()

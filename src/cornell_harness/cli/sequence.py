@@ -1,0 +1,56 @@
+"""``cbox sequence``: an animated scene's frames with each renderer at each seed, scored per frame against the
+per-frame references, the temporal figures (flicker, lag, ghosting) and their report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from cornell_harness.cli.common import (DashboardOpt, RendererFilesOpt, RenderersOpt, SceneOpt, SchedulerOpt,
+                                        TimeLimitOpt, WorkersOpt, app, command_line, executor_for, out_folder_option)
+from cornell_harness.cli.output import info
+
+
+@app.command()
+def sequence(
+    scene: str = SceneOpt,
+    renderer: Optional[List[str]] = RenderersOpt,
+    renderer_files: Optional[List[Path]] = RendererFilesOpt,
+    spp: int = typer.Option(1, "--spp", min=1, help="Samples per pixel of every frame."),
+    seeds: int = typer.Option(3, "--seeds", min=1, help="Seeds 0 .. K-1: the report's confidence bands are over them."),
+    out: Path = out_folder_option(Path("out/sequence"), "Folder for frames.csv, sequences.csv, sequences.json, "
+                                                        "sequence.html and the animations."),
+    time_limit: Optional[str] = TimeLimitOpt,  # seconds (float), by the option's callback: a whole sequence's
+    workers: Optional[int] = WorkersOpt,
+    scheduler: Optional[str] = SchedulerOpt,
+    dashboard: Optional[str] = DashboardOpt,
+) -> None:
+    """Render every frame of an animated scene, score each against its frame's reference, and measure flicker
+    (beside the reference's floor), lag after the scene's change and ghosting where motion uncovers surfaces.
+
+    A renderer with a temporal state renders the sequence itself; any other renders each frame on its own. A
+    sweep of a setting (-r 'probes[hysteresis=0.9]' -r 'probes[hysteresis=0.97]') traces the lag/flicker curve.
+    Exit code 1 if a renderer failed. --time-limit bounds a whole sequence.
+    """
+    from cornell_harness.adapters.registry import resolve
+    from cornell_harness.reports.sequence import write_sequence_report
+    from cornell_harness.scenes.library import resolve_scene
+    from cornell_harness.workflows.sequence_run import run_sequence, sequence_references, write_sequence_results
+
+    sc = resolve_scene(scene)
+    frames = list(range(sc.frame_count))
+    references = sequence_references(sc, frames)
+    with executor_for(workers, scheduler, dashboard) as executor:
+        result = run_sequence(resolve(renderer), sc, spp, list(range(seeds)), references, frames, time_limit,
+                              executor)
+    written = write_sequence_results(out, result)
+    report = write_sequence_report(out, sc.name, result.frame_rows, result.sequence_rows, result.images,
+                                   [r.image for r in references], command_line())
+    for row in result.sequence_rows:
+        info(f"{row['renderer']} seed {row['seed']}: {row['status']}" + (
+            f", flicker {row['flicker']:.3g} (floor {row['flicker_floor']:.3g}), lag {row['lag']:g} frames, "
+            f"ghosting {row['ghosting']:.3g}" if row["status"] == "ok" else f" ({row['reason']})"))
+    info(f"wrote {', '.join(str(p) for p in written)} and {report}")
+    raise typer.Exit(1 if any(r["status"] == "failed" for r in result.sequence_rows) else 0)

@@ -1,0 +1,96 @@
+"""Temporal metrics: flicker against its closed-form floor and the exponential history's closed form, lag after a
+change, ghosting on disoccluded pixels, and the disocclusion masks of a moving object."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cornell_harness.evaluate import temporal
+from cornell_harness.evaluate.disocclusion import disocclusion_mask, disocclusion_masks, pixel_centre_hits
+from cornell_harness.evaluate.registry import METRICS, TEMPORAL_METRICS
+from cornell_harness.adapters.registry import resolve
+from cornell_harness.workflows.sequence import render_sequence
+from tests.sequence_fakes import SIGMA, moving_light, truth
+
+
+def test_registry_defines_each_temporal_metric_once():
+    assert set(TEMPORAL_METRICS) == {"flicker", "lag", "ghosting"}
+    assert all(METRICS[k].better == "low" and not METRICS[k].per_image for k in TEMPORAL_METRICS)
+    assert "flicker_floor" in METRICS and "frame" in METRICS
+
+
+def test_flicker_of_two_independent_reference_sequences_is_the_closed_form_floor():
+    rng = np.random.default_rng(0)
+    v = rng.uniform(0.5, 2.0, size=(6, 32, 32, 3)) * 1e-4  # the reference's variance, per frame and pixel
+    a = np.sqrt(v) * rng.standard_normal(v.shape)
+    b = np.sqrt(v) * rng.standard_normal(v.shape)
+    assert temporal.flicker(a, b) == pytest.approx(temporal.flicker_floor(v), rel=0.02)
+    assert temporal.flicker(a[:1], b[:1]) != temporal.flicker(a[:1], b[:1])  # NaN: one frame has no change
+
+
+def test_exponential_history_on_a_still_scene_flickers_as_its_closed_form():
+    # History weight h, new frame weight a = 1 - h: stationary variance a/(2 - a)·σ², lag-1 correlation h, so the
+    # frame-to-frame change has mean square 2·(1 - h)·a/(2 - a)·σ² = 2·a²/(2 - a)·σ².
+    scene = moving_light(frames=120, stop=0, size=16)  # nothing moves
+    (e,) = resolve(["tests.sequence_fakes:ExponentialTruth"])
+    for h in (0.5, 0.8):
+        frames = render_sequence(e.with_settings({"hysteresis": h}), scene, 1, 11).frames
+        images = np.stack([f.image for f in frames[40:]])  # past the start-up
+        refs = np.broadcast_to(truth(scene.at_frame(0)), images.shape)
+        a = 1.0 - h
+        expected = math.sqrt(2.0 * a * a / (2.0 - a)) * SIGMA
+        assert temporal.flicker(images, refs) == pytest.approx(expected, rel=0.05)
+
+
+def test_lag_counts_the_frames_until_the_error_is_back_in_its_steady_band():
+    rng = np.random.default_rng(3)
+    steady = 1.0 + 0.01 * rng.standard_normal(60)
+    lo, hi, first = temporal.steady_band(steady)
+    assert first == 40 and lo < 1.0 < hi
+    excess = np.zeros(60)
+    excess[20:] = 0.5 ** np.arange(40)  # an error that halves every frame after frame 20
+    lags = temporal.lag(steady + excess, 20)
+    assert 5 <= lags <= 7  # 0.5^k falls below the band's half-width (about 0.02) at k ≈ 6
+    assert temporal.lag(steady, 20) == 0
+    slower = np.zeros(60)
+    slower[20:] = 0.8 ** np.arange(40)
+    assert temporal.lag(steady + slower, 20) > lags
+    assert math.isnan(temporal.lag(steady, 45))  # a change inside the steady frames has nothing to settle to
+
+
+def test_change_frames_are_where_motion_ends_or_a_switch_happens():
+    x = np.array([0, 1, 2, 3, 4, 4, 4, 4, 4, 4, 4, 4], dtype=float)
+    on = np.array([1, 1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0], dtype=float)
+    assert temporal.settle_frames(np.stack([x, on], axis=1)) == [4, 8]
+    assert temporal.settle_frames(np.zeros((5, 2))) == []
+
+
+def test_ghosting_is_the_rmse_over_the_uncovered_pixels_only():
+    refs = np.zeros((3, 4, 4, 3))
+    images = refs + 0.1
+    masks = np.zeros((3, 4, 4), dtype=bool)
+    assert math.isnan(temporal.ghosting(images, refs, masks))
+    masks[1, 0, 0] = masks[2, 3, 3] = True
+    images[1, 0, 0] = 2.0
+    assert temporal.ghosting(images, refs, masks) == pytest.approx(math.sqrt((4.0 * 3 + 0.01 * 3) / 6))
+
+
+def test_disocclusion_of_a_moving_box_is_where_it_was():
+    scene = moving_light(frames=4, stop=2, size=32, step=(0, 0, 0), others=(("small-box", (0.15, 0, 0), 2),))
+    names = scene.object_names()
+    before, after = scene.at_frame(0), scene.at_frame(1)
+    mask = disocclusion_mask(before, after)
+    prev_obj, _ = pixel_centre_hits(before)
+    now_obj, _ = pixel_centre_hits(after)
+    box = names.index("small-box")
+    assert mask.sum() >= 5
+    # uncovered: pixels the box hid before and no longer does (or its own sides turning into view)
+    assert np.all((prev_obj[mask] == box) | (now_obj[mask] == box))
+    assert np.any((prev_obj == box) & (now_obj != box) & mask)
+    assert not disocclusion_mask(before, before).any()
+    masks = disocclusion_masks([scene.at_frame(i) for i in range(4)])
+    assert masks.shape == (4, 32, 32) and not masks[0].any() and masks[2].any()
+    assert not masks[3].any()  # the box rests from frame 2 on

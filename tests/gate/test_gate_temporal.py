@@ -1,0 +1,43 @@
+"""Gate budgets on flicker, lag and ghosting: checked against the registry, refused with still-render checks, and
+an expectation budgeting them renders the animated scene's frames and passes or fails on them."""
+
+from __future__ import annotations
+
+import pytest
+
+from cornell_harness.gate import run as gate_run
+from cornell_harness.gate.config import GateConfigError, load_config
+from tests.sequence_fakes import moving_light, references
+
+
+def config(tmp_path, body: str):
+    path = tmp_path / "gate.toml"
+    path.write_text('[[expect]]\nscene = "moving"\nrenderer = "tests.sequence_fakes:ExponentialTruth"\n' + body)
+    return load_config(path)
+
+
+def test_temporal_budgets_are_registry_names_and_go_with_frames_only(tmp_path):
+    cfg = config(tmp_path, "spp = 2\nmax = { lag = 3, flicker = 0.05, rmse = 1 }\n")
+    assert cfg.expectations[0].frames and cfg.expectations[0].max["lag"] == 3
+    with pytest.raises(GateConfigError, match=r"max\.flickr: unknown metric \(did you mean 'flicker'\?\)"):
+        config(tmp_path, "spp = 2\nmax = { flickr = 0.05 }\n")
+    with pytest.raises(GateConfigError, match=r"min\.lag: unknown metric"):
+        config(tmp_path, "spp = 2\nmin = { lag = 1 }\n")
+    with pytest.raises(GateConfigError, match=r"max\.lag: lag is at least 0"):
+        config(tmp_path, "spp = 2\nmax = { lag = -1 }\n")
+    with pytest.raises(GateConfigError, match=r"expect\[0\]\.unbiased: goes with a still render"):
+        config(tmp_path, "spp = 2\nunbiased = true\nmax = { ghosting = 0.1 }\n")
+
+
+def test_a_long_history_fails_a_lag_budget_that_a_short_one_passes(tmp_path, monkeypatch):
+    scene = moving_light(frames=15, stop=4, size=10)
+    monkeypatch.setattr(gate_run, "resolve_scene", lambda name, overrides=(): scene)
+    monkeypatch.setattr(gate_run, "sequence_references", lambda sc, frames: references(sc, list(frames)))
+    verdicts = {}
+    for h in (0.1, 0.95):
+        cfg = config(tmp_path, f"spp = 4\nsettings = {{ hysteresis = {h} }}\nmax = {{ lag = 2, flicker = 1 }}\n")
+        (outcome,) = gate_run.run_gate(cfg, sandbox=False)
+        checks = {c.name: c for c in outcome.checks}
+        assert checks["finite"].passed and checks["max.flicker"].passed
+        verdicts[h] = checks["max.lag"].passed
+    assert verdicts == {0.1: True, 0.95: False}
