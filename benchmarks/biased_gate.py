@@ -37,7 +37,8 @@ from scipy import stats
 from benchmarks import markdown_blocks
 from cornell_harness.evaluate import bias_extrapolation
 from cornell_harness.evaluate.agreement import sidak_level
-from cornell_harness.gate.config import BiasLimit, load_config
+from cornell_harness.gate.config import load_config
+from cornell_harness.gate.consistency import BiasLimit
 from cornell_harness.gate.run import GateJob, render_bias_efforts
 from cornell_harness.adapters.registry import resolve
 from cornell_harness.scenes.library import resolve_scene

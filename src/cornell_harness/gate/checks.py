@@ -19,7 +19,8 @@ from cornell_harness.evaluate import agreement, bias_extrapolation, convergence,
 from cornell_harness.evaluate.equivalence import FAIL, INCONCLUSIVE, PASS, interval_verdicts, resolving_half_width
 from cornell_harness.evaluate.registry import HIGHER_IS_BETTER
 from cornell_harness.evaluate.score import lookup, metric_value
-from cornell_harness.gate.config import Consistency, Expectation, GateConfig
+from cornell_harness.gate.config import Expectation, GateConfig
+from cornell_harness.gate.consistency import Consistency
 from cornell_harness.gate.margins import BiasTable, bias_table, equivalence_message
 from cornell_harness.store.references import Reference
 from cornell_harness.workflows import runner

@@ -56,7 +56,7 @@ unbiased estimator: ``unbiased = true`` for a renderer that declares ``estimator
 
 ``consistency`` is what a consistent renderer (photon mapping, SPPM: biased, its error going to 0 as its
 budget grows) is checked with instead: ``slope = [lo, hi]``, the log-log slope of ``metric`` (default ``mse``;
-an error that falls, :data:`CONSISTENCY_METRICS`, or a region's) against spp over the render's own checkpoints
+an error that falls, :data:`cornell_harness.gate.consistency.CONSISTENCY_METRICS`, or a region's) against spp over the render's own checkpoints
 from ``from_spp`` (default spp // 16), or ``max_ratio = r`` with ``smaller = { spp = N, <setting> = value }``, a
 second render at a smaller budget whose error must be at least 1/r times the full render's. SPPM with radius
 reduction α = 2/3 has an MSE rate of iterations^(-2/3) (Knaus & Zwicker 2011), so its band sits around −2/3.
@@ -80,12 +80,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cornell_harness.evaluate.sequential import SPENDING
-from cornell_harness.evaluate.registry import (HIGHER_IS_BETTER, IMAGE_METRICS, REGION_CHECK_METRICS, TEMPORAL_METRICS,
-                                               bound_problem, region_metric)
+from cornell_harness.evaluate.registry import IMAGE_METRICS, TEMPORAL_METRICS, bound_problem, region_metric
+from cornell_harness.gate.config_fields import GateConfigError, band, check_metrics, check_names, duration
+from cornell_harness.gate.consistency import BiasLimit, Consistency, parse_bias_limit, parse_consistency
 from cornell_harness.gate.margins import MarginProblem, Margins, parse_margins
 from cornell_harness.schemas.reader import FormatProblem, check, read_toml
-from cornell_harness.suggest import closest
-from cornell_harness.durations import parse_duration
 
 #: The config's defaults (gate.schema.json states the same; tests/test_schemas.py holds them equal).
 DEFAULT_ALPHA = 0.01
@@ -95,51 +94,6 @@ DEFAULT_REGRESSION_METRICS = ("delta_e2000_mean", "rel_mse_trimmed", "ssim")
 DEFAULT_TIME_LIMIT_S = 1800.0
 #: A sequential expectation's default false-pass rate at its margin, over all its looks.
 DEFAULT_BETA = 0.05
-#: The signed error a bias limit extrapolates, image-wide or as a region's ``region.<region>.<metric>``.
-BIAS_LIMIT_METRIC = "mean_radiance_rel_error"
-#: Image metrics a consistency check may follow: errors, which fall towards 0 (not PSNR or SSIM).
-CONSISTENCY_METRICS = tuple(m for m in IMAGE_METRICS if m not in HIGHER_IS_BETTER)
-
-
-class GateConfigError(ValueError):
-    """Bad gate config; ``str()`` names the file and the field."""
-
-    def __init__(self, file, field: str, message: str):
-        super().__init__(f"{file}: {field}: {message}")
-
-
-@dataclass
-class Consistency:
-    """A consistent renderer's error must fall with its budget: a slope band, or a ratio to a smaller budget."""
-
-    metric: str = "mse"
-    slope: tuple[float, float] | None = None
-    from_spp: int | None = None  # first checkpoint of the slope; None: spp // 16, at least 1
-    max_ratio: float | None = None
-    smaller_spp: int | None = None  # the smaller render's spp; None: the expectation's
-    smaller_settings: dict = field(default_factory=dict)  # replace the expectation's (validated at resolve)
-
-    def first_spp(self, spp: int) -> int:
-        """The slope's first checkpoint for a render of ``spp``."""
-        return self.from_spp if self.from_spp is not None else max(1, spp // 16)
-
-
-@dataclass
-class BiasLimit:
-    """Renders at several efforts over seeds, each seed's error extrapolated to infinite effort and t-tested."""
-
-    efforts: tuple[int, ...]
-    setting: tuple[str, ...] = ()  # settings set to each effort; () : the efforts are spp checkpoints
-    rate: float = 1.0
-    seeds: int = 8
-    spp: int = 16  # with ``setting``: the spp of every render
-    metrics: tuple[str, ...] = (BIAS_LIMIT_METRIC,)
-    tolerance: dict = field(default_factory=dict)  # metric -> |limit| allowed (default 0)
-    margin: dict = field(default_factory=dict)  # metric -> equivalence margin: three verdicts where one is set
-
-    def seed_list(self, seed: int) -> list[int]:
-        """The seeds of an expectation at ``seed``: k·seed .. k·seed + k − 1 (disjoint sets for distinct seeds)."""
-        return [self.seeds * seed + j for j in range(self.seeds)]
 
 
 @dataclass
@@ -203,45 +157,6 @@ class GateConfig:
     spending: str = SPENDING[0]
 
 
-def _check_names(path: Path, names, allowed, where: str, what: str = "metric") -> None:
-    """Refuse any name not in ``allowed``, naming it and the closest allowed one."""
-    for key in names:
-        if key not in allowed:
-            hint = closest(key, allowed)
-            raise GateConfigError(path, f"{where}{key}", f"unknown {what}"
-                                  + (f" (did you mean {hint!r}?)" if hint else f"; known: {', '.join(allowed)}"))
-
-
-def _check_metrics(path: Path, names, allowed, where: str) -> None:
-    """Refuse a metric name that is neither in ``allowed`` nor a region metric ``region.<region>.<metric>``."""
-    for key in names:
-        parts = region_metric(key)
-        if parts is None:
-            _check_names(path, [key], allowed, where)
-            continue
-        region, metric = parts
-        if not region or metric not in REGION_CHECK_METRICS:
-            hint = closest(metric, REGION_CHECK_METRICS) if region else None
-            raise GateConfigError(path, f"{where}{key}", "unknown region metric: expected region.<region>.<metric> "
-                                  "with <metric> one of " + ", ".join(REGION_CHECK_METRICS)
-                                  + (f" (did you mean 'region.{region}.{hint}'?)" if hint else ""))
-
-
-def _duration(path: Path, table: dict, key: str, where: str, default: float | None) -> float | None:
-    if key not in table:
-        return default
-    try:
-        return parse_duration(str(table[key]))
-    except ValueError as e:
-        raise GateConfigError(path, f"{where}{key}", str(e)) from None
-
-
-def _band(path: Path, value: list, field: str) -> tuple[float, float]:
-    if not value[0] < value[1]:
-        raise GateConfigError(path, field, "expected [low, high] with low < high")
-    return float(value[0]), float(value[1])
-
-
 def load_config(path: str | Path) -> GateConfig:
     """Parse and validate a gate config; GateConfigError names the file and field of any problem.
 
@@ -254,8 +169,8 @@ def load_config(path: str | Path) -> GateConfig:
     except FormatProblem as e:
         raise GateConfigError(path, e.field, e.message) from None
     reg = doc.get("regression_metrics", list(DEFAULT_REGRESSION_METRICS))
-    _check_names(path, reg, IMAGE_METRICS, "regression_metrics: ")
-    time_limit = _duration(path, doc, "time_limit", "", DEFAULT_TIME_LIMIT_S)
+    check_names(path, reg, IMAGE_METRICS, "regression_metrics: ")
+    time_limit = duration(path, doc, "time_limit", "", DEFAULT_TIME_LIMIT_S)
     baseline = doc.get("baseline")
     exps = [_parse_expectation(path, i, t, time_limit) for i, t in enumerate(doc["expect"])]
     names = [e.name for e in exps]
@@ -274,17 +189,17 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
         raise GateConfigError(path, f"{w}spp", "give exactly one budget: spp = N, time = \"10s\" or max_spp = N "
                               "(sequential)")
     spp = t.get("spp")
-    time_s = _duration(path, t, "time", w, None)
-    slope = _band(path, t["slope"], f"{w}slope") if "slope" in t else None
+    time_s = duration(path, t, "time", w, None)
+    slope = band(path, t["slope"], f"{w}slope") if "slope" in t else None
     budgets = {}
     for key in ("max", "min", "abs_max"):
-        _check_metrics(path, t.get(key, {}), IMAGE_METRICS + (TEMPORAL_METRICS if key == "max" else ()),
+        check_metrics(path, t.get(key, {}), IMAGE_METRICS + (TEMPORAL_METRICS if key == "max" else ()),
                        f"{w}{key}.")
         budgets[key] = {k: float(v) for k, v in t.get(key, {}).items()}
     _check_budgets(path, w, budgets)
     unbiased, settings = t.get("unbiased", False), t.get("settings", {})
-    consistency = _consistency(path, t, w, spp)
-    bias_limit = _bias_limit(path, t, w)
+    consistency = parse_consistency(path, t, w, spp)
+    bias_limit = parse_bias_limit(path, t, w)
     try:
         margins = parse_margins(t, bool(bias_limit and bias_limit.margin))
     except MarginProblem as e:
@@ -300,7 +215,7 @@ def _parse_expectation(path: Path, i: int, t: dict, time_limit: float) -> Expect
     name = t.get("name") or f"{t['scene']}/{t['renderer']}{shown}@{budget}"
     return Expectation(name, t["scene"], t["renderer"], spp, time_s, t.get("seed", 0), unbiased, t.get("tile", 16),
                        slope, budgets["max"], budgets["min"], budgets["abs_max"], settings,
-                       _duration(path, t, "time_limit", w, time_limit), consistency, bias_limit, margins,
+                       duration(path, t, "time_limit", w, time_limit), consistency, bias_limit, margins,
                        t.get("inconclusive", "fail"), t.get("max_spp"), t.get("first_spp"))
 
 
@@ -361,81 +276,3 @@ def _check_budgets(path: Path, w: str, budgets: dict[str, dict[str, float]]) -> 
                                       f"{budgets[kind][key]:g}: every render would fail one of them")
 
 
-def _bias_limit(path: Path, t: dict, w: str) -> BiasLimit | None:
-    """The ``bias_limit`` table of an expectation (None without one); see the module docstring."""
-    if "bias_limit" not in t:
-        return None
-    b, where = t["bias_limit"], f"{w}bias_limit."
-    efforts = b["efforts"]
-    if efforts != sorted(set(efforts)):
-        raise GateConfigError(path, f"{where}efforts", "expected two or more increasing integers >= 1 (photon "
-                              "counts with setting, else spp checkpoints)")
-    setting = b.get("setting", [])
-    setting = [setting] if isinstance(setting, str) else setting
-    if "spp" in b and not setting:
-        raise GateConfigError(path, f"{where}spp", "goes with setting; without it the efforts are the spps")
-    metrics = b.get("metrics", [BIAS_LIMIT_METRIC])
-    for m in metrics:
-        parts = region_metric(m)
-        if (m if parts is None else parts[1]) != BIAS_LIMIT_METRIC or (parts is not None and not parts[0]):
-            raise GateConfigError(path, f"{where}metrics", f"{m!r}: a bias limit extrapolates a signed mean "
-                                  f"error: {BIAS_LIMIT_METRIC!r} or 'region.<region>.{BIAS_LIMIT_METRIC}'")
-    if len(set(metrics)) != len(metrics):
-        raise GateConfigError(path, f"{where}metrics", "a metric is named twice")
-    tolerance, margin = b.get("tolerance", {}), b.get("margin", {})
-    _check_names(path, tolerance, metrics, f"{where}tolerance.", "metric (not in metrics)")
-    _check_names(path, margin, metrics, f"{where}margin.", "metric (not in metrics)")
-    for key, value in margin.items():
-        if value <= tolerance.get(key, 0.0):
-            raise GateConfigError(path, f"{where}margin.{key}", f"{value:g} must be above its tolerance "
-                                  f"({tolerance.get(key, 0.0):g}): no interval could pass and not fail")
-    return BiasLimit(tuple(efforts), tuple(setting), float(b.get("rate", 1.0)), b.get("seeds", 8), b.get("spp", 16),
-                     tuple(metrics), {k: float(v) for k, v in tolerance.items()},
-                     {k: float(v) for k, v in margin.items()})
-
-
-def _consistency(path: Path, t: dict, w: str, spp: int | None) -> Consistency | None:
-    """The ``consistency`` table of an expectation (None without one); see the module docstring."""
-    if "consistency" not in t:
-        return None
-    c, where = t["consistency"], f"{w}consistency."
-    metric = c.get("metric", "mse")
-    if metric in HIGHER_IS_BETTER:
-        raise GateConfigError(path, f"{where}metric", f"{metric!r} is higher-is-better; a consistency check "
-                              "follows an error that falls towards 0 (e.g. mse, rel_mse)")
-    _check_metrics(path, [metric], CONSISTENCY_METRICS, f"{where}metric: ")
-    if ("slope" in c) == ("max_ratio" in c):
-        raise GateConfigError(path, f"{w}consistency", "give exactly one of slope = [low, high] (over the "
-                              "render's checkpoints) or max_ratio = r with smaller = { spp = N, ... }")
-    out = Consistency(metric)
-    if "slope" in c:
-        out.slope = _band(path, c["slope"], f"{where}slope")
-        if "smaller" in c:
-            raise GateConfigError(path, f"{where}smaller", "goes with max_ratio, not with slope")
-        if "from_spp" in c:
-            out.from_spp = c["from_spp"]
-            if spp is not None and out.from_spp >= spp:
-                raise GateConfigError(path, f"{where}from_spp", f"must be >= 1 and below spp ({spp}): the slope "
-                                      "needs two checkpoints")
-        return out
-    if "from_spp" in c:
-        raise GateConfigError(path, f"{where}from_spp", "goes with slope, not with max_ratio")
-    out.max_ratio = float(c["max_ratio"])
-    out.smaller_spp, out.smaller_settings = _smaller(path, c, where, spp)
-    return out
-
-
-def _smaller(path: Path, c: dict, where: str, spp: int | None) -> tuple[int | None, dict]:
-    """``smaller = { spp = N, <setting> = value, ... }``: its spp (None: the expectation's) and its settings."""
-    small = c.get("smaller")
-    if small is None:
-        raise GateConfigError(path, f"{where}smaller", "max_ratio needs smaller = { spp = N, <setting> = value, "
-                              "... }: the budget the full render's error is compared with")
-    small_spp = small.get("spp")
-    if small_spp is not None and spp is not None and small_spp > spp:
-        raise GateConfigError(path, f"{where}smaller.spp", f"must be >= 1 and at most spp ({spp})")
-    settings = {k: v for k, v in small.items() if k != "spp"}
-    if not settings and (small_spp is None or small_spp == spp):
-        raise GateConfigError(path, f"{where}smaller", "must lower the budget: a smaller spp and/or settings "
-                              "(e.g. fewer photons)")
-    return small_spp, settings
