@@ -42,6 +42,8 @@ RENDERERS: dict[str, tuple[str, ...]] = {
     "luxcore": ("luxcore",),
     "pyrender": ("raster",),
     "pathtracer+oidn": ("ours", "oidn"),
+    "pathtracer+temporal": ("ours",),
+    "pathtracer+svgf": ("ours",),
     "mitsuba+oidn": ("mitsuba", "oidn"),
     "cycles": ("cycles",),
 }

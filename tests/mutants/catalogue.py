@@ -3,7 +3,7 @@
 One module per renderer family holds its bugs (:mod:`tests.mutants.pathtracer`,
 :mod:`~tests.mutants.photon_mapping`, :mod:`~tests.mutants.ambient_occlusion`,
 :mod:`~tests.mutants.probes`, :mod:`~tests.mutants.denoising`, :mod:`~tests.mutants.whitted`,
-:mod:`~tests.mutants.spectral`); a new algorithm
+:mod:`~tests.mutants.spectral`, :mod:`~tests.mutants.temporal`); a new algorithm
 adds its module here. :data:`LOW_POWER` lists the mutants below the gate's
 resolution (with why, and what catches them instead), :data:`ISOLATED` those
 that once hung the gate.
@@ -11,14 +11,22 @@ that once hung the gate.
 
 from __future__ import annotations
 
-from tests.mutants import ambient_occlusion, denoising, pathtracer, photon_mapping, probes, spectral, whitted
+from tests.mutants import ambient_occlusion, denoising, pathtracer, photon_mapping, probes, spectral, temporal, whitted
 from tests.mutants.model import Mutant
 
-FAMILIES = (pathtracer, photon_mapping, ambient_occlusion, probes, denoising, whitted, spectral)
+FAMILIES = (pathtracer, photon_mapping, ambient_occlusion, probes, denoising, whitted, spectral, temporal)
 MUTANTS: tuple[Mutant, ...] = tuple(m for family in FAMILIES for m in family.MUTANTS)
 
 BY_NAME = {m.name: m for m in MUTANTS}
 assert len(BY_NAME) == len(MUTANTS), "mutant names must be unique"
+
+#: Where each temporal mutant is caught (tests/renderers/test_temporal_mutants.py).
+TEMPORAL_CATCHERS = {
+    "hysteresis_wrong_way_round": "tests/renderers/test_temporal_mutants.py (the step change's decay λ = h + (1 − h)ρ)",
+    "motion_vectors_off_by_one": "tests/renderers/test_temporal_mutants.py (reprojected positions)",
+    "no_disocclusion_rejection": "tests/renderers/test_temporal_mutants.py (the strip the arc uncovers)",
+    "svgf_variance_not_accumulated": "tests/renderers/test_temporal_mutants.py (the moments' variance, 2(1 − α)/(2 − α))",
+}
 
 #: Mutants the gate cannot fail: a bias too small at its CI budget (power < 99% over seeds, as measured by
 #: ``benchmarks/gate_power.py``, docs/gate-detection.md), or a change that does not take the image away from
@@ -44,6 +52,10 @@ LOW_POWER: dict[str, str] = {
                "(no diffuse interreflection, no caustics), with no budget to hold it to. Caught by "
                "tests/renderers/test_whitted.py::test_mutant_is_caught (the normal-incidence transmittance, the "
                "umbra, the polygon formula, the constant ambient's ρ·La)" for m in whitted.MUTANTS},
+    # The temporal renderers': their bugs show over frames, and the gate renders still images.
+    **{m.name: "the gate holds no sequence expectation (its lag, flicker and ghosting budgets are the sequence "
+               "workflow's), and a still image is a sequence's first frame, with no history. Caught by "
+               f"{TEMPORAL_CATCHERS[m.name]}" for m in temporal.MUTANTS},
 }
 assert set(LOW_POWER) <= set(BY_NAME)
 

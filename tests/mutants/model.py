@@ -28,13 +28,16 @@ DDGI = "cornell_harness/renderers/ddgi.py"  # the probes' algorithm (not an inte
 WHITTED = "cornell_harness/renderers/whitted.py"
 OIDN = "cornell_harness/renderers/oidn.py"  # the denoise stage; its PathTracerOIDN wraps the unmutated path tracer
 HERO = "cornell_harness/renderers/hero_wavelength.py"
+TEMPORAL = "cornell_harness/renderers/temporal.py"  # the temporal accumulation stage; PathTracerTemporal wraps the path tracer
+SVGF = "cornell_harness/renderers/svgf.py"  # the SVGF stage; PathTracerSVGF wraps the path tracer
 SOURCE = ROOT / PATHTRACER
 CORE = "cornell_harness/renderers/core"
 #: The renderers mutants are made of: registered name -> (integrator module, adapter class).
 INTEGRATORS = {"pathtracer": (PATHTRACER, "PathTracer"), "photonmap": (PHOTONMAP, "PhotonMapper"),
                "sppm": (SPPM, "SPPM"), "ao": (AO, "AORenderer"), "ambient": (AMBIENT, "AOAmbient"),
                "probes": (PROBES, "IrradianceProbes"), "pathtracer+oidn": (OIDN, "PathTracerOIDN"),
-               "whitted": (WHITTED, "Whitted")}
+               "whitted": (WHITTED, "Whitted"), "pathtracer+temporal": (TEMPORAL, "PathTracerTemporal"),
+               "pathtracer+svgf": (SVGF, "PathTracerSVGF")}
 
 
 class Edit(NamedTuple):

@@ -44,6 +44,21 @@ stream :data:`PROBE_STREAM`, index k), one sequence per probe over its rays
 camera pass uses the toolkit's per-vertex layout
 (:func:`cornell_harness.renderers.core.visible_points.camera_visible_points`), drawn from the pass's stream.
 Images are bit-identical for any thread count.
+
+**Sequences** (:meth:`IrradianceProbes.render_sequence`, an animated scene):
+DDGI's temporal update (Majercik et al. 2019, §4: the probes are updated once
+per frame, and "bounces accumulate frame after frame"). Frame i makes **one**
+probe update, its rays lit by frame i − 1's volume, blended with hysteresis h
+(:func:`sequence_weight`; ``bounces`` and ``iterations`` are for still images
+only): E_i = h · E_{i−1} + (1 − h) · T(E_{i−1}) per texel (``gamma_blending``
+off; on, the same lerp of E^(1/5)), T the one-bounce gather of their §4.1
+(irradiance texels from the rays' radiance, the reflected part of which
+reads E_{i−1}). Frame 0's black probes give one bounce; the infinite-bounce
+result is reached over frames. After a step change of the light, in a scene
+where T is E ↦ T₀ + ρ·E (a furnace of albedo ρ), the error left after k
+frames is λ^k of the step's with λ = h + (1 − h)·ρ: the hysteresis's h^k when
+nothing is reflected twice, slower with interreflection
+(``tests/renderers/test_probe_sequences.py``).
 """
 
 from __future__ import annotations
@@ -53,10 +68,12 @@ from typing import Sequence
 
 import numpy as np
 
-from cornell_harness.adapters.api import RenderResult, Setting, SettingsError, Stopwatch, default_threads, pass_key
+from cornell_harness.adapters.api import (RenderResult, SequenceResult, Setting, SettingsError, Stopwatch, default_threads,
+                                          frame_seed, pass_key)
 from cornell_harness.scenes.model import Scene
 from cornell_harness.renderers import ddgi
 from cornell_harness.renderers.core.adapter import ToolkitRenderer, warmed_geometry
+from cornell_harness.renderers.core.frames import frames_to_render, still_frame
 from cornell_harness.renderers.core.geometry import SceneGeometry
 from cornell_harness.renderers.core.sampler import (ROTATION_U1, ROTATION_U2, Stream, independent, path_point,
                                                     sample_1d, sample_2d, sampler_setting, sequence_stream)
@@ -85,6 +102,7 @@ class IrradianceProbes(ToolkitRenderer):
         'Ray-Traced Irradiance Fields" (JCGT 8(2))',
         "NVIDIA RTXGI SDK (its defaults)")
     estimator = "biased"
+    sequences = True
     approximations = ("indirect light is interpolated from a grid of irradiance probes (DDGI): blurred "
                       "between probes, visibility by a Chebyshev bound, RTXGI's energy heuristics; biased",
                       "mirrors and glass seen by probe rays reflect nothing into the probes")
@@ -148,6 +166,56 @@ class IrradianceProbes(ToolkitRenderer):
         return result
 
 
+    def render_sequence(self, scene, spp: int, seed: int, settings: dict | None = None,
+                        frames: Sequence[int] | None = None) -> SequenceResult:
+        """The frames of an animated ``scene`` (all, or ``frames``): one probe update per frame, then the camera
+        pass (module docstring, "Sequences"); frame i's camera pass is seeded with ``frame_seed(seed, i)``."""
+        s = with_defaults(self.settings, settings)
+        threads = self.threads or default_threads()
+        count, wanted = frames_to_render(scene, frames)
+        out = []
+        for i, still, geom, volume, update_s, update_cpu in probe_frames(scene, seed, s, threads, count):
+            if i not in wanted:
+                continue
+            result = render_image(still, spp, frame_seed(seed, i), CameraPass(geom, still, volume).trace, (),
+                                  threads, sampler=s["sampler"])
+            result.time_s += update_s
+            result.cpu_time_s += update_cpu
+            result.info.update(frame=i, probes_s=round(update_s, 3), rays=geom.rays,
+                               hysteresis=s["hysteresis"], averaging=s["averaging"])
+            out.append(result)
+        return SequenceResult(out, {"hysteresis": s["hysteresis"], "averaging": s["averaging"],
+                                    "updates_per_frame": 1})
+
+
+def probe_frames(scene, seed: int, settings: dict, threads: int, count: int):
+    """Frames 0 .. count-1 of ``scene`` with the volume after each frame's one update: (i, still scene of frame
+    i, its geometry, the volume, the update's wall and CPU seconds, the scene's Embree build included).
+
+    The grid is frame 0's, fixed in the world as a DDGI volume is; frame i's update (old texels' weight
+    :func:`sequence_weight`) draws from ``frame_seed(seed, i)``'s update 0 and lights its rays with frame i − 1's
+    volume: one bounce per frame (Majercik et al. 2019, §4).
+    """
+    grid, volume = None, None
+    for i in range(count):
+        still = still_frame(scene, i)
+        if grid is None:
+            grid = grid_of(still, settings)
+            geom, _ = warmed_geometry(still, lambda g, still=still: _warm_up(g, still, grid, settings))
+            volume = volume_of(grid, settings)
+        clock = Stopwatch()
+        if i:
+            geom = SceneGeometry(still)
+        volume = update_once(geom, volume, frame_seed(seed, i), 0, sequence_weight(i, settings), settings, threads)
+        yield i, still, geom, volume, *clock.read()
+
+
+def sequence_weight(i: int, settings: dict) -> float:
+    """The old texels' weight in frame i's update: none in frame 0 (black probes), then the hysteresis (``ema``)
+    or the running mean's i/(i + 1) (``exact``) (:func:`history_weight` of update i − 1 without bounces)."""
+    return 0.0 if i == 0 else history_weight(i - 1, 0, settings["hysteresis"], settings["averaging"])
+
+
 def grid_of(scene: Scene, settings: dict) -> ddgi.ProbeGrid:
     """The probe grid the settings ask for (raises SettingsError naming ``bounds`` if it is malformed)."""
     counts = np.full(3, settings["grid"], np.int64)
@@ -188,32 +256,39 @@ def update_probes(geom: SceneGeometry, grid: ddgi.ProbeGrid, seed: int, settings
     ``on_update(k, volume)``, if given, sees the volume after each update k = 1, 2, ...
     """
     volume = volume_of(grid, settings)
+    for k in range(settings["bounces"] + settings["iterations"]):
+        h = history_weight(k, settings["bounces"], settings["hysteresis"], settings["averaging"])
+        volume = update_once(geom, volume, seed, k, h, settings, threads)
+        if on_update is not None:
+            on_update(k + 1, volume)
+    return volume
+
+
+def update_once(geom: SceneGeometry, volume: ddgi.Volume, seed: int, k: int, h: float, settings: dict,
+                threads: int) -> ddgi.Volume:
+    """``volume`` after update k (its rays keyed by ``seed`` and k): every probe's new maps blended with its old
+    ones, old weight ``h``. Its rays are lit with ``volume`` itself: one more bounce."""
+    grid = ddgi.ProbeGrid(volume.origin, volume.spacing, volume.counts)
     positions = ddgi.probe_positions(grid)
     fibonacci = spherical_fibonacci(settings["rays_per_probe"])
     probes, n = len(positions), len(fibonacci)
     per_unit = probes_per_unit(probes, n, threads)
     ni, nd = settings["irradiance_texels"], settings["depth_texels"]
-    bounces, updates = settings["bounces"], settings["bounces"] + settings["iterations"]
-    for k in range(updates):
-        stream = update_stream(settings["sampler"], seed, k, probes)
-        directions = np.ascontiguousarray(fibonacci @ update_rotation(settings["sampler"], seed, k).T)
-        h = history_weight(k, bounces, settings["hysteresis"], settings["averaging"])
-        irradiance, moments = np.empty((probes, ni, ni, 3)), np.empty((probes, nd, nd, 2))
+    stream = update_stream(settings["sampler"], seed, k, probes)
+    directions = np.ascontiguousarray(fibonacci @ update_rotation(settings["sampler"], seed, k).T)
+    irradiance, moments = np.empty((probes, ni, ni, 3)), np.empty((probes, nd, nd, 2))
 
-        def work(p0: int, volume=volume, directions=directions, stream=stream, h=h):
-            count = min(per_unit, probes - p0)
-            radiance, distance = ddgi.trace_probe_rays(geom, volume, positions, directions, p0, count, stream)
-            return ddgi.blend(volume, p0, radiance, distance, directions, h, settings["half_normalisation"],
-                              settings["sharpness"])
+    def work(p0: int):
+        count = min(per_unit, probes - p0)
+        radiance, distance = ddgi.trace_probe_rays(geom, volume, positions, directions, p0, count, stream)
+        return ddgi.blend(volume, p0, radiance, distance, directions, h, settings["half_normalisation"],
+                          settings["sharpness"])
 
-        def reduce(p0: int, maps, irradiance=irradiance, moments=moments) -> None:
-            irradiance[p0:p0 + len(maps[0])], moments[p0:p0 + len(maps[1])] = maps
+    def reduce(p0: int, maps) -> None:
+        irradiance[p0:p0 + len(maps[0])], moments[p0:p0 + len(maps[1])] = maps
 
-        run_units(range(0, probes, per_unit), work, reduce, threads)
-        volume = ddgi.with_maps(volume, irradiance, moments)
-        if on_update is not None:
-            on_update(k + 1, volume)
-    return volume
+    run_units(range(0, probes, per_unit), work, reduce, threads)
+    return ddgi.with_maps(volume, irradiance, moments)
 
 
 def update_stream(sampler: str, seed: int, k: int, probes: int) -> Stream:

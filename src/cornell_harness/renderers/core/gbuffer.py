@@ -20,7 +20,11 @@ filter.
   it sees, as the AO definition of :mod:`cornell_harness.scenes.quantities` wants),
   NaN where it misses;
 - ``prim``: the primitive hit (int64, :mod:`cornell_harness.renderers.core.geometry`'s
-  numbering), -1 where the ray misses.
+  numbering), -1 where the ray misses;
+- ``object``: the object hit (int64, the index of its name in
+  :meth:`cornell_harness.scenes.model.Scene.object_names`: meshes, then spheres), -1 where
+  the ray misses: what motion vectors move by (an object's animation offset) and
+  what disocclusion tests compare (:mod:`cornell_harness.renderers.core.motion`).
 
 :func:`view_space` turns position and normal into the camera's frame
 (x right, y up, z forward = depth), the frame screen-space passes work in.
@@ -45,6 +49,7 @@ class GBuffer(NamedTuple):
     position: np.ndarray  # (H, W, 3) float64 world-space hit point; NaN: miss
     normal: np.ndarray  # (H, W, 3) float64 unit geometric normal on the camera's side; NaN: miss
     prim: np.ndarray  # (H, W) int64 primitive hit; -1: miss
+    object: np.ndarray  # (H, W) int64 object hit (Scene.object_names' index); -1: miss
 
 
 @jit
@@ -88,7 +93,9 @@ def gbuffer(scene: Scene, geom: SceneGeometry | None = None) -> GBuffer:
     depth, position, normal = np.empty(n), np.empty((n, 3)), np.empty((n, 3))
     _surfaces(prim, t_sphere, rays, geom.tables(), basis, depth, position, normal)
     h, w = cam.height, cam.width
-    return GBuffer(depth.reshape(h, w), position.reshape(h, w, 3), normal.reshape(h, w, 3), prim.reshape(h, w))
+    obj = np.where(prim >= 0, geom.object[np.maximum(prim, 0)], -1).astype(np.int64)
+    return GBuffer(depth.reshape(h, w), position.reshape(h, w, 3), normal.reshape(h, w, 3), prim.reshape(h, w),
+                   obj.reshape(h, w))
 
 
 def view_space(g: GBuffer, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
