@@ -275,10 +275,6 @@ class Declarations:
     #: (:mod:`cornell_harness.gate.sequential`) stops so at its first verdict; a renderer that cannot stop renders
     #: its whole budget, and the gate takes its looks from the checkpoints afterwards.
     stops_early: bool = False
-    #: True for a renderer with a ``render_sequence(scene, spp, seed, settings=..., frames=...)`` method returning a
-    #: :class:`SequenceResult`: it renders an animated scene's frames itself, carrying state from frame to frame
-    #: (probes, a temporal history). Any other renderer's frames are rendered one by one as still scenes.
-    sequences: bool = False
     #: The published sources of its method, one short citation each (authors, year, title): shown with the
     #: renderer in the docs' reference of renderers.
     citations: tuple[str, ...] = ()
