@@ -246,3 +246,15 @@ def test_frame_lists(text, frames):
 def test_bad_frame_lists_are_refused(text):
     with pytest.raises(ValueError):
         frame_list(text, 10)
+
+
+def test_set_overrides_the_animation():
+    from cornell_harness.scenes.overrides import load_derived_scene
+
+    base = resolve_scene("cornell-box-orbit")
+    derived = load_derived_scene(base.path, ["animation.fps=12"])
+    assert derived.animation.fps == 12.0 and derived.content_hash() != base.content_hash()
+    assert derived.at_frame(3).camera == base.at_frame(3).camera
+    with pytest.raises(SceneError) as exc:
+        load_derived_scene(base.path, ["animation.frames=5"])
+    assert (exc.value.file, exc.value.field) == ("--set animation.frames=5", "animation.camera[5].frame")
