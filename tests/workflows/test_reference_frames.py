@@ -100,3 +100,13 @@ def test_bad_frames_are_a_usage_error(capsys, scene, frames, words):
     for command in ("build", "verify", "show"):
         code, out, err = cbox_in_process(capsys, "reference", command, "--scene", scene, "--frames", frames)
         assert code == 2 and words in err, (command, err)
+
+
+def test_a_missing_frame_is_built_as_the_others_were(write_scene, tmp_path):
+    """The command for a missing frame keeps the spp and batches of a frame built beside it, timed from it."""
+    scene = load_scene(write_scene(ANIMATED))
+    build_reference(scene.at_frame(1), spp=8, batches=4, entry=_entry())
+    with pytest.raises(ReferenceError) as exc:
+        load_reference(scene.at_frame(2))
+    assert f"cbox reference build --scene {tmp_path} --frames 2 --spp 8 --batches 4 (about" in str(exc.value)
+    assert "the reference of minimal frame 1 took" in str(exc.value)

@@ -185,16 +185,25 @@ def _median_cost() -> float | None:
     return statistics.median(costs) if costs else None
 
 
+def _other_frame(scene: Scene) -> dict | None:
+    """The provenance of another frame's reference beside a frame of an animated scene (the first, in frame
+    order), where ``scene`` is such a frame and one is there; else None."""
+    if scene.frame is None:
+        return None
+    folders = sorted(_beside_file(scene).parent.glob(f"*/{PROVENANCE_FILE}"))
+    return next((p for f in folders if (p := _provenance_at(f.parent)) is not None), None)
+
+
 def _build_hint(scene: Scene, folder: Path, home: str | Path | None = None) -> str:
     """The command that builds ``scene``'s reference into ``folder``, and about how long it takes.
 
     The yardstick is the build this one replaces (its spp and batches are
-    kept), else, for a derived scene, its base's reference, else the median
-    cost of the stored references.
+    kept), else, for a derived scene, its base's reference, else, for a frame of an animated scene, another
+    frame's, else the median cost of the stored references.
     """
     cam = scene.camera
     own = _provenance_at(folder)
-    prov = own or (_provenance_at(scene.path.parent) if scene.overrides else None)
+    prov = own or (_provenance_at(scene.path.parent) if scene.overrides else None) or _other_frame(scene)
     if prov is None:
         if (cost := _median_cost()) is None:
             return rebuild_command(scene, home=home)
@@ -204,7 +213,8 @@ def _build_hint(scene: Scene, folder: Path, home: str | Path | None = None) -> s
     command = rebuild_command(scene, spp, batches if isinstance(batches, int) else None, home)
     if (seconds := build_seconds(prov, cam.width, cam.height, spp)) is None:
         return command
-    source = "the last build" if own else f"the reference of {prov.get('scene') or scene.path.parent.name}"
+    source = "the last build" if own else f"the reference of {prov.get('scene') or scene.path.parent.name}" + (
+        f" frame {prov['frame']}" if "frame" in prov else "")
     w0, h0 = prov["resolution"]
     machine = ", ".join(str(prov.get("machine", "")).split(", ")[:2])  # "x86_64, 2 CPUs"
     notes = f"; scaled to {cam.width}x{cam.height}" if [w0, h0] != [cam.width, cam.height] else ""
