@@ -12,6 +12,7 @@ from tests.scenes.test_animation import ANIMATED
 from tests.user_renderers import SeededNoise
 from cornell_harness.adapters.registry import resolve
 from cornell_harness.adapters.seeds import frame_seed
+from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.loader import load_scene
 from cornell_harness.store.references import REFERENCE_SEED_BASE, ReferenceError, load_reference
 from cornell_harness.workflows.reference_build import build_reference
@@ -100,6 +101,23 @@ def test_bad_frames_are_a_usage_error(capsys, scene, frames, words):
     for command in ("build", "verify", "show"):
         code, out, err = cbox_in_process(capsys, "reference", command, "--scene", scene, "--frames", frames)
         assert code == 2 and words in err, (command, err)
+
+
+@pytest.mark.parametrize("name", ["cornell-box-moving-light", "cornell-box-orbit"])
+def test_the_stored_animated_scenes_have_every_frames_reference(name):
+    scene = resolve_scene(name)
+    refs = [load_reference(scene.at_frame(i)) for i in range(scene.frame_count)]
+    for i, ref in enumerate(refs):
+        assert ref.provenance["frame"] == i and ref.provenance["renderer"] == "mitsuba"
+        assert ref.image.shape == (128, 128, 3) and ref.provenance["wall_time_s"] > 0
+        assert np.all(np.isfinite(ref.image)) and np.all(ref.variance >= 0)
+        assert ref.folder.parent.parent == scene.path.parent  # the package's stored reference
+    assert len({ref.provenance["noise_seed"] for ref in refs}) == scene.frame_count
+    if name == "cornell-box-moving-light":  # frames at rest: the same scene, independent references, alike in noise
+        a, b = refs[12], refs[23]
+        assert not np.array_equal(a.image, b.image)
+        z = (a.image - b.image) / np.sqrt(a.variance + b.variance + 1e-12)
+        assert abs(float(np.mean(z))) < 0.05 and 0.8 < float(np.std(z[a.variance > 0])) < 1.25
 
 
 def test_a_missing_frame_is_built_as_the_others_were(write_scene, tmp_path):
