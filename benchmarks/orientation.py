@@ -37,7 +37,7 @@ RENDERERS = {DEFAULT_QUANTITY: "pathtracer", "ambient_occlusion": "ao"}
 
 def tally(scene_name: str, spp: int, seeds: int) -> dict:
     """For ``seeds`` renders of the scene at ``spp``: false alarms as they are, catches per transform."""
-    scene = resolve_scene(scene_name)
+    scene = resolve_scene(scene_name).at_frame(0)  # an animated scene: its first frame
     reference = load_reference(scene)
     (entry,) = resolve([RENDERERS[scene.quantity]])
     itself = check_orientation(reference.image, reference).transformed

@@ -74,7 +74,7 @@ def test_no_false_alarm_on_noise_model_draws_of_every_stored_scene():
     noted as it is; each transform that changes the scene is caught."""
     rng = np.random.default_rng(0)
     for name in scene_names():
-        ref = load_reference(resolve_scene(name))
+        ref = load_reference(resolve_scene(name).at_frame(0))
         itself = check_orientation(ref.image, ref).transformed
         for spp in (1, 16):
             sd = np.sqrt(np.asarray(ref.variance, np.float64) * ref.spp / spp)

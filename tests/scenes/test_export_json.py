@@ -17,6 +17,7 @@ from cornell_harness.scenes.export.json_scene import FORMAT, SCHEMA, VERSION, do
 from cornell_harness.scenes.library import resolve_scene, scene_names
 from cornell_harness.scenes.materials import MATERIAL_TYPES
 from cornell_harness.scenes.model import Camera, Mesh, Scene, SceneError, Sphere
+from cornell_harness.scenes.animation import Animation, Switch, Track
 from cornell_harness.scenes.quantities import AmbientOcclusion
 from cornell_harness.scenes.spectra import Spectrum
 from cornell_harness.scenes.spectral_scene import SpectralContent
@@ -57,7 +58,19 @@ def scene_from_json(doc: dict, path) -> Scene:
              if m["emitter"] and "radiance_spectrum" in m["emitter"]})
     return Scene(doc["name"], path, frozenset(doc["features"]), camera, materials, meshes, doc["max_depth"],
                  c["pixel_filter"], spheres=spheres, quantity=doc["quantity"], ambient_occlusion=ao,
-                 spectral=spectral)
+                 spectral=spectral, animation=animation_from_json(doc.get("animation"), camera))
+
+
+def animation_from_json(a: dict | None, camera: Camera) -> Animation | None:
+    """The export's animation as the model's, from its keys only."""
+    if a is None:
+        return None
+    cam = None if a["camera"] is None else Track(tuple(k["frame"] for k in a["camera"]),
+                                                 tuple((*k["position"], *k["look_at"]) for k in a["camera"]))
+    objects = {n: Track(tuple(k["frame"] for k in keys), tuple(tuple(k["translate"]) for k in keys))
+               for n, keys in a["objects"].items()}
+    return Animation(a["frames"], a["fps"], camera, cam, objects,
+                     tuple(Switch(s["object"], s["frame"], s["on"]) for s in a["switches"]))
 
 
 def assert_same_scene(back: Scene, scene: Scene) -> None:

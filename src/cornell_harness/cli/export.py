@@ -32,6 +32,9 @@ def export(
     out: Path = out_folder_option(Path("out/export"), "Folder to write the scene into (created if missing); "
                                                       "files of an earlier export there are replaced."),
     overrides: Optional[List[str]] = SetOpt,
+    frame: Optional[int] = typer.Option(None, "--frame", min=0, metavar="N", help=(
+        "Write frame N of an animated scene as a still scene (the formats that cannot express an animation "
+        "refuse the animated scene without it).")),
 ) -> None:
     """Write the scene, with its meshes, in another renderer's format.
 
@@ -45,6 +48,11 @@ def export(
     from cornell_harness.scenes.export import export_scene, render_command
 
     resolved = resolve_scene(scene, overrides)
+    if frame is not None:
+        try:
+            resolved = resolved.at_frame(frame)
+        except IndexError as e:
+            raise typer.BadParameter(str(e), param_hint="--frame") from None
     main = export_scene(resolved, fmt, out)
     typer.echo(main)
     if command := render_command(resolved, fmt, main):

@@ -43,6 +43,8 @@ def scenes(as_json: bool = JsonOpt, home: Optional[Path] = HomeOpt) -> None:
         ref = s["reference"]
         status = (f"reference {ref['spp']} spp{' (user store)' if ref['in_user_store'] else ''}" if ref else
                   f"no usable reference ({s['reference_problem']})")
+        if s["frames"] > 1:  # an animated scene: the reference shown is frame 0's, each frame has its own
+            status = f"{s['frames']} frames, frame 0's {status}"
         typer.echo(f"{s['name']:{w}s} {s['width']}x{s['height']}  {what}  {status}")
         typer.echo(f"{'':{w}s} features: {', '.join(s['features'])}")
         if s["regions"]:
@@ -67,7 +69,7 @@ def _scene_entry(name: str, home: Path | None = None) -> dict:
     except SceneError as e:
         return {**entry, "error": str(e)}
     try:
-        ref = load_reference(scene, home=home)
+        ref = load_reference(scene.at_frame(0), home=home)  # an animated scene's first frame's
         stored, recorded = stored_verdicts(ref.provenance), recorded_verdicts(ref.folder, home)
         reference, problem = {"spp": ref.spp, "renderer_version": ref.provenance.get("renderer_version"),
                               "folder": _shown(ref.folder), "in_user_store": ref.folder.resolve() != folder.resolve(),
@@ -77,7 +79,7 @@ def _scene_entry(name: str, home: Path | None = None) -> dict:
         reference, problem = None, str(e).split(";")[0].split(": ", 1)[-1]
     ao = scene.ambient_occlusion
     return {**entry, "path": _shown(scene.path), "width": scene.camera.width, "height": scene.camera.height,
-            "max_depth": scene.max_depth,
+            "max_depth": scene.max_depth, "frames": scene.frame_count,
             "ambient_occlusion": None if ao is None else {"weighting": ao.weighting, "max_distance": ao.max_distance,
                                                           "normal": ao.normal, "miss_value": ao.miss_value},
             "features": sorted(scene.features), "regions": list(scene.regions),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -13,6 +14,7 @@ from cornell_harness.adapters.registry import RendererError, resolve
 from cornell_harness.cli.common import (EXIT_INCONCLUSIVE, REFERENCE_RENDERER, DashboardOpt, HomeOpt, SceneOpt, SchedulerOpt, SetOpt,
                                         TimeLimitOpt, WorkersOpt, check_output_folder, executor_for, reference_app, render_failed)
 from cornell_harness.cli.output import Progress
+from cornell_harness.scenes.animation import frame_list
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.model import Scene
 from cornell_harness.store.references import ReferenceError, load_reference, reference_folder, reference_folders
@@ -20,12 +22,18 @@ from cornell_harness.store.references import ReferenceError, load_reference, ref
 # a misspelt config, or `cbox --help`, must answer in a second.
 
 
+FramesOpt = typer.Option(None, "--frames", metavar="LIST", help=(
+    "An animated scene's frames to work on, e.g. 0-3,7 (default: every frame); each frame has its own "
+    "reference, in frames/NNNN/ of the scene's reference folder."))
+
+
 @reference_app.command("build")
 def reference_build(
     scene: str = SceneOpt,
     overrides: Optional[List[str]] = SetOpt,
-    spp: int = typer.Option(16384, "--spp", min=2, help="Total samples per pixel of the reference."),
+    spp: int = typer.Option(16384, "--spp", min=2, help="Total samples per pixel of the reference (of each frame)."),
     batches: int = typer.Option(128, "--batches", min=2, help="Independent batches; their spread gives the variance image."),
+    frames: Optional[str] = FramesOpt,
     workers: Optional[int] = WorkersOpt,
     scheduler: Optional[str] = SchedulerOpt,
     dashboard: Optional[str] = DashboardOpt,
@@ -36,25 +44,47 @@ def reference_build(
 
     A scene file of yours keeps its reference beside it; a stored scene's goes to the user store (--home),
     the package's stored references staying read-only. With --set, the derived scene's reference goes to
-    derived/<content hash>/ there; the scene's own reference is left as it is. With --workers or --scheduler
-    the batches render on a Dask cluster and are combined here in batch order: the same reference as a build
-    in this process. --time-limit bounds each batch; one past it ends the build, exit 1, nothing stored.
+    derived/<content hash>/ there; the scene's own reference is left as it is. An animated scene gets one
+    reference per frame (--frames: some of them), each in frames/NNNN/ of that folder, built one after another.
+    With --workers or --scheduler the batches render on a Dask cluster and are combined here in batch order: the
+    same reference as a build in this process. --time-limit bounds each batch; one past it ends the build, exit 1,
+    nothing stored for that frame.
     """
-    sc = resolve_scene(scene, overrides)
+    still = frame_scenes(resolve_scene(scene, overrides), frames)
     if spp % batches:
         raise typer.BadParameter(f"--spp ({spp}) must be a multiple of --batches ({batches})")
-    _refuse_shadowed_build(sc, home)
+    for sc in still:
+        _refuse_shadowed_build(sc, home)
     from cornell_harness.workflows.reference_build import build_reference
 
     (entry,) = resolve([REFERENCE_RENDERER])
     if not entry.available:
         raise RendererError(f"renderer {entry.name!r} builds references but is unavailable: {entry.reason}")
-    with executor_for(workers, scheduler, dashboard) as executor, render_failed(entry.name), \
-            Progress(batches + 1, f"reference {sc.name}", "batch", slots=executor.slots) as bar:  # +1: the noise image
-        bar.start(f"{spp // batches} spp per batch")
-        ref = build_reference(sc, spp, batches, entry.with_time_limit(time_limit), folder=reference_folder(sc, home),
-                              executor=executor, progress=lambda done, total, label: bar.advance(label))
-    typer.echo(f"wrote {ref.folder} ({spp} spp in {ref.provenance['wall_time_s']:.0f} s, {ref.provenance['renderer_version']})")
+    with executor_for(workers, scheduler, dashboard) as executor, render_failed(entry.name):
+        for sc in still:
+            label = sc.name if sc.frame is None else f"{sc.name} frame {sc.frame}"
+            with Progress(batches + 1, f"reference {label}", "batch", slots=executor.slots) as bar:  # +1: noise
+                bar.start(f"{spp // batches} spp per batch")
+                ref = build_reference(sc, spp, batches, entry.with_time_limit(time_limit),
+                                      folder=reference_folder(sc, home), executor=executor,
+                                      progress=lambda done, total, label: bar.advance(label))
+            typer.echo(f"wrote {ref.folder} ({spp} spp in {ref.provenance['wall_time_s']:.0f} s, "
+                       f"{ref.provenance['renderer_version']})")
+
+
+def frame_scenes(scene: Scene, frames: str | None) -> list[Scene]:
+    """The still scenes a command works on: every frame of an animated ``scene`` or those ``--frames`` names; a
+    still scene itself. ``--frames`` on a still scene, or a malformed one, is a usage error (exit 2)."""
+    if scene.animation is None:
+        if frames is not None:
+            raise typer.BadParameter(f"scene {scene.name!r} is not animated: it has no frames to choose",
+                                     param_hint="--frames")
+        return [scene]
+    try:
+        chosen = frame_list(frames, scene.frame_count) if frames is not None else range(scene.frame_count)
+    except ValueError as e:
+        raise typer.BadParameter(str(e), param_hint="--frames") from None
+    return [scene.at_frame(i) for i in chosen]
 
 
 def _refuse_shadowed_build(scene: Scene, home: Path | None) -> None:
@@ -73,12 +103,16 @@ def _refuse_shadowed_build(scene: Scene, home: Path | None) -> None:
 
 
 @reference_app.command("show")
-def reference_show(scene: str = SceneOpt, overrides: Optional[List[str]] = SetOpt,
+def reference_show(scene: str = SceneOpt, overrides: Optional[List[str]] = SetOpt, frames: Optional[str] = FramesOpt,
                    home: Optional[Path] = HomeOpt) -> None:
     """Print the provenance of a scene's reference: the stored one, else the user store's (refused if the scene
-    changed)."""
-    ref = load_reference(resolve_scene(scene, overrides), home=home)
-    typer.echo(json.dumps(ref.provenance, indent=1))
+    changed). For an animated scene, a JSON object of each frame's (--frames: some of them), by frame number."""
+    sc = resolve_scene(scene, overrides)
+    still = frame_scenes(sc, frames)
+    if sc.animation is None:
+        typer.echo(json.dumps(load_reference(sc, home=home).provenance, indent=1))
+    else:
+        typer.echo(json.dumps({str(f.frame): load_reference(f, home=home).provenance for f in still}, indent=1))
 
 
 @reference_app.command("verify")
@@ -109,6 +143,7 @@ def reference_verify(
         "The smallest relative bias that matters (repeatable): VALUE for every region and the whole image, or "
         "REGION=VALUE for one (image=VALUE: the whole image). Default: 0.01 for the whole image, 0.05 for a "
         "region.")),
+    frames: Optional[str] = FramesOpt,
     home: Optional[Path] = HomeOpt,
     time_limit: Optional[str] = TimeLimitOpt,  # seconds (float), by the option's callback
 ) -> None:
@@ -121,7 +156,8 @@ def reference_verify(
     below the Šidák-corrected level at family-wise false-alarm rate 0.01 (the engines disagree beyond noise),
     3 when none is but an interval reaches past its margin (inconclusive: more spp would resolve it), 0 when
     every interval lies inside its margin. `cbox scenes` shows the recorded verdicts; docs/references.md has
-    the stored references' verdicts and what they found.
+    the stored references' verdicts and what they found. An animated scene is verified frame by frame (--frames:
+    some of them), each frame's verdict recorded on its own reference; the exit code is the worst frame's.
     """
     if spp % batches:
         raise typer.BadParameter(f"--spp ({spp}) must be a multiple of --batches ({batches})")
@@ -129,20 +165,34 @@ def reference_verify(
         check_output_folder(report, "--report")
     sc = resolve_scene(scene, overrides)
     margins = _margins(margin or [], sc)
-    ref = load_reference(sc, home=home)  # refused (with the build command) before anything renders
+    still = frame_scenes(sc, frames)
+    refs = [load_reference(f, home=home) for f in still]  # refused (with the build command) before anything renders
     (entry,) = resolve([engine])
     if not entry.available:
         raise RendererError(f"engine {entry.name!r} is unavailable: {entry.reason}")
+    codes = []
+    with executor_for(workers, scheduler, dashboard) as executor, render_failed(entry.name):
+        for f, ref in zip(still, refs):
+            codes.append(_verify_one(f, ref, entry.with_time_limit(time_limit), spp, batches, executor, margins,
+                                     record, report, home))
+    raise typer.Exit(max(codes, key=[0, EXIT_INCONCLUSIVE, 1].index))  # the worst frame's: fail, inconclusive, pass
+
+
+def _verify_one(sc: Scene, ref, entry, spp: int, batches: int, executor, margins: dict, record: bool,
+                report: Path | None, home: Path | None) -> int:
+    """Verify one (still) scene's reference: print the tables and verdict, record it, write its page; its exit code.
+
+    Over 40 lines: it is the printed report of one verification, line after line."""
     from cornell_harness.store.references import record_verdict
     from cornell_harness.workflows.reference_verify import verify_reference
 
-    with executor_for(workers, scheduler, dashboard) as executor, render_failed(entry.name), \
-            Progress(batches, f"verify {sc.name} with {entry.name}", "batch", slots=executor.slots) as bar:
+    label = sc.name if sc.frame is None else f"{sc.name} frame {sc.frame}"
+    with Progress(batches, f"verify {label} with {entry.name}", "batch", slots=executor.slots) as bar:
         bar.start(f"{spp // batches} spp per batch")
-        result = verify_reference(sc, ref, entry.with_time_limit(time_limit), spp, batches, executor=executor,
+        result = verify_reference(sc, ref, entry, spp, batches, executor=executor,
                                   progress=lambda done, total, label: bar.advance(label), margins=margins)
     a = result.agreement
-    typer.echo(f"{sc.name}: reference {ref.provenance.get('renderer_version')} at {ref.spp} spp against "
+    typer.echo(f"{label}: reference {ref.provenance.get('renderer_version')} at {ref.spp} spp against "
                f"{result.record['engine']} {result.record['engine_version']} at {spp} spp "
                f"({result.record['wall_time_s']:.0f} s)")
     for line in a.table() + [""] + a.power_table(result.margins):
@@ -159,9 +209,10 @@ def reference_verify(
     if report is not None:
         from cornell_harness.reports.reference_verify import write_verify_page
 
-        path = write_verify_page(report, sc, ref, result)
+        named = sc if sc.frame is None else dataclasses.replace(sc, name=f"{sc.name}-frame-{sc.frame:04d}")
+        path = write_verify_page(report, named, ref, result)  # a page per frame, named after it
         typer.echo(f"wrote {path}")
-    raise typer.Exit({"pass": 0, "fail": 1}.get(result.verdict, EXIT_INCONCLUSIVE))
+    return {"pass": 0, "fail": 1}.get(result.verdict, EXIT_INCONCLUSIVE)
 
 
 def _margins(given: list[str], scene: Scene) -> dict[str, float]:

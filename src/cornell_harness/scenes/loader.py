@@ -11,6 +11,7 @@ Units and conventions are documented in :mod:`cornell_harness.scenes.model`.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from pathlib import Path
@@ -19,6 +20,7 @@ from typing import Callable
 import numpy as np
 
 from cornell_harness.schemas.reader import FormatProblem, check, key_text, read_text, read_toml, schema
+from cornell_harness.scenes.animation import parse_animation
 from cornell_harness.scenes.materials import MATERIAL_TYPES, material_fields
 from cornell_harness.scenes.model import (DEGENERATE_REL_AREA, IMAGE_BUFFERS, MAX_COORDINATE, MAX_IMAGE_BYTES,
                                           MAX_OBJ_FILE_BYTES, MAX_RADIANCE, MAX_SCENE_FILE_BYTES, Camera, Mesh, Region, Scene,
@@ -91,7 +93,7 @@ def parse_scene(doc: dict, path: Path) -> Scene:
     if unused := sorted(set(declared) - used):
         raise err("features", f"declares {', '.join(unused)} but does not use it")
 
-    return apply_length_scale(err, doc, Scene(
+    scene = apply_length_scale(err, doc, Scene(
         name=doc["name"],
         path=path,
         features=frozenset(declared),
@@ -107,6 +109,10 @@ def parse_scene(doc: dict, path: Path) -> Scene:
         ambient_occlusion=ao,
         spectral=spectral.finish(),
     ), _check_degenerate)
+    if "animation" in doc:
+        animation = parse_animation(err, doc["animation"], scene, float(doc.get("length_scale", 1.0)))
+        scene = dataclasses.replace(scene, animation=animation)
+    return scene
 
 
 def _parse_quantity(err: Err, doc: dict, meshes, spheres) -> tuple[str, AmbientOcclusion | None]:

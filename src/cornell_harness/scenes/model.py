@@ -83,6 +83,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -92,6 +93,9 @@ from cornell_harness.scenes.materials import Diffuse, Material, hash_payload  # 
 from cornell_harness.schemas.reader import one_line  # noqa: F401
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY, AmbientOcclusion
 from cornell_harness.scenes.spectral_scene import SpectralContent
+
+if TYPE_CHECKING:
+    from cornell_harness.scenes.animation import Animation
 
 #: Every feature a scene may use, with what it means.
 FEATURES: dict[str, str] = {
@@ -307,6 +311,24 @@ class Scene:
     # Spectra of materials and emitters, and the colour pipeline that projected them to the RGB values above
     # (cornell_harness.scenes.spectral_scene); None for an RGB scene.
     spectral: SpectralContent | None = None
+    # What moves, for an animated scene (cornell_harness.scenes.animation); None for a still scene.
+    animation: Animation | None = None
+    # The frame of an animated scene this still scene is (at_frame); None for a scene that is no frame of one.
+    frame: int | None = None
+
+    @property
+    def frame_count(self) -> int:
+        """The number of frames: the animation's, 1 for a still scene."""
+        return 1 if self.animation is None else self.animation.frames
+
+    def at_frame(self, i: int) -> "Scene":
+        """The still scene of frame ``i`` (:meth:`cornell_harness.scenes.animation.Animation.scene_at`); a still
+        scene's only frame, 0, is the scene itself. IndexError outside ``[0, frame_count)``."""
+        if self.animation is None:
+            if i != 0:
+                raise IndexError(f"frame {i!r}: a still scene has only frame 0")
+            return self
+        return self.animation.scene_at(self, i)
 
     @property
     def emitters(self) -> tuple[Mesh, ...]:
@@ -330,7 +352,7 @@ class Scene:
         Comments, formatting, OBJ-vs-inline choices and regions do not change
         it; any change to geometry, materials, camera, transport settings or
         quantity does. Keys that older scenes lack (spheres, a quantity other
-        than radiance, the AO definition, spectral content) enter only when present,
+        than radiance, the AO definition, spectral content, an animation, a frame) enter only when present,
         so the stored references of those scenes stay valid.
         """
         payload = {
@@ -358,13 +380,19 @@ class Scene:
             payload["ambient_occlusion"] = self.ambient_occlusion.hash_payload()
         if self.spectral is not None:
             payload["spectral"] = self.spectral.hash_payload()
+        if self.animation is not None:
+            payload["animation"] = self.animation.hash_payload()
+        if self.frame is not None:  # every frame its own hash, hence its own reference, moved or not
+            payload["frame"] = self.frame
         blob = json.dumps(payload, sort_keys=True, separators=(",", ":")).encode()
         return "sha256:" + hashlib.sha256(blob).hexdigest()
 
     def with_resolution(self, width: int, height: int) -> "Scene":
         """The same scene rendered at another resolution (for quick runs)."""
         cam = dataclasses.replace(self.camera, width=int(width), height=int(height))
-        return dataclasses.replace(self, camera=cam)
+        anim = self.animation and self.animation.with_camera(
+            dataclasses.replace(self.animation.camera, width=int(width), height=int(height)))
+        return dataclasses.replace(self, camera=cam, animation=anim)
 
     def with_max_depth(self, max_depth: int) -> "Scene":
         return dataclasses.replace(self, max_depth=int(max_depth))

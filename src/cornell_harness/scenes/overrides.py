@@ -78,7 +78,8 @@ def parse_assignment(text: str) -> tuple[str, Any]:
 
 def override_keys(doc: dict) -> tuple[str, ...]:
     """The keys a scene document can be overridden at: camera, render, its materials' fields, its AO table, its
-    colour pipeline (``colour.rgb_convention``: the RGB projection an RGB renderer runs on)."""
+    colour pipeline (``colour.rgb_convention``: the RGB projection an RGB renderer runs on), its animation
+    (``animation.frames``, ``animation.fps``, a track as a TOML value)."""
     keys = [f"camera.{k}" for k in keys_of("camera")] + [f"render.{k}" for k in keys_of("render")]
     for name, table in (doc.get("materials") or {}).items():
         kind = table.get("type") if isinstance(table, dict) else None
@@ -89,6 +90,8 @@ def override_keys(doc: dict) -> tuple[str, ...]:
         keys += [f"ambient_occlusion.{k}" for k in keys_of("ambient_occlusion")]
     if isinstance(doc.get("colour"), dict):
         keys += [f"colour.{k}" for k in keys_of("colour")]
+    if isinstance(doc.get("animation"), dict):
+        keys += [f"animation.{k}" for k in keys_of("animation")]
     return tuple(keys)
 
 

@@ -15,6 +15,12 @@
   scene's content hash, date, command line; and, under ``verified.<engine>``,
   the verdicts of ``cbox reference verify`` that ship with the reference.
 
+An animated scene (:mod:`cornell_harness.scenes.animation`) has no reference of its own but one per frame,
+the reference of ``scene.at_frame(i)``, in ``frames/0007/`` of the same folder (for frame 7): the same files,
+with the frame in the provenance, seeds that are the frame seeds (:func:`cornell_harness.adapters.seeds.frame_seed`)
+of the still scene's, so every frame's reference is independent of the others', and the image and noise stored
+as half floats (``pixel_types`` in the provenance; :data:`cornell_harness.workflows.reference_build.HALF_LIMIT`).
+
 Those stored references are read-only package data. What is built or recorded
 for them goes to the same place in the user store
 (:mod:`cornell_harness.store.home`), ``<home>/references/<scene>/``
@@ -57,6 +63,7 @@ import numpy as np
 from cornell_harness.store.atomic import write_json_atomic
 from cornell_harness.store.exr import ImageFileError, read_exr
 from cornell_harness.store.home import user_home
+from cornell_harness.scenes.animation import frame_folder
 from cornell_harness.scenes.library import references_root
 from cornell_harness.scenes.model import Scene
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
@@ -101,11 +108,12 @@ class Reference:
 def _beside_file(scene: Scene) -> Path:
     """The reference's folder beside ``scene``'s file: the file's folder or, for a scene derived by ``--set``,
     ``derived/<content hash>/`` in it; keyed by content, so the same overrides in any order or spelling
-    share one reference, and one made for an older version of the file is never mistaken for current."""
+    share one reference, and one made for an older version of the file is never mistaken for current.
+    A frame of an animated scene (``Scene.at_frame``) has its own, ``frames/0007/`` in that folder."""
     folder = scene.path.parent
     if scene.overrides:
         folder = folder / DERIVED_FOLDER / scene.content_hash().removeprefix("sha256:")[:16]
-    return folder
+    return folder if scene.frame is None else folder / frame_folder(scene.frame)
 
 
 def user_folder(folder: str | Path, home: str | Path | None = None) -> Path:
@@ -138,6 +146,7 @@ def rebuild_command(scene: Scene, spp: int = DEFAULT_SPP, batches: int | None = 
     args = ["cbox", "reference", "build", "--scene", scene.path.parent.name if named else str(scene.path.parent)]
     for override in scene.overrides:
         args += ["--set", override]
+    args += ["--frames", str(scene.frame)] if scene.frame is not None else []
     args += ["--spp", str(spp)] + (["--batches", str(batches)] if batches else [])
     args += ["--home", str(home)] if home else []
     return " ".join(map(shlex.quote, args))
@@ -176,16 +185,25 @@ def _median_cost() -> float | None:
     return statistics.median(costs) if costs else None
 
 
+def _other_frame(scene: Scene) -> dict | None:
+    """The provenance of another frame's reference beside a frame of an animated scene (the first, in frame
+    order), where ``scene`` is such a frame and one is there; else None."""
+    if scene.frame is None:
+        return None
+    folders = sorted(_beside_file(scene).parent.glob(f"*/{PROVENANCE_FILE}"))
+    return next((p for f in folders if (p := _provenance_at(f.parent)) is not None), None)
+
+
 def _build_hint(scene: Scene, folder: Path, home: str | Path | None = None) -> str:
     """The command that builds ``scene``'s reference into ``folder``, and about how long it takes.
 
     The yardstick is the build this one replaces (its spp and batches are
-    kept), else, for a derived scene, its base's reference, else the median
-    cost of the stored references.
+    kept), else, for a derived scene, its base's reference, else, for a frame of an animated scene, another
+    frame's, else the median cost of the stored references.
     """
     cam = scene.camera
     own = _provenance_at(folder)
-    prov = own or (_provenance_at(scene.path.parent) if scene.overrides else None)
+    prov = own or (_provenance_at(scene.path.parent) if scene.overrides else None) or _other_frame(scene)
     if prov is None:
         if (cost := _median_cost()) is None:
             return rebuild_command(scene, home=home)
@@ -195,7 +213,8 @@ def _build_hint(scene: Scene, folder: Path, home: str | Path | None = None) -> s
     command = rebuild_command(scene, spp, batches if isinstance(batches, int) else None, home)
     if (seconds := build_seconds(prov, cam.width, cam.height, spp)) is None:
         return command
-    source = "the last build" if own else f"the reference of {prov.get('scene') or scene.path.parent.name}"
+    source = "the last build" if own else f"the reference of {prov.get('scene') or scene.path.parent.name}" + (
+        f" frame {prov['frame']}" if "frame" in prov else "")
     w0, h0 = prov["resolution"]
     machine = ", ".join(str(prov.get("machine", "")).split(", ")[:2])  # "x86_64, 2 CPUs"
     notes = f"; scaled to {cam.width}x{cam.height}" if [w0, h0] != [cam.width, cam.height] else ""
@@ -208,7 +227,14 @@ def _build_hint(scene: Scene, folder: Path, home: str | Path | None = None) -> s
 
 def load_reference(scene: Scene, folder: Path | None = None, home: str | Path | None = None) -> Reference:
     """The reference of ``scene``: in ``folder``, else the first valid one of :func:`reference_folders`; refuse
-    one built from different content, saying how to build it (into :func:`reference_folder`)."""
+    one built from different content, saying how to build it (into :func:`reference_folder`).
+
+    An animated scene has one reference per frame: that of ``scene.at_frame(i)``; the animated scene itself has
+    none (refused, saying so)."""
+    if scene.animation is not None:
+        raise ReferenceError(f"{scene.path}: animation: {scene.name} is animated ({scene.frame_count} frames) and has "
+                             "one reference per frame, the reference of scene.at_frame(i); build them with: "
+                             f"{rebuild_command(scene, home=home)}")
     if folder:
         return _load(scene, Path(folder), home)
     folders = reference_folders(scene, home)
@@ -224,7 +250,8 @@ def load_reference(scene: Scene, folder: Path | None = None, home: str | Path | 
 def _missing(scene: Scene, folder: Path, home: str | Path | None) -> ReferenceError:
     derived = (f"; the stored reference of {scene.path.parent.name} is for the scene without --set"
                if scene.overrides else "")
-    return ReferenceError(f"{folder / PROVENANCE_FILE}: no reference for scene {scene.name!r}{derived}; build it "
+    frame = "" if scene.frame is None else f" frame {scene.frame}"
+    return ReferenceError(f"{folder / PROVENANCE_FILE}: no reference for scene {scene.name!r}{frame}{derived}; build it "
                           f"with: {_build_hint(scene, folder, home)}")
 
 

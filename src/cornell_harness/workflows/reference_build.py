@@ -22,6 +22,7 @@ import numpy as np
 
 from cornell_harness.scenes.spectral_scene import convention_used
 from cornell_harness.adapters.registry import RendererEntry
+from cornell_harness.adapters.seeds import frame_seed
 from cornell_harness.adapters.settings import canonical
 from cornell_harness.evaluate.regions import region_masks, region_noise
 from cornell_harness.scenes.model import Scene
@@ -33,6 +34,14 @@ from cornell_harness.store.references import (NOISE_FILE, PROVENANCE_FILE, REFER
 from cornell_harness.workflows.cells import entry_for
 from cornell_harness.workflows.executor import DaskExecutor, ExecutorError, InProcess, Task, task_key
 from cornell_harness.workflows.runner import render_timed
+
+
+#: Below this, a frame's reference and noise images are stored as half floats (whose largest value is 65504).
+#: An animated scene's frames are many references at once: half floats keep each frame's images at about a
+#: third of float32's bytes, a rounding of at most 2^-11 relative, a small fraction of the per-pixel noise of a
+#: reference of a few thousand spp (a few per cent). The variance stays float32: half would flush its small
+#: values (dark pixels, below about 6e-8) to zero.
+HALF_LIMIT = 6.0e4
 
 
 def build_reference(
@@ -62,21 +71,36 @@ def build_reference(
         raise ValueError(f"spp ({spp}) must be a multiple of batches ({batches})")
     folder = Path(folder) if folder else reference_folder(scene)
     batch_spp = spp // batches
-    seeds = [REFERENCE_SEED_BASE + b for b in range(batches)]
-    noise_seed = REFERENCE_SEED_BASE + batches
+    seeds = [reference_seed(b, scene.frame) for b in range(batches)]
+    noise_seed = reference_seed(batches, scene.frame)
     done = render_batches(scene, entry, batch_spp, seeds, executor, progress, extra_seed=noise_seed)
     mean, variance_of_mean, noise, wall, info = done.mean, done.variance, done.extra, done.wall_s, done.info
     prov = _provenance(scene, entry, info, spp, batches, seeds, noise_seed, wall)
+    if scene.frame is not None:  # a frame of an animated scene (Scene.at_frame)
+        prov["frame"] = scene.frame
     if scene.overrides:  # a derived scene's reference: what it was derived with (cornell_harness.scenes.overrides)
         prov["overrides"] = list(scene.overrides)
     if scene.regions:
         prov["region_noise"] = region_noise(mean, variance_of_mean, region_masks(scene))
+    half = scene.frame is not None and max(float(np.abs(mean).max()), float(np.abs(noise).max())) < HALF_LIMIT
+    prov["pixel_types"] = {REFERENCE_FILE: "half" if half else "float", VARIANCE_FILE: "float",
+                           NOISE_FILE: "half" if half else "float"}
     meta = {"cbox:scene_hash": prov["scene_hash"], SPP_ATTRIBUTE: str(spp), "cbox:renderer": prov["renderer_version"]}
-    write_exr(folder / REFERENCE_FILE, mean, meta)
+    write_exr(folder / REFERENCE_FILE, mean, meta, half=half)
     write_exr(folder / VARIANCE_FILE, variance_of_mean, meta)
-    write_exr(folder / NOISE_FILE, noise, meta)
+    write_exr(folder / NOISE_FILE, noise, meta, half=half)
     write_json_atomic(folder / PROVENANCE_FILE, prov)
-    return Reference(mean.astype(np.float32), variance_of_mean.astype(np.float32), noise, prov, folder)
+    stored = np.float16 if half else np.float32  # what a reader of the files gets
+    return Reference(mean.astype(stored).astype(np.float32), variance_of_mean.astype(np.float32),
+                     noise.astype(stored).astype(np.float32), prov, folder)
+
+
+def reference_seed(batch: int, frame: int | None = None) -> int:
+    """The seed of batch ``batch`` of a reference (the noise image's is batch ``batches``): ``REFERENCE_SEED_BASE +
+    batch``; for frame ``frame`` of an animated scene, that seed's frame seed (:func:`frame_seed`, the one
+    derivation of frames' seeds), so the frames' references are independent, those of identical frames too."""
+    seed = REFERENCE_SEED_BASE + batch
+    return seed if frame is None else frame_seed(seed, frame)
 
 
 @dataclass

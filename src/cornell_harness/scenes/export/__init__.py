@@ -16,6 +16,9 @@ same interface:
   and miss value); ``("radiance",)`` when absent (:func:`quantities`);
 - optionally ``refusal(scene) -> SceneError | None``: why the format cannot express a scene whose
   features it has (e.g. luxcore and ``render.max_depth = 1``).
+- optionally ``ANIMATION = True``: the format carries an animated scene's ``[animation]``
+  (:mod:`cornell_harness.scenes.animation`); every other format refuses an animated scene, whose single frames
+  (``Scene.at_frame``, ``cbox export --frame N``) it writes as still scenes.
 - optionally ``render_command(scene, main) -> str``: the command that renders the written ``main`` file,
   where running it needs more than the file (Mitsuba's spectral variant for a spectral scene); ``cbox export``
   prints it.
@@ -71,6 +74,9 @@ def refusal(scene: Scene, name: str) -> SceneError | None:
                                                   f"carries {', '.join(carried)} only")
     if missing := sorted(scene.features - set(module.FEATURES)):
         return SceneError(scene.path, "features", f"{name} cannot express {', '.join(missing)}")
+    if scene.animation is not None and not getattr(module, "ANIMATION", False):
+        return SceneError(scene.path, "animation", f"{name} cannot express an animated scene "
+                                                   f"({scene.frame_count} frames); export one frame with --frame N")
     if hasattr(module, "refusal"):
         return module.refusal(scene)
     return None

@@ -4,8 +4,9 @@ Every other format is some renderer's own; this one is ours, written so that a p
 lines of parsing (``examples/c-renderer/``'s C tokenizer) has the whole scene: the camera with its
 orthonormal basis and vertical field of view, the materials, the meshes as inline arrays (vertices and
 triangles; no mesh files to read), the analytic spheres, ``max_depth``, the quantity with its parameters
-(ambient occlusion's distance, weighting, normal and miss value) and, for a spectral scene, the sampled
-spectra and which values use them. Its JSON Schema ships in the package,
+(ambient occlusion's distance, weighting, normal and miss value), for a spectral scene the sampled
+spectra and which values use them, and for an animated scene its frames, frame rate, keyed tracks and light
+switches. Its JSON Schema ships in the package,
 ``src/cornell_harness/schemas/json-scene.schema.json`` (draft 2020-12); every field's meaning and unit is
 in it, and :data:`MAPPING` says how each aspect of our scene model is written.
 
@@ -31,6 +32,8 @@ NAME = "json"
 FEATURES = frozenset({"triangle_mesh", "sphere", "diffuse", "mirror", "dielectric", "area_light",
                       "pinhole_camera", "box_filter"})
 QUANTITIES = ("radiance", "ambient_occlusion")
+#: An animated scene is written whole: its still content and ``animation`` (:mod:`cornell_harness.scenes.animation`).
+ANIMATION = True
 #: The document's ``format`` and ``version``: a reader checks both before reading on.
 FORMAT, VERSION = "cornell-harness-scene", 1
 #: The schema's name (:func:`cornell_harness.schemas.reader.schema_file` finds ``<name>.schema.json``).
@@ -72,6 +75,11 @@ MAPPING = (
                                                       "`max_distance` (scene units, `null` for unbounded), "
                                                       "`weighting` (`cosine` or `uniform`), `normal`, "
                                                       "`miss_value`"),
+    ("animation", "`[animation]`: frames, fps, keyed tracks, light switches", "`animation`: `frames`, `fps`, "
+                                                                                "`camera` keys (or `null`), "
+                                                                                "`objects` keys by name, "
+                                                                                "`switches`; absent for a still "
+                                                                                "scene"),
     ("samples", "spp, seed", "not in the file: a renderers file passes them on the command line (`{spp}`, "
                              "`{seed}`)"),
     ("image", "float linear image, pixel (0, 0) top-left", "what the renderer writes at `{out}`: OpenEXR, PFM "
@@ -103,7 +111,20 @@ def document(scene: Scene) -> dict:
                          "light": sp.light}
         doc["spectra"] = {name: {"wavelengths_nm": list(s.wavelengths_nm), "values": list(s.values),
                                  "extrapolation": s.extrapolation} for name, s in sp.spectra.items()}
+    if (anim := scene.animation) is not None:
+        doc["animation"] = _animation(anim)
     return doc
+
+
+def _animation(anim) -> dict:
+    """An animation's tracks as keys: the camera's position and look_at, objects' translations, the switches."""
+    camera = None if anim.camera_track is None else [
+        {"frame": f, "position": _vec(v[:3]), "look_at": _vec(v[3:])}
+        for f, v in zip(anim.camera_track.frames, anim.camera_track.values)]
+    objects = {name: [{"frame": f, "translate": _vec(v)} for f, v in zip(t.frames, t.values)]
+               for name, t in anim.objects.items()}
+    switches = [{"object": s.object, "frame": s.frame, "on": s.on} for s in anim.switches]
+    return {"frames": anim.frames, "fps": anim.fps, "camera": camera, "objects": objects, "switches": switches}
 
 
 def _vec(values) -> list[float]:
