@@ -65,18 +65,25 @@ _ALIGN = 64
 _NO_TFAR = np.float32(1e37)
 
 
-@lru_cache(maxsize=1)
-def library() -> ctypes.CDLL:
-    """embreex's bundled ``libembree4``, with the prototypes used here; also made visible to numba kernels."""
+def library_path() -> str:
+    """The path of the ``libembree4`` that embreex's wheel bundles (``site-packages/embreex.libs/``)."""
     import embreex
-    import llvmlite.binding as llvm
 
     libs = os.path.join(os.path.dirname(os.path.dirname(embreex.__file__)), "embreex.libs")
     found = glob.glob(os.path.join(libs, "libembree4*.so*"))
     if not found:
         raise ImportError(f"no libembree4 in {libs}: embreex's wheel is expected to bundle it")
-    llvm.load_library_permanently(found[0])
-    lib = ctypes.CDLL(found[0])
+    return found[0]
+
+
+@lru_cache(maxsize=1)
+def library() -> ctypes.CDLL:
+    """embreex's bundled ``libembree4``, with the prototypes used here; also made visible to numba kernels."""
+    import llvmlite.binding as llvm
+
+    path = library_path()
+    llvm.load_library_permanently(path)
+    lib = ctypes.CDLL(path)
     vp = ctypes.c_void_p
     lib.rtcNewDevice.restype, lib.rtcNewDevice.argtypes = vp, [ctypes.c_char_p]
     lib.rtcNewScene.restype, lib.rtcNewScene.argtypes = vp, [vp]
