@@ -98,7 +98,9 @@ def _scaled(rec: runner.RunRecord, mask: np.ndarray, factor: float) -> runner.Ru
 
     out.image = scale(rec.image)
     out.variance = None if rec.variance is None else scale(scale(rec.variance))
-    out.checkpoints = [dataclasses.replace(c, image=scale(c.image)) for c in rec.checkpoints]
+    out.checkpoints = [dataclasses.replace(c, image=scale(c.image),
+                                           variance=None if c.variance is None else scale(scale(c.variance)))
+                       for c in rec.checkpoints]
     return out
 
 

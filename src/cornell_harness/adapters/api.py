@@ -114,13 +114,15 @@ def _parse_word(text: str) -> Any:
 @dataclass
 class Checkpoint:
     """The image after the first ``spp`` samples per pixel, and the time to get there (wall, and CPU when the
-    renderer measures it: :class:`Stopwatch`)."""
+    renderer measures it: :class:`Stopwatch`); ``variance``, where the renderer gives one, is the per-pixel
+    variance of ``image`` as :class:`RenderResult`'s (a sequential gate's looks use it)."""
 
     spp: int
     image: np.ndarray
     time_s: float
     aovs: dict = field(default_factory=dict)  # name (AOVS) -> (H, W, 3) float32, when asked for
     cpu_time_s: float | None = None
+    variance: np.ndarray | None = None
 
 
 @dataclass

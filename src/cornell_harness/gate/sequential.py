@@ -31,9 +31,10 @@ At look k, at n_k spp (information fraction t_k = n_k / max_spp):
 
 The variance and outlier tests are made once, at the look the gate stops at; which look that is depends on
 the data, so each runs at its share of ``alpha`` divided by the number of looks (Bonferroni over the looks
-it could have been). Every look takes the render's variance from the reference's noise model at its spp, as
-the fixed gate's floor does (a checkpoint carries no variance of its own), so the rule in the renderer's
-process and the gate's reading of the looks afterwards see the same numbers.
+it could have been). Every look takes the render's own variance at its spp where the checkpoint carries one
+(:class:`cornell_harness.adapters.api.Checkpoint`), floored at the reference's noise model as the fixed
+gate's is, else the model alone; the rule in the renderer's process and the gate's reading of the looks
+afterwards see the same checkpoints, so the same numbers.
 """
 
 from __future__ import annotations
@@ -99,13 +100,14 @@ class Look:
     table: BiasTable
 
 
-def look(image: np.ndarray, k: int, d: Design, ref: Reference, masks: Mapping[str, np.ndarray] | None, tile: int,
-         margins: Margins) -> Look:
-    """Look ``k`` of design ``d`` at ``image`` (the render after d.spps[k] spp)."""
+def look(image: np.ndarray, variance: np.ndarray | None, k: int, d: Design, ref: Reference,
+         masks: Mapping[str, np.ndarray] | None, tile: int, margins: Margins) -> Look:
+    """Look ``k`` of design ``d`` at ``image`` (the render after d.spps[k] spp) and its ``variance`` (None: the
+    renderer gives none; it is floored at the reference's noise model either way, as the fixed gate's)."""
     spp = d.spps[k]
-    agr = agreement.render_agreement(image, None, spp, ref.image, ref.variance, ref.spp, tile, d.fail_levels[k],
-                                     masks)
-    table = bias_table(image, None, spp, ref, masks, d.alpha, margins, level=d.pass_levels[k])
+    agr = agreement.render_agreement(image, variance, spp, ref.image, ref.variance, ref.spp, tile,
+                                     d.fail_levels[k], masks)
+    table = bias_table(image, variance, spp, ref, masks, d.alpha, margins, level=d.pass_levels[k])
     verdict = FAIL if not agr.passed else PASS if not table.unresolved else CONTINUE
     if verdict == CONTINUE and k == len(d.spps) - 1:
         verdict = INCONCLUSIVE
@@ -127,7 +129,8 @@ class StopRule:
         if checkpoint.spp not in self.design.spps:
             return False
         k = self.design.spps.index(checkpoint.spp)
-        result = look(checkpoint.image, k, self.design, self.reference, self.masks, self.tile, self.margins)
+        result = look(checkpoint.image, checkpoint.variance, k, self.design, self.reference, self.masks, self.tile,
+                      self.margins)
         return result.verdict in (PASS, FAIL)
 
 
@@ -140,14 +143,14 @@ def looks(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateConf
     """The looks of a sequential run, in order up to the first with a verdict (the last: inconclusive), and
     the spps of looks the render has no image of (skipped)."""
     d = design(exp, cfg)
-    shots = {c.spp: c.image for c in rec.checkpoints}
-    shots[rec.spp] = rec.image
+    shots = {c.spp: (c.image, c.variance) for c in rec.checkpoints}  # what the stop rule saw
+    shots.setdefault(rec.spp, (rec.image, rec.variance))
     out, skipped = [], []
     for k, n in enumerate(d.spps):
         if n not in shots:
             skipped.append(n)
             continue
-        out.append(look(shots[n], k, d, ref, masks, exp.tile, exp.margins))
+        out.append(look(*shots[n], k, d, ref, masks, exp.tile, exp.margins))
         if out[-1].verdict != CONTINUE:
             break
     return d, out, skipped

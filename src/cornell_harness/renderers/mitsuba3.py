@@ -204,12 +204,14 @@ def scene_dict(scene: Scene, spp: int, sampler: str = "independent", aovs: bool 
     return d
 
 
-def run_passes(spp: int, seed: int, per_pass: int, checkpoints: Sequence[int], sums, image, aovs=None, stop=None):
+def run_passes(spp: int, seed: int, per_pass: int, checkpoints: Sequence[int], sums, image, aovs=None, stop=None,
+               variance=None):
     """Accumulate ``sums(n, pass_seed)`` (a tuple of per-pixel sums over n samples) over the passes of a render.
 
     Returns (sums over all spp, ``image(sums, spp)``, checkpoints, wall seconds spent in ``sums``, CPU seconds
     spent in ``sums``, Mitsuba's threads included, the spp rendered); a checkpoint's image is
-    ``image(sums so far, done)``, its auxiliary images ``aovs(sums so far, done)`` (none if None). When
+    ``image(sums so far, done)``, its auxiliary images ``aovs(sums so far, done)`` (none if None), its variance
+    ``variance(sums so far, done)`` (none if None). When
     ``stop`` (``stops_early``) returns True for a checkpoint, the render ends there: its spp is the checkpoint's.
     """
     acc, done, elapsed, cpu, shots = None, 0, 0.0, 0.0, []
@@ -221,12 +223,14 @@ def run_passes(spp: int, seed: int, per_pass: int, checkpoints: Sequence[int], s
         acc = part if acc is None else tuple(a + p for a, p in zip(acc, part))
         done += n
         if done in checkpoints and done < spp:
-            shots.append(Checkpoint(done, image(acc, done), elapsed, aovs(acc, done) if aovs else {}, cpu))
+            shots.append(Checkpoint(done, image(acc, done), elapsed, aovs(acc, done) if aovs else {}, cpu,
+                                    variance(acc, done) if variance else None))
             if stop is not None and stop(shots[-1]):
                 return acc, shots[-1].image, shots, elapsed, cpu, done
     final = image(acc, spp)
     if spp in checkpoints:
-        shots.append(Checkpoint(spp, final, elapsed, aovs(acc, spp) if aovs else {}, cpu))
+        shots.append(Checkpoint(spp, final, elapsed, aovs(acc, spp) if aovs else {}, cpu,
+                                variance(acc, spp) if variance else None))
     return acc, final, shots, elapsed, cpu, spp
 
 
@@ -339,6 +343,7 @@ class Mitsuba3:
 
         (s1, s2), image, shots, elapsed, cpu, spp = run_passes(
             spp, seed, per_pass, checkpoints, sums,
-            lambda acc, n: mitsuba_ao.mean_and_variance(acc[0], acc[1], n, shape)[0], stop=stop)
+            lambda acc, n: mitsuba_ao.mean_and_variance(acc[0], acc[1], n, shape)[0], stop=stop,
+            variance=lambda acc, n: mitsuba_ao.mean_and_variance(acc[0], acc[1], n, shape)[1])
         variance = mitsuba_ao.mean_and_variance(s1, s2, spp, shape)[1]
         return RenderResult(image, elapsed, spp, seed, shots, info, variance, cpu_time_s=cpu)

@@ -256,7 +256,7 @@ def render_sandboxed(entry: RendererEntry, scene: Scene, spp: int, seed: int, ch
         raise RenderTimeout(f"killed at its time limit of {time_limit_s:g} s (ran {out.time_s:.1f} s)", out.time_s)
     if (why := out.problem()) is not None:
         raise RenderError(why, out.traceback)
-    shots = [Checkpoint(s, image, t, cpu_time_s=cpu) for s, image, t, cpu in out.checkpoints[0]]
+    shots = [Checkpoint(s, image, t, cpu_time_s=cpu, variance=var) for s, image, t, cpu, var in out.checkpoints[0]]
     return (RenderResult(out.images[0], out.render_times[0], out.spps[0], seed, shots, out.infos[0], out.variances[0],
                          cpu_time_s=out.cpu_times[0]), out.timings[0])
 

@@ -88,7 +88,7 @@ class SandboxOutcome:
     timings: list = dataclasses.field(default_factory=list)  # each render call's cornell_harness.workflows.timing.Timing
     shapes: list = dataclasses.field(default_factory=list)  # (H, W, 3) each render was asked for
     infos: list = dataclasses.field(default_factory=list)  # each render's RenderResult.info
-    checkpoints: list = dataclasses.field(default_factory=list)  # each render's [(spp, image, time_s, cpu), ...]
+    checkpoints: list = dataclasses.field(default_factory=list)  # each render's [(spp, image, time_s, cpu, variance)]
     spps: list = dataclasses.field(default_factory=list)  # each render's spp (below the asked one: stopped early)
     seeds: list = dataclasses.field(default_factory=list)  # each render's seed, as its result gave it
     state: dict = dataclasses.field(default_factory=dict)  # a sequence's state (SequenceResult.state)
@@ -227,7 +227,7 @@ def _read_outcome(folder: Path, watched: _Watched, time_bound_s: float, rss_boun
         with np.load(folder / f"render-{i}.npz") as z:
             outcome.images.append(z["image"])
             outcome.variances.append(z["variance"] if "variance" in z.files else None)
-            outcome.checkpoints.append([(spp, z[f"checkpoint-{spp}"], t, cpu)
+            outcome.checkpoints.append([(spp, z[f"checkpoint-{spp}"], t, cpu, z.get(f"checkpoint-variance-{spp}"))
                                         for spp, t, cpu in r.get("checkpoints", [])])
         outcome.spps.append(int(r["spp"]))
         outcome.seeds.append(r.get("seed"))
@@ -283,6 +283,8 @@ def _write_render(folder: Path, i: int, res, timed, result: dict) -> None:
     if res.variance is not None:
         arrays["variance"] = np.asarray(res.variance)
     arrays.update({f"checkpoint-{c.spp}": np.asarray(c.image) for c in res.checkpoints})
+    arrays.update({f"checkpoint-variance-{c.spp}": np.asarray(c.variance) for c in res.checkpoints
+                   if c.variance is not None})
     np.savez(folder / f"render-{i}.npz", **arrays)
     info = json.loads(json.dumps(dict(res.info), default=str))  # what JSON cannot hold, as text
     result["renders"].append({"spp": int(res.spp), "seed": int(res.seed), "time_s": float(res.time_s), "info": info,

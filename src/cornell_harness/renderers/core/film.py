@@ -121,7 +121,7 @@ class Film:
         return spread.reshape(self.shape).astype(np.float32)
 
     def checkpoint(self, n: int, time_s: float, cpu_time_s: float | None = None) -> Checkpoint:
-        return Checkpoint(n, self.image(n), time_s, self.aovs(n), cpu_time_s)
+        return Checkpoint(n, self.image(n), time_s, self.aovs(n), cpu_time_s, self.variance(n))
 
 
 def warm_up() -> None:

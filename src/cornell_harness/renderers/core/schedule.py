@@ -168,6 +168,6 @@ def render_image(
     image = film.image(spp)
     aux = film.aovs(spp)
     if spp in checkpoints and not stopped:
-        shots.append(Checkpoint(spp, image, elapsed, aux, cpu))
+        shots.append(Checkpoint(spp, image, elapsed, aux, cpu, film.variance(spp)))
     meta = {"threads": threads, "sampler": sampler, **({"batches": batches} if batches > 1 else {}), **(info or {})}
     return RenderResult(image, elapsed, spp, seed, shots, meta, film.variance(spp), aux, cpu)
