@@ -9,10 +9,15 @@
   :func:`mirrored_light_image`): the floor's light is all a caustic, exact
   from the polygon formula for the light's mirror image; photon mappers
   must estimate it from photons.
+- **A mirror caustic on a patch in a black world** (:func:`mirror_caustic_scene`):
+  the same light and mirror, the floor cut to a patch the camera sees
+  whole, with nothing around it; :func:`mirrored_light_image` is its
+  exact image too (the polygon formula for the light's image source).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -174,7 +179,8 @@ def mirrored_light_image(scene: Scene, sub: int = 8, margin: float = 0.0) -> tup
     the panel's plane halfway ((p + q)/2), so the panel's black back hides
     none of it when |p_x| > 3a or |p_y| > 3b; the mask keeps the pixels whose
     every sub-sample lands on the floor there (and sees nothing else first),
-    at least ``margin`` inside the floor's edge and that boundary (a density
+    at least ``margin`` inside the floor's edge (the bounds of the scene's
+    first mesh, the floor or a patch of it) and that boundary (a density
     estimate blurs across both).
     """
     cam = scene.camera
@@ -186,8 +192,9 @@ def mirrored_light_image(scene: Scene, sub: int = 8, margin: float = 0.0) -> tup
     z_image = 2 * MIRROR_H - MIRROR_LIGHT_H
     poly = np.array([[-a, -b, z_image], [a, -b, z_image], [a, b, z_image], [-a, b, z_image]], float)
     e = polygon_irradiance(pts, np.array([0, 0, 1.0]), poly, LIGHT_LE)
-    edge = 1.6 - margin
-    ok = (t.reshape(-1) > 0) & (np.abs(pts[:, 0]) <= edge) & (np.abs(pts[:, 1]) <= edge)
+    floor = scene.meshes[0].vertices
+    (x0, y0), (x1, y1) = floor[:, :2].min(axis=0) + margin, floor[:, :2].max(axis=0) - margin
+    ok = (t.reshape(-1) > 0) & (pts[:, 0] >= x0) & (pts[:, 0] <= x1) & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)
     ok &= (np.abs(pts[:, 0]) > 3 * a + margin) | (np.abs(pts[:, 1]) > 3 * b + margin)
     # The camera (below the panel) must not see the panel in front of the floor point.
     tl = (MIRROR_LIGHT_H - o[2]) / d[..., 2]
@@ -196,3 +203,37 @@ def mirrored_light_image(scene: Scene, sub: int = 8, margin: float = 0.0) -> tup
     radiance = np.where(ok, FLOOR_RHO / np.pi * e, 0.0).reshape(cam.height, sub, cam.width, sub).mean(axis=(1, 3))
     mask = ok.reshape(cam.height, sub, cam.width, sub).all(axis=(1, 3))
     return np.repeat(radiance[..., None], 3, axis=2), mask
+
+
+#: The patch of :func:`mirror_caustic_scene`: x in [1.0, 1.6], |y| ≤ 0.3 on the floor (z = 0), beyond the
+#: panel's shadow (|x| > 3·LIGHT_A), lit only through the mirror's part x in [0, 0.65], |y| ≤ 0.25.
+CAUSTIC_PATCH = (1.0, -0.3, 1.6, 0.3)
+
+
+def mirror_caustic_scene(res: int = 32) -> Scene:
+    """A diffuse patch lit only through a mirror, in a black world: a closed-form caustic with edges.
+
+    :func:`mirrored_light_scene` with the floor cut to :data:`CAUSTIC_PATCH`
+    and the mirror to what carries light from the panel to the patch (every
+    ray from the panel's mirror image to the patch crosses z = 1.5 within
+    x in [0.025, 0.625], |y| ≤ 0.225). The camera, 0.9 above the patch's
+    centre looking straight down (50°), sees the patch whole, about 72% of the
+    image's width, with black around it: the discs of a density estimate
+    near the patch's edge reach off it (the edge's bias), those inside do not
+    (the interior, which a consistent estimator must get right up to the
+    curvature of the irradiance over the disc). Its exact image is
+    :func:`mirrored_light_image`.
+    """
+    base = mirrored_light_scene(res)
+    floor, panel, mirror = base.meshes
+    x0, y0, x1, y1 = CAUSTIC_PATCH
+    patch = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
+    top = mirror.vertices[0, 2]
+    cover = np.array([[0.0, -0.25, top], [0.0, 0.25, top], [0.65, 0.25, top], [0.65, -0.25, top]])
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    camera = Camera(position=(cx, cy, 0.9), look_at=(cx, cy, 0.0), up=(0.0, 1.0, 0.0), fov_deg=50.0,
+                    fov_axis="smaller", width=int(res), height=int(res))
+    return dataclasses.replace(base, name="mirror-caustic", path=Path("analytic") / "mirror-caustic.toml",
+                               camera=camera, description="a patch lit by a light's image in a mirror, nothing around",
+                               meshes=(dataclasses.replace(floor, vertices=patch), panel,
+                                       dataclasses.replace(mirror, vertices=cover)))
