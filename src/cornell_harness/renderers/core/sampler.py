@@ -238,9 +238,14 @@ def path_point(st, path):
     """
     if st.kind == INDEPENDENT:
         return np.uint64(st.key), np.int64(path)
-    s = st.first_sample + path // st.pixels
-    batch_key = mix64(st.key ^ (np.uint64(s % st.batches) * _GOLDEN))
-    return pixel_seed(batch_key, path % st.pixels), np.int64(s // st.batches)
+    # Unsigned, one division each for quotient and remainder (numba's signed // and % take two, with
+    # Python's floor fix-ups); paths and samples are never negative.
+    p, pixels, batches = np.uint64(path), np.uint64(st.pixels), np.uint64(st.batches)
+    q = p // pixels
+    s = np.uint64(st.first_sample) + q
+    index = s // batches
+    batch, pixel = s - index * batches, p - q * pixels
+    return pixel_seed(mix64(st.key ^ (batch * _GOLDEN)), pixel), np.int64(index)
 
 
 @jit_inline
