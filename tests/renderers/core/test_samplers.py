@@ -19,8 +19,8 @@ from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.renderers.core import film as film_module
 from cornell_harness.renderers.core.film import Film
 from cornell_harness.renderers.core.rng import uniform
-from cornell_harness.renderers.core.sampler import (BATCHES, BOUNCE_U, CAMERA_U, EMIT_DIR_U, EMIT_U, PMJ02, SOBOL,
-                                                    Stream, bounce_dim, independent, path_point, sample_1d,
+from cornell_harness.renderers.core.sampler import (BATCHES, BOUNCE_U, CAMERA_U, EMIT_DIR_U, EMIT_U, PMJ02,
+                                                    PMJ02_TABLE, SOBOL, Stream, bounce_dim, independent, path_point, sample_1d,
                                                     sample_2d, sequence_stream, vertex_dim)
 from cornell_harness.renderers.pathtracer import PathTracer
 
@@ -68,12 +68,12 @@ def test_independent_stream_is_the_counter_based_rng():
     assert np.array_equal(_draw_2d(st, paths, 4)[:, 1], [uniform(KEY, j, 5) for j in paths])
 
 
-@pytest.mark.parametrize("kind", [PMJ02, SOBOL])
+@pytest.mark.parametrize("kind", [PMJ02, SOBOL, PMJ02_TABLE])
 def test_each_batch_of_a_pixel_is_stratified_progressively(kind):
     """Exact: a batch's first 2^m camera samples of a pixel, for every m ≤ 8, and the next aligned block,
-    are (0, m, 2)-nets; for pmj02 so is every later 2D decision (a vertex's BSDF direction)."""
+    are (0, m, 2)-nets; for pmj02 and pmj02table so is every later 2D decision (a vertex's BSDF direction)."""
     st = Stream(kind, KEY, PIXELS, 0, BATCHES)
-    dims = [CAMERA_U] + ([vertex_dim(3, 3)] if kind == PMJ02 else [])
+    dims = [CAMERA_U] + ([vertex_dim(3, 3)] if kind != SOBOL else [])
     for pixel in (0, 3):
         for batch in (0, BATCHES - 1):
             for dim in dims:
@@ -84,7 +84,7 @@ def test_each_batch_of_a_pixel_is_stratified_progressively(kind):
                         assert _is_net(pts, m), (kind, pixel, batch, dim, m, block)
 
 
-@pytest.mark.parametrize("sampler", ["pmj02", "sobol"])
+@pytest.mark.parametrize("sampler", ["pmj02", "sobol", "pmj02table"])
 def test_a_photon_stream_is_one_sequence_stratified_over_the_photons(sampler):
     """Exact: photons 0 .. 2^m - 1 of a map (one sequence, no batches: :func:`sequence_stream`) and the next
     aligned block put one number in each interval of width 2^-m in every emission dimension, for every
@@ -98,7 +98,7 @@ def test_a_photon_stream_is_one_sequence_stratified_over_the_photons(sampler):
             for dim in range(5):
                 cells = np.floor(_draw_1d(st, photons, dim) * 2 ** m)
                 assert np.unique(cells).size == 2 ** m, (dim, m, block)
-            for dim in [EMIT_U, EMIT_DIR_U, bounce_dim(2, BOUNCE_U)] if sampler == "pmj02" else []:
+            for dim in [EMIT_U, EMIT_DIR_U, bounce_dim(2, BOUNCE_U)] if sampler != "sobol" else []:
                 assert _is_net(_draw_2d(st, photons, dim), m), (dim, m, block)
 
 
@@ -108,7 +108,7 @@ def test_an_independent_photon_stream_is_the_counter_based_rng():
     assert np.array_equal(_draw_1d(sequence_stream("independent", KEY), paths, 7), [uniform(KEY, j, 7) for j in paths])
 
 
-@pytest.mark.parametrize("kind", [PMJ02, SOBOL])
+@pytest.mark.parametrize("kind", [PMJ02, SOBOL, PMJ02_TABLE])
 def test_numbers_do_not_depend_on_how_samples_are_cut_into_passes(kind):
     """A sample's numbers are a function of (seed, pixel, sample index, dimension): the same whether it is
     drawn in a pass that starts at sample 0 or in a later one (first_sample 12)."""
@@ -137,7 +137,7 @@ def test_batch_variance_is_the_spread_of_batch_means():
         np.testing.assert_allclose(f.image(n).reshape(pixels, 3), per_sample.mean(axis=0), rtol=1e-6)
 
 
-@pytest.mark.parametrize("sampler", ["pmj02", "sobol"])
+@pytest.mark.parametrize("sampler", ["pmj02", "sobol", "pmj02table"])
 def test_same_image_and_variance_for_any_thread_count(sampler):
     scene = resolve_scene("cornell-box").with_resolution(24, 16)
     runs = [PathTracer(threads=t).render(scene, 16, seed=4, settings={"sampler": sampler}) for t in (1, 2, 3)]
@@ -146,7 +146,7 @@ def test_same_image_and_variance_for_any_thread_count(sampler):
     assert runs[0].info["sampler"] == sampler and runs[0].info["batches"] == BATCHES
 
 
-@pytest.mark.parametrize("sampler", ["pmj02", "sobol"])
+@pytest.mark.parametrize("sampler", ["pmj02", "sobol", "pmj02table"])
 def test_checkpoints_are_the_shorter_renders(sampler):
     """Progressive: the 16- and 32-spp checkpoints of a 64-spp render are, bit for bit, 16- and 32-spp renders."""
     scene = resolve_scene("cornell-box").with_resolution(24, 16)
@@ -157,8 +157,8 @@ def test_checkpoints_are_the_shorter_renders(sampler):
         assert np.array_equal(shot.image, alone.image), shot.spp
 
 
-# sobol's is slow (9 s): the suite's bound; pmj02, the default, runs by default.
-@pytest.mark.parametrize("sampler", ["pmj02", pytest.param("sobol", marks=pytest.mark.slow)])
+# sobol's is slow (9 s): the suite's bound; pmj02, the default, and pmj02table run by default.
+@pytest.mark.parametrize("sampler", ["pmj02", "pmj02table", pytest.param("sobol", marks=pytest.mark.slow)])
 def test_z_scores_over_20_seeds_have_unit_spread(sampler, monkeypatch):
     """The returned variance is honest: white furnace (ρ 0.8, exact L = 5), 32×32 pixels, 64 spp, seeds 0-19.
 

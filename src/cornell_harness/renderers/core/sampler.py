@@ -41,6 +41,10 @@ to kernels as a :class:`Stream`; every sample stays a pure function of
   shuffled and Owen-scrambled (:func:`cornell_harness.renderers.core.sobol.padded_2d`;
   Burley 2020's padding): each power-of-two prefix of a pixel's samples is
   stratified in every elementary interval, as pmj02 is.
+- ``pmj02table``: pmj02's padding and stratification with the coordinates'
+  Owen scrambling moved into a table made once
+  (:mod:`cornell_harness.renderers.core.owen_table`): per decision one hash,
+  the index shuffle, a lookup and a digital shift; its pixel seed is one hash.
 - ``sobol``: one Owen-scrambled Sobol' sequence across all of a path's
   dimensions per pixel (:func:`cornell_harness.renderers.core.sobol.sobol_1d`; pbrt-v4's
   ``SobolSampler`` with per-pixel scrambling), uniform past its 64 dimensions.
@@ -64,6 +68,7 @@ import numpy as np
 from cornell_harness.adapters.api import Setting, pass_key
 from cornell_harness.renderers.core.rng import mix64, uniform
 from cornell_harness.renderers.core.sampling import jit, jit_inline
+from cornell_harness.renderers.core.owen_table import table_1d, table_2d
 from cornell_harness.renderers.core.sobol import SOBOL_MATRICES, padded_1d, padded_2d, pixel_seed, sobol_1d
 
 
@@ -147,9 +152,9 @@ EMITTER_PICK, EMITTER_U, EMITTER_V, BSDF_U, BSDF_V, ROULETTE = range(VERTICES.st
 #: Offsets inside a photon bounce's block (:data:`PHOTON_BOUNCES`).
 BOUNCE_U, BOUNCE_V, BOUNCE_ROULETTE = range(PHOTON_BOUNCES.stride)
 
-INDEPENDENT, PMJ02, SOBOL = 0, 1, 2
+INDEPENDENT, PMJ02, SOBOL, PMJ02_TABLE = 0, 1, 2, 3
 #: Sampler names (the ``sampler`` setting) and their ids in a :class:`Stream`.
-SAMPLERS = {"independent": INDEPENDENT, "pmj02": PMJ02, "sobol": SOBOL}
+SAMPLERS = {"independent": INDEPENDENT, "pmj02": PMJ02, "sobol": SOBOL, "pmj02table": PMJ02_TABLE}
 #: Independent randomisations of a low-discrepancy render: 7 degrees of freedom per pixel's variance.
 #: More give a steadier variance, fewer keep more stratification (docs/sampling.md measures both).
 BATCHES = 8
@@ -159,10 +164,10 @@ def sampler_setting(draws: str, default: str = "independent", batches: bool = Tr
     """The ``sampler`` setting of a renderer of ours that draws ``draws`` (words: what, and its sequences) from
     a :class:`Stream`. ``batches``: its low-discrepancy renders report the variance of :data:`BATCHES`
     batches. The renderers whose gate expectations were measured with ``independent`` keep it as default."""
-    doc = (f"random numbers of {draws}: independent, pmj02 (progressive (0,2)-sequences per decision) or sobol "
-           "(Owen-scrambled, all dimensions)")
+    doc = (f"random numbers of {draws}: independent, pmj02 (progressive (0,2)-sequences per decision), "
+           "pmj02table (the same stratification from a table, cheaper) or sobol (Owen-scrambled, all dimensions)")
     if batches:
-        doc += f"; the last two report the variance of {BATCHES} independent batches"
+        doc += f"; the last three report the variance of {BATCHES} independent batches"
     return Setting("sampler", str, default, doc, choices=tuple(SAMPLERS))
 
 
@@ -186,7 +191,7 @@ class Stream(NamedTuple):
     """What a kernel needs to draw the numbers of path j of a pass: pixel j mod ``pixels``, sample
     ``first_sample + j div pixels`` of that pixel."""
 
-    kind: int  # INDEPENDENT, PMJ02 or SOBOL
+    kind: int  # INDEPENDENT, PMJ02, SOBOL or PMJ02_TABLE
     key: np.uint64  # the pass's key (independent) or the render's (low-discrepancy)
     pixels: int
     first_sample: int
@@ -238,9 +243,16 @@ def path_point(st, path):
     """
     if st.kind == INDEPENDENT:
         return np.uint64(st.key), np.int64(path)
-    s = st.first_sample + path // st.pixels
-    batch_key = mix64(st.key ^ (np.uint64(s % st.batches) * _GOLDEN))
-    return pixel_seed(batch_key, path % st.pixels), np.int64(s // st.batches)
+    # Unsigned, one division each for quotient and remainder (numba's signed // and % take two, with
+    # Python's floor fix-ups); paths and samples are never negative.
+    p, pixels, batches = np.uint64(path), np.uint64(st.pixels), np.uint64(st.batches)
+    q = p // pixels
+    s = np.uint64(st.first_sample) + q
+    index = s // batches
+    batch, pixel = s - index * batches, p - q * pixels
+    if st.kind == PMJ02_TABLE:  # one hash: its decisions hash (seed, dimension) again
+        return mix64(st.key ^ ((pixel * batches + batch) * _GOLDEN)), np.int64(index)
+    return pixel_seed(mix64(st.key ^ (batch * _GOLDEN)), pixel), np.int64(index)
 
 
 @jit_inline
@@ -251,6 +263,8 @@ def sample_1d(st, point, dim) -> float:
         return uniform(seed, index, dim)
     if st.kind == SOBOL:
         return sobol_1d(seed, index, dim, SOBOL_MATRICES)
+    if st.kind == PMJ02_TABLE:
+        return table_1d(seed, index, dim)
     return padded_1d(seed, index, dim)
 
 
@@ -262,6 +276,8 @@ def sample_2d(st, point, dim):
         return uniform(seed, index, dim), uniform(seed, index, dim + 1)
     if st.kind == SOBOL:
         return sobol_1d(seed, index, dim, SOBOL_MATRICES), sobol_1d(seed, index, dim + 1, SOBOL_MATRICES)
+    if st.kind == PMJ02_TABLE:
+        return table_2d(seed, index, dim)
     return padded_2d(seed, index, dim)
 
 
