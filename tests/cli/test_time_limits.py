@@ -145,10 +145,10 @@ def test_a_command_render_that_ends_leaves_no_temporary_folder(tmp_path, capsys,
 def test_the_gates_time_limit_ends_the_program_and_its_folder(tmp_path, capsys, tmpdir_watched):
     config = tmp_path / "gate.toml"
     config.write_text('[[expect]]\nscene = "furnace"\nrenderer = "fake-cli"\nspp = 2\nfinite_only = true\n'
-                      'time_limit = "3s"\n')
+                      'time_limit = "10s"\n')  # room for the worker to start the program on a loaded machine
     code, out, _ = cbox(capsys, "gate", "--config", str(config), "--renderers", str(_hanging(tmp_path)),
                         "--out", str(tmp_path / "gate"))
     assert code == 1
-    assert "time_limit: killed at its time limit of 3 s" in out, out
+    assert "time_limit: killed at its time limit of 10 s" in out, out
     pids = logged_pids(tmp_path / "runs.log")
     assert len(pids) == 2 and not any(map(alive, pids))
