@@ -1,10 +1,12 @@
-"""cbox sequence end to end on a stand-in animated scene: results, report with its figures and animations."""
+"""cbox sequence end to end: on a stand-in animated scene (results, report with its figures and animations), and on
+the stored cornell-box-moving-light with its per-frame references (a few frames, 1 spp); --frames checked."""
 
 from __future__ import annotations
 
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 from PIL import Image
 
@@ -48,3 +50,25 @@ def test_a_failed_renderer_exits_1(stand_in, tmp_path, capsys):
                                    "--seeds", "1", "--out", str(tmp_path))
     assert code == 1 and "failed" in err
     assert json.loads((tmp_path / "sequences.json").read_text())[0]["status"] == "failed"
+
+
+def test_sequence_on_the_stored_moving_light(tmp_path, capsys):
+    """The real scene and its stored per-frame references: frames 10-15 (the light stops at frame 12) with the
+    path tracer, stateless, at 1 spp. Lag follows the change; the noise of 1 spp flickers above the floor of
+    the 1024-spp references."""
+    code, _, err = cbox_in_process(capsys, "sequence", "--scene", "cornell-box-moving-light", "-r", "pathtracer",
+                                   "--frames", "10-15", "--spp", "1", "--seeds", "1", "--out", str(tmp_path))
+    assert code == 0, err
+    (row,) = json.loads((tmp_path / "sequences.json").read_text())
+    assert row["status"] == "ok" and (row["frames"], row["first_frame"], row["change_frame"]) == (6, 10, 12)
+    assert row["flicker"] > 3 * row["flicker_floor"] > 0 and row["lag"] >= 0 and row["ghosting"] > 0
+    frames = pd.read_csv(tmp_path / "frames.csv")
+    assert frames["frame"].tolist() == list(range(10, 16)) and (frames["delta_e2000_mean"] > 0).all()
+    assert (tmp_path / "anim-pathtracer.png").is_file()
+
+
+@pytest.mark.parametrize("frames, message", [("3,5", "must be consecutive"), ("20-30", "frames are 0..23")])
+def test_frames_must_be_consecutive_and_in_the_scene(frames, message, tmp_path, capsys):
+    code, _, err = cbox_in_process(capsys, "sequence", "--scene", "cornell-box-moving-light", "-r", "pathtracer",
+                                   "--frames", frames, "--out", str(tmp_path))
+    assert code == 2 and "--frames" in err and message in err, err

@@ -3,6 +3,9 @@ an expectation budgeting them renders the animated scene's frames and passes or 
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import pytest
 
 from cornell_harness.gate import run as gate_run
@@ -41,3 +44,14 @@ def test_a_long_history_fails_a_lag_budget_that_a_short_one_passes(tmp_path, mon
         assert checks["finite"].passed and checks["max.flicker"].passed
         verdicts[h] = checks["max.lag"].passed
     assert verdicts == {0.1: True, 0.95: False}
+
+
+def test_the_docs_example_budget_loads(tmp_path):
+    """docs/temporal.md's gate.toml example is a valid config: an expectation on the stored animated scene's
+    frames, budgeting lag and flicker."""
+    text = (Path(__file__).resolve().parents[2] / "docs" / "temporal.md").read_text(encoding="utf-8")
+    (example,) = re.findall(r"```toml\n(# gate\.toml.*?)```", text, re.S)
+    (tmp_path / "gate.toml").write_text(example)
+    (expectation,) = load_config(tmp_path / "gate.toml").expectations
+    assert expectation.frames and expectation.scene == "cornell-box-moving-light"
+    assert {"lag", "flicker"} <= set(expectation.max)

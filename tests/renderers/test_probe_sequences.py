@@ -27,7 +27,7 @@ from tests.renderers.sequences import StandIn
 
 pytest.importorskip("embreex")
 
-SETTINGS = {"grid": 2, "rays_per_probe": 64, "gamma_blending": False}
+SETTINGS = {"grid": 2, "rays_per_probe": 64, "gamma_blending": False, "warm_start": False}
 
 
 def furnace_frames(albedo: float, radiances: list[float]) -> StandIn:
@@ -79,3 +79,14 @@ def test_render_sequence_gives_each_frame_its_seed_and_the_state():
     assert seq.state == {"hysteresis": 0.5, "averaging": "ema", "updates_per_frame": 1}
     assert all(r.time_s >= r.info["probes_s"] > 0 for r in seq.frames)
     assert seq.frames[1].image.mean() > seq.frames[0].image.mean()
+
+
+def test_a_warm_start_begins_at_the_still_render_and_stays_there():
+    """With ``warm_start`` frame 0's probes are a still render's (8 bounces, then blended iterations): in a
+    furnace of albedo 0.5 already the infinite-bounce πρL/(1 − ρ) within 2%, and no frame after it climbs."""
+    albedo = 0.5
+    s = with_defaults(probes.IrradianceProbes.settings, {**SETTINGS, "warm_start": True, "hysteresis": 0.9})
+    frames = list(probes.probe_frames(furnace_frames(albedo, [1.0] * 3), 4, s, 2, 3))
+    e = np.array([v.irradiance[:, 1:-1, 1:-1].mean() for _, _, _, v, _, _ in frames])
+    assert e == pytest.approx(math.pi * albedo / (1 - albedo), rel=0.02)
+    assert [f[0] for f in frames] == [0, 1, 2] and frames[0][4] == 0.0 and frames[1][4] > 0.0

@@ -20,6 +20,8 @@ def sequence(
     renderer_files: Optional[List[Path]] = RendererFilesOpt,
     spp: int = typer.Option(1, "--spp", min=1, help="Samples per pixel of every frame."),
     seeds: int = typer.Option(3, "--seeds", min=1, help="Seeds 0 .. K-1: the report's confidence bands are over them."),
+    frames: Optional[str] = typer.Option(None, "--frames", help="Consecutive frames A-B to render and score "
+                                         "(default all); a stateful renderer still renders from frame 0."),
     out: Path = out_folder_option(Path("out/sequence"), "Folder for frames.csv, sequences.csv, sequences.json, "
                                                         "sequence.html and the animations."),
     time_limit: Optional[str] = TimeLimitOpt,  # seconds (float), by the option's callback: a whole sequence's
@@ -40,10 +42,10 @@ def sequence(
     from cornell_harness.workflows.sequence_run import run_sequence, sequence_references, write_sequence_results
 
     sc = resolve_scene(scene)
-    frames = list(range(sc.frame_count))
-    references = sequence_references(sc, frames)
+    chosen = _frames(frames, sc.frame_count)
+    references = sequence_references(sc, chosen)
     with executor_for(workers, scheduler, dashboard) as executor:
-        result = run_sequence(resolve(renderer), sc, spp, list(range(seeds)), references, frames, time_limit,
+        result = run_sequence(resolve(renderer), sc, spp, list(range(seeds)), references, chosen, time_limit,
                               executor)
     written = write_sequence_results(out, result)
     report = write_sequence_report(out, sc.name, result.frame_rows, result.sequence_rows, result.images,
@@ -54,3 +56,20 @@ def sequence(
             f"ghosting {row['ghosting']:.3g}" if row["status"] == "ok" else f" ({row['reason']})"))
     info(f"wrote {', '.join(str(p) for p in written)} and {report}")
     raise typer.Exit(1 if any(r["status"] == "failed" for r in result.sequence_rows) else 0)
+
+
+def _frames(text: str | None, count: int) -> list[int]:
+    """The frames ``--frames`` names (:func:`cornell_harness.scenes.animation.frame_list`), every frame without
+    it; a usage error (exit 2) unless they are consecutive: flicker and lag compare each frame with the one before."""
+    from cornell_harness.scenes.animation import frame_list
+
+    if text is None:
+        return list(range(count))
+    try:
+        chosen = frame_list(text, count)
+    except ValueError as e:
+        raise typer.BadParameter(str(e), param_hint="--frames") from None
+    if chosen != list(range(chosen[0], chosen[-1] + 1)):
+        raise typer.BadParameter(f"{text!r}: the frames must be consecutive (A-B): flicker and lag compare each "
+                                 "frame with the one before", param_hint="--frames")
+    return chosen

@@ -130,7 +130,7 @@ _TABLE = (
        "reference's per-frame variance: sqrt(mean 2·(V_i + V_i−1)); a renderer's flicker cannot go below it",
        per_image=False),
     _m("lag", "lag (frames)", "frames after the scene's change (a motion ending, a switch) until the per-frame "
-       "RMSE is back in its steady band (mean ± 2 sd of the last third of the frames) for 3 frames", "low",
+       "mean ΔE00 is back in its steady band (mean ± 2 sd of the last third of the frames) for 3 frames", "low",
        "lag (frames)", per_image=False, temporal=True),
     _m("ghosting", "ghosting", "RMSE (linear radiance) over the pixels the motion uncovered (the disocclusion "
        "masks of the reference's motion), every frame", "low", "ghosting RMSE", per_image=False, temporal=True),
@@ -148,8 +148,10 @@ IMAGE_METRICS = tuple(k for k, m in METRICS.items() if m.per_image)
 #: Figures of a whole sequence against its per-frame references (:mod:`cornell_harness.evaluate.temporal`): what
 #: a gate budget on an animated scene may name besides the per-image metrics (then the mean over frames).
 TEMPORAL_METRICS = tuple(k for k, m in METRICS.items() if m.temporal)
-#: The per-frame error :data:`TEMPORAL_METRICS`' lag follows.
-LAG_METRIC = "rmse"
+#: The per-frame error :data:`TEMPORAL_METRICS`' lag follows: the mean ΔE00, display-encoded and so bounded per
+#: pixel. A linear RMSE at the low spp of real-time rendering is dominated by the emitter's aliased edges, whose
+#: error is the same in every frame and hides the recovery of the light on the walls.
+LAG_METRIC = "delta_e2000_mean"
 #: Per-image metrics a check computes unasked (``cbox compare-image`` with thresholds, :func:`check_metrics`): a
 #: pass or two over the pixels each, together under a tenth of one ΔE00 map's cost.
 CHEAP_METRICS = tuple(k for k, m in METRICS.items() if m.cheap)

@@ -53,8 +53,10 @@ probe update, its rays lit by frame i − 1's volume, blended with hysteresis h
 only): E_i = h · E_{i−1} + (1 − h) · T(E_{i−1}) per texel (``gamma_blending``
 off; on, the same lerp of E^(1/5)), T the one-bounce gather of their §4.1
 (irradiance texels from the rays' radiance, the reflected part of which
-reads E_{i−1}). Frame 0's black probes give one bounce; the infinite-bounce
-result is reached over frames. After a step change of the light, in a scene
+reads E_{i−1}). With ``warm_start`` (the default) frame 0's probes are a
+still render's, as if the scene had rested before the sequence; without,
+frame 0's black probes give one bounce and the infinite-bounce result is
+reached over frames. After a step change of the light, in a scene
 where T is E ↦ T₀ + ρ·E (a furnace of albedo ρ), the error left after k
 frames is λ^k of the step's with λ = h + (1 − h)·ρ: the hysteresis's h^k when
 nothing is reflected twice, slower with interreflection
@@ -123,6 +125,8 @@ class IrradianceProbes(ToolkitRenderer):
                 "(RTXGI's per-frame updates)", low=0, high=100_000),
         Setting("hysteresis", float, 0.97, "weight of a texel's old value in an 'ema' update (RTXGI "
                 "probeHysteresis 0.97)", low=0.0, high=0.999),
+        Setting("warm_start", bool, True, "sequences: frame 0's probes are a still render's (bounces, then "
+                "iterations), the scene at rest before it starts; false: black probes, one bounce in frame 0"),
         Setting("averaging", str, "ema", "temporal blend of the iterations: ema (RTXGI: lerp with the "
                 "hysteresis) or exact (the running mean, for a static scene)", choices=AVERAGING),
         Setting("irradiance_texels", int, 6, "octahedral irradiance texels per side, border excluded (RTXGI 6)",
@@ -194,7 +198,11 @@ def probe_frames(scene, seed: int, settings: dict, threads: int, count: int):
 
     The grid is frame 0's, fixed in the world as a DDGI volume is; frame i's update (old texels' weight
     :func:`sequence_weight`) draws from ``frame_seed(seed, i)``'s update 0 and lights its rays with frame i − 1's
-    volume: one bounce per frame (Majercik et al. 2019, §4).
+    volume: one bounce per frame (Majercik et al. 2019, §4). With ``warm_start`` frame 0's volume is instead a
+    still render's (:func:`update_probes` of frame 0's scene, from ``frame_seed(seed, 0)``), the scene having
+    rested before the sequence starts, and its update time is 0 (a pre-roll, not a frame's work): otherwise
+    a hysteresis of 0.97 takes about 1/(1 − λ) ≈ 50 frames to climb from black probes, longer than a short
+    sequence, and its lag after a change cannot be told from its warm-up.
     """
     grid, volume = None, None
     for i in range(count):
@@ -203,6 +211,10 @@ def probe_frames(scene, seed: int, settings: dict, threads: int, count: int):
             grid = grid_of(still, settings)
             geom, _ = warmed_geometry(still, lambda g, still=still: _warm_up(g, still, grid, settings))
             volume = volume_of(grid, settings)
+            if settings["warm_start"]:  # before the sequence starts, as a level's loading: no frame's time
+                volume = update_probes(geom, grid, frame_seed(seed, 0), settings, threads)
+                yield i, still, geom, volume, 0.0, 0.0
+                continue
         clock = Stopwatch()
         if i:
             geom = SceneGeometry(still)
