@@ -6,6 +6,7 @@ import numpy as np
 
 from cornell_harness.renderers.core.owen_table import POINTS, SETS, TABLE, set_point, table_1d, table_2d
 from cornell_harness.renderers.core.sobol import pixel_seed
+from tests.renderers.core.test_samplers import _is_net
 
 KEY = np.uint64(0x243F6A8885A308D3)
 
@@ -33,14 +34,6 @@ def _draw(seeds, indices, dim, two):
 
 def _seeds(n: int) -> np.ndarray:
     return np.array([pixel_seed(KEY, p) for p in range(n)], np.uint64)
-
-
-def _is_net(points: np.ndarray, m: int) -> bool:
-    for a in range(m + 1):
-        cells = np.floor(points[:, 0] * 2 ** a).astype(int) * 2 ** (m - a) + np.floor(points[:, 1] * 2 ** (m - a))
-        if np.unique(cells).size != 2 ** m:
-            return False
-    return True
 
 
 def test_the_table_is_the_computed_sequence():
