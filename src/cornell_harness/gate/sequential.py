@@ -164,7 +164,8 @@ def evaluate_sequential(exp: Expectation, rec: runner.RunRecord, ref: Reference,
         return evaluate(exp, rec, ref, cfg)
     d, seen, skipped = looks(exp, rec, ref, cfg, masks)
     last = seen[-1]
-    image = rec.image if last.spp == rec.spp else next(c.image for c in rec.checkpoints if c.spp == last.spp)
+    shot = next((c for c in rec.checkpoints if c.spp == last.spp), None)  # the look's own image and variance
+    image, variance = (rec.image, rec.variance) if shot is None else (shot.image, shot.variance)
     note = d.note(last.k, stopped=rec.spp == last.spp and last.spp < d.spps[-1])
     if last.verdict != CONTINUE and rec.spp > last.spp:
         note += f"; the renderer cannot stop early and rendered all {rec.spp} spp"
@@ -179,7 +180,7 @@ def evaluate_sequential(exp: Expectation, rec: runner.RunRecord, ref: Reference,
                         last.agreement.p_min, last.agreement.level))
     clean = metrics.zero_broken_pixels(image)
     checks.append(_variance(exp, rec, clean, ref, last.spp, d.other_level))
-    o = outliers.outlier_test(clean, None, ref.image, ref.variance, ref.noise, ref.spp, ref.noise_spp, last.spp,
+    o = outliers.outlier_test(clean, variance, ref.image, ref.variance, ref.noise, ref.spp, ref.noise_spp, last.spp,
                               d.other_level)
     checks.append(Check(exp.name, "outliers", o.passed, f"{o.message()} [at {last.spp} spp, level "
                         f"{d.other_level:.3g}: the outlier test's share of α over {len(d.spps)} looks]", o.worst,
