@@ -119,7 +119,7 @@ def _fake_render(wall_per_spp: float, cpu_per_spp: float | None):
     """A stand-in for the render path that records CPU time (as the capture of issue 30 adds it)."""
     import numpy as np
 
-    def render(entry, scene, spp, seed, checkpoints=()):
+    def render(entry, scene, spp, seed, checkpoints=(), stop=None):
         image = np.full((scene.camera.height, scene.camera.width, 3), 0.5, np.float32)
         result = RenderResult(image, OVERHEAD + wall_per_spp * spp, spp, seed)
         if cpu_per_spp is not None:
