@@ -53,13 +53,80 @@ def test_budget_choice_gives_the_spp_of_the_medians_and_an_interval_from_the_rou
 
 def test_calibration_rounds_are_interleaved_over_the_renderers(scene, log):
     """K rounds of (1 spp, 4 spp) per renderer run as A B A B ..., never A A A B B B: load that changes during
-    calibration then hits both alike. Jittery's clock spreads over the rounds, so its spp gets an interval."""
+    calibration then hits both alike. Jittery's clock spreads over the rounds, so its spp gets an interval.
+    28 spp need no probe (28 // 8 is not above 4); the progress still counts three per round and renderer, as
+    Comparison.renders does."""
     entries = resolve(["tests.user_renderers:Jittery", "tests.user_renderers:JitteryToo"])
-    choices = cmp.calibrate_time_budget(entries, scene, 2.0, 0, repeats=3)
+    labels = []
+    choices = cmp.calibrate_time_budget(entries, scene, 2.0, 0, repeats=3, on_render=labels.append)
     round_ = [("jittery", "1"), ("jittery", "4"), ("jittery-too", "1"), ("jittery-too", "4")]
     assert log() == round_ * 3
+    assert len(labels) == 3 * 3 * 2 and sum("probe not needed" in label for label in labels) == 3 * 2
     for choice in choices:
-        assert choice.spp == 28 and choice.spp_low <= 21 and choice.spp_high >= 36, choice
+        assert choice.spp == 28 and choice.fit_spp == (1, 4) and choice.spp_low <= 21 and choice.spp_high >= 36
+
+
+def test_the_probe_rounds_follow_the_first_ones_interleaved_and_the_line_through_4_spp_and_the_probe_decides(
+        scene, log):
+    """8 s buy Clocked's (8 - 0.25) / (1/16) = 124 spp by the 1- and 4-spp renders; the probe then renders 124 // 8
+    = 15 spp, in rounds interleaved over the renderers after the first ones, and the line through the median
+    4-spp and 15-spp times (Clocked's own, exact) buys the same 124. Jittery's clock (1, 1, 1.25 on the probe
+    rounds) spreads what each round buys around it."""
+    entries = resolve(["tests.user_renderers:Jittery", "tests.user_renderers:JitteryToo"])
+    choices = cmp.calibrate_time_budget(entries, scene, 8.0, 0, repeats=3)
+    first = [("jittery", "1"), ("jittery", "4"), ("jittery-too", "1"), ("jittery-too", "4")]
+    assert log() == first * 3 + [("jittery", "15"), ("jittery-too", "15")] * 3
+    for choice in choices:
+        assert (choice.spp, choice.fit_spp) == (124, (4, 15)) and choice.spp_low < 124 < choice.spp_high, choice
+    info = {}
+    choices[0].record_in(info, 8.0)
+    assert info["time_budget_fit_spp"] == [4, 15]
+
+
+def _cpu_clocked(cpu_of_spp):
+    """A stand-in for the render path whose CPU time is ``cpu_of_spp(spp)``, exactly; its wall time is three
+    times that and a second more (a budget spent in wall seconds would buy far fewer samples)."""
+    import numpy as np
+
+    def render(entry, scene, spp, seed, checkpoints=(), stop=None):
+        image = np.full((scene.camera.height, scene.camera.width, 3), 0.5, np.float32)
+        cpu = cpu_of_spp(spp)
+        result = RenderResult(image, 1.0 + 3.0 * cpu, spp, seed)
+        result.cpu_time_s = cpu
+        return result
+    return render
+
+
+def test_a_cpu_budget_of_a_renderer_with_a_fixed_cost_lands_within_it(scene, monkeypatch):
+    """CPU time 0.5 s + 1/16 s per spp (photon tracing inside the clock, then the camera pass), reported
+    exactly: 10 CPU seconds buy (10 - 0.5) · 16 = 152 spp, whose render takes the budget to the sample;
+    the probe was 152 // 8 = 19 spp."""
+    (entry,) = resolve(["tests.user_renderers:Jittery"])
+    monkeypatch.setattr(runner, "render_checked", _cpu_clocked(lambda spp: 0.5 + 0.0625 * spp))
+    (choice,) = cmp.calibrate_time_budget([entry], scene, 10.0, 0, repeats=3, basis="cpu")
+    assert (choice.spp, choice.fit_spp, choice.basis) == (152, (4, 19), "cpu")
+    assert choice.spp_low == choice.spp_high == 152
+    assert 10.0 - 0.0625 < 0.5 + 0.0625 * choice.spp <= 10.0
+
+
+def _passes(spp: int) -> int:
+    """Passes of doubling size (1, 1, 2, 4, ...) a render of ``spp`` samples takes."""
+    return 1 + max(0, math.ceil(math.log2(spp)))
+
+
+def test_a_cost_not_yet_linear_at_4_spp_is_extrapolated_from_the_probe(scene, monkeypatch):
+    """A fixed cost per pass of doubling size (20 ms; Mitsuba renders so) on top of 30 ms per spp: a 1- or
+    4-spp render is mostly pass cost, so the line through them alone (43 ms per spp) would buy 230 spp,
+    7.1 s of a 10 s budget (-29%); through 4 spp and the probe it lands within 10% of the budget, below it."""
+    def cpu(spp):
+        return 0.02 * _passes(spp) + 0.03 * spp
+
+    (entry,) = resolve(["tests.user_renderers:Jittery"])
+    monkeypatch.setattr(runner, "render_checked", _cpu_clocked(cpu))
+    (choice,) = cmp.calibrate_time_budget([entry], scene, 10.0, 0, repeats=1, basis="cpu")
+    without_probe = int(cmp.spp_for_calibration(cpu(1), cpu(4), 10.0))
+    assert without_probe == 230 and cpu(without_probe) < 0.75 * 10.0
+    assert choice.fit_spp == (4, without_probe // 8) and 0.9 * 10.0 <= cpu(choice.spp) <= 10.0
 
 
 def test_calibration_failure_is_that_renderers_alone(scene, log):

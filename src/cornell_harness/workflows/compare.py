@@ -26,29 +26,50 @@ from cornell_harness.store.references import Reference
 from cornell_harness.workflows import runner
 
 
-def spp_for_calibration(t1: float, t4: float, budget_s: float) -> float:
-    """The spp (not yet whole) that should take ``budget_s`` seconds, from a 1-spp and a 4-spp render's times.
+#: The spp of a time budget's first calibration renders: the line through their times is a first estimate of
+#: what the budget buys, which sizes the probe render (:data:`PROBE_FRACTION`).
+CALIBRATION_SPP = (1, 4)
+#: The probe render has this fraction of the first estimate's spp, and the spp the budget buys is the line
+#: through its time and the 4-spp render's. Renders of 1 and 4 spp take tens of ms, where a renderer's cost is
+#: not yet linear in spp (Mitsuba's per-pass cost) and a busy machine's noise is a large part of the time, so a
+#: line through them alone, extrapolated 100x, misses the budget (docs/timing.md, "How close the budget
+#: lands"); the probe takes about 1/8 of the budget, which keeps the extrapolation within 8x at 1/8 of the
+#: budget's cost per round.
+PROBE_FRACTION = 8
 
-    Per-render overhead (scene set-up) and per-sample cost are separated by
-    the two timings. Where the 1-spp render reads as long as the 4-spp one
+
+def spp_for_calibration(t_low: float, t_high: float, budget_s: float, spp_low: int = 1, spp_high: int = 4) -> float:
+    """The spp (not yet whole) that should take ``budget_s`` seconds, from the times of two renders, at ``spp_low``
+    and ``spp_high`` samples per pixel: the line time = overhead + cost·spp through them.
+
+    Per-render overhead (photon tracing, set-up inside the clock) and per-sample cost are separated by
+    the two timings. Where the smaller render reads as long as the larger
     (stalled by a busy machine: load only adds time), the difference says nothing
     about the per-sample cost (floored at 1e-9 s it gives ~10⁹ spp, a
-    render without end); t4 / 4 is then used, an upper bound on
+    render without end); ``t_high / spp_high`` is then used, an upper bound on
     the per-sample cost (the overhead is ≥ 0): fewer samples than the budget
     buys, never more.
     """
-    per_spp = (t4 - t1) / 3.0 if t4 > t1 else t4 / 4.0
+    per_spp = (t_high - t_low) / (spp_high - spp_low) if t_high > t_low else t_high / spp_high
     per_spp = max(per_spp, 1e-9)  # a renderer that reports no time at all
-    overhead = max(t4 - 4.0 * per_spp, 0.0)  # (4·t1 - t4) / 3 when t4 > t1; 0 in the fallback
+    overhead = max(t_high - spp_high * per_spp, 0.0)  # 0 in the fallback
     return max(1.0, (budget_s - overhead) / per_spp)
+
+
+def probe_spp(first_estimate: int) -> int | None:
+    """The probe render's spp (:data:`PROBE_FRACTION` of the first estimate), or None where the 4-spp render is
+    already within that fraction of the estimate, a short extrapolation that a probe would not shorten."""
+    spp = first_estimate // PROBE_FRACTION
+    return spp if spp > CALIBRATION_SPP[1] else None
 
 
 @dataclass
 class BudgetChoice:
     """The spp a time budget buys one renderer, from K rounds of calibration renders.
 
-    ``spp`` is :func:`spp_for_calibration` of the median 1-spp and median
-    4-spp times; ``spp_low`` / ``spp_high`` is the 95% interval
+    ``spp`` is :func:`spp_for_calibration` of the median times at the two
+    spp of ``fit_spp``: 4 spp and the probe's (:data:`PROBE_FRACTION`), or 1
+    and 4 spp where no probe was needed. ``spp_low`` / ``spp_high`` is the 95% interval
     (:func:`cornell_harness.evaluate.timing_stats.median_interval`) of what each
     round's own pair of renders would buy, the spread of the per-sample
     cost (and overhead) carried to spp, widened to hold ``spp``; None with
@@ -60,29 +81,35 @@ class BudgetChoice:
     spp_high: int | None
     samples: list[float]  # per round, the spp its two renders buy
     basis: str
+    fit_spp: tuple[int, int] = CALIBRATION_SPP
 
     def record_in(self, info: dict, budget_s: float) -> None:
         """The choice as a run's ``info`` (columns ``info_time_budget_s``, ``info_spp_low``, ...)."""
         info.update(time_budget_s=budget_s, time_budget_basis=self.basis, spp_low=self.spp_low,
-                    spp_high=self.spp_high, time_budget_spp_samples=[round(s, 2) for s in self.samples])
+                    spp_high=self.spp_high, time_budget_spp_samples=[round(s, 2) for s in self.samples],
+                    time_budget_fit_spp=list(self.fit_spp))
 
 
-def budget_choice(t1s: Sequence[float], t4s: Sequence[float], budget_s: float, basis: str = "wall") -> BudgetChoice:
-    """The spp ``budget_s`` buys, from K rounds' 1-spp and 4-spp timings (:class:`BudgetChoice`)."""
-    spp = int(spp_for_calibration(float(np.median(t1s)), float(np.median(t4s)), budget_s))
-    samples = [spp_for_calibration(a, b, budget_s) for a, b in zip(t1s, t4s)]
+def budget_choice(t_lows: Sequence[float], t_highs: Sequence[float], budget_s: float, basis: str = "wall",
+                  fit_spp: tuple[int, int] = CALIBRATION_SPP) -> BudgetChoice:
+    """The spp ``budget_s`` buys, from K rounds' timings at the two spp of ``fit_spp`` (:class:`BudgetChoice`)."""
+    spp = int(spp_for_calibration(float(np.median(t_lows)), float(np.median(t_highs)), budget_s, *fit_spp))
+    samples = [spp_for_calibration(a, b, budget_s, *fit_spp) for a, b in zip(t_lows, t_highs)]
     _, low, high = timing_stats.median_interval(samples)
     if math.isnan(low):
-        return BudgetChoice(spp, None, None, samples, basis)
-    return BudgetChoice(spp, max(1, math.floor(min(low, spp))), math.ceil(max(high, spp)), samples, basis)
+        return BudgetChoice(spp, None, None, samples, basis, fit_spp)
+    return BudgetChoice(spp, max(1, math.floor(min(low, spp))), math.ceil(max(high, spp)), samples, basis,
+                        fit_spp)
 
 
 def calibrate_time_budget(entries: Sequence[RendererEntry], scene: Scene, budget_s: float, seed: int,
                           repeats: int = 1, basis: str = "wall",
                           on_render: Callable[[str], None] | None = None) -> list[BudgetChoice | Exception]:
-    """Per entry, the spp ``budget_s`` buys (or the exception its calibration raised): two short timed renders
-    (1 and 4 spp) each, ``repeats`` rounds of them interleaved over the renderers (A1 A4 B1 B4, A1 A4 B1 B4,
-    ...), so that a change of load during calibration hits every renderer alike.
+    """Per entry, the spp ``budget_s`` buys (or the exception its calibration raised): ``repeats`` rounds of
+    two short timed renders (1 and 4 spp), then ``repeats`` rounds of one probe render at about 1/8 of the
+    budget (:data:`PROBE_FRACTION`, sized by the first renders), each round interleaved over the renderers
+    (A1 A4 B1 B4, A1 A4 B1 B4, ..., Ap Bp, Ap Bp, ...), so that a change of load during calibration hits every
+    renderer alike. The spp is the line through the median 4-spp and probe times (:func:`budget_choice`).
 
     ``basis`` "cpu" spends the budget in process CPU seconds (:func:`cornell_harness.workflows.runner.cpu_time`: the
     render proper's, or the whole call's for a renderer that measures none); "auto" spends it in CPU seconds
@@ -90,33 +117,43 @@ def calibrate_time_budget(entries: Sequence[RendererEntry], scene: Scene, budget
     other processes took cores the render's threads needed), else in wall seconds, every renderer alike; each
     choice's ``basis`` says which. The calibration renders are not
     counted in the budget; the final render's own time is what is reported. ``on_render(label)`` follows each
-    calibration render (progress).
+    calibration render, and each round's probe that was not needed (progress: three per round and renderer).
     """
-    timings: list[list[tuple[float, float]] | Exception] = [[] for _ in entries]
+    timings: list[dict[int, list[tuple[float, float]]] | Exception] = [{} for _ in entries]
     machine: list[dict] = []  # each calibration render's figures, for the auto basis
-    for round_ in range(repeats):
-        for i, entry in enumerate(entries):
-            if isinstance(timings[i], Exception):
-                continue
-            try:
-                for spp in (1, 4):
-                    result, timing = runner.render_timed(entry, scene, spp, seed)
-                    timings[i].append((float(result.time_s), runner.cpu_time(result, timing)))
-                    machine.append({**timing.as_dict(), "threads": runner.threads_of(result.info)})
-                    if on_render:
-                        on_render(f"{entry.name} calibration {spp} spp, round {round_ + 1}/{repeats}")
-            except Exception as e:  # recorded as the renderer's failure by the caller; the others go on
-                timings[i] = e
-    if basis == "auto":
-        basis = auto_basis(pd.DataFrame(machine), machine_cores()) if machine else "wall"
-    out: list[BudgetChoice | Exception] = []
-    for t in timings:
-        if isinstance(t, Exception):
-            out.append(t)
-            continue
-        seconds = [c if basis == "cpu" else w for w, c in t]
-        out.append(budget_choice(seconds[0::2], seconds[1::2], budget_s, basis))
-    return out
+
+    def rounds(spp_of: Callable[[int], Sequence[int]], skipped: str = "") -> None:
+        for round_ in range(repeats):
+            for i, entry in enumerate(entries):
+                if isinstance(timings[i], Exception):
+                    continue
+                if skipped and not spp_of(i) and on_render:
+                    on_render(f"{entry.name} calibration {skipped}, round {round_ + 1}/{repeats}")
+                try:
+                    for spp in spp_of(i):
+                        result, timing = runner.render_timed(entry, scene, spp, seed)
+                        timings[i].setdefault(spp, []).append((float(result.time_s), runner.cpu_time(result, timing)))
+                        machine.append({**timing.as_dict(), "threads": runner.threads_of(result.info)})
+                        if on_render:
+                            on_render(f"{entry.name} calibration {spp} spp, round {round_ + 1}/{repeats}")
+                except Exception as e:  # recorded as the renderer's failure by the caller; the others go on
+                    timings[i] = e
+
+    def clock() -> str:
+        return (auto_basis(pd.DataFrame(machine), machine_cores()) if machine else "wall") if basis == "auto" else basis
+
+    def choice(t: dict, spp: tuple[int, int], clock_: str) -> BudgetChoice:
+        low, high = ([c if clock_ == "cpu" else w for w, c in t[s]] for s in spp)
+        return budget_choice(low, high, budget_s, clock_, spp)
+
+    rounds(lambda i: CALIBRATION_SPP)
+    first = clock()
+    probes = [None if isinstance(t, Exception) else probe_spp(choice(t, CALIBRATION_SPP, first).spp)
+              for t in timings]
+    rounds(lambda i: (probes[i],) if probes[i] else (), skipped="probe not needed (4 spp is near the budget's)")
+    final = clock()
+    return [t if isinstance(t, Exception) else choice(t, (CALIBRATION_SPP[1], p) if p else CALIBRATION_SPP, final)
+            for t, p in zip(timings, probes)]
 
 
 def spp_for_time_budget(entry: RendererEntry, scene: Scene, budget_s: float, seed: int) -> int:
@@ -227,9 +264,10 @@ class Comparison:
 
     @property
     def renders(self) -> int:
-        """The renders it makes (a progress bar's length): the calibrations, one per renderer, the repeats."""
+        """The renders it makes (a progress bar's length): the calibrations (1 spp, 4 spp and a probe per round:
+        :func:`calibrate_time_budget`), one per renderer, the repeats."""
         runnable = sum(self.runnable)
-        calibrations = 2 * self.repeats * runnable if self.budget_s else 0
+        calibrations = 3 * self.repeats * runnable if self.budget_s else 0
         return calibrations + len(self.entries) + (self.repeats - 1) * runnable
 
 
