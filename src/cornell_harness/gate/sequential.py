@@ -179,7 +179,7 @@ def evaluate_sequential(exp: Expectation, rec: runner.RunRecord, ref: Reference,
     checks.append(Check(exp.name, "agreement", last.agreement.passed, f"{last.agreement.message()} [{note}]",
                         last.agreement.p_min, last.agreement.level))
     clean = metrics.zero_broken_pixels(image)
-    checks.append(_variance(exp, rec, clean, ref, last.spp, d.other_level))
+    checks.append(_variance(exp, variance, clean, ref, last.spp, d.other_level))
     o = outliers.outlier_test(clean, variance, ref.image, ref.variance, ref.noise, ref.spp, ref.noise_spp, last.spp,
                               d.other_level)
     checks.append(Check(exp.name, "outliers", o.passed, f"{o.message()} [at {last.spp} spp, level "
@@ -190,12 +190,13 @@ def evaluate_sequential(exp: Expectation, rec: runner.RunRecord, ref: Reference,
     return Outcome(exp, rec, checks, last.agreement, last.table)
 
 
-def _variance(exp: Expectation, rec: runner.RunRecord, clean, ref: Reference, spp: int, level: float) -> Check:
-    """The renderer's own variance at the stopping look, where it gave one there (its final image)."""
-    if rec.variance is None or rec.spp != spp:
-        return Check(exp.name, "variance", True, f"skipped: the renderer reports no variance at {spp} spp (a "
-                     "checkpoint carries none), so the other tests use the reference's noise model", skipped=True)
-    v = variance_check.variance_check(clean, rec.variance, ref.image, ref.variance, spp, level)
+def _variance(exp: Expectation, variance, clean, ref: Reference, spp: int, level: float) -> Check:
+    """The renderer's own variance at the stopping look (its checkpoint's, the same whether the render stopped
+    there or went on), where it gives one."""
+    if variance is None:
+        return Check(exp.name, "variance", True, f"skipped: the renderer reports no variance at {spp} spp, so the "
+                     "other tests use the reference's noise model", skipped=True)
+    v = variance_check.variance_check(clean, variance, ref.image, ref.variance, spp, level)
     return Check(exp.name, "variance", v.passed, f"{v.message()} [level {level:.3g}]", v.scale, None)
 
 
