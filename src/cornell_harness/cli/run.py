@@ -291,8 +291,8 @@ def demo(
     renderer: Optional[List[str]] = RenderersOpt,
     renderer_files: Optional[List[Path]] = RendererFilesOpt,
 ) -> None:
-    """What the tool is for, in about three minutes on 2 cores once scripts/setup.sh has compiled the kernels
-    (about four with cold caches; it prints its time): every available
+    """What the tool is for, in about four minutes on 2 cores once scripts/setup.sh has compiled the kernels
+    (it prints its time): every available
     renderer converging on cornell-box (error against spp and time, speed/accuracy, bias and variance) and compared on
     cornell-box-caustics (mirror and glass) → out/report.html, the caustics as a section of it, with the
     Whitted variants against the others per region in "Recursive ray tracing and its hacks"."""
