@@ -7,8 +7,7 @@ run by bash in that folder. A command must exit 0, unless the page follows it wi
 that shows (a command line is the key: a page repeats none with another code). The tests then check what each page says
 its commands make.
 
-The paper tutorial is marked ``slow`` (``pytest -m slow`` runs it): the other two keep this file's default run
-under about a minute and a half on 2 loaded cores.
+All three run in the default suite (CI runs them): about two minutes together on 2 loaded cores.
 """
 
 from __future__ import annotations
@@ -151,8 +150,6 @@ def test_gate_your_own_renderer(tmp_path):
 
 # --- a paper's figures and table -------------------------------------------------------------------------------
 
-@pytest.mark.slow  # about 45 s on a loaded 2-core machine; summary.tex's compile is in the default run
-# (tests/reports/test_summary_tex_fits.py)
 def test_paper_figures(tmp_path):
     """The experiment's tables and figures, relabelled without rendering, compile in a two-column article."""
     if shutil.which("pdflatex") is None:
