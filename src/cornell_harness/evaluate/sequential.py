@@ -69,6 +69,16 @@ def look_levels(fractions: Sequence[float], level: float, spending: str = SPENDI
     return out
 
 
+def doubling(first: int, last: int) -> list[int]:
+    """``first``, 2·``first``, 4·``first``, … below ``last``, then ``last``: a sequential gate's looks, and the
+    checkpoints of a slope."""
+    out, s = [], max(1, first)
+    while s < last:
+        out.append(s)
+        s *= 2
+    return out + [last]
+
+
 def fractions(spps: Sequence[int]) -> np.ndarray:
     """The information fraction n_k / n_K of each look at ``spps`` (increasing; the last is the budget)."""
     n = np.asarray(spps, np.float64)

@@ -18,6 +18,7 @@ import numpy as np
 from cornell_harness.evaluate import agreement, bias_extrapolation, convergence, metrics, outliers, variance_check
 from cornell_harness.evaluate.equivalence import FAIL, INCONCLUSIVE, PASS, interval_verdicts, resolving_half_width
 from cornell_harness.evaluate.registry import HIGHER_IS_BETTER
+from cornell_harness.evaluate.sequential import doubling
 from cornell_harness.evaluate.score import lookup, metric_value
 from cornell_harness.gate.config import Expectation, GateConfig
 from cornell_harness.gate.consistency import Consistency
@@ -124,15 +125,6 @@ def _regression_checks(exp: Expectation, m: dict, base: dict | str | None, cfg: 
                          f"{metric} = {v:.5g}, baseline {b:.5g} ({change:+.1%}; margin {cfg.regression_margin:.0%})",
                          v, limit))
     return out
-
-
-def doubling(first: int, last: int) -> list[int]:
-    """``first``, 2·``first``, 4·``first``, … below ``last``, then ``last``: the checkpoints of a slope."""
-    out, s = [], max(1, first)
-    while s < last:
-        out.append(s)
-        s *= 2
-    return out + [last]
 
 
 def _shots(rec: runner.RunRecord, first: int) -> tuple[list[int], dict]:
@@ -260,24 +252,26 @@ def three_way(exp: Expectation, name: str, ok: bool, message: str, value, limit)
     return Check(exp.name, name, exp.inconclusive == "pass", message, value, limit, inconclusive=True)
 
 
-def _variance_check(exp: Expectation, rec: runner.RunRecord, clean: np.ndarray, ref: Reference,
-                    alpha: float) -> Check:
-    """The renderer's own variance against its residuals (cornell_harness.evaluate.variance_check); skipped without one."""
-    if rec.variance is None:
+def variance_of_render_check(exp: Expectation, variance: np.ndarray | None, spp: int, clean: np.ndarray,
+                             ref: Reference, level: float, note: str) -> Check:
+    """The renderer's own ``variance`` of ``clean`` (at ``spp``) against its residuals, at ``level``
+    (cornell_harness.evaluate.variance_check); skipped without one. ``note`` ends its message (the level's
+    origin)."""
+    if variance is None:
         return Check(exp.name, "variance", True, "skipped: the renderer reports no variance, so the agreement and "
                      "outlier tests use the reference renderer's noise model, not a variance it could misstate"
-                     + _alpha_note(alpha), skipped=True)
-    v = variance_check.variance_check(clean, rec.variance, ref.image, ref.variance, rec.spp,
-                                      statistical_alpha(alpha))
-    return Check(exp.name, "variance", v.passed, v.message() + _alpha_note(alpha), v.scale, None)
+                     + note, skipped=True)
+    v = variance_check.variance_check(clean, variance, ref.image, ref.variance, spp, level)
+    return Check(exp.name, "variance", v.passed, v.message() + note, v.scale, None)
 
 
-def _outlier_check(exp: Expectation, rec: runner.RunRecord, clean: np.ndarray, ref: Reference,
-                   alpha: float) -> Check:
-    """One z-test per pixel, threshold calibrated on the reference's noise batch (cornell_harness.evaluate.outliers)."""
-    o = outliers.outlier_test(clean, rec.variance, ref.image, ref.variance, ref.noise, ref.spp, ref.noise_spp,
-                              rec.spp, statistical_alpha(alpha))
-    return Check(exp.name, "outliers", o.passed, o.message() + _alpha_note(alpha), o.worst, o.threshold.value)
+def outlier_check(exp: Expectation, variance: np.ndarray | None, spp: int, clean: np.ndarray, ref: Reference,
+                  level: float, note: str) -> Check:
+    """One z-test per pixel of ``clean`` (at ``spp``), threshold calibrated on the reference's noise batch, at
+    ``level`` (cornell_harness.evaluate.outliers); ``note`` ends its message."""
+    o = outliers.outlier_test(clean, variance, ref.image, ref.variance, ref.noise, ref.spp, ref.noise_spp, spp,
+                              level)
+    return Check(exp.name, "outliers", o.passed, o.message() + note, o.worst, o.threshold.value)
 
 
 def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateConfig,
@@ -313,8 +307,9 @@ def evaluate(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateC
                                          exp.tile, share, masks)
         checks.append(Check(exp.name, "agreement", agr.passed, agr.message() + _alpha_note(cfg.alpha),
                             agr.p_min, agr.level))
-        checks.append(_variance_check(exp, rec, clean, ref, cfg.alpha))
-        checks.append(_outlier_check(exp, rec, clean, ref, cfg.alpha))
+        level, note = statistical_alpha(cfg.alpha), _alpha_note(cfg.alpha)
+        checks.append(variance_of_render_check(exp, rec.variance, rec.spp, clean, ref, level, note))
+        checks.append(outlier_check(exp, rec.variance, rec.spp, clean, ref, level, note))
         table = bias_table(rec.image, rec.variance, rec.spp, ref, masks, cfg.alpha, exp.margins)
         if exp.margins is not None:
             checks.append(_equivalence_check(exp, table))

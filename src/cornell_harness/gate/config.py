@@ -79,7 +79,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cornell_harness.evaluate.sequential import SPENDING
+from cornell_harness.evaluate.sequential import SPENDING, doubling
 from cornell_harness.evaluate.registry import IMAGE_METRICS, TEMPORAL_METRICS, bound_problem, region_metric
 from cornell_harness.gate.config_fields import GateConfigError, band, check_metrics, check_names, duration
 from cornell_harness.gate.consistency import BiasLimit, Consistency, parse_bias_limit, parse_consistency
@@ -121,12 +121,7 @@ class Expectation:
 
     def looks(self) -> list[int]:
         """A sequential expectation's looks: first_spp (default max_spp // 16), doubling, up to max_spp."""
-        first = self.first_spp or max(1, self.max_spp // 16)
-        out, s = [], first
-        while s < self.max_spp:
-            out.append(s)
-            s *= 2
-        return out + [self.max_spp]
+        return doubling(self.first_spp or max(1, self.max_spp // 16), self.max_spp)
 
     @property
     def frames(self) -> bool:

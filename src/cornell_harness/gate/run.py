@@ -23,7 +23,8 @@ from cornell_harness.adapters.settings import SettingsError
 from cornell_harness.evaluate.regions import region_masks
 from cornell_harness.evaluate.registry import region_metric
 from cornell_harness.evaluate.score import metric_value
-from cornell_harness.gate.checks import Outcome, doubling, evaluate
+from cornell_harness.evaluate.sequential import doubling
+from cornell_harness.gate.checks import Outcome, evaluate
 from cornell_harness.gate.config import Expectation, GateConfig, GateConfigError
 from cornell_harness.gate.sequential import Design, StopRule, design, evaluate_sequential
 from cornell_harness.scenes.library import resolve_scene

@@ -44,10 +44,11 @@ from typing import Mapping
 
 import numpy as np
 
-from cornell_harness.evaluate import agreement, metrics, outliers, variance_check
+from cornell_harness.evaluate import agreement, metrics
 from cornell_harness.evaluate.equivalence import FAIL, INCONCLUSIVE, PASS
 from cornell_harness.evaluate.sequential import fractions, look_levels
-from cornell_harness.gate.checks import Check, Outcome, evaluate, statistical_alpha, three_way
+from cornell_harness.gate.checks import (Check, Outcome, evaluate, outlier_check, statistical_alpha, three_way,
+                                        variance_of_render_check)
 from cornell_harness.gate.config import Expectation, GateConfig
 from cornell_harness.gate.margins import BiasTable, Margins, bias_table, equivalence_message
 from cornell_harness.store.references import Reference
@@ -98,6 +99,8 @@ class Look:
     verdict: str
     agreement: agreement.Agreement
     table: BiasTable
+    image: np.ndarray  # what it looked at: the render after ``spp`` and its variance (None: none given)
+    variance: np.ndarray | None
 
 
 def look(image: np.ndarray, variance: np.ndarray | None, k: int, d: Design, ref: Reference,
@@ -111,7 +114,7 @@ def look(image: np.ndarray, variance: np.ndarray | None, k: int, d: Design, ref:
     verdict = FAIL if not agr.passed else PASS if not table.unresolved else CONTINUE
     if verdict == CONTINUE and k == len(d.spps) - 1:
         verdict = INCONCLUSIVE
-    return Look(k, spp, verdict, agr, table)
+    return Look(k, spp, verdict, agr, table, image, variance)
 
 
 @dataclass
@@ -132,10 +135,6 @@ class StopRule:
         result = look(checkpoint.image, checkpoint.variance, k, self.design, self.reference, self.masks, self.tile,
                       self.margins)
         return result.verdict in (PASS, FAIL)
-
-
-def stop_rule(exp: Expectation, cfg: GateConfig, ref: Reference, masks) -> StopRule:
-    return StopRule(design(exp, cfg), ref, masks, exp.tile, exp.margins)
 
 
 def looks(exp: Expectation, rec: runner.RunRecord, ref: Reference, cfg: GateConfig,
@@ -164,8 +163,6 @@ def evaluate_sequential(exp: Expectation, rec: runner.RunRecord, ref: Reference,
         return evaluate(exp, rec, ref, cfg)
     d, seen, skipped = looks(exp, rec, ref, cfg, masks)
     last = seen[-1]
-    shot = next((c for c in rec.checkpoints if c.spp == last.spp), None)  # the look's own image and variance
-    image, variance = (rec.image, rec.variance) if shot is None else (shot.image, shot.variance)
     note = d.note(last.k, stopped=rec.spp == last.spp and last.spp < d.spps[-1])
     if last.verdict != CONTINUE and rec.spp > last.spp:
         note += f"; the renderer cannot stop early and rendered all {rec.spp} spp"
@@ -173,31 +170,20 @@ def evaluate_sequential(exp: Expectation, rec: runner.RunRecord, ref: Reference,
         note += f"; no image at {', '.join(map(str, skipped))} spp: those looks skipped"
     rec.info["sequential"] = {"looks": [x.spp for x in seen], "verdict": last.verdict, "stop_spp": last.spp,
                               **_cost(rec, last.spp)}
-    bad = int(np.count_nonzero(~np.isfinite(image)))
+    bad = int(np.count_nonzero(~np.isfinite(last.image)))
     checks = [Check(exp.name, "finite", bad == 0, "no NaN or Inf pixel" if bad == 0 else
                     f"{bad} NaN or Inf values at {last.spp} spp", bad, 0)]
     checks.append(Check(exp.name, "agreement", last.agreement.passed, f"{last.agreement.message()} [{note}]",
                         last.agreement.p_min, last.agreement.level))
-    clean = metrics.zero_broken_pixels(image)
-    checks.append(_variance(exp, variance, clean, ref, last.spp, d.other_level))
-    o = outliers.outlier_test(clean, variance, ref.image, ref.variance, ref.noise, ref.spp, ref.noise_spp, last.spp,
-                              d.other_level)
-    checks.append(Check(exp.name, "outliers", o.passed, f"{o.message()} [at {last.spp} spp, level "
-                        f"{d.other_level:.3g}: the outlier test's share of α over {len(d.spps)} looks]", o.worst,
-                        o.threshold.value))
+    # Each at its share of α over the looks, with the stopping look's own variance (as the stop rule saw it).
+    clean = metrics.zero_broken_pixels(last.image)
+    share = (f" [at {last.spp} spp, level {d.other_level:.3g}: the test's share of α over {len(d.spps)} "
+             "looks]")
+    checks.append(variance_of_render_check(exp, last.variance, last.spp, clean, ref, d.other_level, share))
+    checks.append(outlier_check(exp, last.variance, last.spp, clean, ref, d.other_level, share))
     checks.append(three_way(exp, "equivalence", not last.table.unresolved,
                              f"{equivalence_message(last.table)} [{note}]", len(last.table.unresolved), 0))
     return Outcome(exp, rec, checks, last.agreement, last.table)
-
-
-def _variance(exp: Expectation, variance, clean, ref: Reference, spp: int, level: float) -> Check:
-    """The renderer's own variance at the stopping look (its checkpoint's, the same whether the render stopped
-    there or went on), where it gives one."""
-    if variance is None:
-        return Check(exp.name, "variance", True, f"skipped: the renderer reports no variance at {spp} spp, so the "
-                     "other tests use the reference's noise model", skipped=True)
-    v = variance_check.variance_check(clean, variance, ref.image, ref.variance, spp, level)
-    return Check(exp.name, "variance", v.passed, f"{v.message()} [level {level:.3g}]", v.scale, None)
 
 
 def _cost(rec: runner.RunRecord, spp: int) -> dict:
