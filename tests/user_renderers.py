@@ -230,6 +230,18 @@ class StopsNever(ProgressiveNoise):
         return super().render(scene, spp, seed, checkpoints)
 
 
+class UnderstatesItsResult(ProgressiveNoise):
+    """:class:`ProgressiveNoise` whose returned result reports a variance 4 times too small; its checkpoints
+    carry none, so only the result's variance can tell."""
+
+    name = "understates-its-result"
+
+    def render(self, scene, spp, seed, checkpoints=(), stop=None):
+        result = super().render(scene, spp, seed, checkpoints, stop)
+        result.variance = result.variance / 4
+        return result
+
+
 class BrokenPixels(FlatGrey):
     """Grey with one NaN, one +Inf and one negative pixel: what ``cbox stress`` must catch."""
 

@@ -101,6 +101,17 @@ def test_a_renderer_that_cannot_stop_gets_the_same_verdict_from_its_checkpoints(
                                                                  if c.name == "equivalence")
 
 
+def test_the_variance_the_result_reports_is_checked(tmp_path, monkeypatch):
+    """The stop rule saw no variance; the result's, 4 times too small, fails the variance check (z spread 2)."""
+    monkeypatch.delenv(user_renderers.ProgressiveNoise.BIAS_ENV, raising=False)
+    honest = _run(tmp_path, _expect())
+    lying = _run(tmp_path, _expect(renderer="tests.user_renderers:UnderstatesItsResult"))
+    checks = {o.record.renderer: next(c for c in o.checks if c.name == "variance") for o in (honest, lying)}
+    assert all(not c.skipped for c in checks.values())
+    assert checks[honest.record.renderer].passed, checks[honest.record.renderer].message
+    assert not checks[lying.record.renderer].passed and "the result's variance" in checks[lying.record.renderer].message
+
+
 def test_the_stop_rule_travels_to_the_sandbox(tmp_path, monkeypatch):
     monkeypatch.setenv(user_renderers.ProgressiveNoise.BIAS_ENV, "0.2")
     o = run_gate(load_config(_config(tmp_path, _expect(), head="")))[0]  # a spec: rendered in a child process

@@ -31,7 +31,9 @@ At look k, at n_k spp (information fraction t_k = n_k / max_spp):
 
 The variance and outlier tests are made once, at the look the gate stops at; which look that is depends on
 the data, so each runs at its share of ``alpha`` divided by the number of looks (Bonferroni over the looks
-it could have been). Every look takes the render's own variance at its spp where the checkpoint carries one
+it could have been). The variance test reads the stopping look's variance, which the stop rule relied on,
+and also the variance of the result the renderer returned where that is another (rendered past the look, or
+numbers its checkpoints did not show): what users read must be honest too. Every look takes the render's own variance at its spp where the checkpoint carries one
 (:class:`cornell_harness.adapters.api.Checkpoint`), floored at the reference's noise model as the fixed
 gate's is, else the model alone; the rule in the renderer's process and the gate's reading of the looks
 afterwards see the same checkpoints, so the same numbers.
@@ -179,11 +181,31 @@ def evaluate_sequential(exp: Expectation, rec: runner.RunRecord, ref: Reference,
     clean = metrics.zero_broken_pixels(last.image)
     share = (f" [at {last.spp} spp, level {d.other_level:.3g}: the test's share of α over {len(d.spps)} "
              "looks]")
-    checks.append(variance_of_render_check(exp, last.variance, last.spp, clean, ref, d.other_level, share))
+    checks.append(_variance_checks(exp, rec, last, clean, ref, d))
     checks.append(outlier_check(exp, last.variance, last.spp, clean, ref, d.other_level, share))
     checks.append(three_way(exp, "equivalence", not last.table.unresolved,
                              f"{equivalence_message(last.table)} [{note}]", len(last.table.unresolved), 0))
     return Outcome(exp, rec, checks, last.agreement, last.table)
+
+
+def _variance_checks(exp: Expectation, rec: runner.RunRecord, last: Look, clean: np.ndarray, ref: Reference,
+                     d: Design) -> Check:
+    """The variance check of the stopping look's variance (what the stop rule relied on) and, where the result
+    the renderer returned carries another (a later spp, or numbers its checkpoints did not show), of the
+    result's too: that is the variance users read. Two tests then share the variance test's level (Bonferroni);
+    the check fails when either does, with the failing test's message."""
+    shown = rec.variance is not None and not (
+        rec.spp == last.spp and last.variance is not None and np.array_equal(rec.variance, last.variance))
+    level = d.other_level / (2 if shown else 1)
+    share = (f" [at {{spp}} spp, level {level:.3g}: the test's share of α over {len(d.spps)} looks"
+             f"{' and the result' if shown else ''}]")
+    check = variance_of_render_check(exp, last.variance, last.spp, clean, ref, level,
+                                     share.format(spp=last.spp))
+    if not shown or not check.passed:
+        return check
+    result = variance_of_render_check(exp, rec.variance, rec.spp, metrics.zero_broken_pixels(rec.image), ref,
+                                      level, f" (the result's variance){share.format(spp=rec.spp)}")
+    return check if last.variance is not None and result.passed else result
 
 
 def _cost(rec: runner.RunRecord, spp: int) -> dict:
