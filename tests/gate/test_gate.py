@@ -30,6 +30,12 @@ def _config(tmp_path, body: str, head: str = "alpha = 0.01\n") -> str:
     return str(path)
 
 
+def config_error(path: str, field: str, words: str = ""):
+    """pytest.raises for the one-line config error of gate file ``path``: it starts ``path: field: `` and says
+    ``words``."""
+    return pytest.raises(GateConfigError, match="^" + re.escape(f"{path}: {field}: ") + ".*" + re.escape(words))
+
+
 # -- the statistical test ------------------------------------------------------------
 
 def test_sidak_level():
@@ -95,7 +101,7 @@ def test_agreement_rejects_what_it_cannot_evaluate():
 ])
 def test_bad_config_names_file_and_field(tmp_path, text, field):
     path = _config(tmp_path, text, head="")
-    with pytest.raises(GateConfigError, match="^" + re.escape(f"{path}: {field}: ")):
+    with config_error(path, field):
         load_config(path)
 
 

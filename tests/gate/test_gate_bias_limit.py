@@ -9,9 +9,9 @@ import re
 
 import pytest
 
-from cornell_harness.gate.config import GateConfigError, load_config
+from cornell_harness.gate.config import load_config
 from cornell_harness.gate.run import run_gate
-from tests.gate.test_gate import _config
+from tests.gate.test_gate import _config, config_error
 
 SEEDED = "tests.user_renderers:SeededShrinkingBias"
 
@@ -47,7 +47,7 @@ def _expect(extra: str, renderer: str = SEEDED, spp: int = 4) -> str:
 ])
 def test_bias_limit_config_errors(tmp_path, extra, field, words):
     path = _config(tmp_path, _expect(extra), head="")
-    with pytest.raises(GateConfigError, match="^" + re.escape(f"{path}: {field}: ") + ".*" + re.escape(words)):
+    with config_error(path, field, words):
         load_config(path)
 
 
@@ -70,7 +70,7 @@ def test_bias_limit_config_form(tmp_path):
 def test_bias_limit_resolve_errors(tmp_path, extra, field, words):
     """A setting the renderer lacks and a region the scene lacks fail before anything renders."""
     path = _config(tmp_path, _expect(extra))
-    with pytest.raises(GateConfigError, match="^" + re.escape(f"{path}: {field}: ") + ".*" + re.escape(words)):
+    with config_error(path, field, words):
         run_gate(load_config(path), sandbox=False)
 
 

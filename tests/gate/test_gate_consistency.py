@@ -6,15 +6,14 @@ Split from tests/gate/test_gate.py, whose helpers it uses, to keep each module n
 
 from __future__ import annotations
 
-import re
 
 import numpy as np
 import pytest
 
 from cornell_harness.gate.checks import evaluate
-from cornell_harness.gate.config import GateConfigError, load_config
+from cornell_harness.gate.config import load_config
 from cornell_harness.gate.run import run_gate
-from tests.gate.test_gate import _config
+from tests.gate.test_gate import _config, config_error
 
 
 def _expect(extra: str, renderer: str = "x", spp: int = 64, scene: str = "cornell-box") -> str:
@@ -47,7 +46,7 @@ def _expect(extra: str, renderer: str = "x", spp: int = 64, scene: str = "cornel
 ])
 def test_consistency_and_region_budget_config_errors(tmp_path, extra, field, words):
     path = _config(tmp_path, _expect(extra), head="")
-    with pytest.raises(GateConfigError, match="^" + re.escape(f"{path}: {field}: ") + ".*" + re.escape(words)):
+    with config_error(path, field, words):
         load_config(path)
 
 
@@ -157,8 +156,7 @@ def test_resolve_refuses_before_rendering(tmp_path, extra, renderer, field, word
     FlatGrey.calls = 0
     body = _expect("finite_only = true\n", "tests.user_renderers:FlatGrey") + _expect(extra, renderer)
     path = _config(tmp_path, body)
-    with pytest.raises(GateConfigError, match="^" + re.escape(f"{path}: {field.replace('[0]', '[1]')}: ")
-                       + ".*" + re.escape(words)):
+    with config_error(path, field.replace("[0]", "[1]"), words):
         run_gate(load_config(path), sandbox=False)
     assert FlatGrey.calls == 0
 

@@ -17,7 +17,7 @@ from cornell_harness.gate.checks import _bias_limit_checks
 from cornell_harness.gate.config import GateConfigError, load_config
 from cornell_harness.gate.run import run_gate
 from tests.conftest import ROOT, run_cbox
-from tests.gate.test_gate import _config
+from tests.gate.test_gate import _config, config_error
 
 CLEAN, SCALED = "tests.user_renderers:ScaledMitsubaNoise", "tests.user_renderers:RegionScaledNoise"
 
@@ -39,7 +39,7 @@ def _expect(extra: str, renderer: str = CLEAN, scene: str = "cornell-box", spp: 
 ])
 def test_margin_config_errors(tmp_path, extra, field, words):
     path = _config(tmp_path, _expect(extra), head="")
-    with pytest.raises(GateConfigError, match="^" + re.escape(f"{path}: {field}: ") + ".*" + re.escape(words)):
+    with config_error(path, field, words):
         load_config(path)
 
 

@@ -17,7 +17,7 @@ from cornell_harness.gate.config import GateConfigError, load_config
 from cornell_harness.gate.run import run_gate
 from cornell_harness.gate.sequential import design
 from tests import user_renderers
-from tests.gate.test_gate import _config
+from tests.gate.test_gate import _config, config_error
 
 PROGRESSIVE = "tests.user_renderers:ProgressiveNoise"
 BOX_MARGINS = ('margin = { image = 0.005, "region.walls" = 0.01, "region.boxes" = 0.01, "region.floor" = 0.01, '
@@ -38,7 +38,7 @@ def _expect(extra: str = BOX_MARGINS, renderer: str = PROGRESSIVE, scene: str = 
 ])
 def test_sequential_config_errors(tmp_path, extra, field, words):
     path = _config(tmp_path, _expect(extra), head="")
-    with pytest.raises(GateConfigError, match="^" + re.escape(f"{path}: {field}: ") + ".*" + re.escape(words)):
+    with config_error(path, field, words):
         load_config(path)
 
 
