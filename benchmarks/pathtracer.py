@@ -115,27 +115,30 @@ def ours(scene: Scene, spp: int, repeats: int, sampler: str) -> dict:
     return {"time_s": t, "paths_per_s": paths / t, "rays_per_s": rays / t, "rays_per_path": rays / paths}
 
 
-def time_per_path(scene: Scene, sampler: str, units: int) -> dict:
+def time_per_path(scene: Scene, sampler: str, units: int, clock=time.perf_counter) -> dict:
     """Where one thread's time per path goes (ns): the whole bounce loop (:func:`cornell_harness.renderers.pathtracer.trace_paths`,
     one work unit of 2^15 paths at a time), and Embree's queries alone, timed in :func:`_replay_queries`. The rest
-    is shading, sampling and the buffers. Medians over ``units`` consecutive units of one pass."""
+    is shading, sampling and the buffers. Medians over ``units`` consecutive units of one pass, on ``clock``
+    (seconds; :func:`time.thread_time` for the calling thread's CPU time, which a shared machine's waits leave
+    out: the kernels and Embree's calls run on that thread)."""
     cam = scene.camera
     pixels, m = cam.width * cam.height, 1 << 15
     stream = pass_stream(sampler, 0, 0, pixels, 0)
     geom, _ = warmed_geometry(scene, lambda g: trace_paths(g, scene, 0, 1, 1, independent(0)))
     whole, queries = [], []
     for k in range(units):
-        t0 = time.perf_counter()
+        t0 = clock()
         estimates = trace_paths(geom, scene, k * m, (k + 1) * m, pixels, stream)
-        whole.append(time.perf_counter() - t0)
-        replayed, spent = _replay_queries(geom, scene, k * m, m, pixels, stream)
+        whole.append(clock() - t0)
+        replayed, spent = _replay_queries(geom, scene, k * m, m, pixels, stream, clock)
         assert np.array_equal(estimates, replayed), "the replay no longer traces the kernel's rays"
         queries.append(spent)
     ns = {"whole": statistics.median(whole) / m * 1e9, "embree": statistics.median(queries) / m * 1e9}
     return {**ns, "rest": ns["whole"] - ns["embree"]}
 
 
-def _replay_queries(geom, scene: Scene, first: int, m: int, pixels: int, stream) -> tuple[np.ndarray, float]:
+def _replay_queries(geom, scene: Scene, first: int, m: int, pixels: int, stream,
+                    clock=time.perf_counter) -> tuple[np.ndarray, float]:
     """The estimates of paths ``first .. first + m - 1`` and the seconds spent in Embree's queries: a Python copy
     of :func:`cornell_harness.renderers.pathtracer._trace`'s loop (no spheres) that calls the same kernels, bounce by bounce, and
     times the two queries (called with plain arrays: their call costs ~1 µs). :func:`time_per_path` checks that
@@ -149,17 +152,17 @@ def _replay_queries(geom, scene: Scene, first: int, m: int, pixels: int, stream)
     n, depth, spent = m, 1, 0.0
     while n:
         prim = wf.prim[:n]
-        t0 = time.perf_counter()
+        t0 = clock()
         closest_triangles(geo.embree, cur.o32, cur.d32, prim, wf.record)
-        spent += time.perf_counter() - t0
+        spent += clock() - t0
         extend = scene.max_depth < 0 or depth + 1 <= scene.max_depth
         ns, n = pathtracer._shade(Hits(prim, wf.t_sphere[:n]), cur, stream, first, depth, extend, depth >= RR_DEPTH,
                                   geo, paths, pathtracer.Bounce(wf.shadow, nxt))
         if ns:
             visible = wf.visible[:ns]
-            t0 = time.perf_counter()
+            t0 = clock()
             segments_clear(geo.embree, wf.shadow.o, wf.shadow.d, wf.shadow.t, visible, wf.record)
-            spent += time.perf_counter() - t0
+            spent += clock() - t0
             add_unoccluded(L, wf.shadow, visible)
         cur, nxt = nxt, cur
         depth += 1
