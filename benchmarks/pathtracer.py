@@ -150,7 +150,7 @@ def _replay_queries(geom, scene: Scene, first: int, m: int, pixels: int, stream)
     while n:
         prim = wf.prim[:n]
         t0 = time.perf_counter()
-        closest_triangles(geo.embree, cur.o32, cur.d32, prim, wf.record)
+        closest_triangles(geo.embree, cur.o32, cur.d32, prim, wf.record, depth == 1)  # camera rays: coherent
         spent += time.perf_counter() - t0
         extend = scene.max_depth < 0 or depth + 1 <= scene.max_depth
         ns, n = pathtracer._shade(Hits(prim, wf.t_sphere[:n]), cur, stream, first, depth, extend, depth >= RR_DEPTH,
