@@ -333,7 +333,7 @@ def main() -> None:
         ctx["handle"] = embree.handle
         ctx["mitsuba"] = {b: MitsubaQuery(scene, *ctx["rays"][b], coherent=b == "camera") for b in BATCHES}
         ctx["variant"] = ctx["mitsuba"]["camera"].variant
-        _check_agreement(ctx, Path(tmp))
+        check_before_timing(ctx, Path(tmp))
         ctx["render"] = _mitsuba_render_scene(scene, a.spp)
         pathtracer_ns(scene.with_resolution(8, 8), 1, 1, 0)  # numba's cache loaded before the clock
         load0 = machine_load()
@@ -398,7 +398,7 @@ def check_coherent(handle: int, o: np.ndarray, d: np.ndarray, hits: dict) -> Non
     assert np.array_equal(prim, hits["robust", 16, 1][1]), "ours coherent names other triangles than C's"
 
 
-def _check_agreement(ctx: dict, tmp: Path) -> None:
+def check_before_timing(ctx: dict, tmp: Path) -> None:
     """Before timing: the floor answers what ours does, and Mitsuba the same distances (printed)."""
     for b in BATCHES:
         o, d = ctx["rays"][b]

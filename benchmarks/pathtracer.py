@@ -27,7 +27,7 @@ over raw rays/s. ``--markdown FILE`` (repeatable) writes (a)-(c), (d), (e) and (
 (``benchmarks/markdown_blocks.py``); (f) runs with (a)-(c), part ``abc``.
 Run (about 15 minutes on 2 cores):
 
-    .venv/bin/python benchmarks/pathtracer.py --spp 64 --repeats 5 --json --markdown BENCHMARKS.md
+    .venv/bin/python -m benchmarks.pathtracer --spp 64 --repeats 5 --json --markdown BENCHMARKS.md
 """
 
 from __future__ import annotations
@@ -35,7 +35,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shlex
 import statistics
+import sys
 import threading
 import time
 from pathlib import Path
@@ -44,8 +46,7 @@ import numpy as np
 
 import pandas as pd
 
-import markdown_blocks
-
+from benchmarks import markdown_blocks
 from cornell_harness.evaluate import metrics
 from cornell_harness.evaluate.convergence import time_to_target
 from cornell_harness.scenes.library import resolve_scene
@@ -59,11 +60,13 @@ from cornell_harness.renderers.core.geometry import Hits
 from cornell_harness.renderers.core.rays import add_unoccluded, wavefront
 from cornell_harness.renderers.core.roulette import RR_DEPTH
 from cornell_harness.renderers.core.sampler import SAMPLER_SETTING, SAMPLERS, independent, pass_stream
-from cornell_harness.adapters.api import default_threads
+from cornell_harness.adapters.api import default_threads, process_cpu_s
 from cornell_harness.cli.allocator import keep_freed_memory
 from cornell_harness.renderers.mitsuba3 import Mitsuba3, scene_dict
 from cornell_harness.renderers.pathtracer import PathTracer, trace_paths
 
+#: The command the blocks name (run as a module, so that other benchmarks can import this one).
+COMMAND = " ".join([".venv/bin/python -m benchmarks.pathtracer", *map(shlex.quote, sys.argv[1:])])
 RAW_BATCH = 1 << 17  # rays per embreex call in (a): large, its best case
 MITSUBA_SAMPLERS = ("independent", "multijitter", "ldsampler")
 #: Our renders of (d) and (e): each sampler with its default variance (pmj02 and sobol: 8 batches), and pmj02 as
@@ -115,27 +118,29 @@ def ours(scene: Scene, spp: int, repeats: int, sampler: str) -> dict:
     return {"time_s": t, "paths_per_s": paths / t, "rays_per_s": rays / t, "rays_per_path": rays / paths}
 
 
-def time_per_path(scene: Scene, sampler: str, units: int) -> dict:
+def time_per_path(scene: Scene, sampler: str, units: int, clock=time.perf_counter) -> dict:
     """Where one thread's time per path goes (ns): the whole bounce loop (:func:`cornell_harness.renderers.pathtracer.trace_paths`,
     one work unit of 2^15 paths at a time), and Embree's queries alone, timed in :func:`_replay_queries`. The rest
-    is shading, sampling and the buffers. Medians over ``units`` consecutive units of one pass."""
+    is shading, sampling and the buffers. Medians over ``units`` consecutive units of one pass, on ``clock``
+    (the wall clock; :func:`time.thread_time` for the thread's CPU time)."""
     cam = scene.camera
     pixels, m = cam.width * cam.height, 1 << 15
     stream = pass_stream(sampler, 0, 0, pixels, 0)
     geom, _ = warmed_geometry(scene, lambda g: trace_paths(g, scene, 0, 1, 1, independent(0)))
     whole, queries = [], []
     for k in range(units):
-        t0 = time.perf_counter()
+        t0 = clock()
         estimates = trace_paths(geom, scene, k * m, (k + 1) * m, pixels, stream)
-        whole.append(time.perf_counter() - t0)
-        replayed, spent = _replay_queries(geom, scene, k * m, m, pixels, stream)
+        whole.append(clock() - t0)
+        replayed, spent = _replay_queries(geom, scene, k * m, m, pixels, stream, clock)
         assert np.array_equal(estimates, replayed), "the replay no longer traces the kernel's rays"
         queries.append(spent)
     ns = {"whole": statistics.median(whole) / m * 1e9, "embree": statistics.median(queries) / m * 1e9}
     return {**ns, "rest": ns["whole"] - ns["embree"]}
 
 
-def _replay_queries(geom, scene: Scene, first: int, m: int, pixels: int, stream) -> tuple[np.ndarray, float]:
+def _replay_queries(geom, scene: Scene, first: int, m: int, pixels: int, stream,
+                    clock=time.perf_counter) -> tuple[np.ndarray, float]:
     """The estimates of paths ``first .. first + m - 1`` and the seconds spent in Embree's queries: a Python copy
     of :func:`cornell_harness.renderers.pathtracer._trace`'s loop (no spheres) that calls the same kernels, bounce by bounce, and
     times the two queries (called with plain arrays: their call costs ~1 µs). :func:`time_per_path` checks that
@@ -149,17 +154,17 @@ def _replay_queries(geom, scene: Scene, first: int, m: int, pixels: int, stream)
     n, depth, spent = m, 1, 0.0
     while n:
         prim = wf.prim[:n]
-        t0 = time.perf_counter()
+        t0 = clock()
         closest_triangles(geo.embree, cur.o32, cur.d32, prim, wf.record, depth == 1)  # camera rays: coherent
-        spent += time.perf_counter() - t0
+        spent += clock() - t0
         extend = scene.max_depth < 0 or depth + 1 <= scene.max_depth
         ns, n = pathtracer._shade(Hits(prim, wf.t_sphere[:n]), cur, stream, first, depth, extend, depth >= RR_DEPTH,
                                   geo, paths, pathtracer.Bounce(wf.shadow, nxt))
         if ns:
             visible = wf.visible[:ns]
-            t0 = time.perf_counter()
+            t0 = clock()
             segments_clear(geo.embree, wf.shadow.o, wf.shadow.d, wf.shadow.t, visible, wf.record)
-            spent += time.perf_counter() - t0
+            spent += clock() - t0
             add_unoccluded(L, wf.shadow, visible)
         cur, nxt = nxt, cur
         depth += 1
@@ -182,13 +187,14 @@ def breakdown_markdown(per_path: dict, mitsuba_paths_per_s: float, threads: int)
 
 
 def mitsuba(scene: Scene, spp: int, repeats: int) -> dict:
-    mi_scene = _mitsuba_scene(scene, spp, "independent")
-    t = statistics.median(_mitsuba_render(mi_scene, spp, k)[1] for k in range(repeats))
+    mi_scene = mitsuba_scene(scene, spp, "independent")
+    t = statistics.median(mitsuba_render(mi_scene, spp, k)[1] for k in range(repeats))
     return {"time_s": t, "paths_per_s": scene.camera.width * scene.camera.height * spp / t,
             "variant": Mitsuba3().variant()[0]}
 
 
-def _mitsuba_scene(scene: Scene, spp: int, sampler: str):
+def mitsuba_scene(scene: Scene, spp: int, sampler: str):
+    """The scene loaded in Mitsuba with ``sampler``, its kernels compiled by one render at ``spp``."""
     import mitsuba as mi
 
     Mitsuba3().variant()  # selects the variant
@@ -197,12 +203,13 @@ def _mitsuba_scene(scene: Scene, spp: int, sampler: str):
     return mi_scene
 
 
-def _mitsuba_render(mi_scene, spp: int, seed: int) -> tuple[np.ndarray, float]:
+def mitsuba_render(mi_scene, spp: int, seed: int) -> tuple[np.ndarray, float, float]:
+    """One render of a loaded Mitsuba scene: (image, wall seconds, CPU seconds of the process)."""
     import mitsuba as mi
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), process_cpu_s()
     img = np.asarray(mi.render(mi_scene, spp=spp, seed=seed), dtype=np.float64)  # asarray waits for the kernel
-    return img, time.perf_counter() - t0
+    return img, time.perf_counter() - t0, process_cpu_s() - c0
 
 
 def efficiency(scene: Scene, ref: np.ndarray, spp: int, seeds: int) -> dict:
@@ -214,9 +221,9 @@ def efficiency(scene: Scene, ref: np.ndarray, spp: int, seeds: int) -> dict:
         runs = [pt.render(scene, spp, seed, settings=settings) for seed in range(seeds)]
         out[f"ours {label}"] = _figures([np.mean((r.image - ref) ** 2) for r in runs], [r.time_s for r in runs])
     for sampler in MITSUBA_SAMPLERS:
-        mi_scene = _mitsuba_scene(scene, spp, sampler)
-        runs = [_mitsuba_render(mi_scene, spp, seed) for seed in range(seeds)]
-        out[f"mitsuba {sampler}"] = _figures([np.mean((img - ref) ** 2) for img, _ in runs], [t for _, t in runs])
+        mi_scene = mitsuba_scene(scene, spp, sampler)
+        runs = [mitsuba_render(mi_scene, spp, seed) for seed in range(seeds)]
+        out[f"mitsuba {sampler}"] = _figures([np.mean((img - ref) ** 2) for img, _, _ in runs], [t for _, t, _ in runs])
     return out
 
 
@@ -238,10 +245,10 @@ def time_to_delta_e(scene: Scene, ref: np.ndarray, ours: list[str], mitsuba_samp
         for seed in range(seeds):
             r = pt.render(scene, max_spp, seed, checkpoints=checkpoints, settings=OURS[label])
             rows += [(label, seed, c.time_s, metrics.delta_e2000(c.image, ref, exposure)) for c in r.checkpoints]
-    mi_scenes = {spp: _mitsuba_scene(scene, spp, mitsuba_sampler) for spp in spps}
+    mi_scenes = {spp: mitsuba_scene(scene, spp, mitsuba_sampler) for spp in spps}
     for seed in range(seeds):
         for spp in spps:
-            img, t = _mitsuba_render(mi_scenes[spp], spp, seed)
+            img, t, _ = mitsuba_render(mi_scenes[spp], spp, seed)
             rows.append(("mitsuba", seed, t, metrics.delta_e2000(img, ref, exposure)))
     df = pd.DataFrame(rows, columns=["who", "seed", "time_s", "delta_e"])
     return {who: time_to_target(df[df.who == who], "delta_e", target) for who in (*ours, "mitsuba")}
@@ -330,7 +337,7 @@ def main() -> None:
     if not {"d", "e"} & parts:
         if args.json:
             print(json.dumps(results, indent=1))
-        markdown_blocks.write_blocks(args.markdown, {k: "\n".join(v) for k, v in blocks.items()})
+        markdown_blocks.write_blocks(args.markdown, {k: "\n".join(v) for k, v in blocks.items()}, COMMAND)
         return
     ref = np.asarray(load_reference(base).image, dtype=np.float64)
     eff = efficiency(base, ref, args.efficiency_spp, args.seeds)  # (e) picks each side's best sampler from it
@@ -359,7 +366,7 @@ def main() -> None:
         + "."]
     if args.json:
         print(json.dumps(results, indent=1))
-    markdown_blocks.write_blocks(args.markdown, {k: "\n".join(v) for k, v in blocks.items()})
+    markdown_blocks.write_blocks(args.markdown, {k: "\n".join(v) for k, v in blocks.items()}, COMMAND)
 
 
 if __name__ == "__main__":
