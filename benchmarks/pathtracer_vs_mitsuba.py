@@ -20,7 +20,7 @@ time), on two clocks: CPU time (the process's; on a shared machine the cost of t
 (which adds the waits for a core). The machine's load is read before and after. ``--markdown FILE`` writes
 the block ``pathtracer_vs_mitsuba.py``.
 
-Run (about 6 minutes on 2 cores):
+Run (about 5 minutes of CPU time; 9 minutes on 2 cores shared with other jobs):
 
     .venv/bin/python -m benchmarks.pathtracer_vs_mitsuba --markdown BENCHMARKS.md
 """
