@@ -12,7 +12,8 @@ sampler, seed 0. Before any timing, :func:`check_agreement` checks that the C pr
 
 In the same run, on the same batches and thread counts:
 
-- ours: the toolkit's query (:func:`cornell_harness.renderers.core.embree.closest_triangles`, numba,
+- ours: the toolkit's query (:func:`cornell_harness.renderers.core.embree.closest_triangles`, numba), as
+  the path tracer asks it (camera rays: ``rtcIntersect16`` with the coherent flag; bounce rays:
   ``rtcIntersect8``), each thread a contiguous half of the batch;
 - Mitsuba: ``Scene.ray_intersect_preliminary`` (its query alone, no surface interaction) on the same rays
   moved into its unit frame (:func:`cornell_harness.scenes.transforms.unit_frame`), Dr.Jit's pool set to
@@ -72,6 +73,8 @@ BLOCK = "embree_floor.py"
 CONFIGS = tuple((scene, w, c) for scene in ("robust", "fast") for w, c in ((1, 0), (8, 0), (8, 1), (16, 0), (16, 1)))
 THREADS = (1, 2)
 BATCHES = ("camera", "bounce")
+#: The calls our query makes, as the path tracer asks it: camera rays coherent, bounce rays not.
+OURS_CALLS = "camera rays `rtcIntersect16`, coherent; bounce rays `rtcIntersect8`"
 #: tfar of a ray that hits nothing, in the C program's answers (the toolkit's closest-hit tfar).
 NO_HIT_TFAR = np.float32(1e37)
 
@@ -136,7 +139,7 @@ def ray_batches(scene: Scene, n: int, sampler: str = SAMPLER_SETTING.default) ->
     wf = wavefront(n, False)
     paths = pathtracer.Paths(np.zeros((n, 3)), np.zeros((0, 6)), np.ones(0, np.bool_))
     camera_rays(camera_basis(cam), cam.width, cam.height, 0, pixels, stream, wf.cur)
-    closest_triangles(geo.embree, wf.cur.o32, wf.cur.d32, wf.prim, wf.record)
+    closest_triangles(geo.embree, wf.cur.o32, wf.cur.d32, wf.prim, wf.record, True)  # as the path tracer's camera
     _, m = pathtracer._shade(Hits(wf.prim, wf.t_sphere), wf.cur, stream, 0, 1, True, 1 >= RR_DEPTH, geo, paths,
                              pathtracer.Bounce(wf.shadow, wf.nxt))
     return {"camera": (wf.cur.o32.copy(), wf.cur.d32.copy()), "bounce": (wf.nxt.o32[:m].copy(), wf.nxt.d32[:m].copy())}
@@ -162,11 +165,13 @@ def on_threads(n: int, threads: int, work) -> tuple[float, float]:
     return time.perf_counter() - t0, sum(cpu)
 
 
-def ours_query_ns(handle: int, o: np.ndarray, d: np.ndarray, threads: int) -> tuple[float, float]:
-    """(wall, CPU) ns per ray of the toolkit's closest-hit query on ``threads`` threads (a packet record each)."""
+def ours_query_ns(handle: int, o: np.ndarray, d: np.ndarray, threads: int,
+                  coherent: bool = False) -> tuple[float, float]:
+    """(wall, CPU) ns per ray of the toolkit's closest-hit query on ``threads`` threads (a packet record each);
+    ``coherent`` as the path tracer asks for its camera rays."""
     prim = np.empty(len(o), np.int32)
     wall, cpu = on_threads(len(o), threads, lambda a, b: closest_triangles(handle, o[a:b], d[a:b], prim[a:b],
-                                                                           ray_record()))
+                                                                           ray_record(), coherent))
     return wall / len(o) * 1e9, cpu / len(o) * 1e9
 
 
@@ -239,7 +244,7 @@ def one_round(ctx: dict, k: int) -> dict:
         out |= {("floor", batch, t, *config): ns for (*config, t), ns in floor.items()}
         o, d = ctx["rays"][batch]
         for t in THREADS:
-            out["ours", batch, t] = ours_query_ns(ctx["handle"], o, d, t)
+            out["ours", batch, t] = ours_query_ns(ctx["handle"], o, d, t, coherent=batch == "camera")
             out["mitsuba", batch, t] = ctx["mitsuba"][batch].ns(t)
     for t in THREADS:
         out["ours", "render", t], ctx["rays_per_path"] = pathtracer_ns(ctx["scene"], ctx["spp"], t, k)
@@ -280,7 +285,7 @@ def table(s: dict, ctx: dict, clock: str) -> list[str]:
              "| --- |" + " --- |" * len(cols)]
     lines += [f"| floor, {scene} scene: C, `rtcIntersect{w}`{', coherent' * c} | "
               + " | ".join(f"{ns['floor', b, t, scene, w, c]:.1f}" for b, t in cols) + " |" for scene, w, c in CONFIGS]
-    lines.append("| ours: `closest_triangles` (numba, `rtcIntersect8`) | "
+    lines.append(f"| ours: `closest_triangles` (numba; {OURS_CALLS}) | "
                  + " | ".join(cell(("ours", b, t)) for b, t in cols) + " |")
     lines.append(f"| Mitsuba `{ctx['variant']}` `ray_intersect_preliminary` | "
                  + " | ".join(cell(("mitsuba", b, t)) for b, t in cols) + " |")
@@ -328,7 +333,7 @@ def main() -> None:
         ctx["handle"] = embree.handle
         ctx["mitsuba"] = {b: MitsubaQuery(scene, *ctx["rays"][b], coherent=b == "camera") for b in BATCHES}
         ctx["variant"] = ctx["mitsuba"]["camera"].variant
-        _check_agreement(ctx, Path(tmp))
+        check_before_timing(ctx, Path(tmp))
         ctx["render"] = _mitsuba_render_scene(scene, a.spp)
         pathtracer_ns(scene.with_resolution(8, 8), 1, 1, 0)  # numba's cache loaded before the clock
         load0 = machine_load()
@@ -384,7 +389,16 @@ def check_agreement(scene: Scene, o: np.ndarray, d: np.ndarray, prim: np.ndarray
     return differ
 
 
-def _check_agreement(ctx: dict, tmp: Path) -> None:
+def check_coherent(handle: int, o: np.ndarray, d: np.ndarray, hits: dict) -> None:
+    """That our coherent query (camera rays, :data:`OURS_CALLS`) names the triangles the C program's coherent
+    ``rtcIntersect16`` names in the robust scene, on every ray: the same call on the same packets (one thread,
+    packets from the batch's first ray)."""
+    prim = np.empty(len(o), np.int32)
+    closest_triangles(handle, o, d, prim, ray_record(), True)
+    assert np.array_equal(prim, hits["robust", 16, 1][1]), "ours coherent names other triangles than C's"
+
+
+def check_before_timing(ctx: dict, tmp: Path) -> None:
     """Before timing: the floor answers what ours does, and Mitsuba the same distances (printed)."""
     for b in BATCHES:
         o, d = ctx["rays"][b]
@@ -393,6 +407,8 @@ def _check_agreement(ctx: dict, tmp: Path) -> None:
         prim = np.empty(len(o), np.int32)
         closest_triangles(ctx["handle"], o, d, prim, ray_record())
         differ = check_agreement(ctx["scene"], o, d, prim, hits)
+        if b == "camera":
+            check_coherent(ctx["handle"], o, d, hits)
         t = hits["robust", 1, 0][0].astype(np.float64)
         t[prim < 0] = np.inf
         mt = ctx["mitsuba"][b].t()

@@ -27,7 +27,7 @@ over raw rays/s. ``--markdown FILE`` (repeatable) writes (a)-(c), (d), (e) and (
 (``benchmarks/markdown_blocks.py``); (f) runs with (a)-(c), part ``abc``.
 Run (about 15 minutes on 2 cores):
 
-    .venv/bin/python benchmarks/pathtracer.py --spp 64 --repeats 5 --json --markdown BENCHMARKS.md
+    .venv/bin/python -m benchmarks.pathtracer --spp 64 --repeats 5 --json --markdown BENCHMARKS.md
 """
 
 from __future__ import annotations
@@ -35,7 +35,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shlex
 import statistics
+import sys
 import threading
 import time
 from pathlib import Path
@@ -44,8 +46,7 @@ import numpy as np
 
 import pandas as pd
 
-import markdown_blocks
-
+from benchmarks import markdown_blocks
 from cornell_harness.evaluate import metrics
 from cornell_harness.evaluate.convergence import time_to_target
 from cornell_harness.scenes.library import resolve_scene
@@ -59,11 +60,13 @@ from cornell_harness.renderers.core.geometry import Hits
 from cornell_harness.renderers.core.rays import add_unoccluded, wavefront
 from cornell_harness.renderers.core.roulette import RR_DEPTH
 from cornell_harness.renderers.core.sampler import SAMPLER_SETTING, SAMPLERS, independent, pass_stream
-from cornell_harness.adapters.api import default_threads
+from cornell_harness.adapters.api import default_threads, process_cpu_s
 from cornell_harness.cli.allocator import keep_freed_memory
 from cornell_harness.renderers.mitsuba3 import Mitsuba3, scene_dict
 from cornell_harness.renderers.pathtracer import PathTracer, trace_paths
 
+#: The command the blocks name (run as a module, so that other benchmarks can import this one).
+COMMAND = " ".join([".venv/bin/python -m benchmarks.pathtracer", *map(shlex.quote, sys.argv[1:])])
 RAW_BATCH = 1 << 17  # rays per embreex call in (a): large, its best case
 MITSUBA_SAMPLERS = ("independent", "multijitter", "ldsampler")
 #: Our renders of (d) and (e): each sampler with its default variance (pmj02 and sobol: 8 batches), and pmj02 as
@@ -153,7 +156,7 @@ def _replay_queries(geom, scene: Scene, first: int, m: int, pixels: int, stream,
     while n:
         prim = wf.prim[:n]
         t0 = clock()
-        closest_triangles(geo.embree, cur.o32, cur.d32, prim, wf.record)
+        closest_triangles(geo.embree, cur.o32, cur.d32, prim, wf.record, depth == 1)  # camera rays: coherent
         spent += clock() - t0
         extend = scene.max_depth < 0 or depth + 1 <= scene.max_depth
         ns, n = pathtracer._shade(Hits(prim, wf.t_sphere[:n]), cur, stream, first, depth, extend, depth >= RR_DEPTH,
@@ -185,13 +188,14 @@ def breakdown_markdown(per_path: dict, mitsuba_paths_per_s: float, threads: int)
 
 
 def mitsuba(scene: Scene, spp: int, repeats: int) -> dict:
-    mi_scene = _mitsuba_scene(scene, spp, "independent")
-    t = statistics.median(_mitsuba_render(mi_scene, spp, k)[1] for k in range(repeats))
+    mi_scene = mitsuba_scene(scene, spp, "independent")
+    t = statistics.median(mitsuba_render(mi_scene, spp, k)[1] for k in range(repeats))
     return {"time_s": t, "paths_per_s": scene.camera.width * scene.camera.height * spp / t,
             "variant": Mitsuba3().variant()[0]}
 
 
-def _mitsuba_scene(scene: Scene, spp: int, sampler: str):
+def mitsuba_scene(scene: Scene, spp: int, sampler: str):
+    """The scene loaded in Mitsuba with ``sampler``, its kernels compiled by one render at ``spp``."""
     import mitsuba as mi
 
     Mitsuba3().variant()  # selects the variant
@@ -200,12 +204,13 @@ def _mitsuba_scene(scene: Scene, spp: int, sampler: str):
     return mi_scene
 
 
-def _mitsuba_render(mi_scene, spp: int, seed: int) -> tuple[np.ndarray, float]:
+def mitsuba_render(mi_scene, spp: int, seed: int) -> tuple[np.ndarray, float, float]:
+    """One render of a loaded Mitsuba scene: (image, wall seconds, CPU seconds of the process)."""
     import mitsuba as mi
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), process_cpu_s()
     img = np.asarray(mi.render(mi_scene, spp=spp, seed=seed), dtype=np.float64)  # asarray waits for the kernel
-    return img, time.perf_counter() - t0
+    return img, time.perf_counter() - t0, process_cpu_s() - c0
 
 
 def efficiency(scene: Scene, ref: np.ndarray, spp: int, seeds: int) -> dict:
@@ -217,9 +222,9 @@ def efficiency(scene: Scene, ref: np.ndarray, spp: int, seeds: int) -> dict:
         runs = [pt.render(scene, spp, seed, settings=settings) for seed in range(seeds)]
         out[f"ours {label}"] = _figures([np.mean((r.image - ref) ** 2) for r in runs], [r.time_s for r in runs])
     for sampler in MITSUBA_SAMPLERS:
-        mi_scene = _mitsuba_scene(scene, spp, sampler)
-        runs = [_mitsuba_render(mi_scene, spp, seed) for seed in range(seeds)]
-        out[f"mitsuba {sampler}"] = _figures([np.mean((img - ref) ** 2) for img, _ in runs], [t for _, t in runs])
+        mi_scene = mitsuba_scene(scene, spp, sampler)
+        runs = [mitsuba_render(mi_scene, spp, seed) for seed in range(seeds)]
+        out[f"mitsuba {sampler}"] = _figures([np.mean((img - ref) ** 2) for img, _, _ in runs], [t for _, t, _ in runs])
     return out
 
 
@@ -241,10 +246,10 @@ def time_to_delta_e(scene: Scene, ref: np.ndarray, ours: list[str], mitsuba_samp
         for seed in range(seeds):
             r = pt.render(scene, max_spp, seed, checkpoints=checkpoints, settings=OURS[label])
             rows += [(label, seed, c.time_s, metrics.delta_e2000(c.image, ref, exposure)) for c in r.checkpoints]
-    mi_scenes = {spp: _mitsuba_scene(scene, spp, mitsuba_sampler) for spp in spps}
+    mi_scenes = {spp: mitsuba_scene(scene, spp, mitsuba_sampler) for spp in spps}
     for seed in range(seeds):
         for spp in spps:
-            img, t = _mitsuba_render(mi_scenes[spp], spp, seed)
+            img, t, _ = mitsuba_render(mi_scenes[spp], spp, seed)
             rows.append(("mitsuba", seed, t, metrics.delta_e2000(img, ref, exposure)))
     df = pd.DataFrame(rows, columns=["who", "seed", "time_s", "delta_e"])
     return {who: time_to_target(df[df.who == who], "delta_e", target) for who in (*ours, "mitsuba")}
@@ -333,7 +338,7 @@ def main() -> None:
     if not {"d", "e"} & parts:
         if args.json:
             print(json.dumps(results, indent=1))
-        markdown_blocks.write_blocks(args.markdown, {k: "\n".join(v) for k, v in blocks.items()})
+        markdown_blocks.write_blocks(args.markdown, {k: "\n".join(v) for k, v in blocks.items()}, COMMAND)
         return
     ref = np.asarray(load_reference(base).image, dtype=np.float64)
     eff = efficiency(base, ref, args.efficiency_spp, args.seeds)  # (e) picks each side's best sampler from it
@@ -362,7 +367,7 @@ def main() -> None:
         + "."]
     if args.json:
         print(json.dumps(results, indent=1))
-    markdown_blocks.write_blocks(args.markdown, {k: "\n".join(v) for k, v in blocks.items()})
+    markdown_blocks.write_blocks(args.markdown, {k: "\n".join(v) for k, v in blocks.items()}, COMMAND)
 
 
 if __name__ == "__main__":

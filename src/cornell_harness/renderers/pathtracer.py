@@ -255,13 +255,15 @@ def _trace(geo, plane, first, pixels, stream, depths, wf, paths):
     """The bounce loop of :func:`trace_paths`, one kernel per work unit: camera rays, then per bounce the
     closest hits, :func:`_shade`, and the shadow segments' queries, until no path is left. Returns the rays
     traced. One kernel because a kernel called from Python per bounce cost ~0.3 ms of argument typing
-    (:func:`cornell_harness.renderers.core.geometry.trace_closest`). ``depths``: (max_depth, rr_depth)."""
+    (:func:`cornell_harness.renderers.core.geometry.trace_closest`). ``depths``: (max_depth, rr_depth). The camera
+    rays (neighbouring pixels one after another) are asked of Embree as coherent rays, the bounces' not: the
+    flag is 2.5x faster on the first and ~1.4x slower on the others (BENCHMARKS.md, the Embree floor)."""
     max_depth, rr_depth = depths
     cur, nxt = wf.cur, wf.nxt  # double buffer: shade reads one wavefront, writes the next
     camera_rays(plane.basis, plane.width, plane.height, first, pixels, stream, cur)
     n, depth, traced = paths.L.shape[0], 1, 0  # live rays; segments so far, the current ray included
     while n:
-        hits = wavefront_hits(geo, wf, cur, n)
+        hits = wavefront_hits(geo, wf, cur, n, depth == 1)
         extend = max_depth < 0 or depth + 1 <= max_depth
         ns, n_next = _shade(hits, cur, stream, first, depth, extend, depth >= rr_depth, geo, paths,
                             Bounce(wf.shadow, nxt))

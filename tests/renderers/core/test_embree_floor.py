@@ -66,6 +66,18 @@ def test_the_c_program_hits_what_our_query_hits(floor):
         assert all(differ[c] == 0 for c in ef.CONFIGS if c[0] == "robust" and not c[2])
 
 
+def test_our_coherent_camera_query_is_the_c_programs_coherent_call(floor):
+    _, out = floor
+    o, d, _, _, hits = out["camera"]
+    embree = EmbreeScene(*ef.scene_arrays(resolve_scene("cornell-box")))
+    ef.check_coherent(embree.handle, o, d, hits)
+    wrong = dict(hits)
+    t, p = hits["robust", 16, 1]
+    wrong["robust", 16, 1] = (t, np.where(np.arange(len(p)) == np.flatnonzero(p >= 0)[0], p + 1, p))
+    with pytest.raises(AssertionError):
+        ef.check_coherent(embree.handle, o, d, wrong)
+
+
 @pytest.mark.parametrize("change", ["other triangle", "farther", "missed"])
 def test_the_agreement_check_rejects_other_answers(floor, change):
     scene, out = floor

@@ -1,4 +1,4 @@
-"""Embree 4's C API, called in 8-ray packets from numba kernels: every renderer's ray queries.
+"""Embree 4's C API, called in ray packets from numba kernels: every renderer's ray queries.
 
 A wavefront's rays (:mod:`cornell_harness.renderers.core.rays`) are answered by a numba
 loop over 8-ray packets (``rtcIntersect8``/``rtcOccluded8``; consecutive
@@ -9,6 +9,15 @@ rays 1.2x, later bounces 1.1x; identical hits). One ray at a time
 embreex; ``benchmarks/embree_direct.py`` times the packets on incoherent rays.
 A path-at-a-time megakernel calling the same functions between bounces was
 tried too and was slower than the wavefront (BENCHMARKS.md).
+
+Rays that travel together (a pinhole's camera rays, neighbouring pixels one after another) are asked as
+such (``closest_triangles(..., coherent=True)``): 16-ray packets (``rtcIntersect16``) with Embree's
+``RTC_RAY_QUERY_FLAG_COHERENT``, which Mitsuba 3 passes for its camera rays too. On camera rays that is
+2.5-3x faster than the default 8-wide call, and 1.4x faster than 8-wide coherent packets
+(``benchmarks/embree_floor.py``); on bounce rays the flag makes the query ~1.4x slower, so every other
+query keeps the default. The answer is the same triangle but where a ray meets an edge two triangles share
+at one distance (2 camera rays in a million on ``cornell-box``, each on the diagonal of one of its quads),
+and there it depends only on the packet's rays, which the work unit fixes, never the thread count.
 
 How it is wired:
 
@@ -25,10 +34,12 @@ How it is wired:
   once (Embree 4 API docs, ``rtcIntersect1``), so one scene serves every
   work unit; the kernels hold no GIL.
 - The ray structures are Embree 4's ``rtcore_ray.h`` packet layouts
-  (structures of arrays, 8 lanes per field), as 32-bit words of one array
-  per query batch (:func:`ray_record`, aligned as Embree requires): the ray
-  (org, tnear, dir, time, tfar, mask, id, flags), then the hit (Ng, u, v,
-  primID, geomID, instID, instPrimID), then the lanes' valid flags.
+  (structures of arrays, 8 or 16 lanes per field), as 32-bit words of one
+  array per query batch (:func:`ray_record`, aligned as Embree requires):
+  the ray (org, tnear, dir, time, tfar, mask, id, flags), then the hit (Ng,
+  u, v, primID, geomID, instID, instPrimID), then the lanes' valid flags;
+  at its end, the ``RTCIntersectArguments`` of a coherent query, written
+  once when the record is made (a call passes its address, nothing more).
   ``rtcOccluded8`` reads the ray and sets a blocked lane's tfar to -inf.
 
 Rays are float32 with tnear 0 and tfar 1e37, and the scene is robust, as
@@ -52,14 +63,23 @@ from cornell_harness.renderers.core.sampling import jit
 _GEOMETRY_TYPE_TRIANGLE, _BUFFER_TYPE_INDEX, _BUFFER_TYPE_VERTEX = 0, 0, 1
 _FORMAT_UINT3, _FORMAT_FLOAT3 = 0x5003, 0x9003
 _SCENE_FLAG_ROBUST = 1 << 2
+_RAY_QUERY_FLAG_COHERENT = 1 << 16
+_FEATURE_FLAG_ALL = 0xFFFFFFFF
 INVALID_ID = np.uint32(0xFFFFFFFF)
 #: Rays per query: Embree's 8-wide packets (rtcIntersect8/rtcOccluded8; AVX2).
 PACKET = 8
-#: Words of an RTCRayHit8 (structure of arrays: 12 ray fields, then Ng x/y/z, u, v, primID, geomID,
-#: instID, instPrimID, 8 lanes each), then the packet's 8 valid flags at word 192 (32-byte aligned).
-_PRIM_ID, _GEOM_ID, _VALID = 96 + 5 * PACKET, 96 + 6 * PACKET, 192
-_TNEAR, _TFAR, _MASK = 3 * PACKET, 8 * PACKET, 9 * PACKET
-RECORD_WORDS = _VALID + PACKET
+#: Rays per coherent query: 16-wide packets (rtcIntersect16; native with AVX-512, which every machine measured has).
+COHERENT_PACKET = 16
+#: Fields of an RTCRayHitN (structure of arrays, N lanes each: org x/y/z, tnear, dir x/y/z, time, tfar, mask,
+#: id, flags, then Ng x/y/z, u, v, primID, geomID, instID, instPrimID); the N valid flags follow at word
+#: _FIELDS·N (32- or 64-byte aligned), and the coherent query's RTCIntersectArguments after the 16 valid flags.
+_FIELDS = 24
+_TNEAR, _TFAR, _MASK, _PRIM_ID, _GEOM_ID = 3, 8, 9, 17, 18
+_ARGS = _FIELDS * COHERENT_PACKET + COHERENT_PACKET
+#: RTCIntersectArguments: flags, feature_mask, then the context, filter and intersect pointers (null: Embree's
+#: defaults), and minWidthDistanceFactor in builds with RTC_MIN_WIDTH; 48 bytes, 16-byte aligned.
+_ARGS_WORDS = 12
+RECORD_WORDS = _ARGS + _ARGS_WORDS
 _ALIGN = 64
 #: tfar of a closest-hit query: embreex's, so both ask Embree exactly the same question.
 _NO_TFAR = np.float32(1e37)
@@ -105,6 +125,7 @@ except (ImportError, OSError):
     pass  # no kernel here can run; ToolkitRenderer.unavailable_reason says why
 _signature = types.void(types.uintp, types.uintp, types.uintp, types.uintp)  # (valid, scene, rays, arguments)
 _intersect8 = types.ExternalFunction("rtcIntersect8", _signature)
+_intersect16 = types.ExternalFunction("rtcIntersect16", _signature)
 _occluded8 = types.ExternalFunction("rtcOccluded8", _signature)
 
 
@@ -137,51 +158,62 @@ class EmbreeScene:
 
 
 def ray_record() -> np.ndarray:
-    """A zeroed RTCRayHit8 and its valid flags (uint32 words), 64-byte aligned: one per query batch."""
+    """A zeroed ray-packet record (uint32 words), 64-byte aligned, its coherent query's arguments filled in: one
+    per query batch, for packets of either width."""
     buf = np.zeros(RECORD_WORDS + _ALIGN // 4, np.uint32)
     k = (-buf.ctypes.data % _ALIGN) // 4
-    return buf[k:k + RECORD_WORDS]
+    rec = buf[k:k + RECORD_WORDS]
+    rec[_ARGS], rec[_ARGS + 1] = _RAY_QUERY_FLAG_COHERENT, _FEATURE_FLAG_ALL
+    return rec
 
 
 @jit
-def _fill_packet(rec, f, o, d, first, n):
-    """Rays first .. first+n-1 (n ≤ 8) into the packet's lanes, all but tfar; the other lanes invalid."""
-    for k in range(PACKET):
+def _fill_packet(rec, f, o, d, first, n, w):
+    """Rays first .. first+n-1 (n ≤ w) into the lanes of a ``w``-wide packet, all but tfar; the other lanes
+    invalid."""
+    valid = _FIELDS * w
+    for k in range(w):
         if k < n:
             i = first + k
-            f[k], f[PACKET + k], f[2 * PACKET + k], f[_TNEAR + k] = o[i, 0], o[i, 1], o[i, 2], np.float32(0.0)
-            f[4 * PACKET + k], f[5 * PACKET + k], f[6 * PACKET + k] = d[i, 0], d[i, 1], d[i, 2]
-            f[7 * PACKET + k] = np.float32(0.0)  # time
-            rec[_MASK + k], rec[_MASK + PACKET + k], rec[_MASK + 2 * PACKET + k] = INVALID_ID, 0, 0  # mask, id, flags
-            rec[_VALID + k] = INVALID_ID  # -1: a valid lane
+            f[k], f[w + k], f[2 * w + k], f[_TNEAR * w + k] = o[i, 0], o[i, 1], o[i, 2], np.float32(0.0)
+            f[4 * w + k], f[5 * w + k], f[6 * w + k] = d[i, 0], d[i, 1], d[i, 2]
+            f[7 * w + k] = np.float32(0.0)  # time
+            rec[_MASK * w + k], rec[(_MASK + 1) * w + k], rec[(_MASK + 2) * w + k] = INVALID_ID, 0, 0  # mask, id, flags
+            rec[valid + k] = INVALID_ID  # -1: a valid lane
         else:
-            rec[_VALID + k] = 0
+            rec[valid + k] = 0
 
 
 @jit
-def closest_triangles(scene, o, d, prim, rec):
-    """``prim[i]``: id of the triangle ray i (float32 o, d; t > 0) hits first, -1 for none."""
+def closest_triangles(scene, o, d, prim, rec, coherent=False):
+    """``prim[i]``: id of the triangle ray i (float32 o, d; t > 0) hits first, -1 for none. ``coherent``: the
+    rays travel together, one after another (camera rays): 16-wide packets with Embree's coherent flag."""
+    w = COHERENT_PACKET if coherent else PACKET
     f = rec.view(np.float32)
-    for first in range(0, prim.size, PACKET):
-        n = min(PACKET, prim.size - first)
-        _fill_packet(rec, f, o, d, first, n)
-        for k in range(PACKET):
-            f[_TFAR + k] = _NO_TFAR
-            rec[_GEOM_ID + k] = INVALID_ID
-        _intersect8(rec[_VALID:].ctypes.data, scene, rec.ctypes.data, 0)  # 0: default RTCIntersectArguments
+    for first in range(0, prim.size, w):
+        n = min(w, prim.size - first)
+        _fill_packet(rec, f, o, d, first, n, w)
+        for k in range(w):
+            f[_TFAR * w + k] = _NO_TFAR
+            rec[_GEOM_ID * w + k] = INVALID_ID
+        if coherent:
+            _intersect16(rec[_FIELDS * w:].ctypes.data, scene, rec.ctypes.data, rec[_ARGS:].ctypes.data)
+        else:
+            _intersect8(rec[_FIELDS * w:].ctypes.data, scene, rec.ctypes.data, 0)  # 0: default arguments
         for k in range(n):
-            prim[first + k] = -1 if rec[_GEOM_ID + k] == INVALID_ID else np.int32(rec[_PRIM_ID + k])
+            prim[first + k] = -1 if rec[_GEOM_ID * w + k] == INVALID_ID else np.int32(rec[_PRIM_ID * w + k])
 
 
 @jit
 def segments_clear(scene, o, d, tfar, clear, rec):
     """``clear[k]``: no triangle lies on o + t·d for t in (0, tfar[k]) (float32 segments)."""
+    w = PACKET
     f = rec.view(np.float32)
-    for first in range(0, clear.size, PACKET):
-        n = min(PACKET, clear.size - first)
-        _fill_packet(rec, f, o, d, first, n)
+    for first in range(0, clear.size, w):
+        n = min(w, clear.size - first)
+        _fill_packet(rec, f, o, d, first, n, w)
         for k in range(n):
-            f[_TFAR + k] = tfar[first + k]
-        _occluded8(rec[_VALID:].ctypes.data, scene, rec.ctypes.data, 0)
+            f[_TFAR * w + k] = tfar[first + k]
+        _occluded8(rec[_FIELDS * w:].ctypes.data, scene, rec.ctypes.data, 0)
         for k in range(n):
-            clear[first + k] = not f[_TFAR + k] < 0.0  # Embree writes -inf into tfar on a hit
+            clear[first + k] = not f[_TFAR * w + k] < 0.0  # Embree writes -inf into tfar on a hit

@@ -245,28 +245,30 @@ def _nearer_spheres(prim, o, d, g, t):
 
 
 @jit
-def trace_closest(g, rays, prim, t_sphere, rec):
+def trace_closest(g, rays, prim, t_sphere, rec, coherent=False):
     """:meth:`SceneGeometry.closest_hits` inside a kernel, for rays 0 .. ``prim.size`` - 1 of the
     :class:`cornell_harness.renderers.core.rays.RayBuffer` ``rays``: primitive ids into ``prim`` (-1: miss), sphere hits'
     distances into ``t_sphere`` (as long as ``prim``; empty in a scene without spheres). ``rec``:
-    :func:`cornell_harness.renderers.core.embree.ray_record`.
+    :func:`cornell_harness.renderers.core.embree.ray_record`. ``coherent``: camera rays, asked of Embree as
+    rays that travel together (:func:`cornell_harness.renderers.core.embree.closest_triangles`).
 
     A renderer whose bounce loop is a kernel calls this instead of the method: each call of a kernel from
     Python costs ~0.3 ms of numba's argument typing when it takes the scene's tables (a named tuple of arrays),
     which was a fifth of the path tracer's time (BENCHMARKS.md).
     """
-    closest_triangles(g.embree, rays.o32, rays.d32, prim, rec)
+    closest_triangles(g.embree, rays.o32, rays.d32, prim, rec, coherent)
     if g.sphere_radius.size > 0:
         _nearer_spheres(prim, rays.o, rays.d, g, t_sphere)
 
 
 @jit
-def wavefront_hits(g, wf, rays, n):
+def wavefront_hits(g, wf, rays, n, coherent=False):
     """The closest hits of rays 0 .. ``n`` - 1 of ``rays`` (``wf.cur`` or ``wf.nxt`` of the
     :class:`cornell_harness.renderers.core.rays.Wavefront` ``wf``), into ``wf``'s hit buffers: :func:`trace_closest`, as a
-    :class:`Hits` of views. The first step of every bounce of a bounce loop that is one kernel."""
+    :class:`Hits` of views. The first step of every bounce of a bounce loop that is one kernel; ``coherent``
+    for its camera rays."""
     hits = Hits(wf.prim[:n], wf.t_sphere[:n])
-    trace_closest(g, rays, hits.prim, hits.t_sphere, wf.record)
+    trace_closest(g, rays, hits.prim, hits.t_sphere, wf.record, coherent)
     return hits
 
 
