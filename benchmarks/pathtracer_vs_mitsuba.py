@@ -8,7 +8,9 @@ seconds apart on this shared machine, and round k renders seed k. In a round:
   first-bounce rays of our path tracer, and ours and Mitsuba's closest-hit queries on the same rays, ours as
   the path tracer asks them (camera rays coherent), Mitsuba's with its camera's coherent flag;
 - whole renders at 256 spp: ours with the default sampler and with ``pmj02table`` (each with its default
-  variance), Mitsuba 3's ``path`` with ``multijitter`` and ``independent``, alternated; each renderer was
+  variance), Mitsuba 3's ``path`` with ``multijitter`` and ``independent``, alternated, then ours again with
+  ``variance = none`` (one randomisation a pixel and no variance reported, as Mitsuba's samplers: the
+  like-for-like efficiency; the default's 8 randomisations are the price of the gate's z-test); each renderer was
   warmed first (numba's kernels loaded, Mitsuba's compiled). Each gives paths/s, ns per ray traced (ours:
   the closest-hit and shadow rays it counts; Mitsuba counts none, so its paths times our rays per path)
   and its squared error against the stored reference;
@@ -55,6 +57,8 @@ THREADS = 2
 #: Our samplers (each with its default variance), the default first; Mitsuba's, its best first.
 OURS = (SAMPLER_SETTING.default, "pmj02table")
 MITSUBA = ("multijitter", "independent")
+#: The label of our renders with ``variance = none`` (after the sampler's name).
+NO_VARIANCE = "variance=none"
 #: Work units of 2^15 paths per round in the breakdown of our bounce loop.
 UNITS = 6
 
@@ -74,7 +78,8 @@ def setup(scene: Scene, spp: int, rays: int, tmp: Path) -> dict:
     floor.check_before_timing(ctx, tmp)
     ctx["ours"] = PathTracer(threads=THREADS)
     for sampler in OURS:
-        ctx["ours"].render(scene.with_resolution(8, 8), 1, 0, settings={"sampler": sampler})  # numba's kernels
+        for variance in ("batches", "none"):  # numba's kernels
+            ctx["ours"].render(scene.with_resolution(8, 8), 1, 0, settings={"sampler": sampler, "variance": variance})
     ctx["mitsuba_scenes"] = {s: pt_bench.mitsuba_scene(scene, spp, s) for s in MITSUBA}  # Mitsuba's kernels
     return ctx
 
@@ -104,6 +109,10 @@ def one_round(ctx: dict, seed: int) -> dict:
         out["render", "ours", ours] = (r.time_s, r.cpu_time_s, float(np.mean((r.image - ref) ** 2)), r.info["rays"])
         img, wall, cpu = pt_bench.mitsuba_render(ctx["mitsuba_scenes"][theirs], spp, seed)
         out["render", "mitsuba", theirs] = (wall, cpu, float(np.mean((img - ref) ** 2)), None)
+    for ours in OURS:
+        r = ctx["ours"].render(scene, spp, seed, settings={"sampler": ours, "variance": "none"})
+        out["render", "ours", f"{ours} {NO_VARIANCE}"] = (r.time_s, r.cpu_time_s, float(np.mean((r.image - ref) ** 2)),
+                                                         r.info["rays"])
     for sampler in OURS:
         out["loop", sampler] = pt_bench.time_per_path(scene, sampler, UNITS, clock=time.thread_time)
     return out
