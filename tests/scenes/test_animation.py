@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import MINIMAL_SCENE, cbox_in_process
-from cornell_harness.scenes.animation import frame_list
+from cornell_harness.scenes.animation import frame_list, reference_still
 from cornell_harness.scenes.export import export_scene, refusal
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.loader import load_scene
@@ -104,6 +104,53 @@ def test_length_scale_scales_the_tracks(write_scene):
 def test_with_resolution_keeps_the_frames_at_it(write_scene):
     small = load_scene(write_scene(ANIMATED)).with_resolution(4, 2)
     assert (small.at_frame(5).camera.width, small.at_frame(5).camera.height) == (4, 2)
+
+
+#: The minimal scene with rests: the light slides by 0.2 over frames 0-2, rests, goes off at 5 and on at 7 where it
+#: was; the camera stays. ``MOVED`` (replaced by keys, or nothing) can move it while it is off.
+RESTING = MINIMAL_SCENE + """
+[animation]
+frames = 10
+fps = 24
+objects = { light = [{ frame = 0, translate = [0, 0, 0] }, { frame = 2, translate = [0.2, 0, 0] }MOVED] }
+switches = [{ object = "light", frame = 5, on = false }, { object = "light", frame = 7, on = true }]
+"""
+
+
+@pytest.mark.parametrize("moved, expected", [
+    ("", [0, 1, 2, 2, 2, 5, 5, 2, 2, 2]),  # a rest shares; back on where it was: the frames before it went off
+    (", { frame = 5, translate = [0.2, 0, 0] }, { frame = 6, translate = [0.4, 0, 0] }",
+     [0, 1, 2, 2, 2, 5, 6, 7, 7, 7]),  # moved while off: back on elsewhere, a state of its own
+])
+def test_frames_at_one_state_share_the_earliest_ones_reference(write_scene, moved, expected):
+    scene = load_scene(write_scene(RESTING.replace("MOVED", moved)))
+    assert [scene.animation.reference_frame(i) for i in range(10)] == expected
+    assert scene.animation.reference_frames() == sorted(set(expected))
+    for i, j in enumerate(expected):
+        frame = scene.at_frame(i)
+        assert (frame.frame, frame.reference_frame) == (i, j)
+        shared = reference_still(frame)
+        assert shared.frame == j and shared.content_hash() == scene.at_frame(j).content_hash()
+        assert (frame.content_hash() == shared.content_hash()) == (i == j)  # every frame still hashes apart
+    off = [i for i in range(10) if not scene.animation.light_on("light", i)]
+    assert off == [5, 6] and all(expected[i] not in (0, 1, 2) for i in off)  # an off frame shares no on frame's
+
+
+def test_a_camera_that_moves_every_frame_shares_nothing(write_scene):
+    """ANIMATED's light rests over frames 0-2 and 6-8 but its camera moves: every frame is its own reference."""
+    scene = load_scene(write_scene(ANIMATED))
+    assert scene.animation.reference_frames() == list(range(9))
+    assert resolve_scene("cornell-box-orbit").animation.reference_frames() == list(range(24))
+
+
+def test_a_frames_hash_and_reference_do_not_depend_on_the_frame_count(write_scene):
+    """A longer rest keeps the frames' references: the frame count is the animated scene's content, no frame's."""
+    short, long = (load_scene(write_scene(RESTING.replace("MOVED", "").replace("frames = 10", f"frames = {n}")))
+                   for n in (10, 40))
+    assert short.content_hash() != long.content_hash()
+    for i in range(10):
+        assert short.at_frame(i).content_hash() == long.at_frame(i).content_hash()
+    assert long.animation.reference_frame(39) == 2 and long.animation.reference_frames() == [0, 1, 2, 5]
 
 
 BAD = {
