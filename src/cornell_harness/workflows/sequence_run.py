@@ -148,7 +148,8 @@ def sequence_record(entry: RendererEntry, scene: Scene, spp: int, seed: int, ref
 def _sequence_row(rec: runner.RunRecord, motion: SceneMotion) -> dict:
     row = rec.row()
     change = None if motion.change is None else motion.frames[motion.change]
-    row.update(frames=len(motion.frames), first_frame=motion.frames[0], change_frame=change,
+    bound = None if motion.change is None else temporal.lag_bound(len(motion.frames), motion.change)
+    row.update(frames=len(motion.frames), first_frame=motion.frames[0], change_frame=change, lag_bound=bound,
                flicker_floor=motion.floor)
     return row
 
