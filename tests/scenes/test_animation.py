@@ -215,17 +215,17 @@ def test_cli_bad_animation_is_one_line_exit_2(capsys, write_scene, tmp_path):
 
 # --- the stored scenes ---------------------------------------------------------------------------------------------
 
-def test_the_moving_light_slides_for_the_first_half_then_rests():
+def test_the_moving_light_slides_over_frames_0_to_12_then_rests():
     scene = resolve_scene("cornell-box-moving-light")
-    assert scene.frame_count == 24 and (scene.camera.width, scene.camera.height) == (128, 128)
+    assert scene.frame_count == 144 and (scene.camera.width, scene.camera.height) == (128, 128)
     file_light = next(m for m in scene.meshes if m.name == "light").vertices
-    for i in range(24):
+    for i in range(144):
         light = next(m for m in scene.at_frame(i).meshes if m.name == "light")
         dx = -0.5 + min(i, 12) / 12
         np.testing.assert_allclose(light.vertices, file_light + [dx, 0, 0], rtol=0, atol=1e-15)
         assert light.radiance == (18.387, 13.9873, 6.75357)
         assert np.all(np.abs(light.vertices[:, 0]) < 1)  # on the ceiling, inside the walls
-    assert all(scene.at_frame(i).camera == scene.camera for i in range(24))
+    assert all(scene.at_frame(i).camera == scene.camera for i in range(144))
 
 
 def test_the_orbit_keeps_the_box_and_moves_the_camera_on_an_arc():
@@ -251,7 +251,7 @@ def test_formats_without_animation_refuse_it_and_write_a_frame(fmt, tmp_path):
     scene = resolve_scene("cornell-box-moving-light")
     why = refusal(scene, fmt)
     assert why is not None and why.field == "animation" and "--frame N" in why.message
-    with pytest.raises(SceneError, match="24 frames"):
+    with pytest.raises(SceneError, match="144 frames"):
         export_scene(scene, fmt, tmp_path / "a")
     assert not (tmp_path / "a").exists()
     assert refusal(scene.at_frame(7), fmt) is None
