@@ -286,10 +286,10 @@ def _censored_mark(ax: "_Axes", p: Point, cls: str, tip: str, r: float, clip: st
     right marks it (``censored`` among its classes)."""
     x0, x1, y = ax.x(p.x), ax.left + ax.pw, ax.y(p.y)
     ax.parts.append(f'<path class="censored-arrow" data-renderer="{escape(p.name)}" d="M {_f(x0)} {_f(y)} L '
-                    f'{_f(x1 - r)} {_f(y)}" stroke="{p.color}" stroke-width="1.4" stroke-dasharray="4 3" '
+                    f'{_f(x1 - 2 * r)} {_f(y)}" stroke="{p.color}" stroke-width="1.6" stroke-dasharray="4 3" '
                     f'fill="none" {clip}/>')
-    ax.parts.append(f'<path class="{cls} censored" data-renderer="{escape(p.name)}" d="M {_f(x1 - 1.6 * r)} '
-                    f'{_f(y - 1.2 * r)} L {_f(x1)} {_f(y)} L {_f(x1 - 1.6 * r)} {_f(y + 1.2 * r)} Z" '
+    ax.parts.append(f'<path class="{cls} censored" data-renderer="{escape(p.name)}" d="M {_f(x1 - 2.6 * r)} '
+                    f'{_f(y - 1.6 * r)} L {_f(x1)} {_f(y)} L {_f(x1 - 2.6 * r)} {_f(y + 1.6 * r)} Z" '
                     f'fill="{p.color}">{tip}</path>')
 
 

@@ -111,7 +111,8 @@ def lag_flicker_plot(sequences: pd.DataFrame, colours: Mapping[str, str]) -> str
         if math.isinf(lag):
             bound = _bound(rows)
             points.append(Point(name, colours[name], (bound or 0) + 1.0, flicker, f"{name}: lag "
-                                f"{lag_text(lag, bound, 'frames')}, flicker {flicker:.3g}", tag="not settled",
+                                f"{lag_text(lag, bound, 'frames')}, flicker {flicker:.3g}",
+                                tag=f"not settled: lag > {'?' if bound is None else bound}",
                                 censored=True, **ys))
             continue
         lh = 0.0 if math.isnan(lag_h) else lag_h
