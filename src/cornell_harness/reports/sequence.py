@@ -111,15 +111,16 @@ def lag_flicker_plot(sequences: pd.DataFrame, colours: Mapping[str, str]) -> str
         if math.isinf(lag):
             bound = _bound(rows)
             points.append(Point(name, colours[name], (bound or 0) + 1.0, flicker, f"{name}: lag "
-                                f"{lag_text(lag, bound, 'frames')}, flicker {flicker:.3g}",
-                                tag=f"not settled: lag > {'?' if bound is None else bound}",
+                                f"{lag_text(lag, bound, 'frames')}, flicker {flicker:.3g}", tag="not settled",
                                 censored=True, **ys))
             continue
         lh = 0.0 if math.isnan(lag_h) else lag_h
         points.append(Point(name, colours[name], lag + 1.0, flicker, f"{name}: lag {lag:.1f} frames, flicker "
                             f"{flicker:.3g}", xlo=max(lag - lh, 0.0) + 1.0, xhi=lag + lh + 1.0, **ys))
+    bound = _bound(sequences)
+    beyond = f"the {bound} frames after the change" if bound is not None else "the sequence"
     return scatter_svg(points, uid="sequence-lag-flicker", xlabel="lag + 1 (frames)", ylabel="flicker (RMS)",
-                       censored_label="not settled within the sequence: lag beyond it")
+                       censored_label=f"not settled: lag beyond {beyond}")
 
 
 def _table(sequences: pd.DataFrame) -> str:
