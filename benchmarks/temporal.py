@@ -13,7 +13,7 @@ rendered again. Then, from each scene's ``sequences.csv``:
   (``benchmarks/figure_manifest.py``).
 
 Run: ``.venv/bin/python benchmarks/temporal.py --markdown docs/temporal.md`` (every renderer, both scenes: about
-10 minutes a seed on 2 shared cores).
+16 minutes for 3 seeds on 2 cores shared with other work, 14 of them the moving light's 144 frames).
 """
 
 from __future__ import annotations
@@ -57,13 +57,19 @@ def done(folder: Path, seeds: int) -> bool:
     return set(zip(rows["renderer"], rows["seed"])) >= {(r, s) for r in RENDERERS for s in range(seeds)}
 
 
-def cell(values: pd.Series, digits: str) -> str:
-    """Mean over seeds, the 95% interval's half-width in brackets (none for one seed)."""
+def cell(values: pd.Series, digits: str, lag_bound=None) -> str:
+    """Mean over seeds, the 95% interval's half-width in brackets (none for one seed). With ``lag_bound``, a lag:
+    ``> N`` where a seed did not settle within the sequence (:func:`cornell_harness.evaluate.temporal.lag_over_seeds`),
+    N the frames shown after the change."""
     from cornell_harness.evaluate.convergence import mean_ci
+    from cornell_harness.evaluate.temporal import lag_over_seeds
 
-    m, h = mean_ci(pd.to_numeric(values, errors="coerce").dropna())
+    v = pd.to_numeric(values, errors="coerce").dropna()
+    m, h = lag_over_seeds(v) if lag_bound is not None else mean_ci(v)
     if pd.isna(m):
         return "—"
+    if m == float("inf"):
+        return f"> {int(lag_bound)}"
     return markdown_blocks.minus(f"{m:{digits}}" + ("" if pd.isna(h) else f" (± {h:.2g})"))
 
 
@@ -75,7 +81,8 @@ def table(rows_by_scene: dict[str, pd.DataFrame]) -> list[str]:
         ok = rows[rows["status"] == "ok"]
         for i, name in enumerate(RENDERERS):
             g = ok[ok["renderer"] == name]
-            cells = [cell(g[c], ".3g") for c, _ in COLUMNS]
+            bound = pd.to_numeric(g["lag_bound"], errors="coerce").dropna() if "lag_bound" in g else []
+            cells = [cell(g[c], ".3g", bound.iloc[0] if c == "lag" and len(bound) else None) for c, _ in COLUMNS]
             floor = f"{float(rows['flicker_floor'].iloc[0]):.3g}" if i == 0 else ""
             lines.append(f"| {scene if i == 0 else ''} | `{name}` | " + " | ".join(cells) + f" | {floor} |")
     return lines

@@ -2,9 +2,9 @@
 from a known truth image, and renderers of sequences (stateless and stateful) that draw noise around that truth.
 
 :class:`StandInSequence` gives what the scene model's animation contract names (``frame_count``, ``animation``
-with ``frames``, ``fps``, ``offset(name, i)`` and ``camera_at(i)``, ``at_frame(i)``) by moving named objects by
-a fixed step per frame up to a stop frame (dataclasses.replace on the still scene's meshes), so the workflow, the
-metrics and the CLI can be tested before stored animated scenes exist. The renderers are loaded by the tests as
+with ``frames``, ``fps``, ``offset(name, i)``, ``camera_at(i)`` and ``states(frames)``, ``at_frame(i)``) by moving
+named objects by a fixed step per frame up to a stop frame (dataclasses.replace on the still scene's meshes), so the
+workflow, the metrics and the CLI can be tested before stored animated scenes exist. The renderers are loaded by the tests as
 ``tests.sequence_fakes:ClassName`` (the sandbox's child imports them the same way).
 """
 
@@ -41,6 +41,10 @@ class StandInAnimation:
 
     def camera_at(self, i: int):
         return self.camera
+
+    def states(self, frames) -> np.ndarray:
+        """What moves at each frame, a row per frame: the tracks' offsets (the camera stays)."""
+        return np.array([np.concatenate([self.offset(name, i) for name, _, _ in self.tracks]) for i in frames])
 
 
 class StandInSequence:

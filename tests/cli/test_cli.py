@@ -121,6 +121,9 @@ def test_scenes_lists_features_regions_and_references():
     assert lines[i + 1].split("features: ")[1].split(", ") == sorted(
         ["area_light", "box_filter", "dielectric", "diffuse", "mirror", "pinhole_camera", "sphere", "triangle_mesh"])
     assert lines[i + 2].split("regions: ")[1].split(", ") == ["caustic", "glass-shadow", "mirror", "glass", "walls"]
+    animated = {line.split()[0]: line for line in lines if " frames, " in line}
+    assert "24 frames, 24 references, frame 0's reference 1024 spp" in animated["cornell-box-orbit"]
+    assert "144 frames, 13 references, frame 0's reference 1024 spp" in animated["cornell-box-moving-light"]
 
 
 def test_compare_caustics_json_has_regions_and_skips_pyrender(tmp_path):

@@ -45,6 +45,18 @@ def test_sequence_writes_results_and_report(stand_in, tmp_path, capsys):
         assert np.asarray(im.convert("RGB")).any()
 
 
+def test_a_lag_that_did_not_settle_is_printed_as_a_bound(monkeypatch, tmp_path, capsys):
+    """Hysteresis 0.97 on 18 frames, the light stopping at 5: not settled within the 12 frames after it."""
+    scene = moving_light(frames=18, stop=5, size=12)
+    monkeypatch.setattr(library, "resolve_scene", lambda name, overrides=(): scene)
+    monkeypatch.setattr(sequence_run, "sequence_references", lambda sc, frames: references(sc, frames))
+    code, _, err = cbox_in_process(capsys, "sequence", "--scene", "moving", "-r",
+                                   "tests.sequence_fakes:ExponentialTruth[hysteresis=0.97]", "--spp", "4",
+                                   "--seeds", "1", "--out", str(tmp_path))
+    assert code == 0, err
+    assert "lag > 12 frames (not settled)" in err
+
+
 def test_a_failed_renderer_exits_1(stand_in, tmp_path, capsys):
     code, _, err = cbox_in_process(capsys, "sequence", "--scene", "moving", "-r", "tests.sequence_fakes:ForgetsFrames",
                                    "--seeds", "1", "--out", str(tmp_path))
@@ -67,7 +79,7 @@ def test_sequence_on_the_stored_moving_light(tmp_path, capsys):
     assert (tmp_path / "anim-pathtracer.png").is_file()
 
 
-@pytest.mark.parametrize("frames, message", [("3,5", "must be consecutive"), ("20-30", "frames are 0..23")])
+@pytest.mark.parametrize("frames, message", [("3,5", "must be consecutive"), ("140-150", "frames are 0..143")])
 def test_frames_must_be_consecutive_and_in_the_scene(frames, message, tmp_path, capsys):
     code, _, err = cbox_in_process(capsys, "sequence", "--scene", "cornell-box-moving-light", "-r", "pathtracer",
                                    "--frames", frames, "--out", str(tmp_path))

@@ -189,6 +189,25 @@ def test_crowded_scatter_tags_meet_nothing_and_sit_by_their_own_point(layout):
     assert all(" spp" in d["tip"] for d in dots)
 
 
+def test_a_censored_point_is_drawn_at_the_right_edge_with_an_arrow_from_its_bound():
+    """x only a lower bound (a lag that did not settle within the sequence): the triangle's tip on the plot's right
+    edge, the dashed arrow starting at the bound's x (read off the 20 and 50 ticks, log axis), the legend saying
+    what it means; no such entry where nothing is censored."""
+    points = [plots.Point("a", "#111", 5.0, 0.2), plots.Point("b", "#222", 40.0, 0.1, censored=True)]
+    svg = plots.scatter_svg(points, uid="c", xlabel="lag", ylabel="f", censored_label="beyond")
+    left, width = map(float, re.search(r'<clipPath id="c-clip"><rect x="([\d.]+)" y="[\d.]+" width="([\d.]+)"',
+                                       svg).groups())
+    tip = re.search(r'class="point[^"]* censored" data-renderer="b" d="M [\d.]+ [\d.]+ L ([\d.]+) ', svg)
+    assert float(tip.group(1)) == pytest.approx(left + width)
+    ticks = {t: float(x) for x, t in re.findall(r'class="tick x" x="([\d.]+)"[^>]*>(\d+)<', svg)}
+    expected = ticks["20"] + math.log(2.0) / math.log(2.5) * (ticks["50"] - ticks["20"])
+    start = re.search(r'class="censored-arrow" data-renderer="b" d="M ([\d.]+) ', svg)
+    assert float(start.group(1)) == pytest.approx(expected, abs=0.02)
+    assert ">beyond<" in svg and svg.count("censored-mark") == 2
+    plain = plots.scatter_svg(points[:1] + [plots.Point("b", "#222", 40.0, 0.1)], uid="c", xlabel="lag", ylabel="f")
+    assert "censored" not in plain
+
+
 def test_place_tags_tries_each_side_then_drops():
     area = (0.0, 0.0, 200.0, 200.0)
     spots = plots.place_tags([(100, 100), (100, 100), (100, 100), (100, 100), (100, 100), (100, 100), (100, 100)],

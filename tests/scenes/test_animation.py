@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import MINIMAL_SCENE, cbox_in_process
-from cornell_harness.scenes.animation import frame_list
+from cornell_harness.scenes.animation import frame_list, reference_still
 from cornell_harness.scenes.export import export_scene, refusal
 from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.loader import load_scene
@@ -106,6 +106,53 @@ def test_with_resolution_keeps_the_frames_at_it(write_scene):
     assert (small.at_frame(5).camera.width, small.at_frame(5).camera.height) == (4, 2)
 
 
+#: The minimal scene with rests: the light slides by 0.2 over frames 0-2, rests, goes off at 5 and on at 7 where it
+#: was; the camera stays. ``MOVED`` (replaced by keys, or nothing) can move it while it is off.
+RESTING = MINIMAL_SCENE + """
+[animation]
+frames = 10
+fps = 24
+objects = { light = [{ frame = 0, translate = [0, 0, 0] }, { frame = 2, translate = [0.2, 0, 0] }MOVED] }
+switches = [{ object = "light", frame = 5, on = false }, { object = "light", frame = 7, on = true }]
+"""
+
+
+@pytest.mark.parametrize("moved, expected", [
+    ("", [0, 1, 2, 2, 2, 5, 5, 2, 2, 2]),  # a rest shares; back on where it was: the frames before it went off
+    (", { frame = 5, translate = [0.2, 0, 0] }, { frame = 6, translate = [0.4, 0, 0] }",
+     [0, 1, 2, 2, 2, 5, 6, 7, 7, 7]),  # moved while off: back on elsewhere, a state of its own
+])
+def test_frames_at_one_state_share_the_earliest_ones_reference(write_scene, moved, expected):
+    scene = load_scene(write_scene(RESTING.replace("MOVED", moved)))
+    assert [scene.animation.reference_frame(i) for i in range(10)] == expected
+    assert scene.animation.reference_frames() == sorted(set(expected))
+    for i, j in enumerate(expected):
+        frame = scene.at_frame(i)
+        assert (frame.frame, frame.reference_frame) == (i, j)
+        shared = reference_still(frame)
+        assert shared.frame == j and shared.content_hash() == scene.at_frame(j).content_hash()
+        assert (frame.content_hash() == shared.content_hash()) == (i == j)  # every frame still hashes apart
+    off = [i for i in range(10) if not scene.animation.light_on("light", i)]
+    assert off == [5, 6] and all(expected[i] not in (0, 1, 2) for i in off)  # an off frame shares no on frame's
+
+
+def test_a_camera_that_moves_every_frame_shares_nothing(write_scene):
+    """ANIMATED's light rests over frames 0-2 and 6-8 but its camera moves: every frame is its own reference."""
+    scene = load_scene(write_scene(ANIMATED))
+    assert scene.animation.reference_frames() == list(range(9))
+    assert resolve_scene("cornell-box-orbit").animation.reference_frames() == list(range(24))
+
+
+def test_a_frames_hash_and_reference_do_not_depend_on_the_frame_count(write_scene):
+    """A longer rest keeps the frames' references: the frame count is the animated scene's content, no frame's."""
+    short, long = (load_scene(write_scene(RESTING.replace("MOVED", "").replace("frames = 10", f"frames = {n}")))
+                   for n in (10, 40))
+    assert short.content_hash() != long.content_hash()
+    for i in range(10):
+        assert short.at_frame(i).content_hash() == long.at_frame(i).content_hash()
+    assert long.animation.reference_frame(39) == 2 and long.animation.reference_frames() == [0, 1, 2, 5]
+
+
 BAD = {
     "unknown object": (ANIMATED.replace("objects = { light", "objects = { lihgt"), "animation.objects.lihgt",
                        "no object named 'lihgt'; did you mean 'light'?"),
@@ -168,17 +215,17 @@ def test_cli_bad_animation_is_one_line_exit_2(capsys, write_scene, tmp_path):
 
 # --- the stored scenes ---------------------------------------------------------------------------------------------
 
-def test_the_moving_light_slides_for_the_first_half_then_rests():
+def test_the_moving_light_slides_over_frames_0_to_12_then_rests():
     scene = resolve_scene("cornell-box-moving-light")
-    assert scene.frame_count == 24 and (scene.camera.width, scene.camera.height) == (128, 128)
+    assert scene.frame_count == 144 and (scene.camera.width, scene.camera.height) == (128, 128)
     file_light = next(m for m in scene.meshes if m.name == "light").vertices
-    for i in range(24):
+    for i in range(144):
         light = next(m for m in scene.at_frame(i).meshes if m.name == "light")
         dx = -0.5 + min(i, 12) / 12
         np.testing.assert_allclose(light.vertices, file_light + [dx, 0, 0], rtol=0, atol=1e-15)
         assert light.radiance == (18.387, 13.9873, 6.75357)
         assert np.all(np.abs(light.vertices[:, 0]) < 1)  # on the ceiling, inside the walls
-    assert all(scene.at_frame(i).camera == scene.camera for i in range(24))
+    assert all(scene.at_frame(i).camera == scene.camera for i in range(144))
 
 
 def test_the_orbit_keeps_the_box_and_moves_the_camera_on_an_arc():
@@ -204,7 +251,7 @@ def test_formats_without_animation_refuse_it_and_write_a_frame(fmt, tmp_path):
     scene = resolve_scene("cornell-box-moving-light")
     why = refusal(scene, fmt)
     assert why is not None and why.field == "animation" and "--frame N" in why.message
-    with pytest.raises(SceneError, match="24 frames"):
+    with pytest.raises(SceneError, match="144 frames"):
         export_scene(scene, fmt, tmp_path / "a")
     assert not (tmp_path / "a").exists()
     assert refusal(scene.at_frame(7), fmt) is None

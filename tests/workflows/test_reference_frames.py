@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import MINIMAL_SCENE, cbox_in_process, run_cbox
-from tests.scenes.test_animation import ANIMATED
+from tests.scenes.test_animation import ANIMATED, RESTING
 from tests.user_renderers import SeededNoise
 from cornell_harness.adapters.registry import resolve
 from cornell_harness.adapters.seeds import frame_seed
@@ -16,6 +16,8 @@ from cornell_harness.scenes.library import resolve_scene
 from cornell_harness.scenes.loader import load_scene
 from cornell_harness.store.references import REFERENCE_SEED_BASE, ReferenceError, load_reference
 from cornell_harness.workflows.reference_build import build_reference
+from cornell_harness.workflows.sequence_run import sequence_references
+from cornell_harness.cli.reference import frame_scenes
 
 
 def _entry():
@@ -103,21 +105,52 @@ def test_bad_frames_are_a_usage_error(capsys, scene, frames, words):
         assert code == 2 and words in err, (command, err)
 
 
-@pytest.mark.parametrize("name", ["cornell-box-moving-light", "cornell-box-orbit"])
-def test_the_stored_animated_scenes_have_every_frames_reference(name):
+@pytest.mark.parametrize("name, shared", [("cornell-box-moving-light", 12), ("cornell-box-orbit", None)])
+def test_the_stored_animated_scenes_have_every_frames_reference(name, shared):
+    """Every frame reads a valid stored reference: its own, or (the moving light at rest, from frame 12 on) the
+    one of the earliest frame at its state; the package stores exactly the distinct ones."""
     scene = resolve_scene(name)
+    distinct = scene.animation.reference_frames()
+    assert distinct == list(range(13 if shared else scene.frame_count))
+    folders = scene.path.parent / "frames"
+    assert sorted(p.name for p in folders.iterdir()) == [f"{j:04d}" for j in distinct]
     refs = [load_reference(scene.at_frame(i)) for i in range(scene.frame_count)]
     for i, ref in enumerate(refs):
-        assert ref.provenance["frame"] == i and ref.provenance["renderer"] == "mitsuba"
+        j = i if shared is None else min(i, shared)
+        assert ref.provenance["frame"] == j and ref.provenance["renderer"] == "mitsuba"
+        assert ref.folder == folders / f"{j:04d}"  # the package's stored reference
+        assert ref.provenance["scene_hash"] == scene.at_frame(j).content_hash()
         assert ref.image.shape == (128, 128, 3) and ref.provenance["wall_time_s"] > 0
         assert np.all(np.isfinite(ref.image)) and np.all(ref.variance >= 0)
-        assert ref.folder.parent.parent == scene.path.parent  # the package's stored reference
-    assert len({ref.provenance["noise_seed"] for ref in refs}) == scene.frame_count
-    if name == "cornell-box-moving-light":  # frames at rest: the same scene, independent references, alike in noise
-        a, b = refs[12], refs[23]
-        assert not np.array_equal(a.image, b.image)
-        z = (a.image - b.image) / np.sqrt(a.variance + b.variance + 1e-12)
-        assert abs(float(np.mean(z))) < 0.05 and 0.8 < float(np.std(z[a.variance > 0])) < 1.25
+    assert len({ref.provenance["noise_seed"] for ref in refs}) == len(distinct)
+
+
+def test_a_frame_at_rest_reads_the_reference_of_the_first_frame_at_rest():
+    scene = resolve_scene("cornell-box-moving-light")
+    ref = load_reference(scene.at_frame(40))
+    assert ref.folder == scene.path.parent / "frames" / "0012" and ref.provenance["frame"] == 12
+    frames = sequence_references(scene, [11, 12, 40, scene.frame_count - 1])
+    assert [r.provenance["frame"] for r in frames] == [11, 12, 12, 12] and frames[1] is frames[3]  # loaded once
+
+
+def test_a_shared_reference_is_built_once_under_the_earliest_frame(write_scene, tmp_path, capsys):
+    """RESTING: frames 2-4 and 7-9 read frames/0002, built from frame 2's still scene whichever frame asks."""
+    scene = load_scene(write_scene(RESTING.replace("MOVED", "")))
+    ref = build_reference(scene.at_frame(8), spp=4, batches=2, entry=_entry())
+    assert ref.folder == tmp_path / "frames" / "0002" and ref.provenance["frame"] == 2
+    assert ref.provenance["scene_hash"] == scene.at_frame(2).content_hash() != scene.at_frame(8).content_hash()
+    assert ref.provenance["seeds"] == [frame_seed(REFERENCE_SEED_BASE + b, 2) for b in range(2)]
+    assert sorted(p.name for p in (tmp_path / "frames").iterdir()) == ["0002"]
+    for i in (2, 3, 4, 7, 8, 9):
+        assert load_reference(scene.at_frame(i)).folder == ref.folder
+    with pytest.raises(ReferenceError) as exc:
+        load_reference(scene.at_frame(6))  # off: frame 5's, not built
+    assert "frame 6 (which shares frame 5's reference)" in str(exc.value) and "--frames 5 " in str(exc.value)
+    assert [f.frame for f in frame_scenes(scene, "3-6,9")] == [2, 5]  # each reference once, by its frame
+    assert [f.frame for f in frame_scenes(scene, None)] == [0, 1, 2, 5]
+    code, out, err = cbox_in_process(capsys, "reference", "show", "--scene", str(tmp_path), "--frames", "3,8-9")
+    assert code == 0, err
+    assert list(json.loads(out)) == ["2"]
 
 
 def test_a_missing_frame_is_built_as_the_others_were(write_scene, tmp_path):

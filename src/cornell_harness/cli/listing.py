@@ -43,8 +43,8 @@ def scenes(as_json: bool = JsonOpt, home: Optional[Path] = HomeOpt) -> None:
         ref = s["reference"]
         status = (f"reference {ref['spp']} spp{' (user store)' if ref['in_user_store'] else ''}" if ref else
                   f"no usable reference ({s['reference_problem']})")
-        if s["frames"] > 1:  # an animated scene: the reference shown is frame 0's, each frame has its own
-            status = f"{s['frames']} frames, frame 0's {status}"
+        if s["frames"] > 1:  # an animated scene: the reference shown is frame 0's; frames at one state share one
+            status = f"{s['frames']} frames, {s['references']} references, frame 0's {status}"
         typer.echo(f"{s['name']:{w}s} {s['width']}x{s['height']}  {what}  {status}")
         typer.echo(f"{'':{w}s} features: {', '.join(s['features'])}")
         if s["regions"]:
@@ -80,6 +80,7 @@ def _scene_entry(name: str, home: Path | None = None) -> dict:
     ao = scene.ambient_occlusion
     return {**entry, "path": _shown(scene.path), "width": scene.camera.width, "height": scene.camera.height,
             "max_depth": scene.max_depth, "frames": scene.frame_count,
+            "references": 1 if scene.animation is None else len(scene.animation.reference_frames()),
             "ambient_occlusion": None if ao is None else {"weighting": ao.weighting, "max_distance": ao.max_distance,
                                                           "normal": ao.normal, "miss_value": ao.miss_value},
             "features": sorted(scene.features), "regions": list(scene.regions),

@@ -23,8 +23,9 @@ from cornell_harness.store.references import ReferenceError, load_reference, ref
 
 
 FramesOpt = typer.Option(None, "--frames", metavar="LIST", help=(
-    "An animated scene's frames to work on, e.g. 0-3,7 (default: every frame); each frame has its own "
-    "reference, in frames/NNNN/ of the scene's reference folder."))
+    "An animated scene's frames to work on, e.g. 0-3,7 (default: every frame): their references, each once; "
+    "frames at the same state (a light at rest) share the earliest one's, in frames/NNNN/ of the scene's "
+    "reference folder."))
 
 
 @reference_app.command("build")
@@ -45,7 +46,8 @@ def reference_build(
     A scene file of yours keeps its reference beside it; a stored scene's goes to the user store (--home),
     the package's stored references staying read-only. With --set, the derived scene's reference goes to
     derived/<content hash>/ there; the scene's own reference is left as it is. An animated scene gets one
-    reference per frame (--frames: some of them), each in frames/NNNN/ of that folder, built one after another.
+    reference per distinct frame (--frames: those of some frames), each in frames/NNNN/ of that folder, built one
+    after another; frames at the same state share the earliest one's.
     With --workers or --scheduler the batches render on a Dask cluster and are combined here in batch order: the
     same reference as a build in this process. --time-limit bounds each batch; one past it ends the build, exit 1,
     nothing stored for that frame.
@@ -73,8 +75,10 @@ def reference_build(
 
 
 def frame_scenes(scene: Scene, frames: str | None) -> list[Scene]:
-    """The still scenes a command works on: every frame of an animated ``scene`` or those ``--frames`` names; a
-    still scene itself. ``--frames`` on a still scene, or a malformed one, is a usage error (exit 2)."""
+    """The still scenes whose references a command works on: for an animated ``scene``, those that its frames
+    (every frame, or those ``--frames`` names) read, each once, in frame order
+    (:meth:`~cornell_harness.scenes.animation.Animation.reference_frame`); a still scene itself. ``--frames`` on
+    a still scene, or a malformed one, is a usage error (exit 2)."""
     if scene.animation is None:
         if frames is not None:
             raise typer.BadParameter(f"scene {scene.name!r} is not animated: it has no frames to choose",
@@ -84,7 +88,7 @@ def frame_scenes(scene: Scene, frames: str | None) -> list[Scene]:
         chosen = frame_list(frames, scene.frame_count) if frames is not None else range(scene.frame_count)
     except ValueError as e:
         raise typer.BadParameter(str(e), param_hint="--frames") from None
-    return [scene.at_frame(i) for i in chosen]
+    return [scene.at_frame(j) for j in sorted({scene.animation.reference_frame(i) for i in chosen})]
 
 
 def _refuse_shadowed_build(scene: Scene, home: Path | None) -> None:
@@ -106,7 +110,8 @@ def _refuse_shadowed_build(scene: Scene, home: Path | None) -> None:
 def reference_show(scene: str = SceneOpt, overrides: Optional[List[str]] = SetOpt, frames: Optional[str] = FramesOpt,
                    home: Optional[Path] = HomeOpt) -> None:
     """Print the provenance of a scene's reference: the stored one, else the user store's (refused if the scene
-    changed). For an animated scene, a JSON object of each frame's (--frames: some of them), by frame number."""
+    changed). For an animated scene, a JSON object of each distinct reference's (--frames: those of some frames),
+    by the number of the frame it is stored under."""
     sc = resolve_scene(scene, overrides)
     still = frame_scenes(sc, frames)
     if sc.animation is None:
@@ -156,8 +161,9 @@ def reference_verify(
     below the Šidák-corrected level at family-wise false-alarm rate 0.01 (the engines disagree beyond noise),
     3 when none is but an interval reaches past its margin (inconclusive: more spp would resolve it), 0 when
     every interval lies inside its margin. `cbox scenes` shows the recorded verdicts; docs/references.md has
-    the stored references' verdicts and what they found. An animated scene is verified frame by frame (--frames:
-    some of them), each frame's verdict recorded on its own reference; the exit code is the worst frame's.
+    the stored references' verdicts and what they found. An animated scene is verified reference by reference
+    (--frames: those of some frames; frames that share one verify it once), each verdict recorded on its own
+    reference; the exit code is the worst one's.
     """
     if spp % batches:
         raise typer.BadParameter(f"--spp ({spp}) must be a multiple of --batches ({batches})")

@@ -3,6 +3,7 @@ per-frame references, the temporal figures (flicker, lag, ghosting) and their re
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import List, Optional
 
@@ -37,7 +38,7 @@ def sequence(
     Exit code 1 if a renderer failed. --time-limit bounds a whole sequence.
     """
     from cornell_harness.adapters.registry import resolve
-    from cornell_harness.reports.sequence import write_sequence_report
+    from cornell_harness.reports.sequence import lag_text, write_sequence_report
     from cornell_harness.scenes.library import resolve_scene
     from cornell_harness.workflows.sequence_run import run_sequence, sequence_references, write_sequence_results
 
@@ -51,8 +52,9 @@ def sequence(
     report = write_sequence_report(out, sc.name, result.frame_rows, result.sequence_rows, result.images,
                                    [r.image for r in references], command_line())
     for row in result.sequence_rows:
+        lag = lag_text(row.get("lag", math.nan), row.get("lag_bound"), "frames")
         info(f"{row['renderer']} seed {row['seed']}: {row['status']}" + (
-            f", flicker {row['flicker']:.3g} (floor {row['flicker_floor']:.3g}), lag {row['lag']:g} frames, "
+            f", flicker {row['flicker']:.3g} (floor {row['flicker_floor']:.3g}), lag {lag}, "
             f"ghosting {row['ghosting']:.3g}" if row["status"] == "ok" else f" ({row['reason']})"))
     info(f"wrote {', '.join(str(p) for p in written)} and {report}")
     raise typer.Exit(1 if any(r["status"] == "failed" for r in result.sequence_rows) else 0)

@@ -41,11 +41,13 @@ class Metric:
     values: tuple[float, float] = ANY  # the closed range it lies in: a threshold outside it is meaningless
     citation: str = ""  # the published source of its definition; "" for a plain count, mean or bookkeeping column
     temporal: bool = False  # a figure of a whole sequence against its per-frame references (a gate may budget it)
+    infinite: str = ""  # what a value of inf says, where it is a verdict rather than an overflow
 
 
 def _m(key, label, definition, better=None, axis=None, slope=None, per_image=True, colour=False,
-       cheap=False, values=NON_NEGATIVE, cite="", temporal=False) -> Metric:
-    return Metric(key, label, definition, better, axis, slope, per_image, colour, cheap, values, cite, temporal)
+       cheap=False, values=NON_NEGATIVE, cite="", temporal=False, infinite="") -> Metric:
+    return Metric(key, label, definition, better, axis, slope, per_image, colour, cheap, values, cite, temporal,
+                  infinite)
 
 
 #: Sources cited by several metrics.
@@ -130,8 +132,9 @@ _TABLE = (
        "reference's per-frame variance: sqrt(mean 2·(V_i + V_i−1)); a renderer's flicker cannot go below it",
        per_image=False),
     _m("lag", "lag (frames)", "frames after the scene's change (a motion ending, a switch) until the per-frame "
-       "mean ΔE00 is back in its steady band (mean ± 2 sd of the last third of the frames) for 3 frames", "low",
-       "lag (frames)", per_image=False, temporal=True),
+       "mean ΔE00 is back in its steady band (mean ± 2 sd of the last third of the frames) for 3 frames; inf when "
+       "it did not settle within the sequence (the steady frames still trend, or it never enters the band)", "low",
+       "lag (frames)", per_image=False, temporal=True, infinite="not settled within the sequence"),
     _m("ghosting", "ghosting", "RMSE (linear radiance) over the pixels the motion uncovered (the disocclusion "
        "masks of the reference's motion), every frame", "low", "ghosting RMSE", per_image=False, temporal=True),
 )

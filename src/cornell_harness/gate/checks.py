@@ -17,7 +17,7 @@ import numpy as np
 
 from cornell_harness.evaluate import agreement, bias_extrapolation, convergence, metrics, outliers, variance_check
 from cornell_harness.evaluate.equivalence import FAIL, INCONCLUSIVE, PASS, interval_verdicts, resolving_half_width
-from cornell_harness.evaluate.registry import HIGHER_IS_BETTER
+from cornell_harness.evaluate.registry import HIGHER_IS_BETTER, METRICS
 from cornell_harness.evaluate.sequential import doubling
 from cornell_harness.evaluate.score import lookup, metric_value
 from cornell_harness.gate.config import Expectation, GateConfig
@@ -97,6 +97,9 @@ def _budget_checks(exp: Expectation, rec: runner.RunRecord) -> list[Check]:
                 ok = False
             word = {"max": "≤", "min": "≥", "abs_max": "|·| ≤"}[kind]
             by = "" if ok else f", off by {shown - limit:+.4g} ({(shown - limit) / limit:+.1%})" if limit else ""
+            meaning = METRICS[metric].infinite if metric in METRICS and math.isinf(v) else ""
+            if meaning:  # a verdict, not an overflow: say it instead of an infinite excess
+                by = f" ({meaning})"
             out.append(Check(exp.name, f"{kind}.{metric}", ok, f"{metric} = {v:.5g}, budget {word} {limit:g}{by}",
                              v, limit))
     return out

@@ -155,8 +155,8 @@ def text_lines(lines: list[str], x: float, font: float) -> str:
 @dataclass
 class Axes:
     """A log-log plot area of ``layout``'s size, its frame and its legend (``entries``: (kind, colour, label);
-    kind is 'line', 'dash', 'band', 'whisker', 'dot', 'ring', 'rect', or 'note': a line of text with no mark,
-    such as what the notes on a chart mean).
+    kind is 'line', 'dash', 'band', 'whisker', 'dot', 'ring', 'rect', 'arrow' (a censored point's), or 'note': a
+    line of text with no mark, such as what the notes on a chart mean).
 
     Text is never cut: the left margin holds the widest y tick label, a legend at the right is as wide as its
     longest label needs (the figure growing), wrapped where a label is longer still; a legend below wraps and
@@ -326,6 +326,12 @@ class Axes:
             elif kind == "dot":
                 self.parts.append(
                     f'<circle class="legend-mark" cx="{num(x0 + 11)}" cy="{num(y)}" r="4" fill="{color}"/>')
+            elif kind == "arrow":
+                self.parts.append(
+                    f'<path class="legend-mark censored-mark" d="M {num(x0 + 2)} {num(y)} L {num(x0 + 15)} {num(y)}" '
+                    f'stroke="{color}" stroke-width="1.4" stroke-dasharray="4 3" fill="none"/>'
+                    f'<path class="legend-mark censored-mark" d="M {num(x0 + 14)} {num(y - 5)} L {num(x0 + 21)} '
+                    f'{num(y)} L {num(x0 + 14)} {num(y + 5)} Z" fill="{color}"/>')
             tx = x0 + (LEGEND_TEXT_X if kind != "note" else 0)  # a line of text alone starts where marks do
             self.parts.append(
                 f'<text class="legend-label" x="{num(tx)}" y="{num(y + 4)}">'

@@ -199,6 +199,11 @@ class Point:
     ylo: float | None = None
     yhi: float | None = None
     label: str = ""  # the renderer's text in the legend instead of ``name`` (``data-renderer`` keeps the name)
+    censored: bool = False  # x is only a lower bound: drawn at the axis' right edge, an arrow from x to it
+
+
+#: A censored point's right edge lies at least this factor past its x, so the arrow from x to it shows.
+CENSORED_REACH = 2.0
 
 
 def scatter_svg(
@@ -209,52 +214,64 @@ def scatter_svg(
     ylabel: str,
     extra_attrs: str = "",
     layout: Layout = PAGE,
+    censored_label: str = "beyond the axis: x only a lower bound",
 ) -> str:
     """Log-log scatter with the Pareto frontier (lower x and lower y are better) drawn and marked, and each
     point's 95% CI whiskers where it has them (clipped to the axes, which span the points). Each point's
-    ``tag`` goes where it meets no other tag and no point (:func:`place_tags`), or is left to the tooltip."""
+    ``tag`` goes where it meets no other tag and no point (:func:`place_tags`), or is left to the tooltip.
+
+    A ``censored`` point (its x only a lower bound) is drawn at the right edge of the axis, which lies at least
+    :data:`CENSORED_REACH` past its x, as a triangle pointing right at the end of a dashed arrow from its x;
+    the legend says what that means (``censored_label``) and the frontier takes it at the edge."""
     pts = [p for p in points if _usable(p.x, p.y)]
-    xdom, ydom = log_domain([p.x for p in pts]), log_domain([p.y for p in pts])
+    xdom = log_domain([p.x * (CENSORED_REACH if p.censored else 1.0) for p in pts])
+    ydom = log_domain([p.y for p in pts])
     if not pts or xdom is None or ydom is None:
         return f'<p class="note">No positive values to plot for {escape(ylabel)}.</p>'
+    xs = [10.0 ** xdom[1] if p.censored else p.x for p in pts]  # where each point is drawn
     names = list(dict.fromkeys(p.name for p in pts))
     colors = {p.name: p.color for p in pts}
     texts = {p.name: shown(p) for p in reversed(pts)}  # the first point's, where they disagree
     whiskers = [("whisker", "#9aa1ad", "95% CI")] if any(p.xlo is not None or p.ylo is not None for p in pts) else []
-    ax = _Axes(xdom, ydom, layout,
-               [("dot", colors[n], texts[n]) for n in names] + [("ring", "#ffd166", "Pareto frontier")] + whiskers)
+    arrows = [("arrow", "#9aa1ad", censored_label)] if any(p.censored for p in pts) else []
+    ax = _Axes(xdom, ydom, layout, [("dot", colors[n], texts[n]) for n in names]
+               + [("ring", "#ffd166", "Pareto frontier")] + whiskers + arrows)
     ax.frame(uid, xlabel, ylabel)
     clip = f'clip-path="url(#{uid}-clip)"'
-    front = pareto_front([p.x for p in pts], [p.y for p in pts])
+    front = pareto_front(xs, [p.y for p in pts])
     if front:
-        d = " L ".join(f"{_f(ax.x(pts[i].x))} {_f(ax.y(pts[i].y))}" for i in front)
+        d = " L ".join(f"{_f(ax.x(xs[i]))} {_f(ax.y(pts[i].y))}" for i in front)
         ax.parts.append(f'<path class="frontier" d="M {d}" fill="none" stroke="#e0a800" stroke-width="7" '
                         f'stroke-opacity="0.35" stroke-linecap="round" stroke-linejoin="round" {clip}/>')
     on_front = set(front)
     # Lines joining each renderer's own points, faint, so its trade-off curve reads.
-    by_name: dict[str, list[Point]] = {}
-    for p in pts:
-        by_name.setdefault(p.name, []).append(p)
+    by_name: dict[str, list[tuple[float, Point]]] = {}
+    for x, p in zip(xs, pts):
+        by_name.setdefault(p.name, []).append((x, p))
     for name, ps in by_name.items():
         if len(ps) >= 2:
-            ps = sorted(ps, key=lambda p: p.x)
-            d = " L ".join(f"{_f(ax.x(p.x))} {_f(ax.y(p.y))}" for p in ps)
+            ps = sorted(ps, key=lambda xp: xp[0])
+            d = " L ".join(f"{_f(ax.x(x))} {_f(ax.y(p.y))}" for x, p in ps)
             ax.parts.append(
                 f'<path class="trail" data-renderer="{escape(name)}" d="M {d}" fill="none" '
-                f'stroke="{ps[0].color}" stroke-opacity="0.45" stroke-width="1.2" {clip}/>'
+                f'stroke="{ps[0][1].color}" stroke-opacity="0.45" stroke-width="1.2" {clip}/>'
             )
-    for p in pts:
-        _whisker(ax, p.name, p.color, p.x, p.y, p.xlo, p.xhi, clip)
-        _whisker(ax, p.name, p.color, p.x, p.y, p.ylo, p.yhi, clip, axis="y")
+    for x, p in zip(xs, pts):
+        if not p.censored:
+            _whisker(ax, p.name, p.color, x, p.y, p.xlo, p.xhi, clip)
+        _whisker(ax, p.name, p.color, x, p.y, p.ylo, p.yhi, clip, axis="y")
     radius = [5 if i in on_front else 3.6 for i in range(len(pts))]
-    for i, p in enumerate(pts):
+    for i, (x, p) in enumerate(zip(xs, pts)):
         cls = "point on-front" if i in on_front else "point"
         tip = f"<title>{escape(p.tip)}{' — on the Pareto frontier' if i in on_front else ''}</title>"
+        if p.censored:
+            _censored_mark(ax, p, cls, tip, radius[i], clip)
+            continue
         ax.parts.append(
-            f'<circle class="{cls}" data-renderer="{escape(p.name)}" cx="{_f(ax.x(p.x))}" cy="{_f(ax.y(p.y))}" '
+            f'<circle class="{cls}" data-renderer="{escape(p.name)}" cx="{_f(ax.x(x))}" cy="{_f(ax.y(p.y))}" '
             f'r="{radius[i]}" fill="{p.color}">{tip}</circle>'
         )
-    centres = [(ax.x(p.x), ax.y(p.y)) for p in pts]
+    centres = [(ax.x(x), ax.y(p.y)) for x, p in zip(xs, pts)]
     area = (ax.left, ax.top, ax.left + ax.pw, ax.top + ax.ph)
     for (x, y, anchor), p in zip(place_tags(centres, radius, [p.tag for p in pts], area, layout.font), pts):
         if anchor:
@@ -262,6 +279,18 @@ def scatter_svg(
                             f'text-anchor="{anchor}">{escape(p.tag)}</text>')
     ax.legend()
     return ax.svg(uid, "scatter-plot", f"{ylabel} against {xlabel}", extra_attrs)
+
+
+def _censored_mark(ax: "_Axes", p: Point, cls: str, tip: str, r: float, clip: str) -> None:
+    """A censored point: a dashed arrow from its x (a lower bound) to the right edge, where a triangle pointing
+    right marks it (``censored`` among its classes)."""
+    x0, x1, y = ax.x(p.x), ax.left + ax.pw, ax.y(p.y)
+    ax.parts.append(f'<path class="censored-arrow" data-renderer="{escape(p.name)}" d="M {_f(x0)} {_f(y)} L '
+                    f'{_f(x1 - 2 * r)} {_f(y)}" stroke="{p.color}" stroke-width="1.6" stroke-dasharray="4 3" '
+                    f'fill="none" {clip}/>')
+    ax.parts.append(f'<path class="{cls} censored" data-renderer="{escape(p.name)}" d="M {_f(x1 - 2.6 * r)} '
+                    f'{_f(y - 1.6 * r)} L {_f(x1)} {_f(y)} L {_f(x1 - 2.6 * r)} {_f(y + 1.6 * r)} Z" '
+                    f'fill="{p.color}">{tip}</path>')
 
 
 def place_tags(centres: Sequence[tuple[float, float]], radius: Sequence[float], tags: Sequence[str],

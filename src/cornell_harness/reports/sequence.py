@@ -3,7 +3,8 @@
 ``sequence.html`` (self-contained, beside the results) has: the table of temporal figures per renderer (mean over
 seeds with its 95% interval), the error against frame per renderer with its 95% band over seeds, the
 lag-against-flicker plane (the real-time trade: a longer history flickers less and lags more; a sweep of a setting
-traces the curve, the Pareto frontier marked), a frame strip (the reference, then each renderer's first seed) and,
+traces the curve, the Pareto frontier marked; a renderer that did not settle within the sequence at its right edge,
+marked so), a frame strip (the reference, then each renderer's first seed) and,
 per renderer, a side-by-side animation of render, reference and error (an animated PNG written with Pillow,
 ``anim-<renderer>.png``, beside it). Images are display-encoded at each frame reference's exposure; the error is
 the mean absolute error over channels, on one colour scale for every frame of a renderer.
@@ -23,6 +24,7 @@ from PIL import Image
 from cornell_harness.evaluate import metrics
 from cornell_harness.evaluate.convergence import mean_ci
 from cornell_harness.evaluate.registry import LAG_METRIC, METRICS
+from cornell_harness.evaluate.temporal import lag_over_seeds
 from cornell_harness.reports.image_figure import file_stem
 from cornell_harness.reports.images import apply_colormap, png_data_uri, to_uint8
 from cornell_harness.reports.plots import PALETTE, Point, Series, line_plot_svg, scatter_svg
@@ -75,19 +77,50 @@ def error_plot(frames: pd.DataFrame, colours: Mapping[str, str], metric: str = L
                          or metric, guide_slope=None, band_label="95% CI over seeds")
 
 
+def lag_text(lag: float, bound, unit: str = "", digits: str = "g") -> str:
+    """A lag (frames) as text, ``unit`` after the number: ``4 frames``; for ``math.inf``, not settled within the
+    sequence (:func:`cornell_harness.evaluate.temporal.lag`), ``> 83 frames (not settled)`` with the frames the
+    sequence shows after its change (``bound``); ``—`` for NaN (no change to follow)."""
+    unit = f" {unit}" if unit else ""
+    if lag is None or math.isnan(lag):
+        return "—"
+    if math.isinf(lag):
+        return f"> {'?' if bound is None or pd.isna(bound) else int(bound)}{unit} (not settled)"
+    return f"{lag:{digits}}{unit}"
+
+
+def _bound(rows: pd.DataFrame):
+    """The rows' lag bound (frames shown after the change), the first known one; None without one."""
+    known = pd.to_numeric(rows.get("lag_bound", pd.Series(dtype=float)), errors="coerce").dropna()
+    return int(known.iloc[0]) if len(known) else None
+
+
 def lag_flicker_plot(sequences: pd.DataFrame, colours: Mapping[str, str]) -> str:
-    """The lag-against-flicker plane: each renderer's mean over seeds with 95% whiskers (lag + 1: log axis)."""
+    """The lag-against-flicker plane: each renderer's mean over seeds with 95% whiskers (lag + 1: log axis). A
+    renderer that did not settle within the sequence at some seed (its mean lag ``inf``,
+    :func:`cornell_harness.evaluate.temporal.lag_over_seeds`) is drawn at the right edge, an arrow from its bound
+    (the frames shown after the change) to it, and says so."""
     points = []
     for name, rows in sequences.groupby("renderer", sort=False):
-        lag, lag_h = mean_ci(rows["lag"])
+        lag, lag_h = lag_over_seeds(pd.to_numeric(rows["lag"], errors="coerce"))
         flicker, flicker_h = mean_ci(rows["flicker"])
         if math.isnan(lag) or math.isnan(flicker):
             continue
-        lh, fh = (0.0 if math.isnan(h) else h for h in (lag_h, flicker_h))
+        fh = 0.0 if math.isnan(flicker_h) else flicker_h
+        ys = dict(ylo=max(flicker - fh, 1e-12), yhi=flicker + fh)
+        if math.isinf(lag):
+            bound = _bound(rows)
+            points.append(Point(name, colours[name], (bound or 0) + 1.0, flicker, f"{name}: lag "
+                                f"{lag_text(lag, bound, 'frames')}, flicker {flicker:.3g}", tag="not settled",
+                                censored=True, **ys))
+            continue
+        lh = 0.0 if math.isnan(lag_h) else lag_h
         points.append(Point(name, colours[name], lag + 1.0, flicker, f"{name}: lag {lag:.1f} frames, flicker "
-                            f"{flicker:.3g}", xlo=max(lag - lh, 0.0) + 1.0, xhi=lag + lh + 1.0,
-                            ylo=max(flicker - fh, 1e-12), yhi=flicker + fh))
-    return scatter_svg(points, uid="sequence-lag-flicker", xlabel="lag + 1 (frames)", ylabel="flicker (RMS)")
+                            f"{flicker:.3g}", xlo=max(lag - lh, 0.0) + 1.0, xhi=lag + lh + 1.0, **ys))
+    bound = _bound(sequences)
+    beyond = f"the {bound} frames after the change" if bound is not None else "the sequence"
+    return scatter_svg(points, uid="sequence-lag-flicker", xlabel="lag + 1 (frames)", ylabel="flicker (RMS)",
+                       censored_label=f"not settled: lag beyond {beyond}")
 
 
 def _table(sequences: pd.DataFrame) -> str:
@@ -98,8 +131,10 @@ def _table(sequences: pd.DataFrame) -> str:
         ok = g[g["status"] == "ok"]
         cells = []
         for c in TABLE_COLUMNS:
-            m, h = mean_ci(pd.to_numeric(ok[c], errors="coerce")) if c in ok and len(ok) else (math.nan, math.nan)
-            cells.append("—" if math.isnan(m) else f"{m:.4g}" + ("" if math.isnan(h) else f" ± {h:.2g}"))
+            mean = lag_over_seeds if c == "lag" else mean_ci
+            m, h = mean(pd.to_numeric(ok[c], errors="coerce")) if c in ok and len(ok) else (math.nan, math.nan)
+            text = lag_text(m, _bound(ok), digits=".4g") if c == "lag" else "—" if math.isnan(m) else f"{m:.4g}"
+            cells.append(escape(text) + ("" if math.isnan(h) else f" ± {h:.2g}"))
         status = "" if len(ok) == len(g) else f" ({len(g) - len(ok)} not ok: {escape(str(g['reason'].iloc[0]))})"
         rows.append(f"<tr><td>{escape(name)}{status}</td><td>{len(ok)}</td>"
                     + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")

@@ -17,8 +17,16 @@ Tracks are piecewise linear in the frame number between their keys (keys at incr
 ``i / fps`` seconds; the keys are given in frames so that a frame's scene is exact, not a rounded time.
 
 :meth:`Animation.scene_at` makes frame ``i``'s still scene (``Scene.at_frame``): its
-:attr:`~cornell_harness.scenes.model.Scene.frame` is ``i``, which enters its content hash, so every frame has its
-own reference even where two frames look the same (a light at rest). Named regions stay where the file puts them.
+:attr:`~cornell_harness.scenes.model.Scene.frame` is ``i``, which enters its content hash. Named regions stay where
+the file puts them.
+
+**Frames that share a reference.** What an animation sets at a frame is its **state** (:meth:`Animation.state`):
+each tracked object's offset, the camera's keyed position and target, each switched emitter on or off, computed at
+that frame (not read off the keys). Two frames with equal states are the same still scene but for the frame index,
+so they have the same expected image and share one reference: the earliest such frame's
+(:meth:`Animation.reference_frame`; :func:`reference_still` is that frame's still scene). A light at rest after its
+motion is one reference for every frame of the rest; a light switched back on where it was shares the reference of
+the frames before it went off; a camera that moves every frame shares nothing.
 """
 
 from __future__ import annotations
@@ -46,8 +54,12 @@ class Track:
 
     def at(self, i: float) -> np.ndarray:
         """The value at frame ``i``: interpolated linearly between keys, held outside them (float64)."""
-        v = np.asarray(self.values, dtype=np.float64)
-        return np.array([np.interp(float(i), self.frames, v[:, d]) for d in range(v.shape[1])])
+        return self.over([i])[0]
+
+    def over(self, frames) -> np.ndarray:
+        """The values at each of ``frames``, a row per frame: :meth:`at`'s, in one pass (float64)."""
+        v, f = np.asarray(self.values, dtype=np.float64), np.asarray(frames, dtype=np.float64)
+        return np.stack([np.interp(f, self.frames, v[:, d]) for d in range(v.shape[1])], axis=-1)
 
     def scaled(self, s: float) -> "Track":
         return Track(self.frames, tuple(tuple(x * s for x in row) for row in self.values))
@@ -102,9 +114,32 @@ class Animation:
                 state = s.on
         return state
 
+    def states(self, frames) -> np.ndarray:
+        """Everything this animation sets at each of ``frames``, a row (float64) per frame: each tracked object's
+        offset (by name), the camera track's position and target, each switched emitter's 1 (on) or 0 (off) (by
+        name), as :meth:`offset`, :meth:`camera_at` and :meth:`light_on` compute them. Frames with equal rows are
+        the same still scene but for their index."""
+        frames = [self.check_frame(i) for i in frames]
+        tracks = [self.objects[name] for name in sorted(self.objects)] + [t for t in [self.camera_track] if t]
+        columns = [t.over(frames) for t in tracks]
+        columns += [np.array([[float(self.light_on(name, i))] for i in frames])
+                    for name in sorted({s.object for s in self.switches})]
+        return np.concatenate([np.zeros((len(frames), 0)), *columns], axis=1)
+
+    def reference_frame(self, i: int) -> int:
+        """The frame whose reference frame ``i`` reads: the smallest ``j <= i`` whose state (:meth:`states`) equals
+        frame ``i``'s, exactly (a track holding its value, or between two equal keys, gives the same floats every
+        frame; what only rounds alike is not shared)."""
+        states = self.states(range(self.check_frame(i) + 1))
+        return int(np.flatnonzero(np.all(states == states[-1], axis=1))[0])
+
+    def reference_frames(self) -> list[int]:
+        """The distinct references' frames, in order: each frame that is its own :meth:`reference_frame`."""
+        return [i for i in range(self.frames) if self.reference_frame(i) == i]
+
     def scene_at(self, scene: Scene, i: int) -> Scene:
         """The still scene of frame ``i`` of ``scene`` (whose animation this is): objects moved, camera keyed,
-        lights switched (``Scene.at_frame``)."""
+        lights switched (``Scene.at_frame``), with the frame whose reference it shares (:meth:`reference_frame`)."""
         i = self.check_frame(i)
         meshes = []
         for m in scene.meshes:
@@ -116,7 +151,7 @@ class Animation:
         spheres = tuple(dataclasses.replace(s, center=tuple(map(float, np.add(s.center, self.offset(s.name, i)))))
                         if s.name in self.objects else s for s in scene.spheres)
         return dataclasses.replace(scene, camera=self.camera_at(i), meshes=tuple(meshes), spheres=spheres,
-                                   animation=None, frame=i)
+                                   animation=None, frame=i, reference_frame=self.reference_frame(i))
 
     def with_camera(self, camera: Camera) -> "Animation":
         return dataclasses.replace(self, camera=camera)
@@ -212,6 +247,15 @@ def frame_list(text: str, count: int) -> list[int]:
             raise ValueError(f"{part.strip()!r}: frames are 0..{count - 1}, a range A-B with A <= B")
         frames.update(range(lo, hi + 1))
     return sorted(frames)
+
+
+def reference_still(still: Scene) -> Scene:
+    """The still scene whose reference ``still`` reads: ``still`` itself, or for a frame of an animated scene
+    (``Scene.at_frame``) the frame it shares its reference with (:meth:`Animation.reference_frame`), which is the
+    same still scene but for ``frame``."""
+    if still.frame is None or still.reference_frame in (None, still.frame):
+        return still
+    return dataclasses.replace(still, frame=still.reference_frame)
 
 
 def frame_folder(i: int) -> str:

@@ -315,6 +315,9 @@ class Scene:
     animation: Animation | None = None
     # The frame of an animated scene this still scene is (at_frame); None for a scene that is no frame of one.
     frame: int | None = None
+    # The frame whose reference this frame shares (Animation.reference_frame): not content, since equal states
+    # make equal scenes but for ``frame``.
+    reference_frame: int | None = None
 
     @property
     def frame_count(self) -> int:
@@ -382,7 +385,7 @@ class Scene:
             payload["spectral"] = self.spectral.hash_payload()
         if self.animation is not None:
             payload["animation"] = self.animation.hash_payload()
-        if self.frame is not None:  # every frame its own hash, hence its own reference, moved or not
+        if self.frame is not None:  # every frame its own hash; frames at one state share a reference by frame
             payload["frame"] = self.frame
         blob = json.dumps(payload, sort_keys=True, separators=(",", ":")).encode()
         return "sha256:" + hashlib.sha256(blob).hexdigest()

@@ -15,11 +15,16 @@
   scene's content hash, date, command line; and, under ``verified.<engine>``,
   the verdicts of ``cbox reference verify`` that ship with the reference.
 
-An animated scene (:mod:`cornell_harness.scenes.animation`) has no reference of its own but one per frame,
-the reference of ``scene.at_frame(i)``, in ``frames/0007/`` of the same folder (for frame 7): the same files,
-with the frame in the provenance, seeds that are the frame seeds (:func:`cornell_harness.adapters.seeds.frame_seed`)
-of the still scene's, so every frame's reference is independent of the others', and the image and noise stored
-as half floats (``pixel_types`` in the provenance; :data:`cornell_harness.workflows.reference_build.HALF_LIMIT`).
+An animated scene (:mod:`cornell_harness.scenes.animation`) has no reference of its own but one per distinct
+frame: frames whose still scenes are the same but for the frame index (a light at rest) share the reference of the
+earliest of them (:meth:`~cornell_harness.scenes.animation.Animation.reference_frame`), the reference of
+``scene.at_frame(j)`` in ``frames/0012/`` of the same folder (for j = 12: the moving light's frames 12 to the last
+read it). Its files are a still scene's, with the frame j in the provenance and its scene hash
+``scene.at_frame(j)``'s (so a frame sharing it is checked against that hash), seeds that are the frame seeds
+(:func:`cornell_harness.adapters.seeds.frame_seed`) of the still scene's, so the distinct frames' references are
+independent of each other, and the image and noise stored as half floats (``pixel_types`` in the provenance;
+:data:`cornell_harness.workflows.reference_build.HALF_LIMIT`). A frame's state does not include the frame count,
+so an animation made longer keeps its frames' references.
 
 Those stored references are read-only package data. What is built or recorded
 for them goes to the same place in the user store
@@ -63,7 +68,7 @@ import numpy as np
 from cornell_harness.store.atomic import write_json_atomic
 from cornell_harness.store.exr import ImageFileError, read_exr
 from cornell_harness.store.home import user_home
-from cornell_harness.scenes.animation import frame_folder
+from cornell_harness.scenes.animation import frame_folder, reference_still
 from cornell_harness.scenes.library import references_root
 from cornell_harness.scenes.model import Scene
 from cornell_harness.scenes.quantities import DEFAULT_QUANTITY
@@ -109,11 +114,12 @@ def _beside_file(scene: Scene) -> Path:
     """The reference's folder beside ``scene``'s file: the file's folder or, for a scene derived by ``--set``,
     ``derived/<content hash>/`` in it; keyed by content, so the same overrides in any order or spelling
     share one reference, and one made for an older version of the file is never mistaken for current.
-    A frame of an animated scene (``Scene.at_frame``) has its own, ``frames/0007/`` in that folder."""
+    A frame of an animated scene (``Scene.at_frame``) reads that of the frame it shares its reference with
+    (:func:`~cornell_harness.scenes.animation.reference_still`), ``frames/0012/`` in that folder for frame 12."""
     folder = scene.path.parent
     if scene.overrides:
         folder = folder / DERIVED_FOLDER / scene.content_hash().removeprefix("sha256:")[:16]
-    return folder if scene.frame is None else folder / frame_folder(scene.frame)
+    return folder if scene.frame is None else folder / frame_folder(reference_still(scene).frame)
 
 
 def user_folder(folder: str | Path, home: str | Path | None = None) -> Path:
@@ -146,7 +152,7 @@ def rebuild_command(scene: Scene, spp: int = DEFAULT_SPP, batches: int | None = 
     args = ["cbox", "reference", "build", "--scene", scene.path.parent.name if named else str(scene.path.parent)]
     for override in scene.overrides:
         args += ["--set", override]
-    args += ["--frames", str(scene.frame)] if scene.frame is not None else []
+    args += ["--frames", str(reference_still(scene).frame)] if scene.frame is not None else []
     args += ["--spp", str(spp)] + (["--batches", str(batches)] if batches else [])
     args += ["--home", str(home)] if home else []
     return " ".join(map(shlex.quote, args))
@@ -229,8 +235,8 @@ def load_reference(scene: Scene, folder: Path | None = None, home: str | Path | 
     """The reference of ``scene``: in ``folder``, else the first valid one of :func:`reference_folders`; refuse
     one built from different content, saying how to build it (into :func:`reference_folder`).
 
-    An animated scene has one reference per frame: that of ``scene.at_frame(i)``; the animated scene itself has
-    none (refused, saying so)."""
+    An animated scene has one reference per frame: that of ``scene.at_frame(i)``, shared by frames at the same
+    state; the animated scene itself has none (refused, saying so)."""
     if scene.animation is not None:
         raise ReferenceError(f"{scene.path}: animation: {scene.name} is animated ({scene.frame_count} frames) and has "
                              "one reference per frame, the reference of scene.at_frame(i); build them with: "
@@ -251,6 +257,8 @@ def _missing(scene: Scene, folder: Path, home: str | Path | None) -> ReferenceEr
     derived = (f"; the stored reference of {scene.path.parent.name} is for the scene without --set"
                if scene.overrides else "")
     frame = "" if scene.frame is None else f" frame {scene.frame}"
+    if (shared := reference_still(scene).frame) != scene.frame:
+        frame += f" (which shares frame {shared}'s reference)"
     return ReferenceError(f"{folder / PROVENANCE_FILE}: no reference for scene {scene.name!r}{frame}{derived}; build it "
                           f"with: {_build_hint(scene, folder, home)}")
 
@@ -264,10 +272,11 @@ def _load(scene: Scene, folder: Path, home: str | Path | None) -> Reference:
         prov = json.loads(prov_path.read_text())
     except (OSError, json.JSONDecodeError) as e:
         raise ReferenceError(f"{prov_path}: unreadable ({e}); rebuild with: {_build_hint(scene, folder, home)}") from None
-    if prov.get("scene_hash") != scene.content_hash():
+    expected = reference_still(scene).content_hash()  # a frame at rest: the hash of the frame it shares with
+    if prov.get("scene_hash") != expected:
         raise ReferenceError(
             f"{prov_path}: reference was built for scene hash {prov.get('scene_hash')}, but {scene.name} "
-            f"({scene.path}) now hashes to {scene.content_hash()}; rebuild it with: {_build_hint(scene, folder, home)}"
+            f"({scene.path}) now hashes to {expected}; rebuild it with: {_build_hint(scene, folder, home)}"
         )
     try:
         image, variance, noise = (read_exr(folder / f) for f in (REFERENCE_FILE, VARIANCE_FILE, NOISE_FILE))

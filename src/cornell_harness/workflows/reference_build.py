@@ -25,6 +25,7 @@ from cornell_harness.adapters.registry import RendererEntry
 from cornell_harness.adapters.seeds import frame_seed
 from cornell_harness.adapters.settings import canonical
 from cornell_harness.evaluate.regions import region_masks, region_noise
+from cornell_harness.scenes.animation import reference_still
 from cornell_harness.scenes.model import Scene
 from cornell_harness.store.atomic import write_json_atomic
 from cornell_harness.store.exr import write_exr
@@ -64,7 +65,11 @@ def build_reference(
     The batches render on ``executor`` (:func:`render_batches`: combined in batch order, so every backend gives
     the same reference, bit for bit); ``progress(done, total, label)`` follows finished batches (``batch 3``,
     ``noise image``).
+
+    A frame of an animated scene builds the reference it reads: that of the frame it shares it with
+    (:func:`~cornell_harness.scenes.animation.reference_still`), with that frame's seeds, hash and number.
     """
+    scene = reference_still(scene)
     if batches < 2:
         raise ValueError("need at least 2 batches to estimate the variance")
     if spp % batches:

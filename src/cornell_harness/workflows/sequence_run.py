@@ -55,20 +55,10 @@ class SequenceOutcome:
     images: dict = field(default_factory=dict)  # renderer -> (F, H, W, 3) float32
 
 
-def scene_state(still: Scene) -> np.ndarray:
-    """Everything of a frame's still scene that an animation moves or switches, as one vector: each object's
-    vertex mean (sphere centre), each emitter's radiance, the camera's position, target and up."""
-    parts = [m.vertices.mean(axis=0) for m in still.meshes] + [np.asarray(s.center) for s in still.spheres]
-    parts += [np.asarray(m.radiance, dtype=np.float64) for m in still.emitters]
-    cam = still.camera
-    parts += [np.asarray(cam.position), np.asarray(cam.look_at), np.asarray(cam.up)]
-    return np.concatenate([np.asarray(p, dtype=np.float64).ravel() for p in parts])
-
-
 def scene_motion(scene: Scene, frames: Sequence[int], references: Sequence[Reference]) -> SceneMotion:
     """The :class:`SceneMotion` of ``frames`` of ``scene`` (taken as consecutive) with their ``references``."""
     stills = [scene.at_frame(i) for i in frames]
-    changes = temporal.settle_frames(np.stack([scene_state(s) for s in stills]))
+    changes = temporal.settle_frames(scene.animation.states(frames))
     if len(frames) >= 3:
         first_steady = temporal.steady_band(np.zeros(len(frames)))[2]
         changes = [c for c in changes if c < first_steady]
@@ -79,8 +69,14 @@ def scene_motion(scene: Scene, frames: Sequence[int], references: Sequence[Refer
 
 
 def sequence_references(scene: Scene, frames: Sequence[int]) -> list[Reference]:
-    """Each frame's stored reference, ``load_reference(scene.at_frame(i))``; ReferenceError for a missing one."""
-    return [load_reference(scene.at_frame(i)) for i in frames]
+    """Each frame's stored reference, ``load_reference(scene.at_frame(i))``, loaded once for the frames that share
+    it (:meth:`~cornell_harness.scenes.animation.Animation.reference_frame`); ReferenceError for a missing one."""
+    loaded: dict[int, Reference] = {}
+    for i in frames:
+        still = scene.at_frame(i)
+        if still.reference_frame not in loaded:
+            loaded[still.reference_frame] = load_reference(still)
+    return [loaded[scene.animation.reference_frame(i)] for i in frames]
 
 
 def sequence_task(entry: RendererEntry, scene: Scene, spp: int, seed: int, references: Sequence[Reference],
@@ -152,7 +148,8 @@ def sequence_record(entry: RendererEntry, scene: Scene, spp: int, seed: int, ref
 def _sequence_row(rec: runner.RunRecord, motion: SceneMotion) -> dict:
     row = rec.row()
     change = None if motion.change is None else motion.frames[motion.change]
-    row.update(frames=len(motion.frames), first_frame=motion.frames[0], change_frame=change,
+    bound = None if motion.change is None else temporal.lag_bound(len(motion.frames), motion.change)
+    row.update(frames=len(motion.frames), first_frame=motion.frames[0], change_frame=change, lag_bound=bound,
                flicker_floor=motion.floor)
     return row
 
