@@ -150,9 +150,10 @@ def run_mutants(renderer: str, scene_name: str, max_spp: int, tmp: Path) -> list
             continue
         t0 = time.perf_counter()
         rec = runner.run_one(patching.load_mutant(m.name, tmp), scene, max_spp, 0, ref, checkpoints=seq.looks())
-        if rec.status != "ok":
+        if rec.status != "ok":  # a render that fails fails both gates; why is in the table
             rows.append({"mutant": m.name, "seq": "fail", "fixed": "fail", "spp": 0, "cpu": 0.0, "cpu_full": 1.0,
-                         "why": rec.reason})
+                         "why": f"{rec.status}: {rec.reason}"})
+            print(f"  {m.name}: the render {rows[-1]['why']}", file=sys.stderr)
             continue
         s = evaluate_sequential(seq, rec, ref, cfg, masks)
         f = evaluate(fixed, rec, ref, cfg, None, None, masks)
@@ -170,9 +171,12 @@ def mutants_markdown(rows: list[dict], case: str, args, cmd: str) -> str:
              "|---|---|---|---|---|"]
     for r in rows:
         cpu = r["cpu"] / r["cpu_full"] if r["cpu_full"] else float("nan")
-        lines.append(f"| {r['mutant']} | {r['seq']} | {r['fixed']} | {r['spp']} | {cpu:.2f} |")
+        if r["why"]:
+            lines.append(f"| {r['mutant']} | the render {r['why']} | (the same) | — | — |")
+        else:
+            lines.append(f"| {r['mutant']} | {r['seq']} | {r['fixed']} | {r['spp']} | {cpu:.2f} |")
     caught = [r for r in rows if r["seq"] != "pass"]
-    mean = statistics.fmean(r["cpu"] / r["cpu_full"] for r in rows if r["cpu_full"])
+    mean = statistics.fmean(r["cpu"] / r["cpu_full"] for r in rows if not r["why"])
     lines += ["", f"Not passed by the sequential gate: {len(caught)} of {len(rows)} (fixed: "
               f"{sum(r['fixed'] != 'pass' for r in rows)}); mean CPU to its verdict {mean:.2f} of the fixed gate's.",
               "", f"Command: `{cmd}`", ""]
