@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import re
 import shlex
 import statistics
@@ -263,7 +264,8 @@ def markdown(r: dict, reps: int, rounds: int) -> list[str]:
     bs = r["bounces"]
     chunks = " / ".join(map(str, CHUNKS))
     lines = [f"`{r['scene']}`, the first work unit of 2^15 paths (`pmj02`); CPU ns per ray of the wavefront, one "
-             f"thread, medians of {rounds} interleaved rounds of {reps} runs each. {r['shaded_per_path']:.2f} rays "
+             f"thread, medians of {rounds} interleaved rounds of {reps} runs each; load {r['load'][0]:.1f} → "
+             f"{r['load'][1]:.1f} runnable threads on {os.cpu_count()} cores. {r['shaded_per_path']:.2f} rays "
              "a path are shaded in a whole render (every bounce's closest hits). Differences: the largest relative "
              "difference of the estimates, shadow segments and next rays from (a)'s, over the bounces.", "",
              "| CPU ns per ray, one thread | " + " | ".join(
@@ -309,7 +311,9 @@ def main() -> None:
     ap.add_argument("--markdown", type=Path, action="append", default=[],
                     help="write the table into this file's block shading_soa.py (repeatable)")
     args = ap.parse_args()
+    load = os.getloadavg()[0]
     r = measure(args.scene, args.bounces, args.reps, args.rounds)
+    r["load"] = (load, os.getloadavg()[0])
     print(json.dumps(r, indent=1))
     lines = markdown(r, args.reps, args.rounds)
     print("\n".join(lines))
