@@ -35,7 +35,7 @@ import numpy as np
 
 from cornell_harness.scenes.materials import Dielectric, Diffuse, Mirror
 from cornell_harness.scenes.model import Scene
-from cornell_harness.renderers.core.sampling import INV_PI, cosine_hemisphere, jit
+from cornell_harness.renderers.core.sampling import INV_PI, cosine_hemisphere, jit, jit_inline
 
 #: Material type ids (int8 per primitive).
 LAMBERT = 0
@@ -204,7 +204,7 @@ def bsdf_pdf(material, cos) -> float:
     return 0.0
 
 
-@jit
+@jit_inline
 def bsdf_sample(material, n, wo, cos_o, rho, eta, u1, u2):
     """Sample ωi given ``wo`` (unit, away from the surface, ``cos_o = wo·n``).
 
