@@ -120,6 +120,25 @@ def test_numbers_do_not_depend_on_how_samples_are_cut_into_passes(kind):
         assert np.array_equal(_draw_1d(whole, _paths(2, samples), dim), _draw_1d(later, _paths(2, samples, 12), dim))
 
 
+@numba.njit
+def _indices(st, paths):
+    return np.array([path_point(st, p)[1] for p in paths])
+
+
+@pytest.mark.parametrize("kind", [PMJ02, SOBOL, PMJ02_TABLE])
+def test_sample_index_in_its_batch_for_any_batch_count(kind):
+    """Path j of a pass from sample f is sample s = f + j div P of pixel j mod P, point s div K of batch s mod K:
+    the shift taken for a power-of-two K and the division for another K give that index, and one batch's seeds
+    are the same for every sample of the pixel."""
+    paths = np.arange(300)
+    for batches in (1, 3, 8, 12):
+        st = Stream(kind, KEY, PIXELS, 5, batches)
+        assert np.array_equal(_indices(st, paths), (5 + paths // PIXELS) // batches), batches
+    st = Stream(kind, KEY, PIXELS, 0, 3)
+    seeds = {path_point(st, p)[0] for p in _paths(4, 3 * np.arange(20) + 2)}
+    assert len(seeds) == 1
+
+
 def test_batch_variance_is_the_spread_of_batch_means():
     """Film with K batches: variance of the mean = Σ (m_b - m̄)² / (B (B - 1)) over the B = min(K, n) batches."""
     rng = np.random.default_rng(0)

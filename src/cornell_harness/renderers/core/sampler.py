@@ -64,6 +64,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from numba.cpython.unsafe.numbers import trailing_zeros  # LLVM's cttz
 
 from cornell_harness.adapters.api import Setting, pass_key
 from cornell_harness.renderers.core.rng import mix64, uniform
@@ -185,6 +186,7 @@ VARIANCE_SETTING = Setting("variance", str, "batches",
 SEQUENCE_STREAM = 16
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_ONE = np.uint64(1)
 
 
 class Stream(NamedTuple):
@@ -244,11 +246,16 @@ def path_point(st, path):
     if st.kind == INDEPENDENT:
         return np.uint64(st.key), np.int64(path)
     # Unsigned, one division each for quotient and remainder (numba's signed // and % take two, with
-    # Python's floor fix-ups); paths and samples are never negative.
+    # Python's floor fix-ups); paths and samples are never negative. The batch count is a power of two
+    # (BATCHES or 1) in every stream we make: a shift, since a second division waiting on the first
+    # cost most of the state's time (BENCHMARKS.md, samplers.py).
     p, pixels, batches = np.uint64(path), np.uint64(st.pixels), np.uint64(st.batches)
     q = p // pixels
     s = np.uint64(st.first_sample) + q
-    index = s // batches
+    if batches & (batches - _ONE) == 0:
+        index = s >> np.uint64(trailing_zeros(batches))
+    else:
+        index = s // batches
     batch, pixel = s - index * batches, p - q * pixels
     if st.kind == PMJ02_TABLE:  # one hash: its decisions hash (seed, dimension) again
         return mix64(st.key ^ ((pixel * batches + batch) * _GOLDEN)), np.int64(index)
