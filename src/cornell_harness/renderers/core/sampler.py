@@ -43,8 +43,9 @@ to kernels as a :class:`Stream`; every sample stays a pure function of
   stratified in every elementary interval, as pmj02 is.
 - ``pmj02table``: pmj02's padding and stratification with the coordinates'
   Owen scrambling moved into a table made once
-  (:mod:`cornell_harness.renderers.core.owen_table`): per decision one hash,
-  the index shuffle, a lookup and a digital shift; its pixel seed is one hash.
+  (:mod:`cornell_harness.renderers.core.owen_table`): per decision a one-round
+  hash, the index shuffle, a lookup and a digital shift, four multiplications;
+  its pixel seed is one SplitMix64 hash.
 - ``sobol``: one Owen-scrambled Sobol' sequence across all of a path's
   dimensions per pixel (:func:`cornell_harness.renderers.core.sobol.sobol_1d`; pbrt-v4's
   ``SobolSampler`` with per-pixel scrambling), uniform past its 64 dimensions.
