@@ -11,8 +11,11 @@
 (b) MSE at ``--spp`` against the stored reference on ``--scene``, over
     seeds 0 .. ``--seeds`` - 1 (mean and range), with each sampler's batches
     (its reported variance) and with ``variance = none`` (one randomisation).
+(c) what that is for the whole path tracer: ns of CPU per path of a render of
+    ``--scene`` at ``--tracer-spp`` on one thread (process CPU time), median
+    of ``--tracer-rounds`` interleaved rounds, for the samplers of (b).
 
-``--markdown FILE`` writes both into the file's block ``samplers.py#cost``.
+``--markdown FILE`` writes all three into the file's block ``samplers.py#cost``.
 Run (about 10 minutes on 2 cores):
 
     .venv/bin/python benchmarks/samplers.py --markdown BENCHMARKS.md
@@ -93,16 +96,35 @@ def errors(scene_name: str, spp: int, seeds: int, samplers: list[str]) -> dict[t
     return out
 
 
-def markdown(cost: dict, mse: dict, spp: int, seeds: int) -> list[str]:
+def tracer_cost(scene_name: str, spp: int, rounds: int, samplers: list[str]) -> dict[str, float]:
+    """{sampler: ns of CPU per path of the whole path tracer}: renders of ``scene_name`` at ``spp`` on one thread,
+    process CPU time, median over ``rounds`` interleaved rounds (seed = round)."""
+    scene = resolve_scene(scene_name)
+    pt = PathTracer(threads=1)
+    paths = scene.camera.width * scene.camera.height * spp
+    times = {s: [] for s in samplers}
+    for s in samplers:
+        pt.render(scene.with_resolution(8, 8), 1, 0, settings={"sampler": s})  # compile
+    for r in range(rounds):
+        for s, ts in times.items():
+            t0 = time.process_time()
+            pt.render(scene, spp, r, settings={"sampler": s})
+            ts.append((time.process_time() - t0) / paths * 1e9)
+    return {s: statistics.median(ts) for s, ts in times.items()}
+
+
+def markdown(cost: dict, mse: dict, tracer: dict, spp: int, seeds: int, tracer_spp: int) -> list[str]:
     lines = [f"| sampler | ns per path: decisions ({DECISIONS}) | state ({VERTICES + 1}×) | total "
-             f"| MSE ×1e5, {spp} spp, 8 batches: mean [min, max] of {seeds} seeds | the same, `variance = none` |",
-             "| --- | --- | --- | --- | --- | --- |"]
+             f"| MSE ×1e5, {spp} spp, 8 batches: mean [min, max] of {seeds} seeds | the same, `variance = none` "
+             f"| path tracer, ns of CPU per path ({tracer_spp} spp, one thread) |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
     for s, c in cost.items():
         if (s, "none") not in mse:
             continue
         cells = [f"{np.mean(v) * 1e5:.3f} [{min(v) * 1e5:.3f}, {max(v) * 1e5:.3f}]"
                  for v in (mse[s, "batches"], mse[s, "none"])]
-        lines.append(f"| `{s}` | {c['decisions']:.0f} | {c['state']:.0f} | {c['total']:.0f} | " + " | ".join(cells) + " |")
+        lines.append(f"| `{s}` | {c['decisions']:.0f} | {c['state']:.0f} | {c['total']:.0f} | " + " | ".join(cells)
+                     + f" | {tracer[s]:.0f} |")
     return lines
 
 
@@ -112,7 +134,9 @@ def main() -> None:
     ap.add_argument("--spp", type=int, default=256)
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--rounds", type=int, default=31)
-    ap.add_argument("--samplers", default="independent,pmj02,pmj02table", help="samplers of (b), comma-separated")
+    ap.add_argument("--samplers", default="independent,pmj02,pmj02table", help="samplers of (b) and (c), comma-separated")
+    ap.add_argument("--tracer-spp", type=int, default=64)
+    ap.add_argument("--tracer-rounds", type=int, default=5)
     ap.add_argument("--markdown", type=Path, action="append", default=[],
                     help="write the table into this file's block samplers.py#cost (repeatable)")
     args = ap.parse_args()
@@ -120,10 +144,15 @@ def main() -> None:
     cost = decision_cost(args.rounds)
     for s, c in cost.items():
         print(f"{s:12s} decisions {c['decisions']:6.1f}  state {c['state']:6.1f}  total {c['total']:6.1f} ns/path")
-    mse = errors(args.scene, args.spp, args.seeds, args.samplers.split(","))
+    samplers = args.samplers.split(",")
+    tracer = tracer_cost(args.scene, args.tracer_spp, args.tracer_rounds, samplers)
+    for s, ns in tracer.items():
+        print(f"{s:12s} path tracer {ns:7.1f} ns of CPU per path")
+    mse = errors(args.scene, args.spp, args.seeds, samplers)
     for (s, variance), v in mse.items():
         print(f"{s:12s} variance={variance:8s} MSE {np.mean(v):.4e}  seeds {' '.join(f'{x:.3e}' for x in v)}")
-    markdown_blocks.write_blocks(args.markdown, {"samplers.py#cost": "\n".join(markdown(cost, mse, args.spp, args.seeds))})
+    lines = markdown(cost, mse, tracer, args.spp, args.seeds, args.tracer_spp)
+    markdown_blocks.write_blocks(args.markdown, {"samplers.py#cost": "\n".join(lines)})
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ from cornell_harness.renderers.core import film as film_module
 from cornell_harness.renderers.core.film import Film
 from cornell_harness.renderers.core.rng import uniform
 from cornell_harness.renderers.core.sampler import (BATCHES, BOUNCE_U, CAMERA_U, EMIT_DIR_U, EMIT_U, PMJ02,
-                                                    PMJ02_TABLE, SOBOL, Stream, bounce_dim, independent, path_point, sample_1d,
+                                                    PMJ02_TABLE, SOBOL, Stream, bounce_dim, independent, path_point, pixel_divider, sample_1d,
                                                     sample_2d, sequence_stream, vertex_dim)
 from cornell_harness.renderers.pathtracer import PathTracer
 
@@ -28,6 +28,11 @@ pytest.importorskip("embreex")
 
 KEY = pass_key(5, 0, 16)
 PIXELS = 7  # not a power of two: pixel and sample index must not alias
+
+
+def _stream(kind: int, first_sample: int = 0, batches: int = BATCHES, pixels: int = PIXELS) -> Stream:
+    """A stream as :func:`cornell_harness.renderers.core.sampler.pass_stream` makes them, of any kind and key."""
+    return Stream(kind, KEY, pixels, first_sample, batches, pixel_divider(pixels))
 
 
 @numba.njit
@@ -72,7 +77,7 @@ def test_independent_stream_is_the_counter_based_rng():
 def test_each_batch_of_a_pixel_is_stratified_progressively(kind):
     """Exact: a batch's first 2^m camera samples of a pixel, for every m ≤ 8, and the next aligned block,
     are (0, m, 2)-nets; for pmj02 and pmj02table so is every later 2D decision (a vertex's BSDF direction)."""
-    st = Stream(kind, KEY, PIXELS, 0, BATCHES)
+    st = _stream(kind)
     dims = [CAMERA_U] + ([vertex_dim(3, 3)] if kind != SOBOL else [])
     for pixel in (0, 3):
         for batch in (0, BATCHES - 1):
@@ -112,12 +117,50 @@ def test_an_independent_photon_stream_is_the_counter_based_rng():
 def test_numbers_do_not_depend_on_how_samples_are_cut_into_passes(kind):
     """A sample's numbers are a function of (seed, pixel, sample index, dimension): the same whether it is
     drawn in a pass that starts at sample 0 or in a later one (first_sample 12)."""
-    whole = Stream(kind, KEY, PIXELS, 0, BATCHES)
+    whole = _stream(kind)
     later = whole._replace(first_sample=12)
     samples = np.arange(12, 40)
     for dim in (CAMERA_U, vertex_dim(2, 1)):
         assert np.array_equal(_draw_2d(whole, _paths(2, samples), dim), _draw_2d(later, _paths(2, samples, 12), dim))
         assert np.array_equal(_draw_1d(whole, _paths(2, samples), dim), _draw_1d(later, _paths(2, samples, 12), dim))
+
+
+@numba.njit
+def _points(st, paths):
+    seeds, indices = np.empty(paths.size, np.uint64), np.empty(paths.size, np.int64)
+    for k in range(paths.size):
+        seeds[k], indices[k] = path_point(st, paths[k])
+    return seeds, indices
+
+
+@pytest.mark.parametrize("kind", [PMJ02, SOBOL, PMJ02_TABLE])
+def test_sample_index_in_its_batch_for_any_batch_count(kind):
+    """Path j of a pass from sample f is sample s = f + j div P of pixel j mod P, point s div K of batch s mod K:
+    the shift taken for a power-of-two K and the division for another K give that index, and one batch's seeds
+    are the same for every sample of the pixel."""
+    paths = np.arange(300)
+    for batches in (1, 3, 8, 12):
+        assert np.array_equal(_points(_stream(kind, 5, batches), paths)[1], (5 + paths // PIXELS) // batches), batches
+    seeds = _points(_stream(kind, 0, 3), _paths(4, 3 * np.arange(20) + 2))[0]
+    assert np.unique(seeds).size == 1
+
+
+@pytest.mark.parametrize("kind", [PMJ02, PMJ02_TABLE])
+def test_dividing_by_pixels_with_a_multiplication_is_exact(kind):
+    """pixel_divider's multiplication gives path_point the quotient a division gives (a stream without the
+    divider divides): for pixel counts up to 2^32 - 1, at paths on both sides of multiples of the count, up to
+    the 2^32 where it hands over to the division, and past it."""
+    rng = np.random.default_rng(11)
+    for pixels in (2, 3, 7, 1000, 65536, 65537, 1920 * 1080, (1 << 31) + 11, (1 << 32) - 1):
+        q = rng.integers(0, (1 << 32) // pixels, 200, dtype=np.int64)
+        paths = np.concatenate([q * pixels + d for d in (-1, 0, 1, pixels - 1)]
+                               + [np.arange((1 << 32) - 200, (1 << 32) + 200), rng.integers(0, 1 << 40, 200)])
+        paths = paths[paths >= 0]
+        fast, slow = _stream(kind, 3, pixels=pixels), _stream(kind, 3, pixels=pixels)._replace(divider=np.uint64(0))
+        assert fast.divider != 0
+        for a, b in zip(_points(fast, paths), _points(slow, paths)):
+            assert np.array_equal(a, b), pixels
+    assert pixel_divider(1) == 0 and pixel_divider(1 << 32) == 0
 
 
 def test_batch_variance_is_the_spread_of_batch_means():

@@ -43,8 +43,9 @@ to kernels as a :class:`Stream`; every sample stays a pure function of
   stratified in every elementary interval, as pmj02 is.
 - ``pmj02table``: pmj02's padding and stratification with the coordinates'
   Owen scrambling moved into a table made once
-  (:mod:`cornell_harness.renderers.core.owen_table`): per decision one hash,
-  the index shuffle, a lookup and a digital shift; its pixel seed is one hash.
+  (:mod:`cornell_harness.renderers.core.owen_table`): per decision a one-round
+  hash, the index shuffle, a lookup and a digital shift, four multiplications;
+  its pixel seed is one SplitMix64 hash.
 - ``sobol``: one Owen-scrambled Sobol' sequence across all of a path's
   dimensions per pixel (:func:`cornell_harness.renderers.core.sobol.sobol_1d`; pbrt-v4's
   ``SobolSampler`` with per-pixel scrambling), uniform past its 64 dimensions.
@@ -64,6 +65,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from numba.cpython.unsafe.numbers import trailing_zeros  # LLVM's cttz
 
 from cornell_harness.adapters.api import Setting, pass_key
 from cornell_harness.renderers.core.rng import mix64, uniform
@@ -185,6 +187,9 @@ VARIANCE_SETTING = Setting("variance", str, "batches",
 SEQUENCE_STREAM = 16
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_ONE = np.uint64(1)
+_M32 = np.uint64(0xFFFFFFFF)
+_S32 = np.uint64(32)
 
 
 class Stream(NamedTuple):
@@ -196,6 +201,15 @@ class Stream(NamedTuple):
     pixels: int
     first_sample: int
     batches: int  # 1 for independent
+    divider: np.uint64 = np.uint64(0)  # pixel_divider(pixels), or 0: path_point divides
+
+
+def pixel_divider(pixels: int) -> np.uint64:
+    """⌈2^64 / pixels⌉, with which :func:`path_point` divides a path index below 2^32 by ``pixels`` in two
+    multiplications instead of a division (exact: Lemire, Kaser & Kurz 2019, "Faster remainder by direct
+    computation", Software: Practice and Experience 49(6), theorem 1, with N = 32 and F = 64); 0 for 1 pixel
+    or 2^32 and more, where it divides."""
+    return np.uint64(-(-(1 << 64) // pixels)) if 1 < pixels < 1 << 32 else np.uint64(0)
 
 
 def independent(key: np.uint64, pixels: int = 1, first_sample: int = 0) -> Stream:
@@ -215,7 +229,7 @@ def pass_stream(sampler: str, seed: int, index: int, pixels: int, first_sample: 
     kind = SAMPLERS[sampler]
     if kind == INDEPENDENT:
         return independent(pass_key(seed, index), pixels, first_sample)
-    return Stream(kind, pass_key(seed, 0, SEQUENCE_STREAM), pixels, first_sample, batches)
+    return Stream(kind, pass_key(seed, 0, SEQUENCE_STREAM), pixels, first_sample, batches, pixel_divider(pixels))
 
 
 def sequence_stream(sampler: str, key: np.uint64, pixels: int = 1, first_sample: int = 0) -> Stream:
@@ -230,7 +244,7 @@ def sequence_stream(sampler: str, key: np.uint64, pixels: int = 1, first_sample:
     kind = SAMPLERS[sampler]
     if kind == INDEPENDENT:
         return independent(key, pixels, first_sample)
-    return Stream(kind, np.uint64(key), max(pixels, 1), first_sample, 1)
+    return Stream(kind, np.uint64(key), max(pixels, 1), first_sample, 1, pixel_divider(max(pixels, 1)))
 
 
 @jit_inline
@@ -243,12 +257,21 @@ def path_point(st, path):
     """
     if st.kind == INDEPENDENT:
         return np.uint64(st.key), np.int64(path)
-    # Unsigned, one division each for quotient and remainder (numba's signed // and % take two, with
-    # Python's floor fix-ups); paths and samples are never negative.
+    # Unsigned (numba's signed // and % take a division each, with Python's floor fix-ups); paths and
+    # samples are never negative. The quotient by pixels is two multiplications where pixel_divider
+    # allows, and the batch count a power of two (BATCHES or 1) in every stream we make, a shift:
+    # divisions, the second waiting on the first, were most of the state's time (BENCHMARKS.md, samplers.py).
     p, pixels, batches = np.uint64(path), np.uint64(st.pixels), np.uint64(st.batches)
-    q = p // pixels
+    if p >> _S32 == 0 and st.divider != 0:  # p div pixels: the high word of divider × p (pixel_divider)
+        m = np.uint64(st.divider)
+        q = ((m >> _S32) * p + (((m & _M32) * p) >> _S32)) >> _S32
+    else:
+        q = p // pixels
     s = np.uint64(st.first_sample) + q
-    index = s // batches
+    if batches & (batches - _ONE) == 0:
+        index = s >> np.uint64(trailing_zeros(batches))
+    else:
+        index = s // batches
     batch, pixel = s - index * batches, p - q * pixels
     if st.kind == PMJ02_TABLE:  # one hash: its decisions hash (seed, dimension) again
         return mix64(st.key ^ ((pixel * batches + batch) * _GOLDEN)), np.int64(index)
