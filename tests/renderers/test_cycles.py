@@ -10,6 +10,7 @@ scripts/setup.sh --tests installs bpy, so these run in CI.
 from __future__ import annotations
 
 import json
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -79,6 +80,19 @@ def test_the_furnace_gives_its_closed_form(max_depth, monkeypatch):
     se = np.sqrt(result.variance.astype(np.float64).sum(axis=(0, 1))) / result.image[..., 0].size
     z = (mean - exact) / se
     assert np.all(np.abs(z) < 4), (mean, exact, se)
+
+
+def test_a_render_leaves_no_temporary_file(tmp_path, monkeypatch):
+    """Blender makes a ``blender_*`` folder in the temporary directory, which a child ending by ``os._exit`` never
+    removes: the child's temporary directory is the run's own folder, removed with it."""
+    outer = tmp_path / "tmp"
+    outer.mkdir()
+    monkeypatch.setenv("TMPDIR", str(outer))
+    monkeypatch.setattr(tempfile, "tempdir", str(outer))
+    monkeypatch.setenv("CBOX_THREADS", "1")
+    Cycles().render(furnace_scene(0.5, max_depth=2, res=4), 2, 0)
+    assert cycles_module._child_version()
+    assert sorted(p.name for p in outer.iterdir()) == []
 
 
 def test_no_sample_sits_at_the_pixel_centre(tmp_path, monkeypatch):

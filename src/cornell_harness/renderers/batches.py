@@ -55,14 +55,20 @@ def run_child_process(argv: list[str], folder: Path, time_limit_s: float | None 
     ``time_limit_s``), with this package's environment (:func:`child_env`): (exit code, its stdout, the last
     :data:`STDERR_TAIL` characters of its stderr), both kept in files of ``folder``."""
     with open(folder / "stdout.txt", "wb") as out, open(folder / "stderr.txt", "wb") as err:
-        code = processes.run(argv, time_limit_s, stdin=subprocess.DEVNULL, stdout=out, stderr=err, env=child_env())
+        code = processes.run(argv, time_limit_s, stdin=subprocess.DEVNULL, stdout=out, stderr=err,
+                             env=child_env(folder))
     tail = (folder / "stderr.txt").read_text(errors="replace").strip()[-STDERR_TAIL:]
     return code, (folder / "stdout.txt").read_text(errors="replace"), tail
 
 
-def child_env() -> dict:
-    """The child's environment: the folder holding this package first on the path, so it runs the same code."""
+def child_env(temp: Path | None = None) -> dict:
+    """The child's environment: the folder holding this package first on the path, so it runs the same code;
+    with ``temp``, that folder as its temporary directory (TMPDIR): an engine's own temporary files (Blender's
+    ``blender_*`` folder, which a child that ends by ``os._exit`` never removes) go where the run's files go, and
+    are removed with them."""
     root = str(Path(__file__).resolve().parents[2])
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    if temp is not None:
+        env["TMPDIR"] = str(temp)
     return env

@@ -36,7 +36,8 @@ import numpy as np
 from cornell_harness import processes
 from cornell_harness.adapters.api import Checkpoint, RenderResult, default_threads, pass_seed
 from cornell_harness.extras import renderer_problem
-from cornell_harness.renderers.batches import BATCHES_SETTING, batch_plan, mean_and_variance, run_child_process
+from cornell_harness.renderers.batches import (BATCHES_SETTING, batch_plan, child_env, mean_and_variance,
+                                               run_child_process)
 from cornell_harness.scenes.export.luxcore import sphere_mesh
 from cornell_harness.scenes.materials import Dielectric, Diffuse, Mirror
 from cornell_harness.scenes.model import Scene, SceneError, object_bounds
@@ -134,7 +135,7 @@ def _child_version() -> str:
         out = Path(tmp) / "version.txt"
         code = "import os, sys, bpy; open(sys.argv[1], 'w').write(bpy.app.version_string); os._exit(0)"
         status = processes.run([sys.executable, "-c", code, str(out)], VERSION_TIMEOUT_S,
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=child_env(Path(tmp)))
         if status != 0 or not out.is_file():
             raise RuntimeError(f"bpy.app.version_string failed in a child (status {status})")
         return out.read_text().strip()
