@@ -8,6 +8,7 @@ import re
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -120,7 +121,8 @@ def render_log(workdir) -> Path:
 @pytest.fixture(scope="module")
 def cluster(workdir, render_log):
     c = LoopbackCluster(workdir, _env(CBOX_TEST_RENDER_LOG=str(render_log), CBOX_TEST_RENDER_SLEEP="0.5",
-                                      CBOX_TEST_RENDER_HOLD_PIDS=str(workdir / "hold-pids")))
+                                      CBOX_TEST_RENDER_HOLD_PIDS=str(workdir / "hold-pids"),
+                                      DASK_TEMPORARY_DIRECTORY=str(workdir / "dask-scratch")))  # killed: kept here
     try:
         c.add_worker()
         c.add_worker()
@@ -191,9 +193,13 @@ def test_converge_through_scheduler_equals_in_process(cluster, workdir, small_sc
     assert seen == [True] * len(RENDERERS) * len(SEEDS)
 
 
-def test_converge_on_local_workers_equals_in_process(workdir, small_scene, in_process):
-    """``--workers 2``: a LocalCluster of two worker processes gives the in-process table and images."""
+def test_converge_on_local_workers_equals_in_process(workdir, small_scene, in_process, monkeypatch):
+    """``--workers 2``: a LocalCluster of two worker processes gives the in-process table and images, and leaves
+    nothing in the temporary directory (Dask keeps a dask-scratch-space there unless told otherwise)."""
     out, before = workdir / "workers", os.environ.get("OMP_NUM_THREADS")
+    temp = workdir / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
     with open_executor(workers=2) as executor:
         assert executor.slots == 2
         threads = executor.client.run(lambda: (os.environ.get("CBOX_THREADS"), os.environ.get("OMP_NUM_THREADS")))
@@ -203,6 +209,7 @@ def test_converge_on_local_workers_equals_in_process(workdir, small_scene, in_pr
     assert list(threads.values()) == [(share, share)] * 2  # its share of the cores, for renders and metrics alike
     assert os.environ.get("OMP_NUM_THREADS") == before  # Dask's settings for its workers are not left here
     assert_same_experiment(in_process, out)
+    assert sorted(p.name for p in temp.iterdir()) == []
 
 
 def test_reference_batches_across_workers_equal_single_process_build(cluster, workdir, small_scene):

@@ -35,6 +35,7 @@ import json
 import logging
 import os
 import pickle
+import tempfile
 import zlib
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Iterator
@@ -195,7 +196,11 @@ def open_executor(workers: int | None = None, scheduler: str | None = None, dash
             # after, so what this process starts later does not inherit a worker's thread counts.
             saved = {name: os.environ.get(name) for name in THREAD_POOL_VARIABLES}
             stack.callback(_restore_environ, saved)
-            stack.enter_context(dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
+            # The scheduler's and workers' scratch folders (Dask's dask-scratch-space, which it keeps) in one
+            # of ours, removed once the cluster is stopped: a run leaves nothing in the temporary directory.
+            scratch = stack.enter_context(tempfile.TemporaryDirectory(prefix="cbox-dask-"))
+            stack.enter_context(dask.config.set({"temporary-directory": scratch,
+                                                 "distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
                                                  "distributed.nanny.pre-spawn-environ":
                                                      local_pre_spawn_environ(workers)}))
             cluster = stack.enter_context(LocalCluster(
