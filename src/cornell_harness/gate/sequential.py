@@ -33,10 +33,10 @@ The variance and outlier tests are made once, at the look the gate stops at; whi
 the data, so each runs at its share of ``alpha`` divided by the number of looks (Bonferroni over the looks
 it could have been). The variance test reads the stopping look's variance, which the stop rule relied on,
 and also the variance of the result the renderer returned where that is another (rendered past the look, or
-numbers its checkpoints did not show): what users read must be honest too. Every look takes the render's own variance at its spp where the checkpoint carries one
-(:class:`cornell_harness.adapters.api.Checkpoint`), floored at the reference's noise model as the fixed
-gate's is, else the model alone; the rule in the renderer's process and the gate's reading of the looks
-afterwards see the same checkpoints, so the same numbers.
+numbers its checkpoints did not show): what users read must be honest too. Every look takes the render's own
+variance at its spp where the checkpoint carries one (:class:`cornell_harness.adapters.api.Checkpoint`),
+floored at the reference's noise model as the fixed gate's is, else the model alone; the rule in the renderer's
+process and the gate's reading of the looks afterwards see the same checkpoints, so the same numbers.
 """
 
 from __future__ import annotations
@@ -177,7 +177,8 @@ def evaluate_sequential(exp: Expectation, rec: runner.RunRecord, ref: Reference,
                     f"{bad} NaN or Inf values at {last.spp} spp", bad, 0)]
     checks.append(Check(exp.name, "agreement", last.agreement.passed, f"{last.agreement.message()} [{note}]",
                         last.agreement.p_min, last.agreement.level))
-    # Each at its share of α over the looks, with the stopping look's own variance (as the stop rule saw it).
+    # Each at its share of α over the looks, on the stopping look's image and variance (as the stop rule saw
+    # them); the variance check reads the result's variance too (_variance_checks).
     clean = metrics.zero_broken_pixels(last.image)
     share = (f" [at {last.spp} spp, level {d.other_level:.3g}: the test's share of α over {len(d.spps)} "
              "looks]")

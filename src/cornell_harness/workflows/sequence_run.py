@@ -72,11 +72,13 @@ def sequence_references(scene: Scene, frames: Sequence[int]) -> list[Reference]:
     """Each frame's stored reference, ``load_reference(scene.at_frame(i))``, loaded once for the frames that share
     it (:meth:`~cornell_harness.scenes.animation.Animation.reference_frame`); ReferenceError for a missing one."""
     loaded: dict[int, Reference] = {}
+    out = []
     for i in frames:
         still = scene.at_frame(i)
         if still.reference_frame not in loaded:
             loaded[still.reference_frame] = load_reference(still)
-    return [loaded[scene.animation.reference_frame(i)] for i in frames]
+        out.append(loaded[still.reference_frame])
+    return out
 
 
 def sequence_task(entry: RendererEntry, scene: Scene, spp: int, seed: int, references: Sequence[Reference],
